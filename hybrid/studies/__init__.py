@@ -1,0 +1,1 @@
+"""Studies of `hybrid`: stability, work-precision, extreme cases, rigid validation."""
