@@ -1,0 +1,1 @@
+"""hybrid: the breathing human trunk, MuJoCo ribs coupled to a volume-preserving membrane."""

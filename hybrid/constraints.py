@@ -1,0 +1,307 @@
+"""Constraints, applied by projection after free integration (paper 4).
+
+Local constraints act on single points (prescribed trajectories, keep-in-
+region); the global one keeps the enclosed volume at its rest value exactly:
+after free integration to X*, X = X* + phi d with d_i = w_i grad_i V(X*),
+and V(X* + phi d) - V0 is a cubic in phi solved to machine precision
+(DESIGN.md). The same cubic gives the soft (compressible) volume force of
+paper 6.2. Nailed and rigidly linked points are simply never integrated.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+__all__ = ["volume_and_gradient", "volume_cubic", "solve_cubic_near_zero", "project_volume",
+           "soft_volume_force", "apply_prescribed", "apply_keep_in",
+           "SHAPE_HALF_SPACE", "SHAPE_BALL", "SHAPE_BOX"]
+
+SHAPE_HALF_SPACE, SHAPE_BALL, SHAPE_BOX = 0, 1, 2
+
+# Status codes of the projection, read by the simulation.
+PROJ_OK, PROJ_NO_GRADIENT, PROJ_NO_ROOT = 0, 1, 2
+
+
+@njit(cache=True, error_model="numpy")
+def volume_and_gradient(face_vert, vert_pos, ref, grad):
+    """V = 1/6 sum_f a.(b x c) (m^3) and grad_a V = 1/6 sum (b x c) (m^2).
+
+    Coordinates are taken relative to `ref` (m), a point near the body, so
+    that a body far from the origin loses no digits (V is translation
+    invariant for a closed surface). V is homogeneous of degree 3 in the
+    coordinates, so V = 1/3 sum_i x_i . grad_i V: one face pass gives both.
+    # Model: face_vert (nface, 3) int32, ref (3,) m
+    # Data in: vert_pos (nvert, 3) m
+    # Data out: grad (nvert, 3) m^2
+    """
+    grad[:] = 0.0
+    for f in range(face_vert.shape[0]):
+        a, b, c = face_vert[f, 0], face_vert[f, 1], face_vert[f, 2]
+        ax, ay, az = vert_pos[a, 0] - ref[0], vert_pos[a, 1] - ref[1], vert_pos[a, 2] - ref[2]
+        bx, by, bz = vert_pos[b, 0] - ref[0], vert_pos[b, 1] - ref[1], vert_pos[b, 2] - ref[2]
+        cx, cy, cz = vert_pos[c, 0] - ref[0], vert_pos[c, 1] - ref[1], vert_pos[c, 2] - ref[2]
+        grad[a, 0] += by * cz - bz * cy
+        grad[a, 1] += bz * cx - bx * cz
+        grad[a, 2] += bx * cy - by * cx
+        grad[b, 0] += cy * az - cz * ay
+        grad[b, 1] += cz * ax - cx * az
+        grad[b, 2] += cx * ay - cy * ax
+        grad[c, 0] += ay * bz - az * by
+        grad[c, 1] += az * bx - ax * bz
+        grad[c, 2] += ax * by - ay * bx
+    s = 1.0 / 6.0
+    vol = 0.0
+    for i in range(grad.shape[0]):
+        grad[i, 0] *= s
+        grad[i, 1] *= s
+        grad[i, 2] *= s
+        vol += ((vert_pos[i, 0] - ref[0]) * grad[i, 0] + (vert_pos[i, 1] - ref[1]) * grad[i, 1]
+                + (vert_pos[i, 2] - ref[2]) * grad[i, 2])
+    return vol / 3.0
+
+
+@njit(cache=True, error_model="numpy")
+def volume_cubic(face_vert, vert_pos, ref, dirn, out):
+    """Coefficients c2, c3 of V(X + phi D) - V(X) = c1 phi + c2 phi^2 + c3 phi^3.
+
+    Per face (a + phi da).((b + phi db) x (c + phi dc)) expanded (DESIGN.md),
+    / 6; c1 = D . grad V(X) is cheaper per point and left to the caller.
+    # Model: face_vert, ref
+    # Data in: vert_pos (m), dirn (nvert, 3) (projection direction D)
+    # Data out: out (2,) = (c2, c3)
+    """
+    c2 = c3 = 0.0
+    for f in range(face_vert.shape[0]):
+        a, b, c = face_vert[f, 0], face_vert[f, 1], face_vert[f, 2]
+        ax, ay, az = vert_pos[a, 0] - ref[0], vert_pos[a, 1] - ref[1], vert_pos[a, 2] - ref[2]
+        bx, by, bz = vert_pos[b, 0] - ref[0], vert_pos[b, 1] - ref[1], vert_pos[b, 2] - ref[2]
+        cx, cy, cz = vert_pos[c, 0] - ref[0], vert_pos[c, 1] - ref[1], vert_pos[c, 2] - ref[2]
+        dax, day, daz = dirn[a, 0], dirn[a, 1], dirn[a, 2]
+        dbx, dby, dbz = dirn[b, 0], dirn[b, 1], dirn[b, 2]
+        dcx, dcy, dcz = dirn[c, 0], dirn[c, 1], dirn[c, 2]
+        # db x dc, and db x c + b x dc
+        ddx, ddy, ddz = dby * dcz - dbz * dcy, dbz * dcx - dbx * dcz, dbx * dcy - dby * dcx
+        mx = dby * cz - dbz * cy + by * dcz - bz * dcy
+        my = dbz * cx - dbx * cz + bz * dcx - bx * dcz
+        mz = dbx * cy - dby * cx + bx * dcy - by * dcx
+        c2 += dax * mx + day * my + daz * mz + ax * ddx + ay * ddy + az * ddz
+        c3 += dax * ddx + day * ddy + daz * ddz
+    s = 1.0 / 6.0
+    out[0] = c2 * s
+    out[1] = c3 * s
+
+
+@njit(cache=True, error_model="numpy")
+def solve_cubic_near_zero(c0, c1, c2, c3):
+    """Real root of c0 + c1 x + c2 x^2 + c3 x^3 nearest 0.
+
+    Newton from 0 (c0 is the small volume error, c1 > 0 the squared gradient
+    norm, so it converges in a few iterations); if Newton stalls, the real
+    roots of the companion matrix. Returns (root, status).
+    """
+    if not (c1 > 0.0):
+        return 0.0, PROJ_NO_GRADIENT
+    x = 0.0
+    last = np.inf
+    for _ in range(60):
+        f = ((c3 * x + c2) * x + c1) * x + c0
+        fp = (3.0 * c3 * x + 2.0 * c2) * x + c1
+        if fp == 0.0:
+            break
+        dx = f / fp
+        if abs(dx) >= last:  # roundoff floor reached: the previous iterate is the root
+            return x, PROJ_OK
+        x -= dx
+        last = abs(dx)
+        if abs(dx) <= 4e-16 * abs(x):
+            return x, PROJ_OK
+    if not (abs(((c3 * x + c2) * x + c1) * x + c0) <= 1e-13 * (abs(c0) + abs(c1 * x)) + 1e-300):
+        # Newton wandered: take the real root nearest zero from all roots.
+        roots = np.roots(np.array([c3, c2, c1, c0], dtype=np.complex128))
+        best = np.inf
+        found = False
+        for r in roots:
+            if abs(r.imag) <= 1e-9 * max(1.0, abs(r.real)) and abs(r.real) < abs(best):
+                best = r.real
+                found = True
+        if not found:
+            return 0.0, PROJ_NO_ROOT
+        x = best
+    return x, PROJ_OK
+
+
+@njit(cache=True, error_model="numpy")
+def project_volume(ring_ptr, ring_vert, face_vert, ref, vol0, vert_weight, h, vert_pos, vert_vel, grad,
+                   dirn, cubic):
+    """Exact constant-volume projection (paper 4.2-4.3, DESIGN.md).
+
+    X = X* + phi D, D_i = w_i grad_i V(X*), w_i = 1/m_i (0 for points that are
+    not integrated), phi the root nearest 0 of the cubic V(X* + phi D) = V0;
+    velocities v_i += phi D_i / h, the impulse of the constraint force
+    (phi / h^2) grad_i V. Returns (phi, status); phi is in kg/m, and
+    p = phi / h^2 (Pa) is the gauge pressure inside the body.
+
+    The gradient is gathered per point from its closed fan of neighbours,
+    grad_i V = 1/6 sum_j (N_j - N_1) x (N_j+1 - N_1), which is the face
+    formula summed around the point (for a closed fan the sum does not depend
+    on the origin), and V = 1/3 sum_i (x_i - ref) . grad_i V (V is
+    homogeneous of degree 3): one pass, no scatter.
+
+    The quadratic and cubic coefficients need a face pass. It is skipped
+    when a bound shows they cannot move the volume by more than 1e-17 V0 at
+    the linear root (|c2| <= nface |D|max^2 |x|max / 2, |c3| <= nface
+    |D|max^3 / 6); then the linear root is the cubic's root to within the
+    roundoff of V itself. Large corrections take the full cubic.
+    # Model: ring_ptr, ring_vert (closed fans), face_vert, ref (3,) m, vol0 m^3,
+    #        vert_weight (nvert,) 1/kg
+    # Data in/out: vert_pos, vert_vel
+    # Scratch: grad (volume gradient at X*, kept for the rib coupling), dirn, cubic (2,)
+    """
+    vol = 0.0
+    c1 = 0.0
+    dmax2 = 0.0
+    xmax2 = 0.0
+    sixth = 1.0 / 6.0
+    for i in range(vert_weight.shape[0]):
+        b, e = ring_ptr[i], ring_ptr[i + 1]
+        v = ring_vert[b]
+        x1, y1, z1 = vert_pos[v, 0], vert_pos[v, 1], vert_pos[v, 2]
+        ax = ay = az = 0.0
+        gx = gy = gz = 0.0
+        for j in range(b + 1, e):
+            v = ring_vert[j]
+            bx, by, bz = vert_pos[v, 0] - x1, vert_pos[v, 1] - y1, vert_pos[v, 2] - z1
+            gx += ay * bz - az * by
+            gy += az * bx - ax * bz
+            gz += ax * by - ay * bx
+            ax, ay, az = bx, by, bz
+        gx *= sixth
+        gy *= sixth
+        gz *= sixth
+        grad[i, 0] = gx
+        grad[i, 1] = gy
+        grad[i, 2] = gz
+        px, py, pz = vert_pos[i, 0] - ref[0], vert_pos[i, 1] - ref[1], vert_pos[i, 2] - ref[2]
+        vol += px * gx + py * gy + pz * gz
+        w = vert_weight[i]
+        dx, dy, dz = w * gx, w * gy, w * gz
+        dirn[i, 0] = dx
+        dirn[i, 1] = dy
+        dirn[i, 2] = dz
+        c1 += dx * gx + dy * gy + dz * gz
+        dmax2 = max(dmax2, dx * dx + dy * dy + dz * dz)
+        xmax2 = max(xmax2, px * px + py * py + pz * pz)
+    vol /= 3.0
+    c0 = vol - vol0
+    if not (c1 > 0.0):
+        return 0.0, PROJ_NO_GRADIENT
+    phi = -c0 / c1
+    nface = face_vert.shape[0]
+    dmax = math.sqrt(dmax2)
+    bound = nface * dmax2 * (0.5 * math.sqrt(xmax2) * phi * phi + dmax * abs(phi) ** 3 / 6.0)
+    if not (bound <= 1e-17 * abs(vol0)):
+        volume_cubic(face_vert, vert_pos, ref, dirn, cubic)
+        phi, status = solve_cubic_near_zero(c0, c1, cubic[0], cubic[1])
+        if status != PROJ_OK:
+            return 0.0, status
+    s = phi / h
+    for i in range(vert_weight.shape[0]):
+        if vert_weight[i] != 0.0:
+            for a in range(3):
+                vert_pos[i, a] += phi * dirn[i, a]
+                vert_vel[i, a] += s * dirn[i, a]
+    return phi, PROJ_OK
+
+
+@njit(cache=True, error_model="numpy")
+def soft_volume_force(face_vert, ref, vol0, stiff, vert_pos, grad, cubic, vert_force):
+    """Compressibility (paper 6.2): attraction toward the volume-satisfying positions.
+
+    phi solves V(X + phi grad V(X)) = V0; each point is pulled toward its
+    target X_i + phi grad_i with stiffness k: F_i = k phi grad_i V, a uniform
+    pressure p = k phi (Pa). Returns p.
+    # Model: face_vert, ref, vol0 m^3, stiff N/m
+    # Data in: vert_pos
+    # Data out: vert_force; scratch grad, cubic
+    """
+    vol = volume_and_gradient(face_vert, vert_pos, ref, grad)
+    volume_cubic(face_vert, vert_pos, ref, grad, cubic)
+    c1 = 0.0
+    for i in range(grad.shape[0]):
+        c1 += grad[i, 0] ** 2 + grad[i, 1] ** 2 + grad[i, 2] ** 2
+    phi, status = solve_cubic_near_zero(vol - vol0, c1, cubic[0], cubic[1])
+    if status != PROJ_OK:
+        return np.nan
+    p = stiff * phi
+    for i in range(grad.shape[0]):
+        vert_force[i, 0] += p * grad[i, 0]
+        vert_force[i, 1] += p * grad[i, 1]
+        vert_force[i, 2] += p * grad[i, 2]
+    return p
+
+
+@njit(cache=True, error_model="numpy")
+def apply_prescribed(pre_vert, pre_rest, pre_sched, sched_next, h, vert_pos, vert_vel):
+    """Prescribed trajectories: x_i(t+h) = rest_i + disp_s(t+h), v_i = dx / h.
+    # Model: pre_vert (n,) int32, pre_rest (n, 3) m, pre_sched (n,) int64
+    # Data in: sched_next (nsched, 3) m, schedules at t + h
+    # Data out: vert_pos, vert_vel
+    """
+    for k in range(pre_vert.shape[0]):
+        i = pre_vert[k]
+        s = pre_sched[k]
+        for a in range(3):
+            x = pre_rest[k, a] + sched_next[s, a]
+            vert_vel[i, a] = (x - vert_pos[i, a]) / h
+            vert_pos[i, a] = x
+
+
+@njit(cache=True, error_model="numpy")
+def apply_keep_in(kin_vert, kin_shape, shape_kind, shape_par, vert_pos, vert_vel):
+    """Keep points inside a half-space, ball or box: project the position onto
+    the region and remove the outward velocity component.
+    # Model: kin_vert (n,) int32, kin_shape (n,) int64, shape_kind (ns,) int64,
+    #        shape_par (ns, 6): half-space (point, unit normal pointing inside),
+    #        ball (center, radius, -, -), box (lo, hi)
+    # Data in/out: vert_pos, vert_vel
+    """
+    for k in range(kin_vert.shape[0]):
+        i = kin_vert[k]
+        s = kin_shape[k]
+        par = shape_par[s]
+        kind = shape_kind[s]
+        if kind == SHAPE_HALF_SPACE:
+            d = ((vert_pos[i, 0] - par[0]) * par[3] + (vert_pos[i, 1] - par[1]) * par[4]
+                 + (vert_pos[i, 2] - par[2]) * par[5])
+            if d < 0.0:
+                vn = vert_vel[i, 0] * par[3] + vert_vel[i, 1] * par[4] + vert_vel[i, 2] * par[5]
+                for a in range(3):
+                    vert_pos[i, a] -= d * par[3 + a]
+                    if vn < 0.0:
+                        vert_vel[i, a] -= vn * par[3 + a]
+        elif kind == SHAPE_BALL:
+            dx, dy, dz = vert_pos[i, 0] - par[0], vert_pos[i, 1] - par[1], vert_pos[i, 2] - par[2]
+            r = math.sqrt(dx * dx + dy * dy + dz * dz)
+            if r > par[3]:
+                ux, uy, uz = dx / r, dy / r, dz / r
+                vert_pos[i, 0] = par[0] + par[3] * ux
+                vert_pos[i, 1] = par[1] + par[3] * uy
+                vert_pos[i, 2] = par[2] + par[3] * uz
+                vn = vert_vel[i, 0] * ux + vert_vel[i, 1] * uy + vert_vel[i, 2] * uz
+                if vn > 0.0:
+                    vert_vel[i, 0] -= vn * ux
+                    vert_vel[i, 1] -= vn * uy
+                    vert_vel[i, 2] -= vn * uz
+        else:
+            for a in range(3):
+                if vert_pos[i, a] < par[a]:
+                    vert_pos[i, a] = par[a]
+                    if vert_vel[i, a] < 0.0:
+                        vert_vel[i, a] = 0.0
+                elif vert_pos[i, a] > par[3 + a]:
+                    vert_pos[i, a] = par[3 + a]
+                    if vert_vel[i, a] > 0.0:
+                        vert_vel[i, a] = 0.0

@@ -1,0 +1,258 @@
+"""Force terms on the membrane points: compiled kernels and their rest data.
+
+Each term is one function that adds its force into `vert_force` (N) and says
+what it reads and writes. The model holds only the terms a scene has; the
+step calls a kernel only when its term is present.
+
+Terms: gravity, applied forces, attractive points, viscous damping, local
+shape memory (paper 3.4), mass-spring network (paper 6.1), muscle (paper 3.4),
+soft volume (paper 6.2).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from .errors import MeshError
+
+# Fast-math without the flags that assume no NaN or infinity: the divergence
+# check must still see them.
+FAST = {"contract", "arcp", "nsz", "afn"}
+
+__all__ = [
+    "shape_memory_frame_coef", "muscle_pairs",
+    "set_pointwise", "add_applied", "add_attraction",
+    "add_shape_memory", "add_mass_spring", "add_muscle",
+]
+
+
+# ---------------------------------------------------------------- rest data
+
+@njit(cache=True, error_model="numpy", fastmath=FAST, inline="always")
+def ring_frame(vert_pos, ring_ptr, ring_vert, ring_closed, i):
+    """Local frame of vertex i from its neighbour ring only (DESIGN.md).
+
+    G = mean of the ring N_1..N_eta; n = normalized sum of (N_j - G) x (N_j+1 - G)
+    over the fan's consecutive pairs; t1 = unit tangential part of N_1 - G;
+    t2 = n x t1. One pass over the ring: the cross sum is taken relative to
+    N_1 and moved to G afterwards (for a closed fan it does not depend on the
+    origin; for an open one it changes by (N_eta - N_1) x (G - N_1)).
+    Returns (G, t1, t2, n) as 12 floats and |cross sum| (m^2); the norm is 0
+    when the frame is degenerate.
+    """
+    b, e = ring_ptr[i], ring_ptr[i + 1]
+    v = ring_vert[b]
+    x1, y1, z1 = vert_pos[v, 0], vert_pos[v, 1], vert_pos[v, 2]
+    sx = sy = sz = 0.0  # sum of N_j - N_1
+    nx = ny = nz = 0.0
+    ax = ay = az = 0.0  # previous N_j - N_1 (zero for j = 1)
+    for j in range(b + 1, e):
+        v = ring_vert[j]
+        bx, by, bz = vert_pos[v, 0] - x1, vert_pos[v, 1] - y1, vert_pos[v, 2] - z1
+        sx += bx
+        sy += by
+        sz += bz
+        nx += ay * bz - az * by
+        ny += az * bx - ax * bz
+        nz += ax * by - ay * bx
+        ax, ay, az = bx, by, bz
+    inv = 1.0 / (e - b)
+    gx, gy, gz = sx * inv, sy * inv, sz * inv  # G - N_1
+    if not ring_closed[i]:  # move the open fan's sum from N_1 to G
+        nx += ay * gz - az * gy
+        ny += az * gx - ax * gz
+        nz += ax * gy - ay * gx
+    nn = math.sqrt(nx * nx + ny * ny + nz * nz)
+    r = 1.0 / nn
+    nx *= r
+    ny *= r
+    nz *= r
+    # N_1 - G = -(G - N_1)
+    dn = -(gx * nx + gy * ny + gz * nz)
+    tx, ty, tz = -gx - dn * nx, -gy - dn * ny, -gz - dn * nz
+    r = 1.0 / math.sqrt(tx * tx + ty * ty + tz * tz)
+    tx *= r
+    ty *= r
+    tz *= r
+    return (gx + x1, gy + y1, gz + z1, tx, ty, tz,
+            ny * tz - nz * ty, nz * tx - nx * tz, nx * ty - ny * tx, nx, ny, nz, nn)
+
+
+def shape_memory_frame_coef(vert_pos, ring_ptr, ring_vert, ring_closed, verts) -> np.ndarray:
+    """(alpha, beta, gamma) (m) of each vertex in `verts` in its rest ring frame.
+
+    Returns (len(verts), 3). Raises MeshError naming vertices whose ring
+    frame is degenerate (fewer than 3 neighbours, or all on one line).
+    """
+    coef = np.zeros((len(verts), 3))
+    bad = []
+    for k, i in enumerate(verts):
+        if ring_ptr[i + 1] - ring_ptr[i] < 2:
+            bad.append(int(i))
+            continue
+        f = ring_frame(vert_pos, ring_ptr, ring_vert, ring_closed, i)
+        scale = float(np.ptp(vert_pos[ring_vert[ring_ptr[i]:ring_ptr[i + 1]]], axis=0).max())
+        if not (f[12] > 1e-10 * scale * scale) or not np.all(np.isfinite(f[:12])):
+            bad.append(int(i))
+            continue
+        d = vert_pos[i] - np.array(f[0:3])
+        coef[k] = (np.dot(f[3:6], d), np.dot(f[6:9], d), np.dot(f[9:12], d))
+    if bad:
+        raise MeshError(f"shape memory: vertices {bad[:8]} ({len(bad)} in all) have a degenerate neighbour "
+                        f"ring (expected at least 3 neighbours not all on one line); leave them out of the "
+                        f"shape-memory region or nail them")
+    return coef
+
+
+def muscle_pairs(vert_pos, ring_ptr, ring_vert, verts, *, toward=None, axis=None,
+                 max_angle_deg: float = 30.0):
+    """Neighbours each muscular point contracts toward (paper 3.4).
+
+    A neighbour N of point P is a contraction target when the chord P->N lies
+    within `max_angle_deg` of the fibre direction at P, either way along it:
+    the fibre points from P toward the point `toward` (m), or along `axis`.
+    Returns (pair_vert, pair_nbr) int32 arrays.
+    """
+    cos_min = math.cos(math.radians(max_angle_deg))
+    pv, pn = [], []
+    for i in verts:
+        p = vert_pos[i]
+        if toward is not None:
+            u = np.asarray(toward, float) - p
+            nu = np.linalg.norm(u)
+            if nu == 0.0:  # the point the fibres converge to: every chord qualifies
+                u = None
+            else:
+                u = u / nu
+        else:
+            u = np.asarray(axis, float) / np.linalg.norm(axis)
+        for j in ring_vert[ring_ptr[i]:ring_ptr[i + 1]]:
+            c = vert_pos[j] - p
+            cos = 1.0 if u is None else abs(c @ u) / np.linalg.norm(c)
+            if cos >= cos_min:
+                pv.append(i)
+                pn.append(j)
+    return np.asarray(pv, np.int32), np.asarray(pn, np.int32)
+
+
+# ---------------------------------------------------------------- kernels
+
+@njit(cache=True, error_model="numpy")
+def set_pointwise(vert_mass, vert_free, accel, gravity_on, damp_coef, damping_on, vert_vel, vert_force):
+    """Start the force sum with the terms that need only the point itself:
+    gravity F = m g (integrated points) and viscous damping F = -c v (paper
+    eq. 4). One pass sets vert_force, so it needs no separate clearing.
+    # Model: vert_mass (nvert,) kg, vert_free (nvert,) uint8, accel (3,) m/s^2,
+    #        damp_coef (nvert,) N s/m; gravity_on, damping_on: bool
+    # Data in: vert_vel (nvert, 3) m/s
+    # Data out: vert_force (nvert, 3) N
+    """
+    for i in range(vert_mass.shape[0]):
+        fx = fy = fz = 0.0
+        if gravity_on and vert_free[i]:
+            m = vert_mass[i]
+            fx = m * accel[0]
+            fy = m * accel[1]
+            fz = m * accel[2]
+        if damping_on:
+            c = damp_coef[i]
+            fx -= c * vert_vel[i, 0]
+            fy -= c * vert_vel[i, 1]
+            fz -= c * vert_vel[i, 2]
+        vert_force[i, 0] = fx
+        vert_force[i, 1] = fy
+        vert_force[i, 2] = fz
+
+
+@njit(cache=True, error_model="numpy")
+def add_applied(app_vert, app_sched, sched_val, vert_force):
+    """F_i += f_s(t): a force per vertex from schedule s.
+    # Model: app_vert (n,) int32, app_sched (n,) int64
+    # Data in: sched_val (nsched, 3) N (schedules at time t)
+    # Data out: vert_force
+    """
+    for k in range(app_vert.shape[0]):
+        i = app_vert[k]
+        s = app_sched[k]
+        vert_force[i, 0] += sched_val[s, 0]
+        vert_force[i, 1] += sched_val[s, 1]
+        vert_force[i, 2] += sched_val[s, 2]
+
+
+@njit(cache=True, error_model="numpy")
+def add_attraction(att_vert, att_stiff, att_target, att_sched, sched_val, vert_pos, vert_force):
+    """F_i += k (P_ideal - P_i), P_ideal = target_i + offset_s(t) (paper 3.3).
+    # Model: att_vert (n,) int32, att_stiff (n,) N/m, att_target (n, 3) m, att_sched (n,) int64
+    # Data in: sched_val (offsets, m), vert_pos (nvert, 3) m
+    # Data out: vert_force
+    """
+    for k in range(att_vert.shape[0]):
+        i = att_vert[k]
+        s = att_sched[k]
+        c = att_stiff[k]
+        for a in range(3):
+            vert_force[i, a] += c * (att_target[k, a] + sched_val[s, a] - vert_pos[i, a])
+
+
+@njit(cache=True, error_model="numpy", fastmath=FAST)
+def add_shape_memory(sm_vert, sm_stiff, sm_coef, ring_ptr, ring_vert, ring_closed, vert_pos, vert_force):
+    """Local shape memory (paper 3.4): F_i += k_i (P_ideal - P_i).
+
+    P_ideal = G + alpha t1 + beta t2 + gamma n in the frame of the current
+    neighbour ring (`ring_frame`), so the force vanishes at rest and turns
+    with any rigid motion of the surface. No reaction on the neighbours: the
+    force is not conservative.
+    # Model: sm_vert (n,) int32, sm_stiff (n,) N/m, sm_coef (n, 3) m, ring_*
+    # Data in: vert_pos (nvert, 3) m
+    # Data out: vert_force
+    """
+    for k in range(sm_vert.shape[0]):
+        i = sm_vert[k]
+        gx, gy, gz, tx, ty, tz, sx, sy, sz, nx, ny, nz, nn = ring_frame(vert_pos, ring_ptr, ring_vert,
+                                                                        ring_closed, i)
+        al, be, ga = sm_coef[k, 0], sm_coef[k, 1], sm_coef[k, 2]
+        c = sm_stiff[k]
+        vert_force[i, 0] += c * (gx + al * tx + be * sx + ga * nx - vert_pos[i, 0])
+        vert_force[i, 1] += c * (gy + al * ty + be * sy + ga * ny - vert_pos[i, 1])
+        vert_force[i, 2] += c * (gz + al * tz + be * sz + ga * nz - vert_pos[i, 2])
+
+
+@njit(cache=True, error_model="numpy")
+def add_mass_spring(spring_vert, spring_stiff, spring_rest, vert_pos, vert_force):
+    """Springs between neighbours (the paper's comparison model, 6.1).
+    # Model: spring_vert (ns, 2) int32, spring_stiff (ns,) N/m, spring_rest (ns,) m
+    # Data in: vert_pos
+    # Data out: vert_force (both ends)
+    """
+    for s in range(spring_vert.shape[0]):
+        a, b = spring_vert[s, 0], spring_vert[s, 1]
+        dx = vert_pos[b, 0] - vert_pos[a, 0]
+        dy = vert_pos[b, 1] - vert_pos[a, 1]
+        dz = vert_pos[b, 2] - vert_pos[a, 2]
+        ln = math.sqrt(dx * dx + dy * dy + dz * dz)
+        f = spring_stiff[s] * (ln - spring_rest[s]) / ln
+        vert_force[a, 0] += f * dx
+        vert_force[a, 1] += f * dy
+        vert_force[a, 2] += f * dz
+        vert_force[b, 0] -= f * dx
+        vert_force[b, 1] -= f * dy
+        vert_force[b, 2] -= f * dz
+
+
+@njit(cache=True, error_model="numpy")
+def add_muscle(mus_vert, mus_nbr, mus_sched, sched_val, vert_pos, vert_force):
+    """Muscle (paper 3.4): F_i += k_muscle(t) (N_j - P_i) for each contraction pair.
+    # Model: mus_vert, mus_nbr (np,) int32, mus_sched (np,) int64
+    # Data in: sched_val (stiffness N/m in column 0), vert_pos
+    # Data out: vert_force
+    """
+    for k in range(mus_vert.shape[0]):
+        i = mus_vert[k]
+        j = mus_nbr[k]
+        c = sched_val[mus_sched[k], 0]
+        vert_force[i, 0] += c * (vert_pos[j, 0] - vert_pos[i, 0])
+        vert_force[i, 1] += c * (vert_pos[j, 1] - vert_pos[i, 1])
+        vert_force[i, 2] += c * (vert_pos[j, 2] - vert_pos[i, 2])

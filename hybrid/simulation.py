@@ -1,0 +1,346 @@
+"""The changing state of a run, and the step (paper 3.5 and 4; DESIGN.md).
+
+One step, membrane only:
+1. forces at time t (only the terms the model has);
+2. free integration of the points that are not nailed, prescribed or linked
+   (explicit Euler, the paper's eq. 4, or symplectic Euler);
+3. local constraints: prescribed trajectories, keep-in-region;
+4. the exact volume projection, velocities adjusted; p = phi / h^2;
+5. the divergence check: non-finite values, or a point that moved farther
+   in one step than the body's size.
+
+The whole loop is compiled; `Simulation.step(n)` runs n steps in one call
+unless the scene has Python schedules (evaluated between steps) or rigid
+parts (MuJoCo steps between the membrane's force and integration phases).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+from .constraints import (PROJ_NO_GRADIENT, PROJ_OK, apply_keep_in, apply_prescribed,
+                          project_volume, soft_volume_force, volume_and_gradient)
+from .errors import ConstraintError, SimulationDiverged
+from .forces import (add_applied, add_attraction, add_mass_spring, add_muscle, add_shape_memory,
+                     set_pointwise)
+from .model import (TERMS, T_APPLIED, T_ATTRACTION, T_DAMPING, T_GRAVITY, T_KEEP_IN, T_MASS_SPRING,
+                    T_MUSCLE, T_PRESCRIBED, T_SHAPE_MEMORY, T_SOFT_VOLUME, T_VOLUME, MembraneArrays,
+                    Model)
+from .schedule import KIND_PYTHON, schedule_eval
+
+__all__ = ["Simulation", "MembraneState"]
+
+# scal slots
+S_TIME, S_PRESSURE, S_PHI, S_KE, S_MAXDISP = range(5)
+# status codes
+OK, DIVERGED_NONFINITE, DIVERGED_RUNAWAY, VOLUME_FAILED = 0, 1, 2, 3
+
+
+class MembraneState(NamedTuple):
+    """What changes during a run. vert_pos (nvert, 3) m; vert_vel (nvert, 3) m/s;
+    vert_force (nvert, 3) N (forces of the last step, before constraints);
+    grad (nvert, 3) m^2 volume gradient at the last projection; dirn, cubic:
+    scratch; sched_val / sched_next (nsched, 3): schedules at t and t + h;
+    scal: time s, pressure Pa, phi, kinetic energy J, largest step displacement m;
+    status: code, failing step, worst vertex, projection status;
+    term_calls (nterm,): how many times each term's kernel ran."""
+    vert_pos: np.ndarray
+    vert_vel: np.ndarray
+    vert_force: np.ndarray
+    grad: np.ndarray
+    dirn: np.ndarray
+    cubic: np.ndarray
+    sched_val: np.ndarray
+    sched_next: np.ndarray
+    scal: np.ndarray
+    status: np.ndarray
+    term_calls: np.ndarray
+
+
+def new_state(arrays: MembraneArrays) -> MembraneState:
+    n = arrays.vert_rest.shape[0]
+    ns = arrays.sched.kind.shape[0]
+    return MembraneState(
+        vert_pos=arrays.vert_rest.copy(), vert_vel=np.zeros((n, 3)), vert_force=np.zeros((n, 3)),
+        grad=np.zeros((n, 3)), dirn=np.zeros((n, 3)), cubic=np.zeros(2),
+        sched_val=np.zeros((ns, 3)), sched_next=np.zeros((ns, 3)), scal=np.zeros(8),
+        status=np.zeros(4, np.int64), term_calls=np.zeros(len(TERMS), np.int64))
+
+
+@njit(cache=True, error_model="numpy")
+def eval_schedules(sched, t, out):
+    """All compiled schedules at time t into out (nsched, 3); Python ones are set by the caller."""
+    for row in range(sched.kind.shape[0]):
+        if sched.kind[row] != KIND_PYTHON:
+            schedule_eval(sched, row, t, out[row])
+
+
+@njit(cache=True, error_model="numpy")
+def membrane_forces(m, s, t):
+    """Step phase 1: the force of every term the model has, at time t.
+    # Model: m (MembraneArrays)   # Data in: s.vert_pos, s.vert_vel
+    # Data out: s.vert_force, s.sched_val, s.term_calls (and pressure for soft volume)
+    """
+    eval_schedules(m.sched, t, s.sched_val)
+    on = m.term_on
+    set_pointwise(m.vert_mass, m.vert_free, m.accel, on[T_GRAVITY] != 0, m.damp_coef, on[T_DAMPING] != 0,
+                  s.vert_vel, s.vert_force)
+    s.term_calls[T_GRAVITY] += on[T_GRAVITY]
+    s.term_calls[T_DAMPING] += on[T_DAMPING]
+    if on[T_APPLIED]:
+        add_applied(m.app_vert, m.app_sched, s.sched_val, s.vert_force)
+        s.term_calls[T_APPLIED] += 1
+    if on[T_ATTRACTION]:
+        add_attraction(m.att_vert, m.att_stiff, m.att_target, m.att_sched, s.sched_val, s.vert_pos,
+                       s.vert_force)
+        s.term_calls[T_ATTRACTION] += 1
+    if on[T_SHAPE_MEMORY]:
+        add_shape_memory(m.sm_vert, m.sm_stiff, m.sm_coef, m.ring_ptr, m.ring_vert, m.ring_closed,
+                         s.vert_pos, s.vert_force)
+        s.term_calls[T_SHAPE_MEMORY] += 1
+    if on[T_MASS_SPRING]:
+        add_mass_spring(m.spring_vert, m.spring_stiff, m.spring_rest, s.vert_pos, s.vert_force)
+        s.term_calls[T_MASS_SPRING] += 1
+    if on[T_MUSCLE]:
+        add_muscle(m.mus_vert, m.mus_nbr, m.mus_sched, s.sched_val, s.vert_pos, s.vert_force)
+        s.term_calls[T_MUSCLE] += 1
+    if on[T_SOFT_VOLUME]:
+        s.scal[S_PRESSURE] = soft_volume_force(m.face_vert, m.vol_ref, m.vol0, m.soft_stiff, s.vert_pos,
+                                               s.grad, s.cubic, s.vert_force)
+        s.term_calls[T_SOFT_VOLUME] += 1
+
+
+@njit(cache=True, error_model="numpy")
+def membrane_advance(m, s, t, step):
+    """Step phases 2-5: integrate, project, check. Returns a status code.
+    # Model: m   # Data in: s.vert_force   # Data out: s.vert_pos, s.vert_vel, s.scal, s.status
+    """
+    h = m.dt
+    pos, vel, frc = s.vert_pos, s.vert_vel, s.vert_force
+    explicit = m.integrator == 0
+    dmax = 0.0
+    dsum = 0.0
+    worst = 0
+    ke = 0.0
+    for i in range(pos.shape[0]):
+        if not m.vert_free[i]:
+            continue
+        inv_m = 1.0 / m.vert_mass[i]
+        d2 = 0.0
+        for a in range(3):
+            if explicit:  # paper eq. 4: position with the old velocity
+                dx = h * vel[i, a]
+                vel[i, a] += h * frc[i, a] * inv_m
+            else:  # symplectic: velocity first, position with the new velocity
+                vel[i, a] += h * frc[i, a] * inv_m
+                dx = h * vel[i, a]
+            pos[i, a] += dx
+            d2 += dx * dx
+        ke += m.vert_mass[i] * (vel[i, 0] ** 2 + vel[i, 1] ** 2 + vel[i, 2] ** 2)
+        dsum += d2
+        if d2 > dmax:
+            dmax = d2
+            worst = i
+    s.scal[S_KE] = 0.5 * ke
+    s.scal[S_MAXDISP] = math.sqrt(dmax)
+    if not (dsum < np.inf and ke < np.inf):
+        return _fail(s, DIVERGED_NONFINITE, step, _first_nonfinite(pos, vel))
+    if dmax > m.runaway_disp * m.runaway_disp:
+        return _fail(s, DIVERGED_RUNAWAY, step, worst)
+    on = m.term_on
+    if on[T_PRESCRIBED]:
+        eval_schedules(m.sched, t + h, s.sched_next)
+        apply_prescribed(m.pre_vert, m.pre_rest, m.pre_sched, s.sched_next, h, pos, vel)
+        s.term_calls[T_PRESCRIBED] += 1
+    if on[T_KEEP_IN]:
+        apply_keep_in(m.kin_vert, m.kin_shape, m.shape_kind, m.shape_par, pos, vel)
+        s.term_calls[T_KEEP_IN] += 1
+    if on[T_VOLUME]:
+        phi, st = project_volume(m.ring_ptr, m.ring_vert, m.face_vert, m.vol_ref, m.vol0, m.vert_weight, h, pos, vel,
+                                 s.grad, s.dirn, s.cubic)
+        s.term_calls[T_VOLUME] += 1
+        if st != PROJ_OK:
+            s.status[3] = st
+            return _fail(s, VOLUME_FAILED, step, 0)
+        if not (abs(phi) < np.inf):
+            return _fail(s, DIVERGED_NONFINITE, step, _first_nonfinite(pos, vel))
+        s.scal[S_PHI] = phi
+        s.scal[S_PRESSURE] = phi / (h * h)
+    return OK
+
+
+@njit(cache=True, error_model="numpy")
+def _fail(s, code, step, vert):
+    s.status[0] = code
+    s.status[1] = step
+    s.status[2] = vert
+    return code
+
+
+@njit(cache=True, error_model="numpy")
+def _first_nonfinite(pos, vel):
+    for i in range(pos.shape[0]):
+        for a in range(3):
+            if not (abs(pos[i, a]) < np.inf and abs(vel[i, a]) < np.inf):
+                return i
+    return 0
+
+
+@njit(cache=True, error_model="numpy")
+def run_membrane(m, s, nstep, step0):
+    """nstep whole membrane steps; time advances as t0 + k h. Returns steps done."""
+    t0 = s.scal[S_TIME]
+    for k in range(nstep):
+        t = t0 + k * m.dt
+        membrane_forces(m, s, t)
+        if membrane_advance(m, s, t, step0 + k) != OK:
+            return k
+        s.scal[S_TIME] = t0 + (k + 1) * m.dt
+    return nstep
+
+
+class Simulation:
+    """A run of a model: `step(n)`, and the state as read-only views.
+
+    >>> sim = Simulation(compile_scene(scene)); sim.step(1000); sim.pressure
+    """
+
+    def __init__(self, model: Model):
+        self.model = model
+        self.rigid = None
+        if model.rigid is not None:
+            from .coupling import Coupling  # imports mujoco only for rigid scenes
+            self.rigid = Coupling(model)
+        self.reset()
+
+    # ------------------------------------------------------------ state
+    def reset(self) -> None:
+        """Back to rest at t = 0."""
+        self.state = new_state(self.model.arrays)
+        self.steps_done = 0
+        self.failed: Exception | None = None
+        if self.rigid is not None:
+            self.rigid.reset(self.state)
+
+    @property
+    def time(self) -> float:
+        """Simulated time (s)."""
+        return float(self.state.scal[S_TIME])
+
+    @property
+    def vert_pos(self) -> np.ndarray:
+        """(nvert, 3) m, a read-only view."""
+        v = self.state.vert_pos.view()
+        v.flags.writeable = False
+        return v
+
+    @property
+    def vert_vel(self) -> np.ndarray:
+        """(nvert, 3) m/s, a read-only view."""
+        v = self.state.vert_vel.view()
+        v.flags.writeable = False
+        return v
+
+    @property
+    def volume(self) -> float:
+        """Enclosed volume (m^3) of the current positions."""
+        return self.model.mesh.volume(self.state.vert_pos)
+
+    @property
+    def volume_rel_error(self) -> float:
+        """|V - V0| / V0 of the current positions (0 if the model keeps no volume)."""
+        v0 = self.model.arrays.vol0
+        return abs(self.volume - v0) / v0 if v0 else 0.0
+
+    @property
+    def pressure(self) -> float:
+        """Gauge pressure inside the body (Pa) from the last projection, p = phi / h^2."""
+        return float(self.state.scal[S_PRESSURE])
+
+    @property
+    def kinetic_energy(self) -> float:
+        """Kinetic energy of the integrated points after the last step (J)."""
+        return float(self.state.scal[S_KE])
+
+    @property
+    def term_calls(self) -> dict:
+        """How many times each term's kernel ran: {term name: count}."""
+        return {name: int(c) for name, c in zip(TERMS, self.state.term_calls)}
+
+    # ------------------------------------------------------------ stepping
+    def step(self, n: int = 1) -> None:
+        """Advance n steps. Raises SimulationDiverged or ConstraintError;
+        the state then holds the failing step and further steps refuse."""
+        if self.failed is not None:
+            raise self.failed
+        if not (isinstance(n, (int, np.integer)) and n >= 0):
+            raise ValueError(f"n: expected an integer >= 0, received {n!r}")
+        m, s = self.model.arrays, self.state
+        if self.rigid is None and not self.model.python_schedules:
+            done = run_membrane(m, s, int(n), self.steps_done)
+            self.steps_done += done
+            if done < n:
+                self._raise()
+            return
+        for _ in range(int(n)):
+            t = float(s.scal[S_TIME])
+            self._python_schedules(t)
+            if self.rigid is None:
+                membrane_forces(m, s, t)
+                code = membrane_advance(m, s, t, self.steps_done)
+            else:
+                code = self.rigid.step(s, t, self.steps_done)
+            if code != OK:
+                self._raise()
+            s.scal[S_TIME] = t + m.dt
+            self.steps_done += 1
+
+    def _python_schedules(self, t: float) -> None:
+        h = self.model.arrays.dt
+        for row, fn in self.model.python_schedules:
+            for out, tt in ((self.state.sched_val, t), (self.state.sched_next, t + h)):
+                val = np.atleast_1d(np.asarray(fn(tt), dtype=float)).reshape(-1)
+                if val.size not in (1, 3) or not np.all(np.isfinite(val)):
+                    err = SimulationDiverged(
+                        f"schedule function {getattr(fn, '__name__', fn)!r} returned {val.tolist()} at "
+                        f"t = {tt:.6g} s; expected 1 or 3 finite numbers",
+                        time_s=tt, step=self.steps_done, vert=0, dt_suggested_s=h)
+                    self.failed = err
+                    raise err
+                out[row, :val.size] = val
+
+    def _raise(self) -> None:
+        s, model = self.state, self.model
+        code, step, vert = int(s.status[0]), int(s.status[1]), int(s.status[2])
+        h = model.arrays.dt
+        t = step * h
+        if code == VOLUME_FAILED:
+            why = ("the volume gradient vanished on the free points" if s.status[3] == PROJ_NO_GRADIENT
+                   else "the volume cubic has no real root")
+            err: Exception = ConstraintError(
+                f"volume projection failed at t = {t:.6g} s (step {step}): {why}; expected a closed surface "
+                f"with free points to move")
+        else:
+            suggest = self.suggest_dt()
+            what = ("became non-finite" if code == DIVERGED_NONFINITE else
+                    f"moved {s.scal[S_MAXDISP]:.3g} m in one step, more than the body's size "
+                    f"{model.arrays.runaway_disp:.3g} m")
+            err = SimulationDiverged(
+                f"simulation diverged at t = {t:.6g} s (step {step}): vertex {vert} {what}; "
+                f"time step {h:.3g} s with {model.scene.integrator}; try dt_s <= {suggest:.3g} s",
+                time_s=t, step=step, vert=vert, dt_suggested_s=suggest)
+        self.failed = err
+        raise err
+
+    def suggest_dt(self) -> float:
+        """A time step (s) to try after a divergence: half the linear stability
+        bound, and at most a quarter of the step that failed."""
+        h = self.model.arrays.dt
+        bound = self.model.dt_stable_s
+        if bound == 0.0:  # explicit Euler without damping: no step is stable
+            return h / 4.0
+        return min(0.5 * bound, h / 4.0)
