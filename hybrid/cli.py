@@ -1,0 +1,115 @@
+"""The command line: `hybrid run`, `hybrid bench`.
+
+Bad input prints one line naming the culprit on stderr and exits with
+status 2, without a traceback; a run that fails still writes what it
+recorded.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import sys
+from pathlib import Path
+
+from .errors import HybridError
+
+__all__ = ["main"]
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):  # one line, status 2 (argparse prints usage too)
+        sys.stderr.write(f"hybrid: error: {message}\n")
+        sys.exit(2)
+
+
+def _load(scene_arg: str | None, overrides: list[str]):
+    """A scene from a TOML file, or a built-in scene by name ("breathing", "membrane_demo")."""
+    from .demo import membrane_demo
+    name = scene_arg or "breathing"
+    if name == "membrane_demo":
+        if overrides:
+            raise HybridError("--set: the built-in membrane_demo is a Python scene; expected a TOML scene file")
+        return membrane_demo()
+    try:
+        from . import scenefile
+    except ImportError:  # pragma: no cover - scene files arrive with the trunk
+        if scene_arg is None:
+            return membrane_demo()
+        raise HybridError(f"scene {scene_arg!r}: TOML scenes are not available in this build")
+    path = scenefile.builtin_scene(name) if scene_arg is None or not scene_arg.endswith(".toml") else Path(scene_arg)
+    scene = scenefile.load_scene(path)
+    if overrides:
+        scene = scenefile.apply_overrides(scene, overrides)
+    return scene
+
+
+def _cmd_run(args) -> int:
+    from .model import compile_scene
+    from .run import RunFailed, run, write_outputs
+    from .simulation import Simulation
+
+    scene = _load(args.scene, args.set or [])
+    if args.without:
+        scene = scene.without(*args.without)
+    if args.dt is not None:
+        scene = dataclasses.replace(scene, dt_s=args.dt)
+    duration = scene.duration_s if args.duration is None else args.duration
+    if not duration > 0:
+        raise HybridError(f"--duration: expected a time > 0 s, received {duration!r}")
+    out = Path(args.out) if args.out else Path("runs") / scene.name
+    sim = Simulation(compile_scene(scene))
+    try:
+        result = run(sim, duration, progress=True)
+    except RunFailed as failed:
+        write_outputs(failed.result, out)
+        raise failed.error
+    write_outputs(result, out)
+    s = result["summary"]
+    print(f"{s['scene']}: {s['steps']} steps of {s['dt']:g} s in {s['wall_s']:.2f} s "
+          f"({s['us_per_step']:.1f} us/step); volume error max {s['volume_rel_error_max']:.1e}; "
+          f"rib lift {s['rib_lift_mm']:.2f} mm; apex descent {s['apex_descent_mm']:.2f} mm; "
+          f"pressure {s['pressure_min_pa']:.0f} to {s['pressure_max_pa']:.0f} Pa -> {out}")
+    return 0
+
+
+def _cmd_bench(args) -> int:
+    from .bench import format_table, run_bench
+    result = run_bench(Path(args.json) if args.json else None, quick=args.quick)
+    print(format_table(result))
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = _Parser(prog="hybrid", description="Breathing trunk: MuJoCo ribs coupled to a volume-preserving membrane.")
+    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    r = sub.add_parser("run", help="run a scene (default: the built-in breathing trunk)")
+    r.add_argument("scene", nargs="?", help="a scene TOML file, or a built-in name: breathing, membrane_demo")
+    r.add_argument("--duration", type=float, help="simulated time (s); default: the scene's")
+    r.add_argument("--dt", type=float, help="time step (s); default: the scene's")
+    r.add_argument("--out", help="output folder (default runs/SCENE)")
+    r.add_argument("--without", action="append", metavar="NAME", help="drop a force term or constraint by name")
+    r.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a scene value (TOML scenes)")
+    r.set_defaults(func=_cmd_run)
+    b = sub.add_parser("bench", help="time the full step; medians of repeated runs")
+    b.add_argument("--json", metavar="FILE", help="also write the figures as JSON")
+    b.add_argument("--quick", action="store_true", help="small sizes only (a smoke test)")
+    b.set_defaults(func=_cmd_bench)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except HybridError as exc:
+        msg = " ".join(str(exc).split())  # one line, whatever the message
+        sys.stderr.write(f"hybrid: error: {msg}\n")
+        return 2
+    except KeyboardInterrupt:
+        sys.stderr.write("hybrid: interrupted\n")
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

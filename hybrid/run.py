@@ -1,0 +1,202 @@
+"""Run a scene to the end and summarise it: `summary.json` and `breathing.png`.
+
+The runner is an observer: it steps the simulation in compiled chunks between
+frames (every `frame_dt_s` of simulated time), reads what it needs at each
+frame, and never changes the state. A run that fails or diverges still writes
+what it recorded up to the failure, with the error in the summary.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .errors import HybridError
+from .model import Model
+from .schedule import Breathing, evaluate
+from .scene import Muscle
+from .simulation import Simulation
+
+__all__ = ["Trace", "run", "write_outputs"]
+
+
+@dataclass
+class Trace:
+    """Time series recorded at each frame (SI units unless the name says mm)."""
+    t_s: list = field(default_factory=list)
+    rib_lift_mm: list = field(default_factory=list)      # cranial (+z) displacement of the linked points' centroid
+    apex_descent_mm: list = field(default_factory=list)  # caudal (-z) displacement of the apex
+    volume_rel_error: list = field(default_factory=list)
+    pressure_pa: list = field(default_factory=list)
+    muscle_n_per_m: list = field(default_factory=list)
+    kinetic_energy_j: list = field(default_factory=list)
+
+    def arrays(self) -> dict:
+        return {k: np.asarray(v, float) for k, v in self.__dict__.items()}
+
+
+def _apex_vertex(model: Model) -> int:
+    """The integrated point highest (most cranial) at rest: the diaphragm's apex."""
+    z = model.mesh.vert_pos[:, 2].copy()
+    z[model.arrays.vert_free == 0] = -np.inf
+    return int(np.argmax(z))
+
+
+def _breathing(model: Model):
+    """The first muscle's schedule, and its breathing period if it has one."""
+    for term in model.scene.forces:
+        if isinstance(term, Muscle):
+            return term.stiffness, (term.stiffness if isinstance(term.stiffness, Breathing) else None)
+    return None, None
+
+
+def run(sim: Simulation, duration_s: float, *, frame_dt_s: float = 0.01, progress: bool = False) -> dict:
+    """Run `sim` for `duration_s` and return the summary (see `summary keys`).
+
+    Returns a dict with the summary and the trace under "trace". On a
+    HybridError the summary holds "status": "failed" and "error", and the
+    error is re-raised as `RunFailed` carrying the partial result.
+    """
+    model = sim.model
+    h = model.dt_s
+    nstep = int(round(duration_s / h))
+    frame_steps = max(1, int(round(frame_dt_s / h)))
+    apex = _apex_vertex(model)
+    link = model.link_vert
+    rest = model.mesh.vert_pos
+    apex_z0 = rest[apex, 2]
+    rib_z0 = rest[link, 2].mean() if link.size else 0.0
+    muscle_sched, breath = _breathing(model)
+    # the end of the last complete expiration, where the body should be back at rest
+    cycle_end_step = None
+    if breath is not None:
+        ncycle = math.floor((duration_s - breath.onset_s) / breath.period_s + 1e-9)
+        if ncycle >= 1:
+            cycle_end_step = int(round((breath.onset_s + ncycle * breath.period_s) / h))
+    stops = sorted(set(list(range(frame_steps, nstep + 1, frame_steps)) + [nstep]
+                       + ([cycle_end_step] if cycle_end_step else [])))
+    trace = Trace()
+    rest_return_mm = None
+    error = None
+    wall0 = time.perf_counter()
+
+    def record():
+        pos = sim.state.vert_pos
+        trace.t_s.append(sim.time)
+        trace.apex_descent_mm.append(-(pos[apex, 2] - apex_z0) * 1e3)
+        trace.rib_lift_mm.append((pos[link, 2].mean() - rib_z0) * 1e3 if link.size else 0.0)
+        trace.volume_rel_error.append(sim.volume_rel_error)
+        trace.pressure_pa.append(sim.pressure)
+        trace.kinetic_energy_j.append(sim.kinetic_energy)
+        trace.muscle_n_per_m.append(float(evaluate(muscle_sched, sim.time)[0]) if muscle_sched is not None else 0.0)
+
+    record()
+    bar = _Progress(nstep) if progress else None
+    try:
+        for stop in stops:
+            sim.step(stop - sim.steps_done)
+            record()
+            if stop == cycle_end_step:
+                rest_return_mm = float(np.linalg.norm(sim.state.vert_pos - rest, axis=1).max() * 1e3)
+            if bar:
+                bar.update(stop)
+    except HybridError as exc:
+        error = exc
+    finally:
+        if bar:
+            bar.close()
+    wall = time.perf_counter() - wall0
+    arr = trace.arrays()
+    summary = {
+        "scene": model.scene.name,
+        "status": "ok" if error is None else "failed",
+        "steps": sim.steps_done,
+        "dt": h,
+        "duration_s": sim.time,
+        "wall_s": wall,
+        "us_per_step": wall / max(sim.steps_done, 1) * 1e6,
+        "volume_rel_error_max": float(arr["volume_rel_error"].max()),
+        "pressure_min_pa": float(arr["pressure_pa"].min()),
+        "pressure_max_pa": float(arr["pressure_pa"].max()),
+        "rib_lift_mm": float(arr["rib_lift_mm"].max()),
+        "apex_descent_mm": float(arr["apex_descent_mm"].max()),
+        "rest_return_mm": rest_return_mm,
+    }
+    if error is not None:
+        summary["error"] = str(error)
+    result = {"summary": summary, "trace": trace}
+    if error is not None:
+        raise RunFailed(error, result) from error
+    return result
+
+
+class RunFailed(HybridError):
+    """A run stopped on an error; `.result` holds what was recorded before it."""
+
+    def __init__(self, error: Exception, result: dict):
+        super().__init__(str(error))
+        self.error = error
+        self.result = result
+
+
+def write_outputs(result: dict, out_dir: Path, *, plot: bool = True) -> None:
+    """Write summary.json (and breathing.png) into out_dir."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    (out_dir / "summary.json").write_text(json.dumps(result["summary"], indent=2) + "\n")
+    if plot:
+        plot_trace(result["trace"], out_dir / "breathing.png", title=result["summary"]["scene"])
+
+
+def plot_trace(trace: Trace, path: Path, *, title: str = "") -> None:
+    """Five time series, one panel each: rib elevation, apex descent, volume
+    error, pressure and muscle stiffness."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    a = trace.arrays()
+    panels = [("rib_lift_mm", "rib elevation (mm)"), ("apex_descent_mm", "apex descent (mm)"),
+              ("volume_rel_error", "|V - V0| / V0"), ("pressure_pa", "pressure (Pa)"),
+              ("muscle_n_per_m", "muscle stiffness (N/m)")]
+    fig, axes = plt.subplots(len(panels), 1, figsize=(7, 9), sharex=True)
+    for ax, (key, label) in zip(axes, panels):
+        y = a[key]
+        if key == "volume_rel_error":
+            ax.semilogy(a["t_s"], np.maximum(y, 1e-17))
+        else:
+            ax.plot(a["t_s"], y)
+        ax.set_ylabel(label, fontsize=8)
+        ax.grid(alpha=0.3)
+    axes[-1].set_xlabel("time (s)")
+    axes[0].set_title(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+class _Progress:
+    """A one-line progress bar on stderr, only on a terminal."""
+
+    def __init__(self, total: int):
+        self.total = max(total, 1)
+        self.tty = sys.stderr.isatty()
+        self.t0 = time.perf_counter()
+
+    def update(self, done: int) -> None:
+        if not self.tty:
+            return
+        frac = done / self.total
+        n = int(30 * frac)
+        el = time.perf_counter() - self.t0
+        sys.stderr.write(f"\r[{'#' * n}{'.' * (30 - n)}] {100 * frac:5.1f}%  {el:6.1f} s")
+        sys.stderr.flush()
+
+    def close(self) -> None:
+        if self.tty:
+            sys.stderr.write("\n")
