@@ -1,0 +1,66 @@
+"""The command line: outputs, one-line errors with status 2, the benchmark's JSON."""
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from hybrid.cli import main
+
+
+def run_cli(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "hybrid", *args], capture_output=True, text=True, cwd=cwd,
+                          timeout=600)
+
+
+def test_run_membrane_demo_writes_summary_and_plot(tmp_path):
+    out = tmp_path / "demo"
+    assert main(["run", "membrane_demo", "--duration", "4", "--out", str(out)]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    for key in ("scene", "steps", "dt", "duration_s", "wall_s", "us_per_step", "volume_rel_error_max",
+                "pressure_min_pa", "pressure_max_pa", "rib_lift_mm", "apex_descent_mm", "rest_return_mm"):
+        assert key in summary, key
+    assert summary["steps"] == 4000
+    assert summary["volume_rel_error_max"] <= 1e-12
+    # the diaphragm contracts: the apex descends and the abdomen pressure rises
+    assert summary["apex_descent_mm"] > 1.0
+    assert summary["pressure_max_pa"] > 10.0
+    assert (out / "breathing.png").stat().st_size > 10_000
+
+
+@pytest.mark.parametrize("args, culprit", [
+    (["run", "membrane_demo", "--dt", "-1"], "dt_s"),
+    (["run", "membrane_demo", "--duration", "0"], "--duration"),
+    (["run", "membrane_demo", "--without", "nosuchterm"], "nosuchterm"),
+    (["run", "membrane_demo", "--bogus"], "--bogus"),
+])
+def test_bad_input_is_one_line_with_status_2(args, culprit, tmp_path):
+    proc = run_cli(*args, "--out", str(tmp_path / "o"))
+    assert proc.returncode == 2
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1, proc.stderr
+    assert culprit in lines[0]
+    assert "Traceback" not in proc.stderr
+
+
+def test_diverging_run_keeps_what_it_recorded(tmp_path):
+    # a step ten times the stability bound: diverges, exits 2, still writes the summary
+    out = tmp_path / "div"
+    code = main(["run", "membrane_demo", "--dt", "0.05", "--duration", "10", "--out", str(out)])
+    assert code == 2
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "failed"
+    assert "diverged" in summary["error"]
+    assert 0 < summary["steps"] < 200
+
+
+def test_bench_quick_writes_json(tmp_path):
+    path = tmp_path / "bench.json"
+    assert main(["bench", "--quick", "--json", str(path)]) == 0
+    data = json.loads(path.read_text())
+    rows = data["membrane"]
+    assert [r["nvert"] for r in rows] == [80, 642]
+    for r in rows:
+        assert r["us_per_step"] > 0
+        assert r["ns_per_vertex_step"] == pytest.approx(r["us_per_step"] * 1e3 / r["nvert"])
