@@ -25,6 +25,27 @@ SHAPE_HALF_SPACE, SHAPE_BALL, SHAPE_BOX = 0, 1, 2
 PROJ_OK, PROJ_NO_GRADIENT, PROJ_NO_ROOT = 0, 1, 2
 
 
+@njit(cache=True, error_model="numpy", inline="always")
+def ring_cross_sum(ring_ptr, ring_vert, vec, i):
+    """sum_j (N_j - N_1) x (N_j+1 - N_1) over the closed fan of point i, with
+    N_j = vec[ring_vert[j]]: six times the volume gradient at i of a surface
+    whose points are `vec` (for a closed fan the sum does not depend on the
+    origin, so N_1 keeps it local and exact)."""
+    b, e = ring_ptr[i], ring_ptr[i + 1]
+    v = ring_vert[b]
+    x1, y1, z1 = vec[v, 0], vec[v, 1], vec[v, 2]
+    ax = ay = az = 0.0
+    gx = gy = gz = 0.0
+    for j in range(b + 1, e):
+        v = ring_vert[j]
+        bx, by, bz = vec[v, 0] - x1, vec[v, 1] - y1, vec[v, 2] - z1
+        gx += ay * bz - az * by
+        gy += az * bx - ax * bz
+        gz += ax * by - ay * bx
+        ax, ay, az = bx, by, bz
+    return gx, gy, gz
+
+
 @njit(cache=True, error_model="numpy")
 def volume_and_gradient(face_vert, vert_pos, ref, grad):
     """V = 1/6 sum_f a.(b x c) (m^3) and grad_a V = 1/6 sum (b x c) (m^2).
@@ -64,34 +85,26 @@ def volume_and_gradient(face_vert, vert_pos, ref, grad):
 
 
 @njit(cache=True, error_model="numpy")
-def volume_cubic(face_vert, vert_pos, ref, dirn, out):
+def volume_cubic(ring_ptr, ring_vert, ref, vert_pos, dirn, out):
     """Coefficients c2, c3 of V(X + phi D) - V(X) = c1 phi + c2 phi^2 + c3 phi^3.
 
-    Per face (a + phi da).((b + phi db) x (c + phi dc)) expanded (DESIGN.md),
-    / 6; c1 = D . grad V(X) is cheaper per point and left to the caller.
-    # Model: face_vert, ref
+    V is a symmetric cubic form T(X, X, X), so c2 = 3 T(X, D, D) = X . grad V(D)
+    and c3 = T(D, D, D) = V(D) = D . grad V(D) / 3, with grad_i V(D) gathered
+    from the closed fan of i like the gradient itself (a surface needs to be
+    closed to have a volume constraint). This equals the per-face expansion
+    of (a + phi da).((b + phi db) x (c + phi dc)) in DESIGN.md, without its
+    six gathers per face; c1 = D . grad V(X) is left to the caller.
+    # Model: ring_ptr, ring_vert, ref (3,) m
     # Data in: vert_pos (m), dirn (nvert, 3) (projection direction D)
     # Data out: out (2,) = (c2, c3)
     """
     c2 = c3 = 0.0
-    for f in range(face_vert.shape[0]):
-        a, b, c = face_vert[f, 0], face_vert[f, 1], face_vert[f, 2]
-        ax, ay, az = vert_pos[a, 0] - ref[0], vert_pos[a, 1] - ref[1], vert_pos[a, 2] - ref[2]
-        bx, by, bz = vert_pos[b, 0] - ref[0], vert_pos[b, 1] - ref[1], vert_pos[b, 2] - ref[2]
-        cx, cy, cz = vert_pos[c, 0] - ref[0], vert_pos[c, 1] - ref[1], vert_pos[c, 2] - ref[2]
-        dax, day, daz = dirn[a, 0], dirn[a, 1], dirn[a, 2]
-        dbx, dby, dbz = dirn[b, 0], dirn[b, 1], dirn[b, 2]
-        dcx, dcy, dcz = dirn[c, 0], dirn[c, 1], dirn[c, 2]
-        # db x dc, and db x c + b x dc
-        ddx, ddy, ddz = dby * dcz - dbz * dcy, dbz * dcx - dbx * dcz, dbx * dcy - dby * dcx
-        mx = dby * cz - dbz * cy + by * dcz - bz * dcy
-        my = dbz * cx - dbx * cz + bz * dcx - bx * dcz
-        mz = dbx * cy - dby * cx + bx * dcy - by * dcx
-        c2 += dax * mx + day * my + daz * mz + ax * ddx + ay * ddy + az * ddz
-        c3 += dax * ddx + day * ddy + daz * ddz
-    s = 1.0 / 6.0
-    out[0] = c2 * s
-    out[1] = c3 * s
+    for i in range(vert_pos.shape[0]):
+        gx, gy, gz = ring_cross_sum(ring_ptr, ring_vert, dirn, i)
+        c2 += (vert_pos[i, 0] - ref[0]) * gx + (vert_pos[i, 1] - ref[1]) * gy + (vert_pos[i, 2] - ref[2]) * gz
+        c3 += dirn[i, 0] * gx + dirn[i, 1] * gy + dirn[i, 2] * gz
+    out[0] = c2 / 6.0
+    out[1] = c3 / 18.0
 
 
 @njit(cache=True, error_model="numpy")
@@ -150,7 +163,7 @@ def project_volume(ring_ptr, ring_vert, face_vert, ref, vol0, vert_weight, h, ve
     on the origin), and V = 1/3 sum_i (x_i - ref) . grad_i V (V is
     homogeneous of degree 3): one pass, no scatter.
 
-    The quadratic and cubic coefficients need a face pass. It is skipped
+    The quadratic and cubic coefficients need a second pass. It is skipped
     when a bound shows they cannot move the volume by more than 1e-17 V0 at
     the linear root (|c2| <= nface |D|max^2 |x|max / 2, |c3| <= nface
     |D|max^3 / 6); then the linear root is the cubic's root to within the
@@ -166,18 +179,7 @@ def project_volume(ring_ptr, ring_vert, face_vert, ref, vol0, vert_weight, h, ve
     xmax2 = 0.0
     sixth = 1.0 / 6.0
     for i in range(vert_weight.shape[0]):
-        b, e = ring_ptr[i], ring_ptr[i + 1]
-        v = ring_vert[b]
-        x1, y1, z1 = vert_pos[v, 0], vert_pos[v, 1], vert_pos[v, 2]
-        ax = ay = az = 0.0
-        gx = gy = gz = 0.0
-        for j in range(b + 1, e):
-            v = ring_vert[j]
-            bx, by, bz = vert_pos[v, 0] - x1, vert_pos[v, 1] - y1, vert_pos[v, 2] - z1
-            gx += ay * bz - az * by
-            gy += az * bx - ax * bz
-            gz += ax * by - ay * bx
-            ax, ay, az = bx, by, bz
+        gx, gy, gz = ring_cross_sum(ring_ptr, ring_vert, vert_pos, i)
         gx *= sixth
         gy *= sixth
         gz *= sixth
@@ -203,7 +205,7 @@ def project_volume(ring_ptr, ring_vert, face_vert, ref, vol0, vert_weight, h, ve
     dmax = math.sqrt(dmax2)
     bound = nface * dmax2 * (0.5 * math.sqrt(xmax2) * phi * phi + dmax * abs(phi) ** 3 / 6.0)
     if not (bound <= 1e-17 * abs(vol0)):
-        volume_cubic(face_vert, vert_pos, ref, dirn, cubic)
+        volume_cubic(ring_ptr, ring_vert, ref, vert_pos, dirn, cubic)
         phi, status = solve_cubic_near_zero(c0, c1, cubic[0], cubic[1])
         if status != PROJ_OK:
             return 0.0, status
@@ -217,22 +219,30 @@ def project_volume(ring_ptr, ring_vert, face_vert, ref, vol0, vert_weight, h, ve
 
 
 @njit(cache=True, error_model="numpy")
-def soft_volume_force(face_vert, ref, vol0, stiff, vert_pos, grad, cubic, vert_force):
+def soft_volume_force(ring_ptr, ring_vert, ref, vol0, stiff, vert_pos, grad, cubic, vert_force):
     """Compressibility (paper 6.2): attraction toward the volume-satisfying positions.
 
     phi solves V(X + phi grad V(X)) = V0; each point is pulled toward its
     target X_i + phi grad_i with stiffness k: F_i = k phi grad_i V, a uniform
     pressure p = k phi (Pa). Returns p.
-    # Model: face_vert, ref, vol0 m^3, stiff N/m
+    # Model: ring_ptr, ring_vert (closed fans), ref, vol0 m^3, stiff N/m
     # Data in: vert_pos
     # Data out: vert_force; scratch grad, cubic
     """
-    vol = volume_and_gradient(face_vert, vert_pos, ref, grad)
-    volume_cubic(face_vert, vert_pos, ref, grad, cubic)
+    vol = 0.0
     c1 = 0.0
-    for i in range(grad.shape[0]):
-        c1 += grad[i, 0] ** 2 + grad[i, 1] ** 2 + grad[i, 2] ** 2
-    phi, status = solve_cubic_near_zero(vol - vol0, c1, cubic[0], cubic[1])
+    for i in range(vert_pos.shape[0]):
+        gx, gy, gz = ring_cross_sum(ring_ptr, ring_vert, vert_pos, i)
+        gx /= 6.0
+        gy /= 6.0
+        gz /= 6.0
+        grad[i, 0] = gx
+        grad[i, 1] = gy
+        grad[i, 2] = gz
+        vol += (vert_pos[i, 0] - ref[0]) * gx + (vert_pos[i, 1] - ref[1]) * gy + (vert_pos[i, 2] - ref[2]) * gz
+        c1 += gx * gx + gy * gy + gz * gz
+    volume_cubic(ring_ptr, ring_vert, ref, vert_pos, grad, cubic)
+    phi, status = solve_cubic_near_zero(vol / 3.0 - vol0, c1, cubic[0], cubic[1])
     if status != PROJ_OK:
         return np.nan
     p = stiff * phi

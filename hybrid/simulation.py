@@ -109,7 +109,7 @@ def membrane_forces(m, s, t):
         add_muscle(m.mus_vert, m.mus_nbr, m.mus_sched, s.sched_val, s.vert_pos, s.vert_force)
         s.term_calls[T_MUSCLE] += 1
     if on[T_SOFT_VOLUME]:
-        s.scal[S_PRESSURE] = soft_volume_force(m.face_vert, m.vol_ref, m.vol0, m.soft_stiff, s.vert_pos,
+        s.scal[S_PRESSURE] = soft_volume_force(m.ring_ptr, m.ring_vert, m.vol_ref, m.vol0, m.soft_stiff, s.vert_pos,
                                                s.grad, s.cubic, s.vert_force)
         s.term_calls[T_SOFT_VOLUME] += 1
 
@@ -280,8 +280,11 @@ class Simulation:
         if not (isinstance(n, (int, np.integer)) and n >= 0):
             raise ValueError(f"n: expected an integer >= 0, received {n!r}")
         m, s = self.model.arrays, self.state
-        if self.rigid is None and not self.model.python_schedules:
-            done = run_membrane(m, s, int(n), self.steps_done)
+        if not self.model.python_schedules:
+            if self.rigid is None:
+                done = run_membrane(m, s, int(n), self.steps_done)
+            else:  # the whole coupled loop in one compiled call (hybrid.coupling)
+                done = self.rigid.run(s, int(n), self.steps_done)
             self.steps_done += done
             if done < n:
                 self._raise()
