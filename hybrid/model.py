@@ -215,7 +215,7 @@ def _masses(spec: Masses, mesh: Mesh, regions: dict) -> np.ndarray:
             raise SceneError(f"masses.per_vertex_kg: expected {mesh.nvert} values, received shape {m.shape}")
         bad = np.nonzero(~(m > 0) | ~np.isfinite(m))[0]
         if bad.size:
-            raise SceneError(f"masses.per_vertex_kg: expected masses > 0 kg, received {m[bad[0]]!r} "
+            raise SceneError(f"masses.per_vertex_kg: expected masses > 0 kg, received {float(m[bad[0]])!r} "
                              f"at vertices {bad[:8].tolist()}")
         return m.copy()
     dens = spec.density_kg_per_m2
@@ -281,7 +281,7 @@ def compile_scene(scene: Scene) -> Model:
     vert_stiffness = np.zeros(nvert)
 
     for term in scene.forces:
-        what = f"forces[{term.name!r}]"
+        what = f"forces[{getattr(term, 'name', None)!r}]"
         if isinstance(term, Gravity):
             accel = accel + _vec3(term.accel_m_s2, f"{what}.accel_m_s2")
             term_on[T_GRAVITY] = 1
@@ -361,7 +361,7 @@ def compile_scene(scene: Scene) -> Model:
     kin_vert, kin_shape, shape_kind, shape_par = [], [], [], []
     has_volume = False
     for con in scene.constraints:
-        what = f"constraints[{con.name!r}]"
+        what = f"constraints[{getattr(con, 'name', None)!r}]"
         if isinstance(con, Nailed):
             vert_free[_region(con.region, mesh, regions, f"{what}.region")] = 0
         elif isinstance(con, Prescribed):
@@ -491,7 +491,14 @@ def _stable_dt(arrays: MembraneArrays, vert_stiffness: np.ndarray) -> float:
         return math.inf
     integ = "explicit_euler" if arrays.integrator == 0 else "symplectic_euler"
     h = max_stable_dt(arrays.vert_mass[free], vert_stiffness[free], arrays.damp_coef[free], integ, h_hi=10.0)
-    return float(h.min())
+    h_min = float(h.min())
+    damped = free & (arrays.damp_coef > 0)
+    if arrays.integrator == 0 and arrays.term_on[T_VOLUME] and np.any(damped):
+        # explicit Euler + volume projection: the projection cancels the position
+        # step h v along the gradient and its velocity correction cancels v, so
+        # that component of v is multiplied by -h c/m each step: h < m/c too
+        h_min = min(h_min, float(np.min(arrays.vert_mass[damped] / arrays.damp_coef[damped])))
+    return h_min
 
 
 def _keep_in_shape(con: KeepIn, what: str):

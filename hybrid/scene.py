@@ -224,7 +224,8 @@ class Scene:
 
     def term_names(self) -> list[str]:
         """Names of all force terms, constraints and rigid links, in order."""
-        names = [t.name for t in self.forces] + [c.name for c in self.constraints]
+        # getattr: a non-term in the lists must reach compile_scene's type check
+        names = [getattr(t, "name", repr(t)) for t in (*self.forces, *self.constraints)]
         if self.rigid is not None:
             names += [link.name for link in self.rigid.links]
         return names

@@ -97,7 +97,7 @@ def _validate(s: Schedule, *, name: str, ncomp: int) -> None:
         if t.ndim != 1 or t.size < 1 or not np.all(np.isfinite(t)):
             raise SceneError(f"{name}.t_s: expected a non-empty list of finite times, received {s.t_s!r}")
         if np.any(np.diff(t) <= 0):
-            raise SceneError(f"{name}.t_s: expected strictly increasing times, received {list(t)}")
+            raise SceneError(f"{name}.t_s: expected strictly increasing times, received {t.tolist()}")
         if len(s.value) != t.size:
             raise SceneError(f"{name}.value: expected {t.size} values (one per time), received {len(s.value)}")
         for v in s.value:

@@ -148,7 +148,7 @@ def membrane_advance(m, s, t, step):
     s.scal[S_KE] = 0.5 * ke
     s.scal[S_MAXDISP] = math.sqrt(dmax)
     if not (dsum < np.inf and ke < np.inf):
-        return _fail(s, DIVERGED_NONFINITE, step, _first_nonfinite(pos, vel))
+        return _fail(s, DIVERGED_NONFINITE, step, _first_nonfinite(pos, vel, worst))
     if dmax > m.runaway_disp * m.runaway_disp:
         return _fail(s, DIVERGED_RUNAWAY, step, worst)
     on = m.term_on
@@ -167,7 +167,7 @@ def membrane_advance(m, s, t, step):
             s.status[3] = st
             return _fail(s, VOLUME_FAILED, step, 0)
         if not (abs(phi) < np.inf):
-            return _fail(s, DIVERGED_NONFINITE, step, _first_nonfinite(pos, vel))
+            return _fail(s, DIVERGED_NONFINITE, step, _first_nonfinite(pos, vel, worst))
         s.scal[S_PHI] = phi
         s.scal[S_PRESSURE] = phi / (h * h)
     return OK
@@ -182,12 +182,14 @@ def _fail(s, code, step, vert):
 
 
 @njit(cache=True, error_model="numpy")
-def _first_nonfinite(pos, vel):
+def _first_nonfinite(pos, vel, fallback):
+    """The first vertex with a non-finite coordinate, else `fallback` (the point
+    that moved most: finite values whose kinetic energy overflowed)."""
     for i in range(pos.shape[0]):
         for a in range(3):
             if not (abs(pos[i, a]) < np.inf and abs(vel[i, a]) < np.inf):
                 return i
-    return 0
+    return fallback
 
 
 @njit(cache=True, error_model="numpy")
@@ -263,8 +265,12 @@ class Simulation:
 
     @property
     def kinetic_energy(self) -> float:
-        """Kinetic energy of the integrated points after the last step (J)."""
-        return float(self.state.scal[S_KE])
+        """Kinetic energy of the integrated points after the last step, constraints
+        included (J). (The step's own figure, used by the divergence check, is
+        taken before the projections and so counts velocity they remove.)"""
+        a, vel = self.model.arrays, self.state.vert_vel
+        free = a.vert_free > 0
+        return float(0.5 * np.dot(a.vert_mass[free], np.einsum("ij,ij->i", vel[free], vel[free])))
 
     @property
     def term_calls(self) -> dict:
