@@ -47,7 +47,8 @@ class MembraneArrays(NamedTuple):
     damp_coef (nvert,) N s/m; sm_*: shape memory; spring_*: mass-spring; mus_*: muscle;
     soft_stiff N/m; pre_*: prescribed; kin_*, shape_*: keep-in; vol_ref (3,) m, vol0 m^3;
     sched: ScheduleTable; dt s; integrator 0 explicit / 1 symplectic;
-    runaway_disp m: a step moving a point farther than this has run away.
+    runaway_disp m: a step moving a point farther than this has run away;
+    max_speed m/s: so has a point faster than this.
     """
     face_vert: np.ndarray
     ring_ptr: np.ndarray
@@ -89,6 +90,7 @@ class MembraneArrays(NamedTuple):
     dt: float
     integrator: int
     runaway_disp: float
+    max_speed: float
 
 
 @dataclass(frozen=True)
@@ -462,6 +464,7 @@ def compile_scene(scene: Scene) -> Model:
         vol0=float(mesh.volume()) if (has_volume or soft_stiff > 0) else 0.0,
         sched=sched_table, dt=float(scene.dt_s), integrator=integrator,
         runaway_disp=float(np.linalg.norm(np.ptp(mesh.vert_pos, axis=0))),
+        max_speed=_positive(scene.max_speed_m_s, "max_speed_m_s"),
     )
     for arr in arrays:
         if isinstance(arr, np.ndarray):

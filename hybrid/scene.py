@@ -219,6 +219,7 @@ class Scene:
     dt_s: float = 1e-3
     integrator: str = "symplectic_euler"
     duration_s: float = 1.0
+    max_speed_m_s: float = 50.0  # a point faster than this has run away (tissue moves at cm/s)
     name: str = "scene"
     base_dir: Optional[str] = None  # relative paths (mesh, MJCF) resolve here
 

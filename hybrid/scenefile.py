@@ -336,7 +336,7 @@ def _terms(ctx, key, v, types):
 
 # ------------------------------------------------------------------ the scene
 
-_TOP = ("name", "dt_s", "integrator", "duration_s", "mesh", "masses", "regions", "forces", "constraints",
+_TOP = ("name", "dt_s", "integrator", "duration_s", "max_speed_m_s", "mesh", "masses", "regions", "forces", "constraints",
         "rigid")
 _MESH = {"generator": lambda c, p, v: _str(c, p, v, _MESH_GENERATORS), "path": _str, "radius_m": _f_pos,
          "segments": lambda c, p, v: _int(c, p, v, lo=3), "rings": lambda c, p, v: _int(c, p, v, lo=2),
@@ -359,6 +359,8 @@ def scene_from_dict(data: dict, *, source: str = "scene", base_dir: str | Path |
         kw["dt_s"] = _num(ctx, "dt_s", data["dt_s"], lo=0)
     if "duration_s" in data:
         kw["duration_s"] = _num(ctx, "duration_s", data["duration_s"], lo=0)
+    if "max_speed_m_s" in data:
+        kw["max_speed_m_s"] = _num(ctx, "max_speed_m_s", data["max_speed_m_s"], lo=0)
     if "integrator" in data:
         kw["integrator"] = _str(ctx, "integrator", data["integrator"], INTEGRATORS)
 
@@ -519,7 +521,7 @@ def scene_to_dict(scene: Scene) -> dict:
     if not isinstance(scene.mesh, MeshSpec):
         raise SceneError("mesh: a hybrid.mesh.Mesh object cannot be written as TOML; use a MeshSpec")
     d: dict = {"name": scene.name, "dt_s": scene.dt_s, "integrator": scene.integrator,
-               "duration_s": scene.duration_s}
+               "duration_s": scene.duration_s, "max_speed_m_s": scene.max_speed_m_s}
     ms = scene.mesh
     mesh = {k: getattr(ms, k) for k in _MESH if getattr(ms, k) is not None}
     if ms.path is not None:

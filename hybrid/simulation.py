@@ -149,7 +149,10 @@ def membrane_advance(m, s, t, step):
     s.scal[S_MAXDISP] = math.sqrt(dmax)
     if not (dsum < np.inf and ke < np.inf):
         return _fail(s, DIVERGED_NONFINITE, step, _first_nonfinite(pos, vel, worst))
-    if dmax > m.runaway_disp * m.runaway_disp:
+    # runaway: a step longer than the body's size, or a speed above max_speed
+    # (the volume projection can keep an unstable run bounded but fast)
+    lim = min(m.runaway_disp, m.max_speed * h)
+    if dmax > lim * lim:
         return _fail(s, DIVERGED_RUNAWAY, step, worst)
     on = m.term_on
     if on[T_PRESCRIBED]:
@@ -335,9 +338,14 @@ class Simulation:
                 f"with free points to move")
         else:
             suggest = self.suggest_dt()
-            what = ("became non-finite" if code == DIVERGED_NONFINITE else
-                    f"moved {s.scal[S_MAXDISP]:.3g} m in one step, more than the body's size "
-                    f"{model.arrays.runaway_disp:.3g} m")
+            disp = float(s.scal[S_MAXDISP])
+            if code == DIVERGED_NONFINITE:
+                what = "became non-finite"
+            elif disp > model.arrays.runaway_disp:
+                what = f"moved {disp:.3g} m in one step, more than the body's size {model.arrays.runaway_disp:.3g} m"
+            else:
+                what = (f"reached {disp / h:.3g} m/s, above max_speed_m_s = {model.arrays.max_speed:.3g} "
+                        f"(raise it if the scene is meant to move that fast)")
             err = SimulationDiverged(
                 f"simulation diverged at t = {t:.6g} s (step {step}): vertex {vert} {what}; "
                 f"time step {h:.3g} s with {model.scene.integrator}; try dt_s <= {suggest:.3g} s",
