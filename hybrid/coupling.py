@@ -60,8 +60,6 @@ _SITE_STEM = "hybrid_link_"
 _RK4 = int(_rigid.mujoco.mjtIntegrator.mjINT_RK4)
 _DSBL_GRAVITY = int(_rigid.mujoco.mjtDisableBit.mjDSBL_GRAVITY)
 _INERTIA_FROM_GEOM_TRUE = _rigid.mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_TRUE
-_BAD_WARNINGS = tuple(int(getattr(_rigid.mujoco.mjtWarning, n))
-                      for n in ("mjWARN_BADQPOS", "mjWARN_BADQVEL", "mjWARN_BADQACC"))
 _POINT_GEOM_RADIUS = 1e-4  # m: the geoms that carry point masses (inertia 0.4 m r^2, negligible)
 
 
@@ -416,7 +414,7 @@ class Coupling:
         else:
             xh, qh = self._no_hist
         site_xpos, xipos, xfrc, cvel, subtree_com, qpos = self._views
-        warn = self._bad_warnings()
+        mj_time = d.time
         done = run_coupled(self.model.arrays, state, self.link_vert, sys.site_id, sys.site_body,
                            sys.site_root, self._extra, self._force, self._vel, site_xpos, xipos,
                            xfrc, cvel, subtree_com, qpos, mjm._address, d._address,
@@ -424,9 +422,9 @@ class Coupling:
         if record:
             self._xfrc_hist.append(xh[:done])
             self._qpos_hist.append(qh[:done])
-        if self._bad_warnings() > warn:
-            # MuJoCo found a non-finite or huge qpos/qvel/qacc and reset its data: the
-            # ribs jumped back to qpos0; the run is not to be trusted any more
+        if done and d.time < mj_time + (done - 0.5) * mjm.opt.timestep:
+            # MuJoCo found a non-finite or huge qpos/qvel/qacc and reset its data (time
+            # 0, qpos0): the ribs jumped back; the run is not to be trusted any more
             raise SimulationDiverged(
                 f"MuJoCo's rigid state diverged between steps {step0} and {step0 + done} "
                 f"(t <= {state.scal[S_TIME]:.6g} s) and MuJoCo reset it; try a smaller dt_s, heavier or "
@@ -434,10 +432,6 @@ class Coupling:
                 step=int(step0 + done), vert=int(self.link_vert[0]) if self.link_vert.size else 0,
                 dt_suggested_s=0.5 * float(self.model.arrays.dt))
         return done
-
-    def _bad_warnings(self) -> int:
-        w = self.system.data.warning
-        return sum(int(w[i].number) for i in _BAD_WARNINGS)
 
     # -- records
     def wrench_history(self) -> np.ndarray:

@@ -89,6 +89,13 @@ def test_toml_keys_are_the_dataclass_fields(table):
         assert set(required) == no_default, typ
 
 
+def test_every_scene_field_is_a_toml_key():
+    from hybrid.scene import Scene
+    fields = {f.name for f in dataclasses.fields(Scene)} - {"base_dir"}
+    assert fields == set(sf._TOP)
+    assert set(sf.scene_to_dict(sf.load_scene(sf.builtin_scene()))) == fields
+
+
 def test_breathing_scene_round_trips_through_a_mapping():
     scene = sf.load_scene(sf.builtin_scene())
     assert scene.name == "breathing" and Path(scene.base_dir) == sf.builtin_scene().parent
