@@ -460,3 +460,69 @@ def free_body_spec(mass: float, inertia: Sequence[float], point: Sequence[float]
                             trntype=mujoco.mjtTrn.mjTRN_SITE)
     act.gear = [*direction.tolist(), 0.0, 0.0, 0.0]
     return spec
+
+
+# ---------------------------------------------------------------- benchmarks
+
+def time_bare_mj_step(path: str | Path, *, nstep: int = 20000, repeats: int = 7) -> float:
+    """Median time (us) of one bare `mj_step` of the MJCF at `path`, called from Python."""
+    import statistics
+    import time
+    model = _compile(load_spec(path))
+    data = mujoco.MjData(model)
+    mujoco.mj_step(model, data)
+    times = []
+    for _ in range(repeats):
+        mujoco.mj_resetData(model, data)
+        t0 = time.perf_counter()
+        for _ in range(nstep):
+            mujoco.mj_step(model, data)
+        times.append((time.perf_counter() - t0) / nstep)
+    return statistics.median(times) * 1e6
+
+
+def flex_sphere_run(vert_pos: np.ndarray, face_vert: np.ndarray, *, duration_s: float = 1.0,
+                    total_kg: float = 4.0, young_pa: float = 3e4, thickness_m: float = 0.01,
+                    timestep_s: float = 1e-3) -> dict:
+    """MuJoCo's own closed 2D flex sphere (elastic shell) dropped on a plane under gravity.
+
+    vert_pos (n, 3) m around the origin, face_vert (nface, 3) outward. Returns
+    {"nvert", "us_per_step", "volume_change"} with the relative volume change
+    after `duration_s`; MuJoCo has no volume constraint. Raises RigidError if
+    MuJoCo reset the simulation (a blow-up).
+    """
+    import time
+    pts = " ".join(f"{x:.6f}" for x in np.asarray(vert_pos, float).ravel())
+    el = " ".join(str(int(i)) for i in np.asarray(face_vert).ravel())
+    z0 = float(-np.min(vert_pos[:, 2])) + 0.005
+    xml = f"""<mujoco>
+  <option timestep="{timestep_s}" integrator="Euler" gravity="0 0 -9.81"/>
+  <worldbody>
+    <geom name="floor" type="plane" size="1 1 0.1"/>
+    <flexcomp name="ball" type="direct" dim="2" pos="0 0 {z0}" radius="0.004" mass="{total_kg}"
+              point="{pts}" element="{el}">
+      <contact selfcollide="none"/>
+      <elasticity young="{young_pa}" poisson="0.3" thickness="{thickness_m}" damping="0.002" elastic2d="both"/>
+    </flexcomp>
+  </worldbody>
+</mujoco>"""
+    model = mujoco.MjModel.from_xml_string(xml)
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    elem = model.flex_elem[: model.flex_elemnum[0] * 3].reshape(-1, 3)
+
+    def vol(x):
+        a, b, c = x[elem[:, 0]], x[elem[:, 1]], x[elem[:, 2]]
+        return float(np.einsum("ij,ij->i", a - x.mean(0), np.cross(b - x.mean(0), c - x.mean(0))).sum() / 6.0)
+
+    v0 = vol(data.flexvert_xpos.copy())
+    nstep = int(round(duration_s / timestep_s))
+    t0 = time.perf_counter()
+    for _ in range(nstep):
+        mujoco.mj_step(model, data)
+    wall = time.perf_counter() - t0
+    if sum(int(w.number) for w in data.warning):
+        raise RigidError("flex sphere: MuJoCo reported a blow-up and reset the simulation; "
+                         "expected a stable run (lower the time step or the stiffness)")
+    return {"nvert": int(model.nflexvert), "us_per_step": wall / nstep * 1e6,
+            "volume_change": (vol(data.flexvert_xpos.copy()) - v0) / v0}

@@ -64,3 +64,6 @@ def test_bench_quick_writes_json(tmp_path):
     for r in rows:
         assert r["us_per_step"] > 0
         assert r["ns_per_vertex_step"] == pytest.approx(r["us_per_step"] * 1e3 / r["nvert"])
+    coupled = data["coupled"]
+    assert coupled["ratio"] == pytest.approx(coupled["us_per_step"] / coupled["mj_step_us"])
+    assert coupled["mj_step_us"] > 0
