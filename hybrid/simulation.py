@@ -232,6 +232,16 @@ class Simulation:
             self.rigid.reset(self.state)
 
     @property
+    def mj_model(self):
+        """MuJoCo's `MjModel` of the rigid part (None for a membrane-only scene)."""
+        return None if self.rigid is None else self.rigid.mj_model
+
+    @property
+    def mj_data(self):
+        """MuJoCo's `MjData` of this run (None for a membrane-only scene)."""
+        return None if self.rigid is None else self.rigid.mj_data
+
+    @property
     def time(self) -> float:
         """Simulated time (s)."""
         return float(self.state.scal[S_TIME])
