@@ -15,7 +15,7 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["volume_and_gradient", "volume_cubic", "solve_cubic_near_zero", "project_volume",
+__all__ = ["ring_cross_sum", "volume_cubic", "solve_cubic_near_zero", "project_volume",
            "soft_volume_force", "apply_prescribed", "apply_keep_in",
            "SHAPE_HALF_SPACE", "SHAPE_BALL", "SHAPE_BOX"]
 
@@ -25,7 +25,7 @@ SHAPE_HALF_SPACE, SHAPE_BALL, SHAPE_BOX = 0, 1, 2
 PROJ_OK, PROJ_NO_GRADIENT, PROJ_NO_ROOT = 0, 1, 2
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", _nrt=False, inline="always")
 def ring_cross_sum(ring_ptr, ring_vert, vec, i):
     """sum_j (N_j - N_1) x (N_j+1 - N_1) over the closed fan of point i, with
     N_j = vec[ring_vert[j]]: six times the volume gradient at i of a surface
@@ -46,45 +46,7 @@ def ring_cross_sum(ring_ptr, ring_vert, vec, i):
     return gx, gy, gz
 
 
-@njit(cache=True, error_model="numpy")
-def volume_and_gradient(face_vert, vert_pos, ref, grad):
-    """V = 1/6 sum_f a.(b x c) (m^3) and grad_a V = 1/6 sum (b x c) (m^2).
-
-    Coordinates are taken relative to `ref` (m), a point near the body, so
-    that a body far from the origin loses no digits (V is translation
-    invariant for a closed surface). V is homogeneous of degree 3 in the
-    coordinates, so V = 1/3 sum_i x_i . grad_i V: one face pass gives both.
-    # Model: face_vert (nface, 3) int32, ref (3,) m
-    # Data in: vert_pos (nvert, 3) m
-    # Data out: grad (nvert, 3) m^2
-    """
-    grad[:] = 0.0
-    for f in range(face_vert.shape[0]):
-        a, b, c = face_vert[f, 0], face_vert[f, 1], face_vert[f, 2]
-        ax, ay, az = vert_pos[a, 0] - ref[0], vert_pos[a, 1] - ref[1], vert_pos[a, 2] - ref[2]
-        bx, by, bz = vert_pos[b, 0] - ref[0], vert_pos[b, 1] - ref[1], vert_pos[b, 2] - ref[2]
-        cx, cy, cz = vert_pos[c, 0] - ref[0], vert_pos[c, 1] - ref[1], vert_pos[c, 2] - ref[2]
-        grad[a, 0] += by * cz - bz * cy
-        grad[a, 1] += bz * cx - bx * cz
-        grad[a, 2] += bx * cy - by * cx
-        grad[b, 0] += cy * az - cz * ay
-        grad[b, 1] += cz * ax - cx * az
-        grad[b, 2] += cx * ay - cy * ax
-        grad[c, 0] += ay * bz - az * by
-        grad[c, 1] += az * bx - ax * bz
-        grad[c, 2] += ax * by - ay * bx
-    s = 1.0 / 6.0
-    vol = 0.0
-    for i in range(grad.shape[0]):
-        grad[i, 0] *= s
-        grad[i, 1] *= s
-        grad[i, 2] *= s
-        vol += ((vert_pos[i, 0] - ref[0]) * grad[i, 0] + (vert_pos[i, 1] - ref[1]) * grad[i, 1]
-                + (vert_pos[i, 2] - ref[2]) * grad[i, 2])
-    return vol / 3.0
-
-
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def volume_cubic(ring_ptr, ring_vert, ref, vert_pos, dirn, out):
     """Coefficients c2, c3 of V(X + phi D) - V(X) = c1 phi + c2 phi^2 + c3 phi^3.
 
@@ -107,46 +69,124 @@ def volume_cubic(ring_ptr, ring_vert, ref, vert_pos, dirn, out):
     out[1] = c3 / 18.0
 
 
-@njit(cache=True, error_model="numpy")
-def solve_cubic_near_zero(c0, c1, c2, c3):
-    """Real root of c0 + c1 x + c2 x^2 + c3 x^3 nearest 0.
+@njit(cache=True, error_model="numpy", _nrt=False)
+def _cubic_at(c0, c1, c2, c3, x):
+    return ((c3 * x + c2) * x + c1) * x + c0
 
-    Newton from 0 (c0 is the small volume error, c1 > 0 the squared gradient
-    norm, so it converges in a few iterations); if Newton stalls, the real
-    roots of the companion matrix. Returns (root, status).
+
+@njit(cache=True, error_model="numpy", _nrt=False)
+def _root_between(c0, c1, c2, c3, a, b):
+    """The root of the cubic on [a, b], where it is monotone and changes sign:
+    Newton kept inside a shrinking bracket (bisection when it leaves it)."""
+    fa = _cubic_at(c0, c1, c2, c3, a)
+    x = 0.5 * (a + b)
+    for _ in range(200):
+        fx = _cubic_at(c0, c1, c2, c3, x)
+        if fx == 0.0:
+            return x
+        if (fx < 0.0) == (fa < 0.0):
+            a, fa = x, fx
+        else:
+            b = x
+        fp = (3.0 * c3 * x + 2.0 * c2) * x + c1
+        xn = x - fx / fp if fp != 0.0 else 0.5 * (a + b)
+        if not (a < xn < b):
+            xn = 0.5 * (a + b)
+        if xn == x or b - a <= 4e-16 * max(abs(a), abs(b)):
+            return xn
+        x = xn
+    return x
+
+
+@njit(cache=True, error_model="numpy", _nrt=False)
+def _monotone_pieces(c0, c1, c2, c3):
+    """(lo, k1, k2, hi): a bound R on every real root (lo = -R, hi = R) and the
+    cubic's critical points k1 <= k2 clipped into [lo, hi] (equal to lo or hi
+    when absent). Between consecutive ones the cubic is monotone."""
+    lead = abs(c3) if c3 != 0.0 else (abs(c2) if c2 != 0.0 else abs(c1))
+    r = 1.0 + max(abs(c0), abs(c1), abs(c2)) / lead  # Cauchy's bound
+    k1, k2 = -r, r
+    q2, q1, q0 = 3.0 * c3, 2.0 * c2, c1  # the derivative
+    if q2 != 0.0:
+        disc = q1 * q1 - 4.0 * q2 * q0
+        if disc > 0.0:
+            sq = math.sqrt(disc)
+            # the stable pair of quadratic roots
+            qq = -0.5 * (q1 + (sq if q1 >= 0.0 else -sq))
+            u, v = qq / q2, (q0 / qq if qq != 0.0 else -qq / q2)
+            k1, k2 = min(u, v), max(u, v)
+    elif q1 != 0.0:
+        k1 = k2 = -q0 / q1
+    return -r, min(max(k1, -r), r), min(max(k2, -r), r), r
+
+
+@njit(cache=True, error_model="numpy", _nrt=False)
+def solve_cubic_near_zero(c0, c1, c2, c3):
+    """Real root of c0 + c1 x + c2 x^2 + c3 x^3 nearest 0. Returns (root, status).
+
+    Newton from 0 first (c0 is the small volume error, c1 > 0 the squared
+    gradient norm, so it converges in a few iterations). Its root is kept
+    when it lies in the monotone piece around 0 and no other piece is nearer
+    to 0; otherwise every monotone piece with a sign change is searched and
+    the root nearest 0 wins. No allocation, so the step stays free of
+    reference counting.
     """
     if not (c1 > 0.0):
         return 0.0, PROJ_NO_GRADIENT
     x = 0.0
     last = np.inf
+    converged = False
     for _ in range(60):
-        f = ((c3 * x + c2) * x + c1) * x + c0
+        f = _cubic_at(c0, c1, c2, c3, x)
         fp = (3.0 * c3 * x + 2.0 * c2) * x + c1
         if fp == 0.0:
             break
         dx = f / fp
-        if abs(dx) >= last:  # roundoff floor reached: the previous iterate is the root
-            return x, PROJ_OK
+        if abs(dx) >= last:  # roundoff floor reached: the current iterate is the root
+            converged = True
+            break
         x -= dx
         last = abs(dx)
         if abs(dx) <= 4e-16 * abs(x):
-            return x, PROJ_OK
-    if not (abs(((c3 * x + c2) * x + c1) * x + c0) <= 1e-13 * (abs(c0) + abs(c1 * x)) + 1e-300):
-        # Newton wandered: take the real root nearest zero from all roots.
-        roots = np.roots(np.array([c3, c2, c1, c0], dtype=np.complex128))
-        best = np.inf
-        found = False
-        for r in roots:
-            if abs(r.imag) <= 1e-9 * max(1.0, abs(r.real)) and abs(r.real) < abs(best):
-                best = r.real
-                found = True
-        if not found:
-            return 0.0, PROJ_NO_ROOT
-        x = best
-    return x, PROJ_OK
+            converged = True
+            break
+    lo, k1, k2, hi = _monotone_pieces(c0, c1, c2, c3)
+    # the piece around 0 (f'(0) = c1 > 0, so 0 is not a critical point)
+    a = lo
+    b = hi
+    for k in (k1, k2):
+        if k < 0.0:
+            a = max(a, k)
+        elif k > 0.0:
+            b = min(b, k)
+    # a true root (residual at the roundoff of its terms), in the piece around 0, nearest
+    scale = abs(c0) + abs(c1 * x) + abs(c2 * x * x) + abs(c3 * x * x * x)
+    if (converged and abs(_cubic_at(c0, c1, c2, c3, x)) <= 1e-12 * scale
+            and a <= x <= b and abs(x) <= min(abs(a), abs(b))):
+        return x, PROJ_OK
+    best = np.inf
+    bounds = (lo, k1, k2, hi)
+    for j in range(3):
+        p, q = bounds[j], bounds[j + 1]
+        if q <= p:
+            continue
+        fp_, fq = _cubic_at(c0, c1, c2, c3, p), _cubic_at(c0, c1, c2, c3, q)
+        if fp_ == 0.0:
+            r = p
+        elif fq == 0.0:
+            r = q
+        elif (fp_ < 0.0) != (fq < 0.0):
+            r = _root_between(c0, c1, c2, c3, p, q)
+        else:
+            continue
+        if abs(r) < abs(best):
+            best = r
+    if best == np.inf:
+        return 0.0, PROJ_NO_ROOT
+    return best, PROJ_OK
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def project_volume(ring_ptr, ring_vert, face_vert, ref, vol0, vert_weight, h, vert_pos, vert_vel, grad,
                    dirn, cubic):
     """Exact constant-volume projection (paper 4.2-4.3, DESIGN.md).
@@ -218,7 +258,7 @@ def project_volume(ring_ptr, ring_vert, face_vert, ref, vol0, vert_weight, h, ve
     return phi, PROJ_OK
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def soft_volume_force(ring_ptr, ring_vert, ref, vol0, stiff, vert_pos, grad, cubic, vert_force):
     """Compressibility (paper 6.2): attraction toward the volume-satisfying positions.
 
@@ -253,7 +293,7 @@ def soft_volume_force(ring_ptr, ring_vert, ref, vol0, stiff, vert_pos, grad, cub
     return p
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def apply_prescribed(pre_vert, pre_rest, pre_sched, sched_next, h, vert_pos, vert_vel):
     """Prescribed trajectories: x_i(t+h) = rest_i + disp_s(t+h), v_i = dx / h.
     # Model: pre_vert (n,) int32, pre_rest (n, 3) m, pre_sched (n,) int64
@@ -269,7 +309,7 @@ def apply_prescribed(pre_vert, pre_rest, pre_sched, sched_next, h, vert_pos, ver
             vert_pos[i, a] = x
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def apply_keep_in(kin_vert, kin_shape, shape_kind, shape_par, vert_pos, vert_vel):
     """Keep points inside a half-space, ball or box: project the position onto
     the region and remove the outward velocity component.

@@ -284,7 +284,7 @@ def _add_point_masses(spec, model0, body_names, local, mass, added):
 
 # ----------------------------------------------------------------- the coupled step
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def run_coupled(m, s, link_vert, site_id, site_body, site_root, link_extra, link_force, link_vel,
                 site_xpos, xipos, xfrc, cvel, subtree_com, qpos, m_ptr, d_ptr, rk4, nstep, step0,
                 record, xfrc_hist, qpos_hist):
@@ -311,15 +311,18 @@ def run_coupled(m, s, link_vert, site_id, site_body, site_root, link_extra, link
             for a in range(3):
                 link_force[j, a] = frc[i, a] + p * grad[i, a] + link_extra[j, a]
         _rigid.point_wrench_kernel(site_xpos, xipos, site_id, site_body, link_force, xfrc)
-        if record:
-            xfrc_hist[k] = xfrc
+        if record:  # element-wise: a slice copy would allocate
+            for b in range(xfrc.shape[0]):
+                for a in range(6):
+                    xfrc_hist[k, b, a] = xfrc[b, a]
         if rk4:
             _mj_step(m_ptr, d_ptr)
         else:
             _mj_step2(m_ptr, d_ptr)
         _mj_step1(m_ptr, d_ptr)
         if record:
-            qpos_hist[k] = qpos
+            for a in range(qpos.shape[0]):
+                qpos_hist[k, a] = qpos[a]
         _rigid.site_vel_kernel(site_xpos, cvel, subtree_com, site_id, site_body, site_root, link_vel)
         for j in range(n):
             i = link_vert[j]

@@ -31,7 +31,7 @@ __all__ = [
 
 # ---------------------------------------------------------------- rest data
 
-@njit(cache=True, error_model="numpy", fastmath=FAST, inline="always")
+@njit(cache=True, error_model="numpy", _nrt=False, fastmath=FAST, inline="always")
 def ring_frame(vert_pos, ring_ptr, ring_vert, ring_closed, i):
     """Local frame of vertex i from its neighbour ring only (DESIGN.md).
 
@@ -140,7 +140,7 @@ def muscle_pairs(vert_pos, ring_ptr, ring_vert, verts, *, toward=None, axis=None
 
 # ---------------------------------------------------------------- kernels
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def set_pointwise(vert_mass, vert_free, accel, gravity_on, damp_coef, damping_on, vert_vel, vert_force):
     """Start the force sum with the terms that need only the point itself:
     gravity F = m g (integrated points) and viscous damping F = -c v (paper
@@ -167,7 +167,7 @@ def set_pointwise(vert_mass, vert_free, accel, gravity_on, damp_coef, damping_on
         vert_force[i, 2] = fz
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def add_applied(app_vert, app_sched, sched_val, vert_force):
     """F_i += f_s(t): a force per vertex from schedule s.
     # Model: app_vert (n,) int32, app_sched (n,) int64
@@ -182,7 +182,7 @@ def add_applied(app_vert, app_sched, sched_val, vert_force):
         vert_force[i, 2] += sched_val[s, 2]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def add_attraction(att_vert, att_stiff, att_target, att_sched, sched_val, vert_pos, vert_force):
     """F_i += k (P_ideal - P_i), P_ideal = target_i + offset_s(t) (paper 3.3).
     # Model: att_vert (n,) int32, att_stiff (n,) N/m, att_target (n, 3) m, att_sched (n,) int64
@@ -197,7 +197,7 @@ def add_attraction(att_vert, att_stiff, att_target, att_sched, sched_val, vert_p
             vert_force[i, a] += c * (att_target[k, a] + sched_val[s, a] - vert_pos[i, a])
 
 
-@njit(cache=True, error_model="numpy", fastmath=FAST)
+@njit(cache=True, error_model="numpy", _nrt=False, fastmath=FAST)
 def add_shape_memory(sm_vert, sm_stiff, sm_coef, ring_ptr, ring_vert, ring_closed, vert_pos, vert_force):
     """Local shape memory (paper 3.4): F_i += k_i (P_ideal - P_i).
 
@@ -220,7 +220,7 @@ def add_shape_memory(sm_vert, sm_stiff, sm_coef, ring_ptr, ring_vert, ring_close
         vert_force[i, 2] += c * (gz + al * tz + be * sz + ga * nz - vert_pos[i, 2])
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def add_mass_spring(spring_vert, spring_stiff, spring_rest, vert_pos, vert_force):
     """Springs between neighbours (the paper's comparison model, 6.1).
     # Model: spring_vert (ns, 2) int32, spring_stiff (ns,) N/m, spring_rest (ns,) m
@@ -242,7 +242,7 @@ def add_mass_spring(spring_vert, spring_stiff, spring_rest, vert_pos, vert_force
         vert_force[b, 2] -= f * dz
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def add_muscle(mus_vert, mus_nbr, mus_sched, sched_val, vert_pos, vert_force):
     """Muscle (paper 3.4): F_i += k_muscle(t) (N_j - P_i) for each contraction pair.
     # Model: mus_vert, mus_nbr (np,) int32, mus_sched (np,) int64

@@ -23,7 +23,7 @@ import numpy as np
 from numba import njit
 
 from .constraints import (PROJ_NO_GRADIENT, PROJ_OK, apply_keep_in, apply_prescribed,
-                          project_volume, soft_volume_force, volume_and_gradient)
+                          project_volume, soft_volume_force)
 from .errors import ConstraintError, SimulationDiverged
 from .forces import (add_applied, add_attraction, add_mass_spring, add_muscle, add_shape_memory,
                      set_pointwise)
@@ -71,7 +71,7 @@ def new_state(arrays: MembraneArrays) -> MembraneState:
         status=np.zeros(4, np.int64), term_calls=np.zeros(len(TERMS), np.int64))
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def eval_schedules(sched, t, out):
     """All compiled schedules at time t into out (nsched, 3); Python ones are set by the caller."""
     for row in range(sched.kind.shape[0]):
@@ -79,7 +79,7 @@ def eval_schedules(sched, t, out):
             schedule_eval(sched, row, t, out[row])
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def membrane_forces(m, s, t):
     """Step phase 1: the force of every term the model has, at time t.
     # Model: m (MembraneArrays)   # Data in: s.vert_pos, s.vert_vel
@@ -114,7 +114,7 @@ def membrane_forces(m, s, t):
         s.term_calls[T_SOFT_VOLUME] += 1
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def membrane_advance(m, s, t, step):
     """Step phases 2-5: integrate, project, check. Returns a status code.
     # Model: m   # Data in: s.vert_force   # Data out: s.vert_pos, s.vert_vel, s.scal, s.status
@@ -176,7 +176,7 @@ def membrane_advance(m, s, t, step):
     return OK
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _fail(s, code, step, vert):
     s.status[0] = code
     s.status[1] = step
@@ -184,7 +184,7 @@ def _fail(s, code, step, vert):
     return code
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _first_nonfinite(pos, vel, fallback):
     """The first vertex with a non-finite coordinate, else `fallback` (the point
     that moved most: finite values whose kinetic energy overflowed)."""
@@ -195,7 +195,7 @@ def _first_nonfinite(pos, vel, fallback):
     return fallback
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def run_membrane(m, s, nstep, step0):
     """nstep whole membrane steps; time advances as t0 + k h. Returns steps done."""
     t0 = s.scal[S_TIME]

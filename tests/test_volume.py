@@ -262,3 +262,22 @@ def test_soft_volume_keeps_the_error_bounded_and_reads_the_pressure(p_ext):
         errs[k] = abs(err[-1])
     # a stiffer term, a smaller error: inversely proportional to k to within the shape-memory share
     assert errs[8e4] / errs[2e4] == pytest.approx(0.25, rel=0.05)
+
+
+def test_cubic_root_nearest_zero_matches_numpy_roots():
+    """The projection's allocation-free cubic solver against numpy's companion-
+    matrix roots on random cubics spanning nine decades (c1 > 0 as for the
+    projection): the real root nearest 0, to 1e-6 relative (np.roots itself is
+    only accurate to about sqrt(eps) near multiple roots)."""
+    from hybrid.constraints import solve_cubic_near_zero
+
+    rng = np.random.default_rng(7)
+    for _ in range(5000):
+        c = rng.normal(size=4) * 10.0 ** rng.uniform(-6, 3, size=4)
+        c[1] = abs(c[1])
+        root, status = solve_cubic_near_zero(*c)
+        assert status == 0
+        ref = np.roots(c[::-1])
+        real = ref[np.abs(ref.imag) <= 1e-7 * np.maximum(1.0, np.abs(ref.real))].real
+        nearest = real[np.argmin(np.abs(real))]
+        assert abs(root - nearest) <= 1e-6 * max(1.0, abs(nearest)), (c, root, real)
