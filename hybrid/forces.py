@@ -32,17 +32,13 @@ __all__ = [
 # ---------------------------------------------------------------- rest data
 
 @njit(cache=True, error_model="numpy", _nrt=False, fastmath=FAST, inline="always")
-def ring_frame(vert_pos, ring_ptr, ring_vert, ring_closed, i):
-    """Local frame of vertex i from its neighbour ring only (DESIGN.md).
-
-    G = mean of the ring N_1..N_eta; n = normalized sum of (N_j - G) x (N_j+1 - G)
-    over the fan's consecutive pairs; t1 = unit tangential part of N_1 - G;
-    t2 = n x t1. One pass over the ring: the cross sum is taken relative to
-    N_1 and moved to G afterwards (for a closed fan it does not depend on the
-    origin; for an open one it changes by (N_eta - N_1) x (G - N_1)).
-    Returns (G, t1, t2, n) as 12 floats and |cross sum| (m^2); the norm is 0
-    when the frame is degenerate.
-    """
+def ring_sums(vert_pos, ring_ptr, ring_vert, ring_closed, i):
+    """First half of the local frame of vertex i (DESIGN.md), one pass over its ring:
+    G, the mean of the neighbours N_1..N_eta (m), and the unnormalised normal,
+    the sum of (N_j - G) x (N_j+1 - G) over the fan's consecutive pairs (m^2).
+    The cross sum is taken relative to N_1 and moved to G afterwards (for a
+    closed fan it does not depend on the origin; for an open one it changes by
+    (N_eta - N_1) x (G - N_1)). Returns (Gx, Gy, Gz, nx, ny, nz)."""
     b, e = ring_ptr[i], ring_ptr[i + 1]
     v = ring_vert[b]
     x1, y1, z1 = vert_pos[v, 0], vert_pos[v, 1], vert_pos[v, 2]
@@ -61,24 +57,39 @@ def ring_frame(vert_pos, ring_ptr, ring_vert, ring_closed, i):
         ax, ay, az = bx, by, bz
     inv = 1.0 / (e - b)
     gx, gy, gz = sx * inv, sy * inv, sz * inv  # G - N_1
-    if not ring_closed[i]:  # move the open fan's sum from N_1 to G
+    if not ring_closed[i]:
         nx += ay * gz - az * gy
         ny += az * gx - ax * gz
         nz += ax * gy - ay * gx
-    nn = math.sqrt(nx * nx + ny * ny + nz * nz)
-    r = 1.0 / nn
+    return gx + x1, gy + y1, gz + z1, nx, ny, nz
+
+
+@njit(cache=True, error_model="numpy", _nrt=False, fastmath=FAST, inline="always")
+def frame_axes(vert_pos, first, gx, gy, gz, nx, ny, nz):
+    """Second half: unit n, t1 = unit tangential part of N_1 - G, t2 = n x t1,
+    from `ring_sums` and the first neighbour's index. Returns (t1, t2, n) as 9 floats."""
+    r = 1.0 / math.sqrt(nx * nx + ny * ny + nz * nz)
     nx *= r
     ny *= r
     nz *= r
-    # N_1 - G = -(G - N_1)
-    dn = -(gx * nx + gy * ny + gz * nz)
-    tx, ty, tz = -gx - dn * nx, -gy - dn * ny, -gz - dn * nz
+    dx, dy, dz = vert_pos[first, 0] - gx, vert_pos[first, 1] - gy, vert_pos[first, 2] - gz
+    dn = dx * nx + dy * ny + dz * nz
+    tx, ty, tz = dx - dn * nx, dy - dn * ny, dz - dn * nz
     r = 1.0 / math.sqrt(tx * tx + ty * ty + tz * tz)
     tx *= r
     ty *= r
     tz *= r
-    return (gx + x1, gy + y1, gz + z1, tx, ty, tz,
-            ny * tz - nz * ty, nz * tx - nx * tz, nx * ty - ny * tx, nx, ny, nz, nn)
+    return tx, ty, tz, ny * tz - nz * ty, nz * tx - nx * tz, nx * ty - ny * tx, nx, ny, nz
+
+
+@njit(cache=True, error_model="numpy", _nrt=False)
+def ring_frame(vert_pos, ring_ptr, ring_vert, ring_closed, i):
+    """The local frame of vertex i from its neighbour ring only: (G, t1, t2, n)
+    as 12 floats and |cross sum| (m^2), 0 when the frame is degenerate."""
+    gx, gy, gz, nx, ny, nz = ring_sums(vert_pos, ring_ptr, ring_vert, ring_closed, i)
+    nn = math.sqrt(nx * nx + ny * ny + nz * nz)
+    tx, ty, tz, ux, uy, uz, nx, ny, nz = frame_axes(vert_pos, ring_vert[ring_ptr[i]], gx, gy, gz, nx, ny, nz)
+    return gx, gy, gz, tx, ty, tz, ux, uy, uz, nx, ny, nz, nn
 
 
 def shape_memory_frame_coef(vert_pos, ring_ptr, ring_vert, ring_closed, verts) -> np.ndarray:
@@ -198,26 +209,39 @@ def add_attraction(att_vert, att_stiff, att_target, att_sched, sched_val, vert_p
 
 
 @njit(cache=True, error_model="numpy", _nrt=False, fastmath=FAST)
-def add_shape_memory(sm_vert, sm_stiff, sm_coef, ring_ptr, ring_vert, ring_closed, vert_pos, vert_force):
+def add_shape_memory(sm_vert, sm_stiff, sm_coef, ring_ptr, ring_vert, ring_closed, vert_pos, sm_sums,
+                     vert_force):
     """Local shape memory (paper 3.4): F_i += k_i (P_ideal - P_i).
 
     P_ideal = G + alpha t1 + beta t2 + gamma n in the frame of the current
     neighbour ring (`ring_frame`), so the force vanishes at rest and turns
     with any rigid motion of the surface. No reaction on the neighbours: the
-    force is not conservative.
+    force is not conservative. Two passes, the ring gathers then the
+    normalisations: a third faster than one pass, which stalls on the
+    dependent square roots and divisions of each point.
     # Model: sm_vert (n,) int32, sm_stiff (n,) N/m, sm_coef (n, 3) m, ring_*
     # Data in: vert_pos (nvert, 3) m
+    # Scratch: sm_sums (n, 6): G (m) and the unnormalised normal (m^2)
     # Data out: vert_force
     """
     for k in range(sm_vert.shape[0]):
+        gx, gy, gz, nx, ny, nz = ring_sums(vert_pos, ring_ptr, ring_vert, ring_closed, sm_vert[k])
+        sm_sums[k, 0] = gx
+        sm_sums[k, 1] = gy
+        sm_sums[k, 2] = gz
+        sm_sums[k, 3] = nx
+        sm_sums[k, 4] = ny
+        sm_sums[k, 5] = nz
+    for k in range(sm_vert.shape[0]):
         i = sm_vert[k]
-        gx, gy, gz, tx, ty, tz, sx, sy, sz, nx, ny, nz, nn = ring_frame(vert_pos, ring_ptr, ring_vert,
-                                                                        ring_closed, i)
+        gx, gy, gz = sm_sums[k, 0], sm_sums[k, 1], sm_sums[k, 2]
+        tx, ty, tz, ux, uy, uz, nx, ny, nz = frame_axes(vert_pos, ring_vert[ring_ptr[i]], gx, gy, gz,
+                                                        sm_sums[k, 3], sm_sums[k, 4], sm_sums[k, 5])
         al, be, ga = sm_coef[k, 0], sm_coef[k, 1], sm_coef[k, 2]
         c = sm_stiff[k]
-        vert_force[i, 0] += c * (gx + al * tx + be * sx + ga * nx - vert_pos[i, 0])
-        vert_force[i, 1] += c * (gy + al * ty + be * sy + ga * ny - vert_pos[i, 1])
-        vert_force[i, 2] += c * (gz + al * tz + be * sz + ga * nz - vert_pos[i, 2])
+        vert_force[i, 0] += c * (gx + al * tx + be * ux + ga * nx - vert_pos[i, 0])
+        vert_force[i, 1] += c * (gy + al * ty + be * uy + ga * ny - vert_pos[i, 1])
+        vert_force[i, 2] += c * (gz + al * tz + be * uz + ga * nz - vert_pos[i, 2])
 
 
 @njit(cache=True, error_model="numpy", _nrt=False)

@@ -43,8 +43,8 @@ OK, DIVERGED_NONFINITE, DIVERGED_RUNAWAY, VOLUME_FAILED = 0, 1, 2, 3
 class MembraneState(NamedTuple):
     """What changes during a run. vert_pos (nvert, 3) m; vert_vel (nvert, 3) m/s;
     vert_force (nvert, 3) N (forces of the last step, before constraints);
-    grad (nvert, 3) m^2 volume gradient at the last projection; dirn, cubic:
-    scratch; sched_val / sched_next (nsched, 3): schedules at t and t + h;
+    grad (nvert, 3) m^2 volume gradient at the last projection; sm_sums, dirn,
+    cubic: scratch; sched_val / sched_next (nsched, 3): schedules at t and t + h;
     scal: time s, pressure Pa, phi, kinetic energy J, largest step displacement m;
     status: code, failing step, worst vertex, projection status;
     term_calls (nterm,): how many times each term's kernel ran."""
@@ -52,6 +52,7 @@ class MembraneState(NamedTuple):
     vert_vel: np.ndarray
     vert_force: np.ndarray
     grad: np.ndarray
+    sm_sums: np.ndarray
     dirn: np.ndarray
     cubic: np.ndarray
     sched_val: np.ndarray
@@ -66,7 +67,8 @@ def new_state(arrays: MembraneArrays) -> MembraneState:
     ns = arrays.sched.kind.shape[0]
     return MembraneState(
         vert_pos=arrays.vert_rest.copy(), vert_vel=np.zeros((n, 3)), vert_force=np.zeros((n, 3)),
-        grad=np.zeros((n, 3)), dirn=np.zeros((n, 3)), cubic=np.zeros(2),
+        grad=np.zeros((n, 3)), sm_sums=np.zeros((arrays.sm_vert.shape[0], 6)), dirn=np.zeros((n, 3)),
+        cubic=np.zeros(2),
         sched_val=np.zeros((ns, 3)), sched_next=np.zeros((ns, 3)), scal=np.zeros(8),
         status=np.zeros(4, np.int64), term_calls=np.zeros(len(TERMS), np.int64))
 
@@ -100,7 +102,7 @@ def membrane_forces(m, s, t):
         s.term_calls[T_ATTRACTION] += 1
     if on[T_SHAPE_MEMORY]:
         add_shape_memory(m.sm_vert, m.sm_stiff, m.sm_coef, m.ring_ptr, m.ring_vert, m.ring_closed,
-                         s.vert_pos, s.vert_force)
+                         s.vert_pos, s.sm_sums, s.vert_force)
         s.term_calls[T_SHAPE_MEMORY] += 1
     if on[T_MASS_SPRING]:
         add_mass_spring(m.spring_vert, m.spring_stiff, m.spring_rest, s.vert_pos, s.vert_force)
