@@ -13,7 +13,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import prange
+
+from .kernel import kernel, kernel_twin
 
 __all__ = ["ring_cross_sum", "volume_cubic", "solve_cubic_near_zero", "project_volume",
            "soft_volume_force", "apply_prescribed", "apply_keep_in",
@@ -25,7 +27,7 @@ SHAPE_HALF_SPACE, SHAPE_BALL, SHAPE_BOX = 0, 1, 2
 PROJ_OK, PROJ_NO_GRADIENT, PROJ_NO_ROOT = 0, 1, 2
 
 
-@njit(cache=True, error_model="numpy", _nrt=False, inline="always")
+@kernel(inline="always")
 def ring_cross_sum(ring_ptr, ring_vert, vec, i):
     """sum_j (N_j - N_1) x (N_j+1 - N_1) over the closed fan of point i, with
     N_j = vec[ring_vert[j]]: six times the volume gradient at i of a surface
@@ -46,8 +48,20 @@ def ring_cross_sum(ring_ptr, ring_vert, vec, i):
     return gx, gy, gz
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
-def volume_cubic(ring_ptr, ring_vert, ref, vert_pos, dirn, out):
+def _cubic_terms(ring_ptr, ring_vert, ref, vert_pos, dirn, vert_acc):
+    """Per point: x_i . grad_i V(D) and D_i . grad_i V(D), times 6, into vert_acc[:, :2]."""
+    for i in prange(vert_pos.shape[0]):
+        gx, gy, gz = ring_cross_sum(ring_ptr, ring_vert, dirn, i)
+        vert_acc[i, 0] = ((vert_pos[i, 0] - ref[0]) * gx + (vert_pos[i, 1] - ref[1]) * gy
+                          + (vert_pos[i, 2] - ref[2]) * gz)
+        vert_acc[i, 1] = dirn[i, 0] * gx + dirn[i, 1] * gy + dirn[i, 2] * gz
+
+
+_cubic_terms_serial, _cubic_terms_parallel = kernel_twin(_cubic_terms)
+
+
+@kernel
+def volume_cubic(ring_ptr, ring_vert, ref, vert_pos, dirn, vert_acc, out, parallel):
     """Coefficients c2, c3 of V(X + phi D) - V(X) = c1 phi + c2 phi^2 + c3 phi^3.
 
     V is a symmetric cubic form T(X, X, X), so c2 = 3 T(X, D, D) = X . grad V(D)
@@ -58,23 +72,27 @@ def volume_cubic(ring_ptr, ring_vert, ref, vert_pos, dirn, out):
     six gathers per face; c1 = D . grad V(X) is left to the caller.
     # Model: ring_ptr, ring_vert, ref (3,) m
     # Data in: vert_pos (m), dirn (nvert, 3) (projection direction D)
+    # Scratch: vert_acc (nvert, 4)
     # Data out: out (2,) = (c2, c3)
     """
+    if parallel:
+        _cubic_terms_parallel(ring_ptr, ring_vert, ref, vert_pos, dirn, vert_acc)
+    else:
+        _cubic_terms_serial(ring_ptr, ring_vert, ref, vert_pos, dirn, vert_acc)
     c2 = c3 = 0.0
     for i in range(vert_pos.shape[0]):
-        gx, gy, gz = ring_cross_sum(ring_ptr, ring_vert, dirn, i)
-        c2 += (vert_pos[i, 0] - ref[0]) * gx + (vert_pos[i, 1] - ref[1]) * gy + (vert_pos[i, 2] - ref[2]) * gz
-        c3 += dirn[i, 0] * gx + dirn[i, 1] * gy + dirn[i, 2] * gz
+        c2 += vert_acc[i, 0]
+        c3 += vert_acc[i, 1]
     out[0] = c2 / 6.0
     out[1] = c3 / 18.0
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@kernel
 def _cubic_at(c0, c1, c2, c3, x):
     return ((c3 * x + c2) * x + c1) * x + c0
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@kernel
 def _root_between(c0, c1, c2, c3, a, b):
     """The root of the cubic on [a, b], where it is monotone and changes sign:
     Newton kept inside a shrinking bracket (bisection when it leaves it)."""
@@ -98,7 +116,7 @@ def _root_between(c0, c1, c2, c3, a, b):
     return x
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@kernel
 def _monotone_pieces(c0, c1, c2, c3):
     """(lo, k1, k2, hi): a bound R on every real root (lo = -R, hi = R) and the
     cubic's critical points k1 <= k2 clipped into [lo, hi] (equal to lo or hi
@@ -120,7 +138,7 @@ def _monotone_pieces(c0, c1, c2, c3):
     return -r, min(max(k1, -r), r), min(max(k2, -r), r), r
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@kernel
 def solve_cubic_near_zero(c0, c1, c2, c3):
     """Real root of c0 + c1 x + c2 x^2 + c3 x^3 nearest 0. Returns (root, status).
 
@@ -186,9 +204,47 @@ def solve_cubic_near_zero(c0, c1, c2, c3):
     return best, PROJ_OK
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+def _volume_gather(ring_ptr, ring_vert, ref, vert_weight, vert_pos, grad, dirn, vert_acc):
+    """Per point: grad_i V (closed fan), D_i = w_i grad_i V, and the terms of
+    V, c1, |D|max and |x|max: (x_i . g_i, D_i . g_i, |D_i|^2, |x_i|^2) into vert_acc."""
+    sixth = 1.0 / 6.0
+    for i in prange(vert_weight.shape[0]):
+        gx, gy, gz = ring_cross_sum(ring_ptr, ring_vert, vert_pos, i)
+        gx *= sixth
+        gy *= sixth
+        gz *= sixth
+        grad[i, 0] = gx
+        grad[i, 1] = gy
+        grad[i, 2] = gz
+        px, py, pz = vert_pos[i, 0] - ref[0], vert_pos[i, 1] - ref[1], vert_pos[i, 2] - ref[2]
+        w = vert_weight[i]
+        dx, dy, dz = w * gx, w * gy, w * gz
+        dirn[i, 0] = dx
+        dirn[i, 1] = dy
+        dirn[i, 2] = dz
+        vert_acc[i, 0] = px * gx + py * gy + pz * gz
+        vert_acc[i, 1] = dx * gx + dy * gy + dz * gz
+        vert_acc[i, 2] = dx * dx + dy * dy + dz * dz
+        vert_acc[i, 3] = px * px + py * py + pz * pz
+
+
+def _volume_update(vert_weight, phi, dirn, h, vert_pos, vert_vel):
+    """X += phi D, v += phi D / h on the points that carry the correction."""
+    s = phi / h
+    for i in prange(vert_weight.shape[0]):
+        if vert_weight[i] != 0.0:
+            for a in range(3):
+                vert_pos[i, a] += phi * dirn[i, a]
+                vert_vel[i, a] += s * dirn[i, a]
+
+
+_volume_gather_serial, _volume_gather_parallel = kernel_twin(_volume_gather)
+_volume_update_serial, _volume_update_parallel = kernel_twin(_volume_update)
+
+
+@kernel
 def project_volume(ring_ptr, ring_vert, face_vert, ref, vol0, vert_weight, h, vert_pos, vert_vel, grad,
-                   dirn, cubic):
+                   dirn, cubic, vert_acc, parallel):
     """Exact constant-volume projection (paper 4.2-4.3, DESIGN.md).
 
     X = X* + phi D, D_i = w_i grad_i V(X*), w_i = 1/m_i (0 for points that are
@@ -211,31 +267,22 @@ def project_volume(ring_ptr, ring_vert, face_vert, ref, vol0, vert_weight, h, ve
     # Model: ring_ptr, ring_vert (closed fans), face_vert, ref (3,) m, vol0 m^3,
     #        vert_weight (nvert,) 1/kg
     # Data in/out: vert_pos, vert_vel
-    # Scratch: grad (volume gradient at X*, kept for the rib coupling), dirn, cubic (2,)
+    # Scratch: grad (volume gradient at X*, kept for the rib coupling), dirn, cubic (2,),
+    #          vert_acc (nvert, 4)
     """
+    if parallel:
+        _volume_gather_parallel(ring_ptr, ring_vert, ref, vert_weight, vert_pos, grad, dirn, vert_acc)
+    else:
+        _volume_gather_serial(ring_ptr, ring_vert, ref, vert_weight, vert_pos, grad, dirn, vert_acc)
     vol = 0.0
     c1 = 0.0
     dmax2 = 0.0
     xmax2 = 0.0
-    sixth = 1.0 / 6.0
     for i in range(vert_weight.shape[0]):
-        gx, gy, gz = ring_cross_sum(ring_ptr, ring_vert, vert_pos, i)
-        gx *= sixth
-        gy *= sixth
-        gz *= sixth
-        grad[i, 0] = gx
-        grad[i, 1] = gy
-        grad[i, 2] = gz
-        px, py, pz = vert_pos[i, 0] - ref[0], vert_pos[i, 1] - ref[1], vert_pos[i, 2] - ref[2]
-        vol += px * gx + py * gy + pz * gz
-        w = vert_weight[i]
-        dx, dy, dz = w * gx, w * gy, w * gz
-        dirn[i, 0] = dx
-        dirn[i, 1] = dy
-        dirn[i, 2] = dz
-        c1 += dx * gx + dy * gy + dz * gz
-        dmax2 = max(dmax2, dx * dx + dy * dy + dz * dz)
-        xmax2 = max(xmax2, px * px + py * py + pz * pz)
+        vol += vert_acc[i, 0]
+        c1 += vert_acc[i, 1]
+        dmax2 = max(dmax2, vert_acc[i, 2])
+        xmax2 = max(xmax2, vert_acc[i, 3])
     vol /= 3.0
     c0 = vol - vol0
     if not (c1 > 0.0):
@@ -245,21 +292,19 @@ def project_volume(ring_ptr, ring_vert, face_vert, ref, vol0, vert_weight, h, ve
     dmax = math.sqrt(dmax2)
     bound = nface * dmax2 * (0.5 * math.sqrt(xmax2) * phi * phi + dmax * abs(phi) ** 3 / 6.0)
     if not (bound <= 1e-17 * abs(vol0)):
-        volume_cubic(ring_ptr, ring_vert, ref, vert_pos, dirn, cubic)
+        volume_cubic(ring_ptr, ring_vert, ref, vert_pos, dirn, vert_acc, cubic, parallel)
         phi, status = solve_cubic_near_zero(c0, c1, cubic[0], cubic[1])
         if status != PROJ_OK:
             return 0.0, status
-    s = phi / h
-    for i in range(vert_weight.shape[0]):
-        if vert_weight[i] != 0.0:
-            for a in range(3):
-                vert_pos[i, a] += phi * dirn[i, a]
-                vert_vel[i, a] += s * dirn[i, a]
+    if parallel:
+        _volume_update_parallel(vert_weight, phi, dirn, h, vert_pos, vert_vel)
+    else:
+        _volume_update_serial(vert_weight, phi, dirn, h, vert_pos, vert_vel)
     return phi, PROJ_OK
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
-def soft_volume_force(ring_ptr, ring_vert, ref, vol0, stiff, vert_pos, grad, cubic, vert_force):
+@kernel
+def soft_volume_force(ring_ptr, ring_vert, ref, vol0, stiff, vert_pos, grad, cubic, vert_acc, vert_force):
     """Compressibility (paper 6.2): attraction toward the volume-satisfying positions.
 
     phi solves V(X + phi grad V(X)) = V0; each point is pulled toward its
@@ -267,7 +312,7 @@ def soft_volume_force(ring_ptr, ring_vert, ref, vol0, stiff, vert_pos, grad, cub
     pressure p = k phi (Pa). Returns p.
     # Model: ring_ptr, ring_vert (closed fans), ref, vol0 m^3, stiff N/m
     # Data in: vert_pos
-    # Data out: vert_force; scratch grad, cubic
+    # Data out: vert_force; scratch grad, cubic, vert_acc
     """
     vol = 0.0
     c1 = 0.0
@@ -281,7 +326,7 @@ def soft_volume_force(ring_ptr, ring_vert, ref, vol0, stiff, vert_pos, grad, cub
         grad[i, 2] = gz
         vol += (vert_pos[i, 0] - ref[0]) * gx + (vert_pos[i, 1] - ref[1]) * gy + (vert_pos[i, 2] - ref[2]) * gz
         c1 += gx * gx + gy * gy + gz * gz
-    volume_cubic(ring_ptr, ring_vert, ref, vert_pos, grad, cubic)
+    volume_cubic(ring_ptr, ring_vert, ref, vert_pos, grad, vert_acc, cubic, False)
     phi, status = solve_cubic_near_zero(vol / 3.0 - vol0, c1, cubic[0], cubic[1])
     if status != PROJ_OK:
         return np.nan
@@ -293,7 +338,7 @@ def soft_volume_force(ring_ptr, ring_vert, ref, vol0, stiff, vert_pos, grad, cub
     return p
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@kernel
 def apply_prescribed(pre_vert, pre_rest, pre_sched, sched_next, h, vert_pos, vert_vel):
     """Prescribed trajectories: x_i(t+h) = rest_i + disp_s(t+h), v_i = dx / h.
     # Model: pre_vert (n,) int32, pre_rest (n, 3) m, pre_sched (n,) int64
@@ -309,7 +354,7 @@ def apply_prescribed(pre_vert, pre_rest, pre_sched, sched_next, h, vert_pos, ver
             vert_pos[i, a] = x
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@kernel
 def apply_keep_in(kin_vert, kin_shape, shape_kind, shape_par, vert_pos, vert_vel):
     """Keep points inside a half-space, ball or box: project the position onto
     the region and remove the outward velocity component.

@@ -40,10 +40,11 @@ from pathlib import Path
 
 import llvmlite.binding as _llvm
 import numpy as np
-from numba import njit, types
+from numba import types
 
 from . import regions as _regions
 from . import rigid as _rigid
+from .kernel import kernel
 from .errors import RigidError, SceneError, SimulationDiverged
 from .scene import Nailed, Prescribed, Rigid, RigidLink, Scene
 from .model import T_GRAVITY
@@ -284,7 +285,7 @@ def _add_point_masses(spec, model0, body_names, local, mass, added):
 
 # ----------------------------------------------------------------- the coupled step
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@kernel
 def run_coupled(m, s, link_vert, site_id, site_body, site_root, link_extra, link_force, link_vel,
                 site_xpos, xipos, xfrc, cvel, subtree_com, qpos, m_ptr, d_ptr, rk4, nstep, step0,
                 record, xfrc_hist, qpos_hist):

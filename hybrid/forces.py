@@ -14,7 +14,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import prange
+
+from .kernel import kernel, kernel_twin
 
 from .errors import MeshError
 
@@ -25,13 +27,13 @@ FAST = {"contract", "arcp", "nsz", "afn"}
 __all__ = [
     "shape_memory_frame_coef", "muscle_pairs",
     "set_pointwise", "add_applied", "add_attraction",
-    "add_shape_memory", "add_mass_spring", "add_muscle",
+    "add_shape_memory", "add_shape_memory_parallel", "add_mass_spring", "add_muscle",
 ]
 
 
 # ---------------------------------------------------------------- rest data
 
-@njit(cache=True, error_model="numpy", _nrt=False, fastmath=FAST, inline="always")
+@kernel(fastmath=FAST, inline="always")
 def ring_sums(vert_pos, ring_ptr, ring_vert, ring_closed, i):
     """First half of the local frame of vertex i (DESIGN.md), one pass over its ring:
     G, the mean of the neighbours N_1..N_eta (m), and the unnormalised normal,
@@ -64,7 +66,7 @@ def ring_sums(vert_pos, ring_ptr, ring_vert, ring_closed, i):
     return gx + x1, gy + y1, gz + z1, nx, ny, nz
 
 
-@njit(cache=True, error_model="numpy", _nrt=False, fastmath=FAST, inline="always")
+@kernel(fastmath=FAST, inline="always")
 def frame_axes(vert_pos, first, gx, gy, gz, nx, ny, nz):
     """Second half: unit n, t1 = unit tangential part of N_1 - G, t2 = n x t1,
     from `ring_sums` and the first neighbour's index. Returns (t1, t2, n) as 9 floats."""
@@ -82,7 +84,7 @@ def frame_axes(vert_pos, first, gx, gy, gz, nx, ny, nz):
     return tx, ty, tz, ny * tz - nz * ty, nz * tx - nx * tz, nx * ty - ny * tx, nx, ny, nz
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@kernel
 def ring_frame(vert_pos, ring_ptr, ring_vert, ring_closed, i):
     """The local frame of vertex i from its neighbour ring only: (G, t1, t2, n)
     as 12 floats and |cross sum| (m^2), 0 when the frame is degenerate."""
@@ -151,7 +153,7 @@ def muscle_pairs(vert_pos, ring_ptr, ring_vert, verts, *, toward=None, axis=None
 
 # ---------------------------------------------------------------- kernels
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@kernel
 def set_pointwise(vert_mass, vert_free, accel, gravity_on, damp_coef, damping_on, vert_vel, vert_force):
     """Start the force sum with the terms that need only the point itself:
     gravity F = m g (integrated points) and viscous damping F = -c v (paper
@@ -178,7 +180,7 @@ def set_pointwise(vert_mass, vert_free, accel, gravity_on, damp_coef, damping_on
         vert_force[i, 2] = fz
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@kernel
 def add_applied(app_vert, app_sched, sched_val, vert_force):
     """F_i += f_s(t): a force per vertex from schedule s.
     # Model: app_vert (n,) int32, app_sched (n,) int64
@@ -193,7 +195,7 @@ def add_applied(app_vert, app_sched, sched_val, vert_force):
         vert_force[i, 2] += sched_val[s, 2]
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@kernel
 def add_attraction(att_vert, att_stiff, att_target, att_sched, sched_val, vert_pos, vert_force):
     """F_i += k (P_ideal - P_i), P_ideal = target_i + offset_s(t) (paper 3.3).
     # Model: att_vert (n,) int32, att_stiff (n,) N/m, att_target (n, 3) m, att_sched (n,) int64
@@ -208,8 +210,7 @@ def add_attraction(att_vert, att_stiff, att_target, att_sched, sched_val, vert_p
             vert_force[i, a] += c * (att_target[k, a] + sched_val[s, a] - vert_pos[i, a])
 
 
-@njit(cache=True, error_model="numpy", _nrt=False, fastmath=FAST)
-def add_shape_memory(sm_vert, sm_stiff, sm_coef, ring_ptr, ring_vert, ring_closed, vert_pos, sm_sums,
+def _add_shape_memory(sm_vert, sm_stiff, sm_coef, ring_ptr, ring_vert, ring_closed, vert_pos, sm_sums,
                      vert_force):
     """Local shape memory (paper 3.4): F_i += k_i (P_ideal - P_i).
 
@@ -223,8 +224,9 @@ def add_shape_memory(sm_vert, sm_stiff, sm_coef, ring_ptr, ring_vert, ring_close
     # Data in: vert_pos (nvert, 3) m
     # Scratch: sm_sums (n, 6): G (m) and the unnormalised normal (m^2)
     # Data out: vert_force
+    Compiled twice (hybrid.kernel): `add_shape_memory` and `add_shape_memory_parallel`.
     """
-    for k in range(sm_vert.shape[0]):
+    for k in prange(sm_vert.shape[0]):
         gx, gy, gz, nx, ny, nz = ring_sums(vert_pos, ring_ptr, ring_vert, ring_closed, sm_vert[k])
         sm_sums[k, 0] = gx
         sm_sums[k, 1] = gy
@@ -232,7 +234,7 @@ def add_shape_memory(sm_vert, sm_stiff, sm_coef, ring_ptr, ring_vert, ring_close
         sm_sums[k, 3] = nx
         sm_sums[k, 4] = ny
         sm_sums[k, 5] = nz
-    for k in range(sm_vert.shape[0]):
+    for k in prange(sm_vert.shape[0]):
         i = sm_vert[k]
         gx, gy, gz = sm_sums[k, 0], sm_sums[k, 1], sm_sums[k, 2]
         tx, ty, tz, ux, uy, uz, nx, ny, nz = frame_axes(vert_pos, ring_vert[ring_ptr[i]], gx, gy, gz,
@@ -244,7 +246,10 @@ def add_shape_memory(sm_vert, sm_stiff, sm_coef, ring_ptr, ring_vert, ring_close
         vert_force[i, 2] += c * (gz + al * tz + be * uz + ga * nz - vert_pos[i, 2])
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+add_shape_memory, add_shape_memory_parallel = kernel_twin(_add_shape_memory, fastmath=FAST)
+
+
+@kernel
 def add_mass_spring(spring_vert, spring_stiff, spring_rest, vert_pos, vert_force):
     """Springs between neighbours (the paper's comparison model, 6.1).
     # Model: spring_vert (ns, 2) int32, spring_stiff (ns,) N/m, spring_rest (ns,) m
@@ -266,7 +271,7 @@ def add_mass_spring(spring_vert, spring_stiff, spring_rest, vert_pos, vert_force
         vert_force[b, 2] -= f * dz
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@kernel
 def add_muscle(mus_vert, mus_nbr, mus_sched, sched_val, vert_pos, vert_force):
     """Muscle (paper 3.4): F_i += k_muscle(t) (N_j - P_i) for each contraction pair.
     # Model: mus_vert, mus_nbr (np,) int32, mus_sched (np,) int64

@@ -21,6 +21,7 @@ from . import regions as _regions
 from . import schedule as _sched
 from .constraints import SHAPE_BALL, SHAPE_BOX, SHAPE_HALF_SPACE
 from .errors import HybridError, MeshError, SceneError
+from .kernel import use_parallel
 from .mesh import Mesh
 from .scene import (INTEGRATORS, AppliedForce, Attraction, Damping, Gravity, KeepIn, MassSpring,
                     Masses, MeshSpec, Muscle, Nailed, Prescribed, Scene, ShapeMemory, SoftVolume,
@@ -48,7 +49,8 @@ class MembraneArrays(NamedTuple):
     soft_stiff N/m; pre_*: prescribed; kin_*, shape_*: keep-in; vol_ref (3,) m, vol0 m^3;
     sched: ScheduleTable; dt s; integrator 0 explicit / 1 symplectic;
     runaway_disp m: a step moving a point farther than this has run away;
-    max_speed m/s: so has a point faster than this.
+    max_speed m/s: so has a point faster than this; parallel: the per-point
+    passes run their multi-core build (hybrid.kernel).
     """
     face_vert: np.ndarray
     ring_ptr: np.ndarray
@@ -91,6 +93,7 @@ class MembraneArrays(NamedTuple):
     integrator: int
     runaway_disp: float
     max_speed: float
+    parallel: bool
 
 
 @dataclass(frozen=True)
@@ -465,6 +468,7 @@ def compile_scene(scene: Scene) -> Model:
         sched=sched_table, dt=float(scene.dt_s), integrator=integrator,
         runaway_disp=float(np.linalg.norm(np.ptp(mesh.vert_pos, axis=0))),
         max_speed=_positive(scene.max_speed_m_s, "max_speed_m_s"),
+        parallel=use_parallel(nvert),
     )
     for arr in arrays:
         if isinstance(arr, np.ndarray):

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from typing import Callable, NamedTuple, Sequence, Union
 
 import numpy as np
-from numba import njit
+from .kernel import kernel
 
 from .errors import SceneError
 
@@ -168,7 +168,7 @@ def stack_schedules(scheds: Sequence[Schedule]) -> tuple[ScheduleTable, list]:
     return ScheduleTable(kind, par, tab_len, tab_t, tab_v), python_fns
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@kernel
 def breathing_value(par, t):
     """Raised-cosine breathing cycle (see `Breathing`); par = (period, fraction, peak, onset)."""
     period, frac, peak, onset = par[0], par[1], par[2], par[3]
@@ -181,7 +181,7 @@ def breathing_value(par, t):
     return peak * 0.5 * (1.0 + math.cos(math.pi * (tau - t_insp) / (period - t_insp)))
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@kernel
 def schedule_eval(sched, row, t, out):
     """Write schedule `row` at time t (s) into out (3,); scalars land in out[0].
 

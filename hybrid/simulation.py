@@ -20,13 +20,15 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
+from numba import prange
+
+from .kernel import kernel, kernel_twin
 
 from .constraints import (PROJ_NO_GRADIENT, PROJ_OK, apply_keep_in, apply_prescribed,
                           project_volume, soft_volume_force)
 from .errors import ConstraintError, SimulationDiverged
 from .forces import (add_applied, add_attraction, add_mass_spring, add_muscle, add_shape_memory,
-                     set_pointwise)
+                     add_shape_memory_parallel, set_pointwise)
 from .model import (TERMS, T_APPLIED, T_ATTRACTION, T_DAMPING, T_GRAVITY, T_KEEP_IN, T_MASS_SPRING,
                     T_MUSCLE, T_PRESCRIBED, T_SHAPE_MEMORY, T_SOFT_VOLUME, T_VOLUME, MembraneArrays,
                     Model)
@@ -43,8 +45,8 @@ OK, DIVERGED_NONFINITE, DIVERGED_RUNAWAY, VOLUME_FAILED = 0, 1, 2, 3
 class MembraneState(NamedTuple):
     """What changes during a run. vert_pos (nvert, 3) m; vert_vel (nvert, 3) m/s;
     vert_force (nvert, 3) N (forces of the last step, before constraints);
-    grad (nvert, 3) m^2 volume gradient at the last projection; sm_sums, dirn,
-    cubic: scratch; sched_val / sched_next (nsched, 3): schedules at t and t + h;
+    grad (nvert, 3) m^2 volume gradient at the last projection; sm_sums,
+    vert_acc, dirn, cubic: scratch; sched_val / sched_next (nsched, 3): schedules at t and t + h;
     scal: time s, pressure Pa, phi, kinetic energy J, largest step displacement m;
     status: code, failing step, worst vertex, projection status;
     term_calls (nterm,): how many times each term's kernel ran."""
@@ -53,6 +55,7 @@ class MembraneState(NamedTuple):
     vert_force: np.ndarray
     grad: np.ndarray
     sm_sums: np.ndarray
+    vert_acc: np.ndarray
     dirn: np.ndarray
     cubic: np.ndarray
     sched_val: np.ndarray
@@ -67,13 +70,14 @@ def new_state(arrays: MembraneArrays) -> MembraneState:
     ns = arrays.sched.kind.shape[0]
     return MembraneState(
         vert_pos=arrays.vert_rest.copy(), vert_vel=np.zeros((n, 3)), vert_force=np.zeros((n, 3)),
-        grad=np.zeros((n, 3)), sm_sums=np.zeros((arrays.sm_vert.shape[0], 6)), dirn=np.zeros((n, 3)),
+        grad=np.zeros((n, 3)), sm_sums=np.zeros((arrays.sm_vert.shape[0], 6)),
+        vert_acc=np.zeros((n, 4)), dirn=np.zeros((n, 3)),
         cubic=np.zeros(2),
         sched_val=np.zeros((ns, 3)), sched_next=np.zeros((ns, 3)), scal=np.zeros(8),
         status=np.zeros(4, np.int64), term_calls=np.zeros(len(TERMS), np.int64))
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@kernel
 def eval_schedules(sched, t, out):
     """All compiled schedules at time t into out (nsched, 3); Python ones are set by the caller."""
     for row in range(sched.kind.shape[0]):
@@ -81,7 +85,7 @@ def eval_schedules(sched, t, out):
             schedule_eval(sched, row, t, out[row])
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@kernel
 def membrane_forces(m, s, t):
     """Step phase 1: the force of every term the model has, at time t.
     # Model: m (MembraneArrays)   # Data in: s.vert_pos, s.vert_vel
@@ -101,8 +105,12 @@ def membrane_forces(m, s, t):
                        s.vert_force)
         s.term_calls[T_ATTRACTION] += 1
     if on[T_SHAPE_MEMORY]:
-        add_shape_memory(m.sm_vert, m.sm_stiff, m.sm_coef, m.ring_ptr, m.ring_vert, m.ring_closed,
-                         s.vert_pos, s.sm_sums, s.vert_force)
+        if m.parallel:
+            add_shape_memory_parallel(m.sm_vert, m.sm_stiff, m.sm_coef, m.ring_ptr, m.ring_vert, m.ring_closed,
+                                      s.vert_pos, s.sm_sums, s.vert_force)
+        else:
+            add_shape_memory(m.sm_vert, m.sm_stiff, m.sm_coef, m.ring_ptr, m.ring_vert, m.ring_closed,
+                             s.vert_pos, s.sm_sums, s.vert_force)
         s.term_calls[T_SHAPE_MEMORY] += 1
     if on[T_MASS_SPRING]:
         add_mass_spring(m.spring_vert, m.spring_stiff, m.spring_rest, s.vert_pos, s.vert_force)
@@ -112,38 +120,61 @@ def membrane_forces(m, s, t):
         s.term_calls[T_MUSCLE] += 1
     if on[T_SOFT_VOLUME]:
         s.scal[S_PRESSURE] = soft_volume_force(m.ring_ptr, m.ring_vert, m.vol_ref, m.vol0, m.soft_stiff, s.vert_pos,
-                                               s.grad, s.cubic, s.vert_force)
+                                               s.grad, s.cubic, s.vert_acc, s.vert_force)
         s.term_calls[T_SOFT_VOLUME] += 1
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+def _integrate(vert_free, vert_mass, explicit, h, vert_force, vert_pos, vert_vel, vert_acc):
+    """Free integration of the points that are not nailed, prescribed or linked;
+    each point's squared step length and twice its kinetic energy go to
+    vert_acc[:, :2] for the divergence check.
+    # Model: vert_free (nvert,) uint8, vert_mass (nvert,) kg; explicit: the paper's
+    #        explicit Euler (eq. 4, position with the old velocity), else symplectic
+    # Data in: vert_force (N)   # Data in/out: vert_pos, vert_vel   # Scratch: vert_acc
+    """
+    for i in prange(vert_pos.shape[0]):
+        if not vert_free[i]:
+            vert_acc[i, 0] = 0.0
+            vert_acc[i, 1] = 0.0
+            continue
+        inv_m = 1.0 / vert_mass[i]
+        d2 = 0.0
+        for a in range(3):
+            if explicit:
+                dx = h * vert_vel[i, a]
+                vert_vel[i, a] += h * vert_force[i, a] * inv_m
+            else:  # velocity first, position with the new velocity
+                vert_vel[i, a] += h * vert_force[i, a] * inv_m
+                dx = h * vert_vel[i, a]
+            vert_pos[i, a] += dx
+            d2 += dx * dx
+        vert_acc[i, 0] = d2
+        vert_acc[i, 1] = vert_mass[i] * (vert_vel[i, 0] ** 2 + vert_vel[i, 1] ** 2 + vert_vel[i, 2] ** 2)
+
+
+_integrate_serial, _integrate_parallel = kernel_twin(_integrate)
+
+
+@kernel
 def membrane_advance(m, s, t, step):
     """Step phases 2-5: integrate, project, check. Returns a status code.
     # Model: m   # Data in: s.vert_force   # Data out: s.vert_pos, s.vert_vel, s.scal, s.status
     """
     h = m.dt
     pos, vel, frc = s.vert_pos, s.vert_vel, s.vert_force
-    explicit = m.integrator == 0
+    if m.parallel:
+        _integrate_parallel(m.vert_free, m.vert_mass, m.integrator == 0, h, frc, pos, vel, s.vert_acc)
+    else:
+        _integrate_serial(m.vert_free, m.vert_mass, m.integrator == 0, h, frc, pos, vel, s.vert_acc)
     dmax = 0.0
     dsum = 0.0
     worst = 0
     ke = 0.0
+    acc = s.vert_acc
     for i in range(pos.shape[0]):
-        if not m.vert_free[i]:
-            continue
-        inv_m = 1.0 / m.vert_mass[i]
-        d2 = 0.0
-        for a in range(3):
-            if explicit:  # paper eq. 4: position with the old velocity
-                dx = h * vel[i, a]
-                vel[i, a] += h * frc[i, a] * inv_m
-            else:  # symplectic: velocity first, position with the new velocity
-                vel[i, a] += h * frc[i, a] * inv_m
-                dx = h * vel[i, a]
-            pos[i, a] += dx
-            d2 += dx * dx
-        ke += m.vert_mass[i] * (vel[i, 0] ** 2 + vel[i, 1] ** 2 + vel[i, 2] ** 2)
+        d2 = acc[i, 0]
         dsum += d2
+        ke += acc[i, 1]
         if d2 > dmax:
             dmax = d2
             worst = i
@@ -166,7 +197,7 @@ def membrane_advance(m, s, t, step):
         s.term_calls[T_KEEP_IN] += 1
     if on[T_VOLUME]:
         phi, st = project_volume(m.ring_ptr, m.ring_vert, m.face_vert, m.vol_ref, m.vol0, m.vert_weight, h, pos, vel,
-                                 s.grad, s.dirn, s.cubic)
+                                 s.grad, s.dirn, s.cubic, s.vert_acc, m.parallel)
         s.term_calls[T_VOLUME] += 1
         if st != PROJ_OK:
             s.status[3] = st
@@ -178,7 +209,7 @@ def membrane_advance(m, s, t, step):
     return OK
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@kernel
 def _fail(s, code, step, vert):
     s.status[0] = code
     s.status[1] = step
@@ -186,7 +217,7 @@ def _fail(s, code, step, vert):
     return code
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@kernel
 def _first_nonfinite(pos, vel, fallback):
     """The first vertex with a non-finite coordinate, else `fallback` (the point
     that moved most: finite values whose kinetic energy overflowed)."""
@@ -197,7 +228,7 @@ def _first_nonfinite(pos, vel, fallback):
     return fallback
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@kernel
 def run_membrane(m, s, nstep, step0):
     """nstep whole membrane steps; time advances as t0 + k h. Returns steps done."""
     t0 = s.scal[S_TIME]
