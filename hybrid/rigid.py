@@ -464,21 +464,22 @@ def free_body_spec(mass: float, inertia: Sequence[float], point: Sequence[float]
 
 # ---------------------------------------------------------------- benchmarks
 
-def time_bare_mj_step(path: str | Path, *, nstep: int = 20000, repeats: int = 7) -> float:
-    """Median time (us) of one bare `mj_step` of the MJCF at `path`, called from Python."""
-    import statistics
+def bare_stepper(path: str | Path):
+    """A timer of bare `mj_step` calls (from Python) on the MJCF at `path`:
+    returns f(nstep) -> seconds per step."""
     import time
     model = _compile(load_spec(path))
     data = mujoco.MjData(model)
     mujoco.mj_step(model, data)
-    times = []
-    for _ in range(repeats):
+
+    def timed(nstep: int) -> float:
         mujoco.mj_resetData(model, data)
         t0 = time.perf_counter()
         for _ in range(nstep):
             mujoco.mj_step(model, data)
-        times.append((time.perf_counter() - t0) / nstep)
-    return statistics.median(times) * 1e6
+        return (time.perf_counter() - t0) / nstep
+
+    return timed
 
 
 def flex_sphere_run(vert_pos: np.ndarray, face_vert: np.ndarray, *, duration_s: float = 1.0,

@@ -65,5 +65,6 @@ def test_bench_quick_writes_json(tmp_path):
         assert r["us_per_step"] > 0
         assert r["ns_per_vertex_step"] == pytest.approx(r["us_per_step"] * 1e3 / r["nvert"])
     coupled = data["coupled"]
-    assert coupled["ratio"] == pytest.approx(coupled["us_per_step"] / coupled["mj_step_us"])
+    # the median of per-repeat ratios lies between the extremes of the two medians' ratio
+    assert 0.3 < coupled["ratio"] / (coupled["us_per_step"] / coupled["mj_step_us"]) < 3
     assert coupled["mj_step_us"] > 0
