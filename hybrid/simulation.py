@@ -85,7 +85,7 @@ def eval_schedules(sched, t, out):
             schedule_eval(sched, row, t, out[row])
 
 
-@kernel
+@kernel(inline="always")
 def membrane_forces(m, s, t):
     """Step phase 1: the force of every term the model has, at time t.
     # Model: m (MembraneArrays)   # Data in: s.vert_pos, s.vert_vel
@@ -155,7 +155,7 @@ def _integrate(vert_free, vert_mass, explicit, h, vert_force, vert_pos, vert_vel
 _integrate_serial, _integrate_parallel = kernel_twin(_integrate)
 
 
-@kernel
+@kernel(inline="always")
 def membrane_advance(m, s, t, step):
     """Step phases 2-5: integrate, project, check. Returns a status code.
     # Model: m   # Data in: s.vert_force   # Data out: s.vert_pos, s.vert_vel, s.scal, s.status
