@@ -1,0 +1,294 @@
+"""A catalogue of stiff and extreme cases, each ending stable, diverged or refused.
+
+`run(out_dir)` writes `extremes.json` and `extremes.md`:
+
+    {"cases": [{"name", "outcome": "stable" | "diverged" | "refused", "message",
+                "volume_rel_error_max": x or null, "step": n or null, "dt_s", "reasonable",
+                "what", "wall_s"}, ...],
+     "reasonable_failures": [names], "bugs": [...]}
+
+- refused: the scene does not load (SceneError, MeshError, RigidError,
+  ConstraintError at compile time): the message.
+- diverged: the run raised SimulationDiverged (or ConstraintError: the volume
+  projection has no root) at `step`: the message, with the step it suggests.
+- stable: the run finished; `volume_rel_error_max` is the largest |V - V0| / V0
+  sampled every few steps (0 for a scene without the volume constraint).
+
+Anything else raised is a bug of hybrid: it is caught, listed in "bugs" (type,
+message) and the case reported as diverged with the message prefixed "BUG". A
+non-finite state that was not detected is a bug too. `reasonable` marks the cases
+a user would plausibly run; `reasonable_failures` lists those that do not end
+stable. Membrane cases start from `hybrid.demo.membrane_demo` (80 points, one
+breath); rib cases from the coupled breathing scene, the MJCF modified in a
+temporary folder.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import tempfile
+import time
+import traceback
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from ..coupling import resolve_mjcf
+from ..demo import membrane_demo
+from ..errors import ConstraintError, HybridError, SimulationDiverged
+from ..mesh import Mesh, uv_sphere
+from ..model import Model, compile_scene
+from ..regions import HalfSpace
+from ..scene import AppliedForce, Damping, MeshSpec, Muscle, Scene, ShapeMemory
+from ..schedule import Breathing
+from ..simulation import Simulation
+from .stability import _finite, write_json
+
+__all__ = ["run", "cases", "run_case", "Case"]
+
+OUTCOMES = ("stable", "diverged", "refused")
+
+
+@dataclass
+class Case:
+    name: str
+    what: str
+    build: Callable[[], object]     # -> Scene or Model; may raise HybridError (refused)
+    duration_s: float = 4.0         # one breath
+    perturb_l0: float = 0.0         # initial random displacement of the free points, in mean edges
+    reasonable: bool = True         # would a user plausibly run it?
+    small_duration_s: float = 0.3
+
+
+def _replace_force(scene: Scene, kind, **changes) -> Scene:
+    return dataclasses.replace(scene, forces=tuple(
+        dataclasses.replace(f, **changes) if isinstance(f, kind) else f for f in scene.forces))
+
+
+def _scaled(scene: Scene, kind, field: str, factor: float) -> Scene:
+    return dataclasses.replace(scene, forces=tuple(
+        dataclasses.replace(f, **{field: getattr(f, field) * factor}) if isinstance(f, kind) else f
+        for f in scene.forces))
+
+
+def _muscle_x(scene: Scene, factor: float) -> Scene:
+    def scale(f):
+        if not isinstance(f, Muscle):
+            return f
+        s = f.stiffness
+        return dataclasses.replace(f, stiffness=dataclasses.replace(s, peak=s.peak * factor)
+                                   if isinstance(s, Breathing) else s * factor)
+    return dataclasses.replace(scene, forces=tuple(scale(f) for f in scene.forces))
+
+
+def _flat_demo(thickness_ratio: float) -> Scene:
+    """The demo's sphere squashed along z to an ellipsoid of half-thickness
+    thickness_ratio * radius, its regions squashed alike."""
+    base = membrane_demo()
+    r = base.mesh.radius_m
+    m = uv_sphere(r, base.mesh.segments, base.mesh.rings)
+    pos = m.vert_pos * np.array([1.0, 1.0, thickness_ratio])
+    mesh = Mesh.from_arrays(pos, m.face_vert, name=f"flat_{thickness_ratio:g}")
+    regions = {"diaphragm": HalfSpace((0.0, 0.0, 0.05 * thickness_ratio), (0.0, 0.0, 1.0)),
+               "pelvis": HalfSpace((0.0, 0.0, -0.09 * thickness_ratio), (0.0, 0.0, -1.0))}
+    sc = dataclasses.replace(base, mesh=mesh, regions=regions)
+    return _replace_force(sc, Muscle, toward_m=(0.0, 0.0, r * thickness_ratio))
+
+
+def _breathing():
+    from .. import load_scene
+    return load_scene("breathing")
+
+
+def _rib_variant(tmp: Path, name: str, edit: Callable[[ET.Element], None]) -> Callable[[], Scene]:
+    def build():
+        sc = _breathing()
+        src = resolve_mjcf(sc)
+        tree = ET.parse(src)
+        edit(tree.getroot())
+        path = tmp / f"trunk_{name}.xml"
+        tree.write(path)
+        return dataclasses.replace(sc, rigid=dataclasses.replace(sc.rigid, mjcf=str(path)))
+    return build
+
+
+def _stiff_ribs(root):
+    for j in root.iter("joint"):  # the rib class default and any explicit joint
+        if j.get("stiffness"):
+            j.set("stiffness", str(float(j.get("stiffness")) * 1e3))
+    for t in root.iter("spatial"):
+        t.set("stiffness", str(float(t.get("stiffness")) * 1e3))
+
+
+def _light_ribs(root):
+    for b in root.iter("body"):
+        if b.get("name", "").startswith("rib_"):
+            for g in b.iter("geom"):
+                g.set("mass", str(float(g.get("mass")) * 1e-3))
+
+
+def cases(tmp: Path) -> list[Case]:
+    demo = membrane_demo
+    return [
+        Case("baseline_membrane", "membrane_demo as shipped (80 points, shape memory 3000 N/m, dt 1 ms)",
+             lambda: demo()),
+        Case("baseline_coupled", "the breathing scene as shipped (membrane + MuJoCo ribs)", _breathing),
+        Case("shape_memory_x100", "membrane_demo, shape memory 3000 -> 3e5 N/m, dt 1 ms",
+             lambda: _scaled(demo(), ShapeMemory, "stiffness_n_per_m", 100.0)),
+        Case("shape_memory_x1e4", "membrane_demo, shape memory 3000 -> 3e7 N/m, dt 1 ms",
+             lambda: _scaled(demo(), ShapeMemory, "stiffness_n_per_m", 1e4), reasonable=False),
+        Case("dt_half_bound", "membrane_demo at dt = 0.5 x model.dt_stable_s (what a divergence suggests)",
+             lambda: (lambda m: m.with_dt(0.5 * m.dt_stable_s))(compile_scene(demo()))),
+        Case("dt_at_bound", "membrane_demo at dt = model.dt_stable_s (the per-point linear bound)",
+             lambda: (lambda m: m.with_dt(m.dt_stable_s))(compile_scene(demo()))),
+        Case("dt_2x_bound", "membrane_demo at dt = 2 x model.dt_stable_s",
+             lambda: (lambda m: m.with_dt(2.0 * m.dt_stable_s))(compile_scene(demo())), reasonable=False),
+        Case("tiny_masses", "membrane_demo, total mass 4 kg -> 0.4 g (x 1e-4), dt 1 ms",
+             lambda: dataclasses.replace(demo(), masses=dataclasses.replace(demo().masses, total_kg=4e-4)),
+             reasonable=False),
+        Case("no_damping", "membrane_demo without its damping term (symplectic Euler)",
+             lambda: demo().without("damping")),
+        Case("no_damping_explicit_euler", "membrane_demo without damping, explicit Euler (no stable step)",
+             lambda: dataclasses.replace(demo().without("damping"), integrator="explicit_euler"),
+             reasonable=False),
+        Case("perturbation_0.7_l0", "membrane_demo released from random displacements of 0.7 mean edge",
+             lambda: demo(), perturb_l0=0.7),
+        Case("perturbation_1.5_l0", "membrane_demo released from random displacements of 1.5 mean edge",
+             lambda: demo(), perturb_l0=1.5, reasonable=False),
+        Case("sliver_triangles", "membrane_demo on a UV sphere of 96 segments x 4 rings (aspect ~ 20)",
+             lambda: dataclasses.replace(demo(), mesh=MeshSpec(generator="uv_sphere", radius_m=0.12,
+                                                               segments=96, rings=4))),
+        Case("nearly_flat_body", "membrane_demo squashed to an ellipsoid 1/100 as thick as wide",
+             lambda: _flat_demo(0.01)),
+        Case("flat_body", "membrane_demo squashed flat (zero thickness, zero volume)",
+             lambda: _flat_demo(0.0), reasonable=False),
+        Case("mesh_40962", "membrane_demo on an icosphere of 40962 points (same 4 kg, 3000 N/m, dt 1 ms)",
+             lambda: dataclasses.replace(demo(), mesh=MeshSpec(generator="icosphere", subdivisions=6,
+                                                               radius_m=0.12)),
+             duration_s=0.05, small_duration_s=0.005),
+        Case("muscle_x100", "membrane_demo, muscle peak 60 -> 6000 N/m",
+             lambda: _muscle_x(demo(), 100.0), reasonable=False),
+        Case("rib_springs_x1000", "breathing scene, rib hinge stiffness 12 -> 1.2e4 N m/rad, sternum "
+             "1000 -> 1e6 N/m", _rib_variant(tmp, "stiff", _stiff_ribs)),
+        Case("ribs_light", "breathing scene, rib masses x 1e-3 (0.2 kg -> 0.2 g per rib)",
+             _rib_variant(tmp, "light", _light_ribs)),
+        Case("huge_external_force", "breathing scene, 1e4 N downward on each dome point",
+             lambda: dataclasses.replace(_breathing(), forces=_breathing().forces + (
+                 AppliedForce("dome", (0.0, 0.0, -1e4)),)), reasonable=False),
+        Case("invalid_dt", "membrane_demo with dt_s = -1e-3", lambda: dataclasses.replace(demo(), dt_s=-1e-3),
+             reasonable=False),
+        Case("nan_stiffness", "membrane_demo with shape memory stiffness NaN",
+             lambda: _replace_force(demo(), ShapeMemory, stiffness_n_per_m=float("nan")), reasonable=False),
+        Case("missing_mjcf", "breathing scene pointing at an MJCF file that does not exist",
+             lambda: dataclasses.replace(_breathing(), rigid=dataclasses.replace(
+                 _breathing().rigid, mjcf=str(tmp / "no_such_trunk.xml"))), reasonable=False),
+    ]
+
+
+def _free_perturbation(model: Model, amp_l0: float, seed: int = 0) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    u = rng.normal(size=model.arrays.vert_rest.shape)
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    u[model.arrays.vert_free == 0] = 0.0
+    return amp_l0 * model.mesh.edge_length_mean() * u
+
+
+def _retry(model: Model, case: Case, duration: float, dt: float, max_steps: int = 20000):
+    """Does the same case run `duration` (at most max_steps steps) at the suggested step?"""
+    if not (dt > 0 and math.isfinite(dt)):
+        return None
+    try:
+        sim = Simulation(model.with_dt(dt))
+        if case.perturb_l0:
+            sim.state.vert_pos[:] += _free_perturbation(model, case.perturb_l0)
+        sim.step(int(min(max_steps, math.ceil(duration / dt))))
+        return bool(np.all(np.isfinite(sim.state.vert_pos)))
+    except HybridError:
+        return False
+
+
+def run_case(case: Case, *, small: bool = False, bugs: list | None = None) -> dict:
+    """One case: never raises, never returns NaN."""
+    bugs = [] if bugs is None else bugs
+    out = {"name": case.name, "what": case.what, "reasonable": case.reasonable, "outcome": None,
+           "message": "", "volume_rel_error_max": None, "step": None, "dt_s": None,
+           "dt_suggested_s": None, "steps_run": 0, "wall_s": 0.0}
+    t0 = time.perf_counter()
+    try:
+        try:
+            built = case.build()
+            model = built if isinstance(built, Model) else compile_scene(built)
+            sim = Simulation(model)
+            out["dt_s"] = model.dt_s
+            out["dt_stable_s"] = model.dt_stable_s
+        except (ConstraintError, HybridError) as e:
+            out.update(outcome="refused", message=f"{type(e).__name__}: {e}")
+            return out
+        if case.perturb_l0:
+            sim.state.vert_pos[:] += _free_perturbation(model, case.perturb_l0)
+        duration = case.small_duration_s if small else case.duration_s
+        nstep = max(1, int(math.ceil(duration / model.dt_s)))
+        chunk = max(1, min(50, nstep // 20))
+        volmax = 0.0
+        try:
+            while sim.steps_done < nstep:
+                sim.step(min(chunk, nstep - sim.steps_done))
+                err = sim.volume_rel_error
+                if not math.isfinite(err) or not np.all(np.isfinite(sim.state.vert_pos)):
+                    raise FloatingPointError(f"non-finite state after step {sim.steps_done} not detected")
+                volmax = max(volmax, err)
+        except SimulationDiverged as e:
+            out.update(outcome="diverged", message=str(e), step=e.step, dt_suggested_s=e.dt_suggested_s,
+                       steps_run=sim.steps_done, volume_rel_error_max=volmax)
+            out["stable_at_suggested_dt"] = _retry(model, case, duration, e.dt_suggested_s)
+            return out
+        except ConstraintError as e:
+            out.update(outcome="diverged", message=f"ConstraintError: {e}", step=sim.steps_done,
+                       steps_run=sim.steps_done, volume_rel_error_max=volmax)
+            return out
+        out.update(outcome="stable", message=f"{nstep} steps ({nstep * model.dt_s:.3g} s) without failure",
+                   volume_rel_error_max=volmax, steps_run=nstep)
+        return out
+    except Exception as e:  # a bug of hybrid: report, never crash the study
+        bugs.append({"case": case.name, "type": type(e).__name__, "message": str(e),
+                     "traceback": traceback.format_exc(limit=6)})
+        out.update(outcome="diverged", message=f"BUG {type(e).__name__}: {e}")
+        return out
+    finally:
+        out["wall_s"] = time.perf_counter() - t0
+
+
+def _markdown(res: dict) -> str:
+    L = ["# Extreme cases", "", "| case | outcome | max volume error | step | reasonable | stable at suggested dt "
+         "| message |", "|---|---|---|---|---|---|---|"]
+    for c in res["cases"]:
+        v = c["volume_rel_error_max"]
+        msg = c["message"].replace("|", "/")
+        if len(msg) > 160:
+            msg = msg[:157] + "..."
+        L.append(f"| {c['name']} | {c['outcome']} | {'-' if v is None else format(v, '.2e')} | "
+                 f"{'-' if c['step'] is None else c['step']} | {'yes' if c['reasonable'] else 'no'} | "
+                 f"{ {True: 'yes', False: 'no', None: '-'}[c.get('stable_at_suggested_dt')]} | {msg} |")
+    L += ["", f"Reasonable cases that do not end stable: {', '.join(res['reasonable_failures']) or 'none'}",
+          f"Bugs (unexpected exceptions): {len(res['bugs'])}", f"Run time: {res['runtime_s']:.1f} s"]
+    return "\n".join(L) + "\n"
+
+
+def run(out_dir, *, small: bool = False) -> dict:
+    """Every case; writes DIR/extremes.json and DIR/extremes.md."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    bugs: list = []
+    with tempfile.TemporaryDirectory(prefix="hybrid_extremes_") as tmp:
+        rows = [run_case(c, small=small, bugs=bugs) for c in cases(Path(tmp))]
+    res = {"small": small, "cases": rows,
+           "reasonable_failures": [r["name"] for r in rows if r["reasonable"] and r["outcome"] != "stable"],
+           "bugs": bugs, "runtime_s": time.perf_counter() - t0}
+    write_json(out / "extremes.json", res)
+    (out / "extremes.md").write_text(_markdown(_finite(res)))
+    return _finite(res)

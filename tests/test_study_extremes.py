@@ -1,0 +1,40 @@
+"""The extremes catalogue at its small size: every case ends stable, diverged or
+refused, with a message; no NaN in the JSON; nothing unexpected raised."""
+
+from __future__ import annotations
+
+import json
+
+from hybrid.studies import extremes
+
+
+def _strict_load(path):
+    def no_constant(name):
+        raise ValueError(f"non-finite constant {name} in {path}")
+    return json.loads(path.read_text(), parse_constant=no_constant)
+
+
+def test_small_extremes_catalogue(tmp_path):
+    extremes.run(tmp_path, small=True)
+    data = _strict_load(tmp_path / "extremes.json")
+    cases = data["cases"]
+    assert len(cases) >= 14
+    names = [c["name"] for c in cases]
+    assert len(set(names)) == len(names)
+    for c in cases:
+        assert set(c) >= {"name", "outcome", "message", "volume_rel_error_max"}
+        assert c["outcome"] in ("stable", "diverged", "refused"), c
+        assert isinstance(c["message"], str) and c["message"], c
+        assert not c["message"].startswith("BUG"), c
+        v = c["volume_rel_error_max"]
+        if c["outcome"] == "stable":
+            assert isinstance(v, float) and 0.0 <= v < 1e-6, c  # the exact projection
+        if c["outcome"] == "refused":
+            assert v is None
+        if c["outcome"] == "diverged":
+            assert isinstance(c["step"], int)
+    assert data["bugs"] == []
+    by = {c["name"]: c["outcome"] for c in cases}
+    assert by["baseline_membrane"] == "stable" and by["baseline_coupled"] == "stable"
+    assert by["invalid_dt"] == "refused" and by["missing_mjcf"] == "refused"
+    assert by["dt_2x_bound"] == "diverged"
