@@ -1,4 +1,4 @@
-"""The command line: `hybrid run`, `hybrid bench`.
+"""The command line: `hybrid run`, `hybrid bench`, `hybrid render`.
 
 Bad input prints one line naming the culprit on stderr and exits with
 status 2, without a traceback; a run that fails still writes what it
@@ -59,11 +59,18 @@ def _cmd_run(args) -> int:
         raise HybridError(f"--duration: expected a time > 0 s, received {duration!r}")
     out = Path(args.out) if args.out else Path("runs") / scene.name
     sim = Simulation(compile_scene(scene))
+    recorder = None
+    if not args.no_record:
+        from .record import Recorder
+        recorder = Recorder(out / "run.mcap", sim, every_s=args.record_every)
     try:
-        result = run(sim, duration, progress=True)
+        result = run(sim, duration, progress=True, observers=[recorder] if recorder else [])
     except RunFailed as failed:
         write_outputs(failed.result, out)
         raise failed.error
+    finally:  # the recording is complete and readable whatever stopped the run
+        if recorder is not None:
+            recorder.close()
     write_outputs(result, out)
     s = result["summary"]
     print(f"{s['scene']}: {s['steps']} steps of {s['dt']:g} s in {s['wall_s']:.2f} s "
@@ -80,6 +87,16 @@ def _cmd_bench(args) -> int:
     return 0
 
 
+def _positive_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"expected a number > 0, received {text!r}")
+    return value
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="hybrid", description="Breathing trunk: MuJoCo ribs coupled to a volume-preserving membrane.")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
@@ -90,6 +107,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--out", help="output folder (default runs/SCENE)")
     r.add_argument("--without", action="append", metavar="NAME", help="drop a force term or constraint by name")
     r.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a scene value (TOML scenes)")
+    r.add_argument("--no-record", action="store_true", help="do not write OUT/run.mcap (the MCAP recording)")
+    r.add_argument("--record-every", type=_positive_float, default=0.01, metavar="SECONDS",
+                   help="recording interval in simulated time (default 0.01 s)")
     r.set_defaults(func=_cmd_run)
     b = sub.add_parser("bench", help="time the full step; medians of repeated runs")
     b.add_argument("--json", metavar="FILE", help="also write the figures as JSON")

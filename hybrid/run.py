@@ -30,6 +30,7 @@ __all__ = ["Trace", "run", "write_outputs"]
 class Trace:
     """Time series recorded at each frame (SI units unless the name says mm)."""
     t_s: list = field(default_factory=list)
+    volume_m3: list = field(default_factory=list)
     rib_lift_mm: list = field(default_factory=list)      # cranial (+z) displacement of the linked points' centroid
     apex_descent_mm: list = field(default_factory=list)  # caudal (-z) displacement of the apex
     volume_rel_error: list = field(default_factory=list)
@@ -56,8 +57,12 @@ def _breathing(model: Model):
     return None, None
 
 
-def run(sim: Simulation, duration_s: float, *, frame_dt_s: float = 0.01, progress: bool = False) -> dict:
+def run(sim: Simulation, duration_s: float, *, frame_dt_s: float = 0.01, progress: bool = False,
+        observers=()) -> dict:
     """Run `sim` for `duration_s` and return the summary (see `summary keys`).
+
+    `observers`: callables `obs(sim, trace)` called at each frame, after the trace
+    has its values (e.g. `hybrid.record.Recorder`); they must not change the state.
 
     Returns a dict with the summary and the trace under "trace". On a
     HybridError the summary holds "status": "failed" and "error", and the
@@ -92,10 +97,14 @@ def run(sim: Simulation, duration_s: float, *, frame_dt_s: float = 0.01, progres
         trace.t_s.append(sim.time)
         trace.apex_descent_mm.append(-(pos[apex, 2] - apex_z0) * 1e3)
         trace.rib_lift_mm.append((pos[link, 2].mean() - rib_z0) * 1e3 if link.size else 0.0)
-        trace.volume_rel_error.append(sim.volume_rel_error)
+        vol, v0 = sim.volume, model.arrays.vol0
+        trace.volume_m3.append(vol)
+        trace.volume_rel_error.append(abs(vol - v0) / v0 if v0 else 0.0)  # = sim.volume_rel_error
         trace.pressure_pa.append(sim.pressure)
         trace.kinetic_energy_j.append(sim.kinetic_energy)
         trace.muscle_n_per_m.append(float(evaluate(muscle_sched, sim.time)[0]) if muscle_sched is not None else 0.0)
+        for obs in observers:
+            obs(sim, trace)
 
     record()
     bar = _Progress(nstep) if progress else None

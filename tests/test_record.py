@@ -1,0 +1,144 @@
+"""The MCAP recording (hybrid.record): read-back, crash safety, channels, the CLI."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+
+import hybrid
+from hybrid.cli import main
+from hybrid.demo import membrane_demo
+from hybrid.record import SCALAR_CHANNELS, Recorder, read
+from hybrid.run import RunFailed, run
+
+
+class _Copies:
+    """An observer keeping what the simulation holds at each frame."""
+
+    def __init__(self):
+        self.t, self.pos, self.xpos, self.xquat = [], [], [], []
+
+    def __call__(self, sim, trace):
+        self.t.append(sim.time)
+        self.pos.append(np.array(sim.vert_pos))
+        if sim.mj_data is not None:
+            self.xpos.append(np.array(sim.mj_data.xpos[1:]))
+            self.xquat.append(np.array(sim.mj_data.xquat[1:]))
+
+
+def test_read_back_equals_the_simulation_at_the_recorded_times(tmp_path):
+    sim = hybrid.load()  # the coupled breathing trunk
+    copies = _Copies()
+    with Recorder(tmp_path / "run.mcap", sim) as rec:
+        result = run(sim, 0.3, observers=[copies, rec])
+    data = read(tmp_path / "run.mcap")
+    pts = data["/membrane/points"]
+    assert pts["pos"].dtype == np.float32
+    assert pts["pos"].shape == (31, sim.model.nvert, 3)  # t = 0, 0.01, ..., 0.3
+    np.testing.assert_allclose(pts["t"], copies.t, rtol=0, atol=1e-9)
+    np.testing.assert_array_equal(pts["pos"], np.asarray(copies.pos).astype(np.float32))
+    tf = data["/rigid/transforms"]
+    assert tf["bodies"] == ["spine", "rib_left", "rib_right"]
+    np.testing.assert_array_equal(tf["pos"], np.asarray(copies.xpos))
+    np.testing.assert_array_equal(tf["quat"], np.asarray(copies.xquat))
+    # every scalar channel, one value a frame, equal to the runner's trace
+    trace = result["trace"].arrays()
+    for topic, key in SCALAR_CHANNELS.items():
+        assert topic in data, topic
+        np.testing.assert_array_equal(data[topic]["t"], pts["t"])
+        np.testing.assert_array_equal(data[topic]["value"], trace[key])
+    assert data["/rib_elevation"]["value"].max() > 0.0
+    # the triangle list every frame for a small mesh; the model's description
+    assert len(data["/membrane/mesh"]["t"]) == 31
+    model = data["model"]
+    np.testing.assert_array_equal(model["face_vert"], sim.model.mesh.face_vert)
+    assert "dome" in model["regions"] and "abdomen" in model["regions"]
+    assert {g["body"] for g in model["geoms"]} >= {"spine", "rib_left", "rib_right"}
+
+
+def test_the_file_is_a_valid_indexed_mcap_in_foxglove_schemas(tmp_path):
+    from mcap.reader import NonSeekingReader, make_reader
+
+    sim = hybrid.load()
+    with Recorder(tmp_path / "run.mcap", sim) as rec:
+        run(sim, 0.05, observers=[rec])
+    with open(tmp_path / "run.mcap", "rb") as f:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        schemas = {c.topic: summary.schemas[c.schema_id].name for c in summary.channels.values()}
+        assert schemas["/membrane/mesh"] == "foxglove.SceneUpdate"
+        assert schemas["/membrane/points"] == "foxglove.PointCloud"
+        assert schemas["/rigid/transforms"] == "foxglove.FrameTransforms"
+        assert summary.statistics.message_count == sum(summary.statistics.channel_message_counts.values())
+        msgs = list(reader.iter_messages(topics=["/membrane/mesh"]))
+    assert len(msgs) == 6
+    scene = json.loads(msgs[-1][2].data)
+    tri = scene["entities"][0]["triangles"][0]
+    assert len(tri["points"]) == sim.model.nvert
+    assert len(tri["colors"]) == sim.model.nvert
+    assert len(tri["indices"]) == 3 * len(sim.model.mesh.face_vert)
+    with open(tmp_path / "run.mcap", "rb") as f:  # the CRCs hold
+        assert sum(1 for _ in NonSeekingReader(f, validate_crcs=True).iter_messages()) == summary.statistics.message_count
+
+
+def _diverging_scene():
+    return dataclasses.replace(membrane_demo(), dt_s=0.006)  # diverges at step 11 (t = 0.066 s)
+
+
+def test_a_run_that_diverges_leaves_every_frame_up_to_the_divergence(tmp_path):
+    sim = hybrid.load(_diverging_scene())
+    copies = _Copies()
+    rec = Recorder(tmp_path / "run.mcap", sim)
+    try:
+        with pytest.raises(RunFailed) as failed:
+            run(sim, 1.0, observers=[copies, rec])
+    finally:
+        rec.close()
+    frames = failed.value.result["trace"].t_s
+    assert len(frames) >= 5
+    data = read(tmp_path / "run.mcap")
+    pts = data["/membrane/points"]
+    np.testing.assert_allclose(pts["t"], frames, rtol=0, atol=1e-9)
+    np.testing.assert_array_equal(pts["pos"], np.asarray(copies.pos).astype(np.float32))
+    for topic in SCALAR_CHANNELS:
+        assert len(data[topic]["t"]) == len(frames)
+
+
+def test_the_cli_run_that_diverges_still_writes_a_readable_recording(tmp_path, capsys):
+    out = tmp_path / "out"
+    assert main(["run", "membrane_demo", "--dt", "0.006", "--duration", "1", "--out", str(out)]) == 2
+    assert "diverged" in capsys.readouterr().err
+    summary = json.loads((out / "summary.json").read_text())
+    data = read(out / "run.mcap")
+    t = data["/membrane/points"]["t"]
+    # frames every 2 steps (0.012 s) up to the last complete one before the failing step
+    expected = np.arange(0, summary["steps"] + 1, 2) * 0.006
+    np.testing.assert_allclose(t, expected, rtol=0, atol=1e-9)
+
+
+def test_an_unfinished_file_reads_up_to_its_last_complete_chunk(tmp_path):
+    """A killed process leaves no summary: the reader takes what is there."""
+    sim = hybrid.load(membrane_demo())
+    path = tmp_path / "run.mcap"
+    rec = Recorder(path, sim, chunk_size=4096)
+    run(sim, 0.5, observers=[rec])
+    rec._writer.flush_chunk()  # as the periodic flush does; then the process "dies" (no close)
+    rec._file.flush()
+    whole = path.read_bytes()
+    path.write_bytes(whole[: len(whole) - 1000])  # and a torn last record
+    data = read(path)
+    t = data["/membrane/points"]["t"]
+    assert 10 < len(t) < 51
+    np.testing.assert_allclose(t, np.arange(len(t)) * 0.01, atol=1e-9)
+    rec._file.close()
+
+
+def test_no_record_and_record_every(tmp_path):
+    assert main(["run", "membrane_demo", "--duration", "0.1", "--out", str(tmp_path / "a"), "--no-record"]) == 0
+    assert not (tmp_path / "a" / "run.mcap").exists()
+    assert main(["run", "membrane_demo", "--duration", "0.1", "--out", str(tmp_path / "b"),
+                 "--record-every", "0.05"]) == 0
+    np.testing.assert_allclose(read(tmp_path / "b" / "run.mcap")["/pressure"]["t"], [0.0, 0.05, 0.1], atol=1e-9)
