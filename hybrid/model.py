@@ -401,18 +401,34 @@ def compile_scene(scene: Scene) -> Model:
         rigid, link_vert = build_rigid(scene, mesh, regions, vert_mass)
         vert_free[link_vert] = 0
 
+    # Forces on nailed and prescribed points are never used: leave those
+    # points out of every force term (linked points keep theirs: they go to
+    # the rigid bodies).
+    moving = vert_free > 0
+    moving[link_vert] = True
+
+    def keep(verts, *lists):
+        ok = moving[np.asarray(verts, dtype=np.int64)] if len(verts) else np.zeros(0, bool)
+        return [np.asarray(x)[ok] if len(x) else np.asarray(x) for x in (verts, *lists)]
+
+    app_vert, app_sched = keep(app_vert, app_sched)
+    att_vert, att_stiff, att_target, att_sched = keep(att_vert, att_stiff, att_target, att_sched)
+    mus_vert, mus_nbr, mus_sched = keep(mus_vert, mus_nbr, mus_sched)
+
     # shape memory and springs need rest data
-    sm_vert = np.nonzero(sm_stiff_v > 0)[0].astype(np.int32)
+    sm_vert = np.nonzero((sm_stiff_v > 0) & moving)[0].astype(np.int32)
     sm_coef = _forces.shape_memory_frame_coef(mesh.vert_pos, mesh.ring_ptr, mesh.ring_vert, mesh.ring_closed,
                                               sm_vert) if sm_vert.size else empty_3
     vert_stiffness += sm_stiff_v
     if spring_stiff_v:
         eidx = np.array(sorted(spring_stiff_v), dtype=np.int64)
-        spring_vert = mesh.edge_vert[eidx].astype(np.int32)
-        spring_stiff = np.array([spring_stiff_v[int(e)] for e in eidx])
+        stiff = np.array([spring_stiff_v[int(e)] for e in eidx])
+        np.add.at(vert_stiffness, mesh.edge_vert[eidx, 0], stiff)  # each point's own stiffness,
+        np.add.at(vert_stiffness, mesh.edge_vert[eidx, 1], stiff)  # whatever its neighbours do
+        used = moving[mesh.edge_vert[eidx]].any(axis=1)
+        spring_vert = mesh.edge_vert[eidx[used]].astype(np.int32)
+        spring_stiff = stiff[used]
         spring_rest = np.linalg.norm(mesh.vert_pos[spring_vert[:, 1]] - mesh.vert_pos[spring_vert[:, 0]], axis=1)
-        np.add.at(vert_stiffness, spring_vert[:, 0], spring_stiff)
-        np.add.at(vert_stiffness, spring_vert[:, 1], spring_stiff)
     else:
         spring_vert, spring_stiff, spring_rest = np.zeros((0, 2), np.int32), empty_f, empty_f
 

@@ -399,3 +399,16 @@ def test_runaway_speed_is_detected_and_the_limit_is_a_scene_setting():
     fast = Simulation(compile_scene(dataclasses.replace(scene, max_speed_m_s=1e3)))
     fast.step(300)  # the lightest point reaches about 370 m/s: allowed now
     assert np.all(np.isfinite(fast.vert_pos))
+
+
+def test_forces_of_nailed_points_are_never_computed():
+    """Nailed points never move, so no force term computes anything for them;
+    the free points' motion is what it would be with those forces computed."""
+    from hybrid.demo import membrane_demo
+
+    model = compile_scene(membrane_demo())
+    nailed = np.flatnonzero(model.arrays.vert_free == 0)
+    assert nailed.size > 0
+    assert not np.isin(model.arrays.sm_vert, nailed).any()
+    assert not np.isin(model.arrays.mus_vert, nailed).any()
+    assert model.arrays.sm_vert.size == model.nvert - nailed.size
