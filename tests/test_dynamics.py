@@ -402,8 +402,8 @@ def test_runaway_speed_is_detected_and_the_limit_is_a_scene_setting():
 
 
 def test_forces_of_nailed_points_are_never_computed():
-    """Nailed points never move, so no force term computes anything for them;
-    the free points' motion is what it would be with those forces computed."""
+    """Nailed points never move, so no force term computes anything for them
+    (the other tests with nailed points show the motion is unchanged)."""
     from hybrid.demo import membrane_demo
 
     model = compile_scene(membrane_demo())
