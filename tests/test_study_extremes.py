@@ -5,7 +5,9 @@ from __future__ import annotations
 
 import json
 
-from hybrid.studies import extremes
+import pytest
+
+from hybrid.studies.cli import main_study
 
 
 def _strict_load(path):
@@ -14,8 +16,9 @@ def _strict_load(path):
     return json.loads(path.read_text(), parse_constant=no_constant)
 
 
-def test_small_extremes_catalogue(tmp_path):
-    extremes.run(tmp_path, small=True)
+def test_small_extremes_catalogue(tmp_path, capsys):
+    assert main_study(["extremes", "--out", str(tmp_path), "--small"]) == 0
+    assert "extremes:" in capsys.readouterr().out
     data = _strict_load(tmp_path / "extremes.json")
     cases = data["cases"]
     assert len(cases) >= 14
@@ -38,3 +41,11 @@ def test_small_extremes_catalogue(tmp_path):
     assert by["baseline_membrane"] == "stable" and by["baseline_coupled"] == "stable"
     assert by["invalid_dt"] == "refused" and by["missing_mjcf"] == "refused"
     assert by["dt_2x_bound"] == "diverged"
+
+
+def test_study_cli_bad_input_is_one_line_status_2(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main_study(["extremes"])  # --out missing
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert err.startswith("hybrid study: error:") and err.count("\n") == 1

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 
-from hybrid.studies import stability
+from hybrid.studies.cli import main_study
 
 
 def _strict_load(path):
@@ -14,7 +14,7 @@ def _strict_load(path):
 
 
 def test_small_stability_study_writes_the_json(tmp_path):
-    stability.run(tmp_path, small=True)
+    assert main_study(["stability", "--out", str(tmp_path), "--small"]) == 0
     data = _strict_load(tmp_path / "stability.json")
     assert data["table1_max_abs_error"] <= 1e-12
     rows = data["table3"]

@@ -124,6 +124,16 @@ def _stiff_ribs(root):
         t.set("stiffness", str(float(t.get("stiffness")) * 1e3))
 
 
+def _stiffer_ribs(root):
+    _stiff_ribs(root)
+    _stiff_ribs(root)
+    for j in root.iter("joint"):
+        if j.get("stiffness"):
+            j.set("stiffness", str(float(j.get("stiffness")) / 1e2))
+    for t in root.iter("spatial"):
+        t.set("stiffness", str(float(t.get("stiffness")) / 1e2))
+
+
 def _light_ribs(root):
     for b in root.iter("body"):
         if b.get("name", "").startswith("rib_"):
@@ -174,8 +184,15 @@ def cases(tmp: Path) -> list[Case]:
              lambda: _muscle_x(demo(), 100.0), reasonable=False),
         Case("rib_springs_x1000", "breathing scene, rib hinge stiffness 12 -> 1.2e4 N m/rad, sternum "
              "1000 -> 1e6 N/m", _rib_variant(tmp, "stiff", _stiff_ribs)),
-        Case("ribs_light", "breathing scene, rib masses x 1e-3 (0.2 kg -> 0.2 g per rib)",
+        Case("rib_springs_x1e4", "breathing scene, rib hinge stiffness 12 -> 1.2e5 N m/rad, sternum "
+             "1000 -> 1e7 N/m", _rib_variant(tmp, "stiffer", _stiffer_ribs), reasonable=False),
+        Case("ribs_light", "breathing scene, rib masses x 1e-3 (0.2 kg -> 0.2 g per rib); the linked "
+             "points' mass is still added to the ribs (add_link_mass = true)",
              _rib_variant(tmp, "light", _light_ribs)),
+        Case("ribs_light_no_link_mass", "breathing scene, rib masses x 1e-3 and add_link_mass = false: "
+             "the ribs alone carry the membrane's explicit force",
+             lambda: (lambda sc: dataclasses.replace(sc, rigid=dataclasses.replace(sc.rigid, add_link_mass=False)))(
+                 _rib_variant(tmp, "light2", _light_ribs)())),
         Case("huge_external_force", "breathing scene, 1e4 N downward on each dome point",
              lambda: dataclasses.replace(_breathing(), forces=_breathing().forces + (
                  AppliedForce("dome", (0.0, 0.0, -1e4)),)), reasonable=False),

@@ -1,0 +1,65 @@
+"""`hybrid study ...`: the numerical studies from the command line.
+
+    hybrid study stability --out DIR [--small]   # paper 6.1: DIR/stability.json, .md, PNGs
+    hybrid study extremes  --out DIR [--small]   # DIR/extremes.json, .md
+
+`main_study(argv)` takes the arguments after `study` and returns the exit
+status (0; 2 with one line on stderr for bad input, as `hybrid run`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from ..errors import HybridError
+
+__all__ = ["main_study", "build_study_parser"]
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):  # one line, status 2
+        sys.stderr.write(f"hybrid study: error: {message}\n")
+        sys.exit(2)
+
+
+def build_study_parser() -> argparse.ArgumentParser:
+    p = _Parser(prog="hybrid study", description="Numerical studies of hybrid: JSON, Markdown and plots.")
+    sub = p.add_subparsers(dest="study", required=True, parser_class=_Parser)
+    for name, help_ in (("stability", "the paper's stability comparison (6.1) and beyond"),
+                        ("extremes", "a catalogue of stiff and extreme cases: stable, diverged or refused")):
+        s = sub.add_parser(name, help=help_)
+        s.add_argument("--out", required=True, metavar="DIR", help="output folder (created)")
+        s.add_argument("--small", action="store_true", help="a small version (seconds; for tests)")
+    return p
+
+
+def _stability(args) -> None:
+    from . import stability
+    r = stability.run(args.out, small=args.small)
+    print(f"stability: Table 1 max |error| {r['table1_max_abs_error']:.1e}; Table 3 h_max "
+          + ", ".join(f"{t['model']} {t['perturbation']} l0: {t['h_max']:.3g} (paper {t['paper_h_max']})"
+                      for t in r["table3"])
+          + f"; {r['runtime_s']:.1f} s -> {args.out}/stability.json")
+
+
+def _extremes(args) -> None:
+    from . import extremes
+    r = extremes.run(args.out, small=args.small)
+    counts = {k: sum(c["outcome"] == k for c in r["cases"]) for k in ("stable", "diverged", "refused")}
+    print(f"extremes: {len(r['cases'])} cases, " + ", ".join(f"{n} {k}" for k, n in counts.items())
+          + f"; reasonable cases failing: {', '.join(r['reasonable_failures']) or 'none'}; "
+          f"{len(r['bugs'])} bug(s); {r['runtime_s']:.1f} s -> {args.out}/extremes.json")
+
+
+def main_study(argv) -> int:
+    args = build_study_parser().parse_args(list(argv))
+    try:
+        {"stability": _stability, "extremes": _extremes}[args.study](args)
+        return 0
+    except HybridError as exc:
+        sys.stderr.write(f"hybrid study: error: {' '.join(str(exc).split())}\n")
+        return 2
+    except OSError as exc:  # e.g. an output folder that cannot be created
+        sys.stderr.write(f"hybrid study: error: {exc}\n")
+        return 2
