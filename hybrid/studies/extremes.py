@@ -25,6 +25,7 @@ temporary folder.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
 import tempfile
@@ -297,12 +298,15 @@ def _markdown(res: dict) -> str:
 
 def run(out_dir, *, small: bool = False) -> dict:
     """Every case; writes DIR/extremes.json and DIR/extremes.md."""
-    out = Path(out_dir)
+    out = Path(out_dir).resolve()
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     bugs: list = []
     with tempfile.TemporaryDirectory(prefix="hybrid_extremes_") as tmp:
-        rows = [run_case(c, small=small, bugs=bugs) for c in cases(Path(tmp))]
+        # MuJoCo writes MUJOCO_LOG.TXT into the working folder on its warnings
+        # (the light-ribs cases): keep it out of the user's folder
+        with contextlib.chdir(tmp):
+            rows = [run_case(c, small=small, bugs=bugs) for c in cases(Path(tmp))]
     res = {"small": small, "cases": rows,
            "reasonable_failures": [r["name"] for r in rows if r["reasonable"] and r["outcome"] != "stable"],
            "bugs": bugs, "runtime_s": time.perf_counter() - t0}
