@@ -80,6 +80,16 @@ def _cmd_run(args) -> int:
     return 0
 
 
+def _cmd_render(args) -> int:
+    from .render import render
+    result = render(args.source, Path(args.out), video=args.video, duration_s=args.duration)
+    rest, peak, end = result["frames"]
+    extra = f" and {result['video']}" if result["video"] else ""
+    print(f"rest t = {rest:.2f} s, peak inspiration t = {peak:.2f} s, end of expiration t = {end:.2f} s "
+          f"-> {result['figure']}{extra}")
+    return 0
+
+
 def _cmd_bench(args) -> int:
     from .bench import format_table, run_bench
     result = run_bench(Path(args.json) if args.json else None, quick=args.quick)
@@ -111,6 +121,12 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--record-every", type=_positive_float, default=0.01, metavar="SECONDS",
                    help="recording interval in simulated time (default 0.01 s)")
     r.set_defaults(func=_cmd_run)
+    d = sub.add_parser("render", help="draw rest, peak inspiration and end of expiration (figure 4) headless")
+    d.add_argument("source", nargs="?", help="a run.mcap recording, or a scene to run (default: breathing)")
+    d.add_argument("--out", required=True, help="output folder: figure4.png (and run.mp4)")
+    d.add_argument("--video", action="store_true", help="also an MP4 of the run (needs pip install -e .[video])")
+    d.add_argument("--duration", type=_positive_float, help="simulated time when running a scene (s)")
+    d.set_defaults(func=_cmd_render)
     b = sub.add_parser("bench", help="time the full step; medians of repeated runs")
     b.add_argument("--json", metavar="FILE", help="also write the figures as JSON")
     b.add_argument("--quick", action="store_true", help="small sizes only (a smoke test)")

@@ -1,0 +1,80 @@
+"""Headless pictures (hybrid.render): the three-panel figure 4 and the MP4."""
+
+from __future__ import annotations
+
+import importlib.util
+
+import numpy as np
+import pytest
+
+import hybrid
+from hybrid.cli import main
+from hybrid.record import Recorder
+from hybrid.render import draw_figure, frames_from_recording, key_frames, write_video
+from hybrid.run import run
+
+
+def _image(path):
+    import matplotlib.image as mpimg
+    img = mpimg.imread(path)[..., :3]
+    h = img.shape[0]
+    return img[int(0.12 * h):]  # below the titles
+
+
+def _panels(img):
+    w = img.shape[1] // 3
+    return [img[:, i * w:(i + 1) * w] for i in range(3)]
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory):
+    """The breathing trunk through its first breath (4 s), recorded."""
+    path = tmp_path_factory.mktemp("rec") / "run.mcap"
+    sim = hybrid.load()
+    with Recorder(path, sim) as rec:
+        run(sim, 4.05, observers=[rec])
+    return path
+
+
+def test_render_a_recording_makes_three_different_panels_with_the_membrane_visible(recording, tmp_path, capsys):
+    out = tmp_path / "fig"
+    assert main(["render", str(recording), "--out", str(out)]) == 0
+    assert "peak inspiration" in capsys.readouterr().out
+    img = _image(out / "figure4.png")
+    a, b, c = _panels(img)
+    # below the titles: peak inspiration differs clearly from rest and from the end of
+    # expiration; the end of expiration is back near rest, as in the paper's figure 4 c
+    # ("the system returns to its original shape"), but not to the pixel
+    assert np.abs(a - b).sum() > 1000.0 and np.abs(b - c).sum() > 1000.0
+    assert 0.0 < np.abs(a - c).sum() < 0.1 * np.abs(a - b).sum()
+    # the same frames without the membrane: the membrane's pixels are there
+    fr = frames_from_recording(recording)
+    rest, peak, end = key_frames(fr)
+    assert fr.t[rest] == 0.0 and 1.0 < fr.t[peak] < 2.5 and fr.t[end] == pytest.approx(4.0, abs=0.011)
+    draw_figure(fr, tmp_path / "empty.png", [rest, peak, end], membrane=False)
+    bare = _image(tmp_path / "empty.png")
+    membrane_px = np.abs(img - bare).max(axis=2) > 0.1
+    assert membrane_px.mean() > 0.03
+    # and a picture of neither membrane nor bones would be blank: the bones are drawn
+    assert (np.abs(bare - 1.0).max(axis=2) > 0.1).mean() > 0.005
+
+
+def test_render_a_scene_runs_it_first(tmp_path):
+    out = tmp_path / "fig"
+    assert main(["render", "membrane_demo", "--out", str(out), "--duration", "2"]) == 0
+    a, b, c = _panels(_image(out / "figure4.png"))
+    assert np.abs(a - b).sum() > 50.0
+
+
+def test_render_reports_a_missing_recording(tmp_path, capsys):
+    assert main(["render", str(tmp_path / "nope.mcap"), "--out", str(tmp_path)]) == 2
+    assert "no such file" in capsys.readouterr().err
+
+
+@pytest.mark.skipif(importlib.util.find_spec("imageio_ffmpeg") is None, reason="needs the [video] extra")
+def test_video(recording, tmp_path):
+    fr = frames_from_recording(recording)
+    n = write_video(fr, tmp_path / "run.mp4", every_s=0.5)
+    assert n == 9
+    data = (tmp_path / "run.mp4").read_bytes()
+    assert len(data) > 1000 and data[4:8] == b"ftyp"
