@@ -1,4 +1,4 @@
-"""The command line: `hybrid run`, `hybrid bench`, `hybrid render`.
+"""The command line: `hybrid run`, `hybrid bench`, `hybrid render`, `hybrid view`.
 
 Bad input prints one line naming the culprit on stderr and exits with
 status 2, without a traceback; a run that fails still writes what it
@@ -90,6 +90,12 @@ def _cmd_render(args) -> int:
     return 0
 
 
+def _cmd_view(args) -> int:
+    from .render import view
+    view(args.scene, duration_s=args.duration)
+    return 0
+
+
 def _cmd_bench(args) -> int:
     from .bench import format_table, run_bench
     result = run_bench(Path(args.json) if args.json else None, quick=args.quick)
@@ -105,6 +111,11 @@ def _positive_float(text: str) -> float:
     if not value > 0:
         raise argparse.ArgumentTypeError(f"expected a number > 0, received {text!r}")
     return value
+
+
+def _cmd_study(args) -> int:
+    from .studies.cli import main_study
+    return main_study(args.study_argv)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -127,10 +138,17 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--video", action="store_true", help="also an MP4 of the run (needs pip install -e .[video])")
     d.add_argument("--duration", type=_positive_float, help="simulated time when running a scene (s)")
     d.set_defaults(func=_cmd_render)
+    v = sub.add_parser("view", help="run a scene live in MuJoCo's viewer (needs a display)")
+    v.add_argument("scene", nargs="?", help="a scene TOML file, or a built-in name (default: breathing)")
+    v.add_argument("--duration", type=_positive_float, help="simulated time (s); default: the scene's")
+    v.set_defaults(func=_cmd_view)
     b = sub.add_parser("bench", help="time the full step; medians of repeated runs")
     b.add_argument("--json", metavar="FILE", help="also write the figures as JSON")
     b.add_argument("--quick", action="store_true", help="small sizes only (a smoke test)")
     b.set_defaults(func=_cmd_bench)
+    st = sub.add_parser("study", help="numerical studies: stability, extremes", add_help=False, prefix_chars="\0")
+    st.add_argument("study_argv", nargs=argparse.REMAINDER)
+    st.set_defaults(func=_cmd_study)
     return p
 
 

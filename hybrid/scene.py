@@ -76,8 +76,9 @@ class Damping:
 
     Give `coef_n_s_per_m` (c directly) or `critical_fraction` (c = fraction x
     2 sqrt(k_i m_i) per point, k_i the point's elastic stiffness from shape
-    memory and springs; 0.3 is comfortable, below 0.1 the non-conservative
-    shape-memory force can excite itself).
+    memory and springs; 0.3 is comfortable; on the breathing membrane the
+    non-conservative shape-memory force excites itself below 0.15, as
+    `hybrid study stability` measures).
     """
     coef_n_s_per_m: Optional[float] = None
     critical_fraction: Optional[float] = None

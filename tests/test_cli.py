@@ -68,3 +68,10 @@ def test_bench_quick_writes_json(tmp_path):
     # the median of per-repeat ratios lies between the extremes of the two medians' ratio
     assert 0.3 < coupled["ratio"] / (coupled["us_per_step"] / coupled["mj_step_us"]) < 3
     assert coupled["mj_step_us"] > 0
+
+
+def test_study_subcommand_reaches_the_studies(tmp_path):
+    proc = run_cli("study", "nosuchstudy", "--out", str(tmp_path / "s"))
+    assert proc.returncode == 2
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "nosuchstudy" in lines[0], proc.stderr
