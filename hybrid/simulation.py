@@ -40,6 +40,9 @@ __all__ = ["Simulation", "MembraneState"]
 S_TIME, S_PRESSURE, S_PHI, S_KE, S_MAXDISP = range(5)
 # status codes
 OK, DIVERGED_NONFINITE, DIVERGED_RUNAWAY, VOLUME_FAILED = 0, 1, 2, 3
+# below this fraction of critical damping the shape-memory force excites
+# itself on the breathing membrane (measured by `hybrid study stability`)
+SELF_EXCITATION_DAMPING = 0.15
 
 
 class MembraneState(NamedTuple):
@@ -389,12 +392,29 @@ class Simulation:
             else:
                 what = (f"reached {disp / h:.3g} m/s, above max_speed_m_s = {model.arrays.max_speed:.3g} "
                         f"(raise it if the scene is meant to move that fast)")
+            remedy = f"try dt_s <= {suggest:.3g} s"
+            damping = self._damping_fraction()
+            if h <= model.dt_stable_s and damping < SELF_EXCITATION_DAMPING:
+                # the step is not the cause: the non-conservative shape memory excites itself
+                remedy = (f"the step is within the stability bound {model.dt_stable_s:.3g} s but damping is "
+                          f"{damping:.3g} of critical, below the {SELF_EXCITATION_DAMPING} where shape memory "
+                          f"excites itself; add Damping(critical_fraction=0.3)")
             err = SimulationDiverged(
                 f"simulation diverged at t = {t:.6g} s (step {step}): vertex {vert} {what}; "
-                f"time step {h:.3g} s with {model.scene.integrator}; try dt_s <= {suggest:.3g} s",
+                f"time step {h:.3g} s with {model.scene.integrator}; {remedy}",
                 time_s=t, step=step, vert=vert, dt_suggested_s=suggest)
         self.failed = err
         raise err
+
+    def _damping_fraction(self) -> float:
+        """The smallest damping, as a fraction of critical, over the integrated
+        shape-memory points (inf when the model has no shape memory)."""
+        a = self.model.arrays
+        if a.sm_vert.size == 0:
+            return math.inf
+        i = a.sm_vert[a.vert_free[a.sm_vert] > 0]
+        k = self.model.vert_stiffness[i]
+        return float(np.min(a.damp_coef[i] / (2.0 * np.sqrt(k * a.vert_mass[i])))) if i.size else math.inf
 
     def suggest_dt(self) -> float:
         """A time step (s) to try after a divergence: half the linear stability

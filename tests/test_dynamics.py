@@ -412,3 +412,14 @@ def test_forces_of_nailed_points_are_never_computed():
     assert not np.isin(model.arrays.sm_vert, nailed).any()
     assert not np.isin(model.arrays.mus_vert, nailed).any()
     assert model.arrays.sm_vert.size == model.nvert - nailed.size
+
+
+def test_divergence_without_damping_names_the_damping_not_the_step():
+    """Undamped shape memory excites itself at a stable step: the message
+    says so instead of suggesting a smaller step (found by `hybrid study extremes`)."""
+    from hybrid.demo import membrane_demo
+
+    sim = Simulation(compile_scene(membrane_demo().without("damping")))
+    with pytest.raises(SimulationDiverged, match="critical_fraction=0.3") as exc:
+        sim.step(20000)
+    assert "0.15" in str(exc.value)
