@@ -1,6 +1,8 @@
 """Pictures of a run, headless: the paper's figure 4 (rest, peak inspiration, end of
 expiration side by side) as a PNG, and an MP4 of the whole run.
 
+`hybrid view SCENE` runs a scene live in MuJoCo's viewer where a display exists.
+
 `hybrid render RUN.mcap|SCENE --out DIR` draws from a recording (`hybrid.record`) or
 runs a scene first. Drawing is matplotlib's Agg backend with `mpl_toolkits.mplot3d`:
 no GPU, no display, no system package beyond what the wheels bring. The membrane is a
@@ -21,7 +23,7 @@ import numpy as np
 from .errors import HybridError
 
 __all__ = ["Frames", "frames_from_recording", "frames_from_scene", "key_frames", "draw_figure",
-           "render", "write_video"]
+           "render", "write_video", "view", "has_display", "membrane_edges", "draw_membrane"]
 
 PANEL_TITLES = ("a. rest", "b. peak inspiration", "c. end of expiration")
 _LIGHT = np.array([0.45, -0.35, 0.82]) / np.linalg.norm([0.45, -0.35, 0.82])
@@ -305,3 +307,85 @@ def render(source: str | None, out_dir: str | Path, *, video: bool = False, dura
         result["video"] = out / "run.mp4"
         write_video(fr, result["video"])
     return result
+
+
+# ---------------------------------------------------------------- live viewing
+def has_display() -> bool:
+    """Whether a window can open: an X11 or Wayland display on Linux; assumed elsewhere."""
+    import os
+    import sys
+    if sys.platform.startswith("linux"):
+        return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+    return True
+
+
+def membrane_edges(model) -> tuple[np.ndarray, np.ndarray]:
+    """The membrane's edges (nedge, 2) and their colours (nedge, 4) float32 (the mean of
+    their points' region colours)."""
+    from .record import region_colours
+
+    _, _, colours = region_colours(model)
+    face = np.asarray(model.mesh.face_vert)
+    edges = np.unique(np.sort(np.concatenate([face[:, [0, 1]], face[:, [1, 2]], face[:, [2, 0]]]), axis=1), axis=0)
+    return edges, colours[edges].mean(axis=1).astype(np.float32)
+
+
+def draw_membrane(scn, pos: np.ndarray, edges: np.ndarray, edge_rgba: np.ndarray, width_m: float = 0.0015) -> int:
+    """Replace the geoms of a MuJoCo `MjvScene` (the viewer's user scene) by the membrane's
+    edges as thin capsules at positions `pos`. Returns the number of geoms drawn."""
+    from . import rigid as _rigid  # the only module that imports mujoco
+
+    mujoco = _rigid.mujoco
+    capsule = mujoco.mjtGeom.mjGEOM_CAPSULE
+    zero, eye = np.zeros(3), np.eye(3).ravel()
+    scn.ngeom = 0
+    for (i, j), rgba in zip(edges, edge_rgba):
+        if scn.ngeom >= scn.maxgeom:
+            break
+        g = scn.geoms[scn.ngeom]
+        mujoco.mjv_initGeom(g, capsule, zero, zero, eye, rgba)
+        mujoco.mjv_connector(g, capsule, width_m, pos[i], pos[j])
+        scn.ngeom += 1
+    return scn.ngeom
+
+
+def view(scene_arg: str | None, *, duration_s: float | None = None) -> None:
+    """Run a scene live in MuJoCo's passive viewer, the membrane drawn each frame as
+    its edges and points (user scene geoms) coloured by region; in real time, until the
+    window closes or the scene's duration ends. Raises HybridError where no display exists."""
+    if not has_display():
+        raise HybridError("view: no display (DISPLAY and WAYLAND_DISPLAY are not set); "
+                          "use `hybrid render` for pictures and video without one")
+    import importlib
+    import time as _time
+
+    from . import rigid as _rigid  # the only module that imports mujoco
+    from .cli import _load
+    from .model import compile_scene
+    from .simulation import Simulation
+
+    mujoco = _rigid.mujoco
+    viewer = importlib.import_module(mujoco.__name__ + ".viewer")
+    scene = _load(scene_arg, [])
+    sim = Simulation(compile_scene(scene))
+    m, d = (sim.mj_model, sim.mj_data) if sim.mj_model is not None else (None, None)
+    if m is None:  # membrane only: an empty world to look at it in
+        m = mujoco.MjModel.from_xml_string("<mujoco/>")
+        d = mujoco.MjData(m)
+    edges, edge_rgba = membrane_edges(sim.model)
+    frame_steps = max(1, int(round(1 / 60 / sim.model.dt_s)))
+    end = scene.duration_s if duration_s is None else duration_s
+    with viewer.launch_passive(m, d) as v:
+        wall0 = _time.perf_counter()
+        while v.is_running() and sim.time < end:
+            try:
+                sim.step(frame_steps)
+            except HybridError as exc:
+                print(f"hybrid: {exc}")
+                break
+            with v.lock():
+                draw_membrane(v.user_scn, sim.vert_pos, edges, edge_rgba)
+            v.sync()
+            ahead = sim.time - (_time.perf_counter() - wall0)
+            if ahead > 0:
+                _time.sleep(ahead)

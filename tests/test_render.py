@@ -78,3 +78,27 @@ def test_video(recording, tmp_path):
     assert n == 9
     data = (tmp_path / "run.mp4").read_bytes()
     assert len(data) > 1000 and data[4:8] == b"ftyp"
+
+
+def test_view_without_a_display_says_so_in_one_line(monkeypatch, capsys):
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    assert main(["view", "membrane_demo"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "no display" in err and "hybrid render" in err
+
+
+def test_the_viewer_draws_the_membrane_edges_as_user_geoms():
+    """The drawing the live viewer does each frame, on a plain (headless) MjvScene."""
+    from hybrid import rigid
+    from hybrid.render import draw_membrane, membrane_edges
+
+    sim = hybrid.load()
+    sim.step(100)
+    edges, rgba = membrane_edges(sim.model)
+    assert len(edges) == 80 + 156 - 2  # Euler: V - E + F = 2
+    scn = rigid.mujoco.MjvScene(sim.mj_model, maxgeom=1000)
+    assert draw_membrane(scn, sim.vert_pos, edges, rgba) == len(edges)
+    i, j = edges[0]
+    np.testing.assert_allclose(scn.geoms[0].pos, 0.5 * (sim.vert_pos[i] + sim.vert_pos[j]), atol=1e-6)
+    np.testing.assert_allclose(scn.geoms[0].rgba, rgba[0], atol=1e-6)
