@@ -390,8 +390,7 @@ class Simulation:
             elif disp > model.arrays.runaway_disp:
                 what = f"moved {disp:.3g} m in one step, more than the body's size {model.arrays.runaway_disp:.3g} m"
             else:
-                what = (f"reached {disp / h:.3g} m/s, above max_speed_m_s = {model.arrays.max_speed:.3g} "
-                        f"(raise it if the scene is meant to move that fast)")
+                what = f"reached {disp / h:.3g} m/s, above max_speed_m_s = {model.arrays.max_speed:.3g}"
             remedy = f"try dt_s <= {suggest:.3g} s"
             damping = self._damping_fraction()
             if h <= model.dt_stable_s and damping < SELF_EXCITATION_DAMPING:
