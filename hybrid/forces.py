@@ -20,10 +20,6 @@ from .kernel import kernel, kernel_twin
 
 from .errors import MeshError
 
-# Fast-math without the flags that assume no NaN or infinity: the divergence
-# check must still see them.
-FAST = {"contract", "arcp", "nsz", "afn"}
-
 __all__ = [
     "shape_memory_frame_coef", "muscle_pairs",
     "set_pointwise", "add_applied", "add_attraction",
@@ -33,7 +29,7 @@ __all__ = [
 
 # ---------------------------------------------------------------- rest data
 
-@kernel(fastmath=FAST, inline="always")
+@kernel(inline="always")
 def ring_sums(vert_pos, ring_ptr, ring_vert, ring_closed, i):
     """First half of the local frame of vertex i (DESIGN.md), one pass over its ring:
     G, the mean of the neighbours N_1..N_eta (m), and the unnormalised normal,
@@ -66,7 +62,7 @@ def ring_sums(vert_pos, ring_ptr, ring_vert, ring_closed, i):
     return gx + x1, gy + y1, gz + z1, nx, ny, nz
 
 
-@kernel(fastmath=FAST, inline="always")
+@kernel(inline="always")
 def frame_axes(vert_pos, first, gx, gy, gz, nx, ny, nz):
     """Second half: unit n, t1 = unit tangential part of N_1 - G, t2 = n x t1,
     from `ring_sums` and the first neighbour's index. Returns (t1, t2, n) as 9 floats."""
@@ -246,7 +242,7 @@ def _add_shape_memory(sm_vert, sm_stiff, sm_coef, ring_ptr, ring_vert, ring_clos
         vert_force[i, 2] += c * (gz + al * tz + be * uz + ga * nz - vert_pos[i, 2])
 
 
-add_shape_memory, add_shape_memory_parallel = kernel_twin(_add_shape_memory, fastmath=FAST)
+add_shape_memory, add_shape_memory_parallel = kernel_twin(_add_shape_memory)
 
 
 @kernel

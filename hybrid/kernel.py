@@ -1,6 +1,7 @@
 """How the step's kernels are compiled.
 
-Every step kernel is compiled without reference counting (`_nrt=False`):
+Every step kernel is compiled without reference counting (`_nrt=False`)
+and with the fast-math flags that keep NaN and infinity visible (`FAST`):
 the step allocates nothing, and the atomic reference counts numba would
 otherwise add around each call cost about 0.5 us per call. The per-point
 passes that dominate large meshes are also compiled a second time from the
@@ -16,9 +17,12 @@ import types
 import numba
 from numba import njit
 
-__all__ = ["FLAGS", "kernel", "kernel_twin", "PARALLEL_MIN_VERTS", "use_parallel"]
+__all__ = ["FAST", "FLAGS", "kernel", "kernel_twin", "PARALLEL_MIN_VERTS", "use_parallel"]
 
-FLAGS = dict(cache=True, error_model="numpy", _nrt=False)
+# Fast-math without the flags that assume no NaN or infinity: fused
+# multiply-adds and reciprocals, but the divergence check still sees NaN.
+FAST = {"contract", "arcp", "nsz", "afn"}
+FLAGS = dict(cache=True, error_model="numpy", _nrt=False, fastmath=FAST)
 PARALLEL_MIN_VERTS = 2000
 
 
