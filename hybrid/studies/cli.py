@@ -2,6 +2,12 @@
 
     hybrid study stability --out DIR [--small]   # paper 6.1: DIR/stability.json, .md, PNGs
     hybrid study extremes  --out DIR [--small]   # DIR/extremes.json, .md
+    hybrid study work-precision --out DIR [--small] [--scheduler ADDRESS]
+                                                 # DIR/work_precision.json, .md, .png
+
+Studies with independent runs (work-precision) run them on all local cores,
+or on an existing Dask cluster with `--scheduler tcp://HOST:PORT` (the
+optional extra `hybrid[dask]`; see `hybrid.sweep`).
 
 `main_study(argv)` takes the arguments after `study` and returns the exit
 status (0; 2 with one line on stderr for bad input, as `hybrid run`).
@@ -27,10 +33,15 @@ def build_study_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="hybrid study", description="Numerical studies of hybrid: JSON, Markdown and plots.")
     sub = p.add_subparsers(dest="study", required=True, parser_class=_Parser)
     for name, help_ in (("stability", "the paper's stability comparison (6.1) and beyond"),
-                        ("extremes", "a catalogue of stiff and extreme cases: stable, diverged or refused")):
+                        ("extremes", "a catalogue of stiff and extreme cases: stable, diverged or refused"),
+                        ("work-precision", "error against run time of both integrators, breathing and "
+                                           "membrane-only scenes")):
         s = sub.add_parser(name, help=help_)
         s.add_argument("--out", required=True, metavar="DIR", help="output folder (created)")
         s.add_argument("--small", action="store_true", help="a small version (seconds; for tests)")
+        if name == "work-precision":
+            s.add_argument("--scheduler", metavar="ADDRESS", default=None,
+                           help="run on an existing Dask cluster (tcp://HOST:PORT) instead of the local cores")
     return p
 
 
@@ -52,14 +63,26 @@ def _extremes(args) -> None:
           f"{len(r['bugs'])} bug(s); {r['runtime_s']:.1f} s -> {args.out}/extremes.json")
 
 
+def _work_precision(args) -> None:
+    from . import work_precision
+    r = work_precision.run(args.out, small=args.small, scheduler=args.scheduler)
+    print("work-precision: observed order " + ", ".join(f"{k} {p:.2f}" for k, p in r["order"].items())
+          + "; reference converged: " + ", ".join(f"{s} {v['converged']}" for s, v in r["reference"].items())
+          + f"; {len(r['failures'])} failed run(s); {r['runtime_s']:.1f} s -> {args.out}/work_precision.json")
+
+
 def main_study(argv) -> int:
     args = build_study_parser().parse_args(list(argv))
     try:
-        {"stability": _stability, "extremes": _extremes}[args.study](args)
+        {"stability": _stability, "extremes": _extremes,
+         "work-precision": _work_precision}[args.study](args)
         return 0
     except HybridError as exc:
         sys.stderr.write(f"hybrid study: error: {' '.join(str(exc).split())}\n")
         return 2
-    except OSError as exc:  # e.g. an output folder that cannot be created
+    except ImportError as exc:  # --scheduler without the optional extra [dask]
+        sys.stderr.write(f"hybrid study: error: {exc}\n")
+        return 2
+    except OSError as exc:  # e.g. an output folder that cannot be created, an unreachable scheduler
         sys.stderr.write(f"hybrid study: error: {exc}\n")
         return 2

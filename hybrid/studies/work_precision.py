@@ -1,0 +1,244 @@
+"""Error against run time: the integrators of the breathing scene and of a
+membrane-only scene at time steps from the stability bound down by halves.
+
+`run(out_dir)` writes `work_precision.json`, `work_precision.md` and
+`work_precision.png` (log-log error against wall time, and error against h).
+
+Scenes     "breathing": the packaged trunk (`hybrid.load_scene("breathing")`,
+           membrane coupled to MuJoCo ribs); "membrane": `hybrid.demo.membrane_demo()`.
+           Both damp at 0.3 of critical, which explicit Euler needs.
+Steps      h = 1e-3 s / 2^k, k = 0..LEVELS-1: 1e-3 s is the scenes' own step,
+           about half the explicit Euler bound `compile_scene(scene).dt_stable_s`
+           (1.87e-3 s; symplectic Euler's is 4.6e-3 s); every h divides the
+           10 ms between recorded frames exactly (`Simulation.step(10 ms / h)`).
+Reference  per scene, symplectic Euler at h_ref = 1e-3 s / 2^REF_K and at h_ref/2.
+           Both integrators are first order (see `observed_order`), so by
+           Richardson extrapolation the finer one's error is about
+           |x(h_ref) - x(h_ref/2)|: reported as `reference_error` and checked
+           to be far below the smallest error of the runs (`reference_ok`).
+Errors     over one breath (4 s; 0.25 s in small mode), from frames every 10 ms:
+           vertex: max over frames of max over vertices of |x - x_ref| (m),
+           the runs' `error`; rib angle: max over frames and rib hinges of
+           |qpos - qpos_ref| (rad, breathing scene only); pressure: max over
+           frames of |p - p_ref| (Pa).
+Work       wall time of the stepping (after a warm-up that compiles), and per
+           simulated second. The runs are independent: `hybrid.sweep.sweep`
+           runs them on all local cores, or on a Dask cluster (`scheduler`).
+Order      the least-squares slope of log(error) against log(h) over the
+           three finest levels, per SCENE/INTEGRATOR.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import HybridError
+from ..sweep import sweep
+from .stability import write_json
+
+__all__ = ["run", "simulate", "observed_order", "SCENES", "INTEGRATORS"]
+
+SCENES = ("breathing", "membrane")
+INTEGRATORS = ("explicit_euler", "symplectic_euler")
+H0 = 1e-3          # the coarsest step (s); the levels are H0 / 2^k
+FRAME_S = 0.01     # recorded frames every 10 ms of simulated time
+# (levels, reference level REF_K, window s) by size
+SIZES = {False: dict(levels=5, ref_k=9, window_s=4.0),
+         True: dict(levels=4, ref_k=8, window_s=0.25)}
+ORDER_LEVELS = 3   # the observed order from the finest levels
+
+
+def _scene(name: str):
+    if name == "breathing":
+        from .. import load_scene
+        return load_scene("breathing")
+    if name == "membrane":
+        from ..demo import membrane_demo
+        return membrane_demo()
+    raise ValueError(f"scene: expected one of {list(SCENES)}, received {name!r}")
+
+
+def simulate(scene: str, integrator: str, k: int, window_s: float) -> dict:
+    """One run at h = H0 / 2^k over `window_s`: the frames every 10 ms
+    (vertex positions, rib hinge angles, pressure) and the wall time.
+    A sweep task: top level and picklable arguments."""
+    from ..model import compile_scene
+    from ..simulation import Simulation
+
+    dt = H0 / 2 ** k
+    model = compile_scene(_scene(scene)).with_dt(dt, integrator)
+    Simulation(model).step(1)  # warm-up: compiles (or loads numba's cache) outside the timing
+    sim = Simulation(model)
+    hinges = np.zeros(0, int)
+    if sim.mj_model is not None:
+        import mujoco
+        mjm = sim.mj_model
+        hinges = np.array([mjm.jnt_qposadr[j] for j in range(mjm.njnt)
+                           if mjm.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE], int)
+    per_frame = 10 * 2 ** k  # FRAME_S / dt, exactly
+    nframe = int(round(window_s / FRAME_S))
+    pos = np.empty((nframe, model.nvert, 3))
+    ang = np.empty((nframe, hinges.size))
+    prs = np.empty(nframe)
+    wall = 0.0
+    for f in range(nframe):
+        t0 = time.perf_counter()
+        sim.step(per_frame)
+        wall += time.perf_counter() - t0
+        pos[f] = sim.vert_pos
+        prs[f] = sim.pressure
+        if hinges.size:
+            ang[f] = sim.mj_data.qpos[hinges]
+    return {"scene": scene, "integrator": integrator, "k": k, "dt": dt, "pos": pos, "angle": ang,
+            "pressure": prs, "wall_s": wall, "sim_s": nframe * FRAME_S}
+
+
+def _errors(r: dict, ref: dict) -> dict:
+    e = {"error": float(np.max(np.linalg.norm(r["pos"] - ref["pos"], axis=2))),
+         "pressure_error": float(np.max(np.abs(r["pressure"] - ref["pressure"])))}
+    e["angle_error"] = float(np.max(np.abs(r["angle"] - ref["angle"]))) if r["angle"].size else None
+    return e
+
+
+def observed_order(dts, errors, n: int = ORDER_LEVELS) -> float:
+    """Slope of log(error) against log(h), least squares over the n smallest h."""
+    pairs = sorted((d, e) for d, e in zip(dts, errors) if e is not None and e > 0 and math.isfinite(e))[:n]
+    if len(pairs) < 2:
+        return math.nan
+    x, y = np.log([p[0] for p in pairs]), np.log([p[1] for p in pairs])
+    return float(np.polyfit(x, y, 1)[0])
+
+
+def run(out_dir, *, small: bool = False, scheduler: str | None = None, workers: int | None = None) -> dict:
+    """The study; writes DIR/work_precision.json, .md and .png; returns the JSON's dict."""
+    t_start = time.perf_counter()
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    size = SIZES[bool(small)]
+    window = size["window_s"]
+    ref_k = size["ref_k"]
+    from ..model import compile_scene
+    bounds = {}
+    for s in SCENES:
+        model = compile_scene(_scene(s))
+        bounds[s] = {i: model.with_dt(H0, i).dt_stable_s for i in INTEGRATORS}
+    # the references first: the longest tasks start first
+    tasks = [dict(scene=s, integrator="symplectic_euler", k=k, window_s=window)
+             for s in SCENES for k in (ref_k + 1, ref_k)]
+    tasks += [dict(scene=s, integrator=i, k=k, window_s=window)
+              for s in SCENES for i in INTEGRATORS for k in range(size["levels"])]
+    results = sweep(simulate, tasks, scheduler=scheduler, workers=workers, on_error="return")
+
+    nref = 2 * len(SCENES)
+    refs, reference, runs, failures = {}, {}, [], []
+    for j, (task, r) in enumerate(zip(tasks, results)):
+        if isinstance(r, Exception):
+            failures.append({**task, "dt": H0 / 2 ** task["k"], "message": " ".join(str(r).split())})
+        elif j < nref:
+            refs[(task["scene"], task["k"])] = r
+        else:
+            runs.append(r)
+    for s in SCENES:
+        fine, coarse = refs.get((s, ref_k + 1)), refs.get((s, ref_k))
+        if fine is None or coarse is None:
+            raise HybridError(f"work-precision: the reference runs of {s!r} failed: "
+                              + "; ".join(f["message"] for f in failures if f["scene"] == s))
+        est = _errors(coarse, fine)  # p = 1: the finer reference's error ~ |x(h) - x(h/2)|
+        reference[s] = {"dt": fine["dt"], "dt_check": coarse["dt"], "wall_s": fine["wall_s"],
+                        "error_estimate": est["error"], "angle_error_estimate": est["angle_error"],
+                        "pressure_error_estimate": est["pressure_error"]}
+
+    rows = []
+    for r in runs:
+        ref = refs[(r["scene"], ref_k + 1)]
+        rows.append({"scene": r["scene"], "integrator": r["integrator"], "dt": r["dt"], **_errors(r, ref),
+                     "wall_s": r["wall_s"], "wall_per_sim_s": r["wall_s"] / r["sim_s"],
+                     "dt_over_bound": r["dt"] / bounds[r["scene"]][r["integrator"]]})
+    order, order_angle, order_pressure = {}, {}, {}
+    for s in SCENES:
+        for i in INTEGRATORS:
+            sel = [x for x in rows if x["scene"] == s and x["integrator"] == i]
+            key = f"{s}/{i}"
+            order[key] = observed_order([x["dt"] for x in sel], [x["error"] for x in sel])
+            order_pressure[key] = observed_order([x["dt"] for x in sel], [x["pressure_error"] for x in sel])
+            if s == "breathing":
+                order_angle[key] = observed_order([x["dt"] for x in sel], [x["angle_error"] for x in sel])
+    for s in SCENES:
+        smallest = min((x["error"] for x in rows if x["scene"] == s), default=math.nan)
+        reference[s]["smallest_run_error"] = smallest
+        # converged: the reference's own error is at most a tenth of the smallest run error
+        reference[s]["converged"] = bool(reference[s]["error_estimate"] <= 0.1 * smallest)
+
+    data = {"runs": rows, "order": order, "order_angle": order_angle, "order_pressure": order_pressure,
+            "reference": reference, "failures": failures, "stability_bound_s": bounds,
+            "window_s": window, "frame_s": FRAME_S, "small": bool(small),
+            "scheduler": scheduler, "runtime_s": time.perf_counter() - t_start}
+    write_json(out / "work_precision.json", data)
+    _plot(out / "work_precision.png", rows)
+    (out / "work_precision.md").write_text(_markdown(data))
+    data["runtime_s"] = time.perf_counter() - t_start
+    write_json(out / "work_precision.json", data)
+    return data
+
+
+def _markdown(d: dict) -> str:
+    lines = [f"Work-precision over {d['window_s']:g} s (frames every {1e3 * d['frame_s']:g} ms).", "",
+             "| scene | integrator | h (s) | h / bound | vertex error (m) | rib angle error (rad) "
+             "| pressure error (Pa) | wall (s) | wall per simulated s |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for r in d["runs"]:
+        ang = "-" if r["angle_error"] is None else f"{r['angle_error']:.2e}"
+        lines.append(f"| {r['scene']} | {r['integrator']} | {r['dt']:.3g} | {r['dt_over_bound']:.2f} "
+                     f"| {r['error']:.2e} | {ang} | {r['pressure_error']:.2e} | {r['wall_s']:.3f} "
+                     f"| {r['wall_per_sim_s']:.3f} |")
+    lines += ["", "| scene/integrator | order (vertex) | order (rib angle) | order (pressure) |", "|---|---|---|---|"]
+    for k, p in d["order"].items():
+        pa = d["order_angle"].get(k)
+        lines.append(f"| {k} | {p:.2f} | {'-' if pa is None else f'{pa:.2f}'} | {d['order_pressure'][k]:.2f} |")
+    lines += ["", "| scene | reference h (s) | its estimated vertex error (m) | smallest run error (m) | converged |",
+              "|---|---|---|---|---|"]
+    for s, r in d["reference"].items():
+        lines.append(f"| {s} | {r['dt']:.3g} | {r['error_estimate']:.2e} | {r['smallest_run_error']:.2e} "
+                     f"| {r['converged']} |")
+    if d["failures"]:
+        lines += ["", "Failed runs:"] + [f"- {f['scene']} {f['integrator']} h={f['dt']:.3g}: {f['message']}"
+                                          for f in d["failures"]]
+    return "\n".join(lines) + "\n"
+
+
+def _plot(path: Path, rows: list) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
+    styles = {"breathing": "-", "membrane": "--"}
+    marks = {"explicit_euler": "o", "symplectic_euler": "s"}
+    for s in SCENES:
+        for i in INTEGRATORS:
+            sel = sorted((x for x in rows if x["scene"] == s and x["integrator"] == i), key=lambda x: -x["dt"])
+            if not sel:
+                continue
+            lab = f"{s} / {i.replace('_', ' ')}"
+            axes[0].loglog([x["wall_per_sim_s"] for x in sel], [x["error"] for x in sel],
+                           styles[s], marker=marks[i], label=lab)
+            axes[1].loglog([x["dt"] for x in sel], [x["error"] for x in sel], styles[s], marker=marks[i], label=lab)
+    dts = sorted({x["dt"] for x in rows})
+    if dts:
+        e0 = max(x["error"] for x in rows)
+        axes[1].loglog(dts, [e0 * d / dts[-1] for d in dts], ":", color="gray", label="slope 1")
+    axes[0].set_xlabel("wall time per simulated second (s)")
+    axes[1].set_xlabel("time step h (s)")
+    for ax in axes:
+        ax.set_ylabel("largest vertex error over the window (m)")
+        ax.grid(True, which="both", alpha=0.3)
+    axes[0].legend(fontsize=8)
+    axes[0].set_title("error against run time")
+    axes[1].set_title("error against time step")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
