@@ -13,7 +13,9 @@ one worker per core by default, each with numba on one thread
 (NUMBA_NUM_THREADS=1: the solver's kernels are themselves multi-core on large
 meshes, and one process per core already fills the machine). `fn` and the
 parameters must be picklable: a function defined at the top level of a module
-(not a lambda, not in `__main__` of an interactive session).
+(not a lambda, not in `__main__` of an interactive session). As for any
+'spawn' pool, a script that calls `sweep` must guard its top level with
+`if __name__ == "__main__":` (the workers import the script's module).
 
 With `scheduler="tcp://HOST:PORT"` the tasks go to an existing Dask cluster
 through `dask.distributed.Client(scheduler)` (`client.map` / `client.gather`;
