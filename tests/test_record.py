@@ -125,7 +125,8 @@ def test_an_unfinished_file_reads_up_to_its_last_complete_chunk(tmp_path):
     path = tmp_path / "run.mcap"
     rec = Recorder(path, sim, chunk_size=4096)
     run(sim, 0.5, observers=[rec])
-    rec._writer.flush_chunk()  # as the periodic flush does; then the process "dies" (no close)
+    rec._drain()  # as the periodic drain and flush do; then the process "dies" (no close)
+    rec._writer.flush_chunk()
     rec._file.flush()
     whole = path.read_bytes()
     path.write_bytes(whole[: len(whole) - 1000])  # and a torn last record
