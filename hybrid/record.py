@@ -20,11 +20,16 @@ Log times are the simulated time in nanoseconds (t = 0 at the start). The model'
 description (faces, region of each point, colours, geoms) is an MCAP metadata record
 named "hybrid", so that `hybrid render` needs nothing but the file.
 
-Crash safety: every record is appended as the run goes; chunks are small and the
-writer is flushed at least every `flush_s` seconds of wall time, so a killed process
-leaves every frame but the last few; `close()` (called in a `finally` by the runner's
-caller, or by `with Recorder(...)`) finishes the file on an error or an interrupt.
-`read` accepts unfinished files (no summary, truncated last record).
+Cost: a frame is copied when it comes and encoded with up to 199 others in one pass
+(`batch`), the triangle list's points by a compiled formatter, the messages packed
+straight into the chunk (`_McapWriter`): about 0.15 s for the 1201 frames of the
+12 s breathing run.
+
+Crash safety: the frames held are encoded and the chunk in progress written at least
+every `flush_s` seconds of wall time, so a killed process leaves every frame but
+those of its last second; `close()` (called in a `finally` by `hybrid run`, or by
+`with Recorder(...)`) encodes the rest and finishes the file on an error or an
+interrupt. `read` accepts unfinished files (no summary, truncated last record).
 """
 
 from __future__ import annotations
