@@ -146,7 +146,7 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--json", metavar="FILE", help="also write the figures as JSON")
     b.add_argument("--quick", action="store_true", help="small sizes only (a smoke test)")
     b.set_defaults(func=_cmd_bench)
-    st = sub.add_parser("study", help="numerical studies: stability, extremes", add_help=False, prefix_chars="\0")
+    st = sub.add_parser("study", help="numerical studies: stability, extremes, work-precision", add_help=False, prefix_chars="\0")
     st.add_argument("study_argv", nargs=argparse.REMAINDER)
     st.set_defaults(func=_cmd_study)
     return p
