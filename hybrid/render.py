@@ -127,22 +127,28 @@ def frames_from_scene(scene_arg: str | None, duration_s: float | None = None, *,
 
 
 def key_frames(fr: Frames) -> tuple[int, int, int]:
-    """(rest, peak inspiration, end of expiration): the first frame; the frame of the
-    largest apex descent (else the largest displacement); the frame after it where the
-    muscle, relaxing, starts to contract again (the end of that breath), else the last."""
+    """(rest, peak inspiration, end of expiration) of the first breath: the first frame;
+    the frame of largest apex descent up to the end of that breath (else the largest
+    displacement; the muscle's peak if that is the breath's last frame, as in a shape
+    still sagging under gravity); the end of the breath, where the muscle, relaxed
+    after its first peak, starts to contract again (else the last frame)."""
     n = len(fr.t)
-    if fr.apex_descent is not None and np.ptp(fr.apex_descent) > 0:
-        peak = int(np.argmax(fr.apex_descent))
-    else:
-        peak = int(np.argmax(np.linalg.norm(fr.pos - fr.pos[:1], axis=2).max(axis=1)))
     end = n - 1
-    if fr.muscle is not None and np.ptp(fr.muscle) > 0:
-        m = fr.muscle
+    m = fr.muscle
+    top = None
+    if m is not None and np.ptp(m) > 0:
         tol = 1e-9 * np.abs(m).max()
-        for i in range(peak + 1, n):
+        top = int(np.argmax(m >= m.max() - tol))  # the first contraction's peak
+        for i in range(top + 1, n):
             if m[i] > m[i - 1] + tol:  # contracting again: the breath ended at i - 1
                 end = i - 1
                 break
+    if fr.apex_descent is not None and np.ptp(fr.apex_descent[:end + 1]) > 0:
+        peak = int(np.argmax(fr.apex_descent[:end + 1]))
+    else:
+        peak = int(np.argmax(np.linalg.norm(fr.pos[:end + 1] - fr.pos[:1], axis=2).max(axis=1)))
+    if peak == end and top is not None and end > 0:  # still settling (a sag): the muscle's peak
+        peak = top
     return 0, peak, end
 
 

@@ -143,3 +143,19 @@ def test_no_record_and_record_every(tmp_path):
     assert main(["run", "membrane_demo", "--duration", "0.1", "--out", str(tmp_path / "b"),
                  "--record-every", "0.05"]) == 0
     np.testing.assert_allclose(read(tmp_path / "b" / "run.mcap")["/pressure"]["t"], [0.0, 0.05, 0.1], atol=1e-9)
+
+
+def test_an_interrupted_run_leaves_a_finished_file_with_every_frame_before_the_interrupt(tmp_path):
+    sim = hybrid.load(membrane_demo())
+    seen = []
+
+    def interrupt(s, trace):
+        seen.append(s.time)
+        if len(seen) == 37:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        with Recorder(tmp_path / "run.mcap", sim) as rec:
+            run(sim, 1.0, observers=[rec, interrupt])
+    t = read(tmp_path / "run.mcap")["/membrane/points"]["t"]
+    np.testing.assert_allclose(t, seen, atol=1e-9)

@@ -59,11 +59,13 @@ def test_render_a_recording_makes_three_different_panels_with_the_membrane_visib
     assert (np.abs(bare - 1.0).max(axis=2) > 0.1).mean() > 0.005
 
 
-def test_render_a_scene_runs_it_first(tmp_path):
+def test_render_a_scene_runs_it_first(tmp_path, capsys):
     out = tmp_path / "fig"
-    assert main(["render", "membrane_demo", "--out", str(out), "--duration", "2"]) == 0
+    # the membrane alone (no MuJoCo), still sagging under gravity through its first breath
+    assert main(["render", "membrane_demo", "--out", str(out), "--duration", "4.2"]) == 0
+    assert "peak inspiration t = 1.60 s, end of expiration t = 4.00 s" in capsys.readouterr().out
     a, b, c = _panels(_image(out / "figure4.png"))
-    assert np.abs(a - b).sum() > 50.0
+    assert np.abs(a - b).sum() > 50.0 and np.abs(b - c).sum() > 50.0
 
 
 def test_render_reports_a_missing_recording(tmp_path, capsys):
