@@ -159,3 +159,38 @@ def test_an_interrupted_run_leaves_a_finished_file_with_every_frame_before_the_i
             run(sim, 1.0, observers=[rec, interrupt])
     t = read(tmp_path / "run.mcap")["/membrane/points"]["t"]
     np.testing.assert_allclose(t, seen, atol=1e-9)
+
+
+def test_a_killed_run_leaves_a_readable_file_with_its_frames(tmp_path):
+    """SIGKILL: no finally runs; the frames flushed before the kill are readable."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    path = tmp_path / "run.mcap"
+    script = ("import hybrid\n"
+              "from hybrid.demo import membrane_demo\n"
+              "from hybrid.record import Recorder\n"
+              "from hybrid.run import run\n"
+              "sim = hybrid.load(membrane_demo(duration_s=1000.0))\n"
+              f"rec = Recorder({str(path)!r}, sim, flush_s=0.05)\n"
+              "run(sim, 1000.0, observers=[rec])\n")
+    proc = subprocess.Popen([sys.executable, "-c", script])
+    try:
+        deadline = time.monotonic() + 60
+        n = 0
+        while time.monotonic() < deadline and proc.poll() is None:
+            time.sleep(0.2)
+            if path.exists():
+                n = len(read(path).get("/membrane/points", {}).get("t", []))
+                if n >= 100:
+                    break
+    finally:
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait()
+    assert n >= 100
+    t = read(path)["/membrane/points"]["t"]
+    assert len(t) >= n
+    np.testing.assert_allclose(t, np.arange(len(t)) * 0.01, atol=1e-9)  # every frame, in order, from 0
