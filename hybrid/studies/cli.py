@@ -1,7 +1,7 @@
 """`hybrid study ...`: the numerical studies from the command line.
 
-    hybrid study stability --out DIR [--small]   # paper 6.1: DIR/stability.json, .md, PNGs
-    hybrid study extremes  --out DIR [--small]   # DIR/extremes.json, .md
+    hybrid study stability --out DIR [--small] [--scheduler ADDRESS]   # paper 6.1: DIR/stability.json, .md, PNGs
+    hybrid study extremes  --out DIR [--small] [--scheduler ADDRESS]   # DIR/extremes.json, .md
     hybrid study work-precision --out DIR [--small] [--scheduler ADDRESS]
                                                  # DIR/work_precision.json, .md, .png
 
@@ -39,15 +39,14 @@ def build_study_parser() -> argparse.ArgumentParser:
         s = sub.add_parser(name, help=help_)
         s.add_argument("--out", required=True, metavar="DIR", help="output folder (created)")
         s.add_argument("--small", action="store_true", help="a small version (seconds; for tests)")
-        if name == "work-precision":
-            s.add_argument("--scheduler", metavar="ADDRESS", default=None,
-                           help="run on an existing Dask cluster (tcp://HOST:PORT) instead of the local cores")
+        s.add_argument("--scheduler", metavar="ADDRESS", default=None,
+                       help="run on an existing Dask cluster (tcp://HOST:PORT) instead of the local cores")
     return p
 
 
 def _stability(args) -> None:
     from . import stability
-    r = stability.run(args.out, small=args.small)
+    r = stability.run(args.out, small=args.small, scheduler=args.scheduler)
     print(f"stability: Table 1 max |error| {r['table1_max_abs_error']:.1e}; Table 3 h_max "
           + ", ".join(f"{t['model']} {t['perturbation']} l0: {t['h_max']:.3g} (paper {t['paper_h_max']})"
                       for t in r["table3"])
@@ -56,7 +55,7 @@ def _stability(args) -> None:
 
 def _extremes(args) -> None:
     from . import extremes
-    r = extremes.run(args.out, small=args.small)
+    r = extremes.run(args.out, small=args.small, scheduler=args.scheduler)
     counts = {k: sum(c["outcome"] == k for c in r["cases"]) for k in ("stable", "diverged", "refused")}
     print(f"extremes: {len(r['cases'])} cases, " + ", ".join(f"{n} {k}" for k, n in counts.items())
           + f"; reasonable cases failing: {', '.join(r['reasonable_failures']) or 'none'}; "

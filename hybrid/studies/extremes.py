@@ -296,8 +296,18 @@ def _markdown(res: dict) -> str:
     return "\n".join(L) + "\n"
 
 
-def run(out_dir, *, small: bool = False) -> dict:
-    """Every case; writes DIR/extremes.json and DIR/extremes.md."""
+def run_named_case(name: str, tmp: str, small: bool) -> tuple[dict, list]:
+    """The case called `name` (built in a worker process of `hybrid.sweep`): its row and bugs."""
+    case = next(c for c in cases(Path(tmp)) if c.name == name)
+    bugs: list = []
+    return run_case(case, small=small, bugs=bugs), bugs
+
+
+def run(out_dir, *, small: bool = False, scheduler: str | None = None, workers: int | None = None) -> dict:
+    """Every case, in parallel on the local cores (or a Dask cluster at
+    `scheduler`); writes DIR/extremes.json and DIR/extremes.md."""
+    from ..sweep import sweep
+
     out = Path(out_dir).resolve()
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
@@ -306,7 +316,11 @@ def run(out_dir, *, small: bool = False) -> dict:
         # MuJoCo writes MUJOCO_LOG.TXT into the working folder on its warnings
         # (the light-ribs cases): keep it out of the user's folder
         with contextlib.chdir(tmp):
-            rows = [run_case(c, small=small, bugs=bugs) for c in cases(Path(tmp))]
+            params = [dict(name=c.name, tmp=tmp, small=small) for c in cases(Path(tmp))]
+            rows = []
+            for row, case_bugs in sweep(run_named_case, params, scheduler=scheduler, workers=workers):
+                rows.append(row)
+                bugs += case_bugs
     res = {"small": small, "cases": rows,
            "reasonable_failures": [r["name"] for r in rows if r["reasonable"] and r["outcome"] != "stable"],
            "bugs": bugs, "runtime_s": time.perf_counter() - t0}

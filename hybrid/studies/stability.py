@@ -707,29 +707,46 @@ def _markdown(res: dict) -> str:
     return "\n".join(L) + "\n"
 
 
-def run(out_dir, *, small: bool = False) -> dict:
-    """The whole study; writes DIR/stability.json, DIR/stability.md and PNGs."""
+def run_section(name: str, small: bool) -> tuple[object, float]:
+    """One independent section of the study (run in a worker of `hybrid.sweep`):
+    its result and its wall time (s)."""
+    sections = {
+        "table1": lambda: table1(TABLE1_CASES[:3] + TABLE1_CASES[4:5] if small else TABLE1_CASES),
+        "table2": table2,
+        "table3": lambda: table3(small=small),
+        "stability_map": lambda: stability_map(small=small),
+        "membrane_spectrum": lambda: membrane_spectrum(small=small),
+        "self_excitation": lambda: self_excitation(small=small),
+    }
+    t = time.perf_counter()
+    blas = single_thread_blas().__enter__()
+    try:
+        result = sections[name]()
+    finally:
+        blas.__exit__(None, None, None)
+    return result, time.perf_counter() - t
+
+
+SECTIONS = ("table1", "table2", "table3", "stability_map", "membrane_spectrum", "self_excitation")
+
+
+def run(out_dir, *, small: bool = False, scheduler: str | None = None, workers: int | None = None) -> dict:
+    """The whole study, its sections in parallel on the local cores (or a Dask
+    cluster at `scheduler`); writes DIR/stability.json, DIR/stability.md and PNGs."""
+    from ..sweep import sweep
+
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    timings = {}
-
-    def timed(name, fn):
-        t = time.perf_counter()
-        r = fn()
-        timings[name] = time.perf_counter() - t
-        return r
-
-    blas = single_thread_blas().__enter__()
-    t1 = timed("table1", lambda: table1(TABLE1_CASES[:3] + TABLE1_CASES[4:5] if small else TABLE1_CASES))
-    t2 = timed("table2", table2)
-    t3 = timed("table3", lambda: table3(small=small))
-    res = {"small": small, "table1_max_abs_error": t1["max_abs_error"], "table1": t1, "table2": t2,
+    done = sweep(run_section, [dict(name=n, small=small) for n in SECTIONS], scheduler=scheduler,
+                 workers=workers)
+    parts = {n: r for n, (r, _) in zip(SECTIONS, done)}
+    timings = {n: w for n, (_, w) in zip(SECTIONS, done)}
+    t1, t3 = parts["table1"], parts["table3"]
+    res = {"small": small, "table1_max_abs_error": t1["max_abs_error"], "table1": t1, "table2": parts["table2"],
            "table3": [{k: v for k, v in r.items()} for r in t3["rows"]], "table3_setup": t3["setup"]}
-    res["stability_map"] = timed("stability_map", lambda: stability_map(small=small))
-    res["membrane_spectrum"] = timed("membrane_spectrum", lambda: membrane_spectrum(small=small))
-    res["self_excitation"] = timed("self_excitation", lambda: self_excitation(small=small))
-    blas.__exit__(None, None, None)
+    for n in ("stability_map", "membrane_spectrum", "self_excitation"):
+        res[n] = parts[n]
     res["plots"] = _plots(out, res)
     res["timings_s"] = timings
     res["runtime_s"] = time.perf_counter() - t0
