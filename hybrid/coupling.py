@@ -1,8 +1,8 @@
 """The membrane coupled to MuJoCo rigid bodies (paper 3.5, DESIGN.md).
 
 `build_rigid` (called by `compile_scene` for scenes with a `Rigid` part) loads the
-scene's MJCF (ours, "trunk", or any user's file, which is read and never written),
-adds one attachment site per linked membrane point on its body, optionally adds the
+scene's MJCF (ours, "trunk", or any user's file, which is read and never written, or
+a model an installed package builds in memory, e.g. "myo_sim:myotorso"), adds one attachment site per linked membrane point on its body, optionally adds the
 linked points' masses to their bodies, and compiles the model once. `Coupling` (made
 by `Simulation` for such scenes) runs the coupled step, in this order:
 
@@ -51,11 +51,24 @@ from .model import T_GRAVITY
 from .simulation import (OK, S_PRESSURE, S_TIME, MembraneState, membrane_advance,
                          membrane_forces)
 
-__all__ = ["BUILTIN_MJCF", "resolve_mjcf", "build_rigid", "CoupledRigid", "Coupling",
+__all__ = ["BUILTIN_MJCF", "PACKAGE_MJCF", "resolve_mjcf", "load_rigid_spec", "build_rigid", "CoupledRigid", "Coupling",
            "run_coupled"]
 
 #: MJCF names a scene may use instead of a path.
 BUILTIN_MJCF = {"trunk": _rigid.TRUNK_XML, "builtin:trunk": _rigid.TRUNK_XML}
+
+
+
+def _myo_sim_spec(name: str):
+    import myo_sim
+    return myo_sim.load_spec(name)
+
+
+#: Models built in memory by an installed package instead of read from a file:
+#: rigid.mjcf = "SCHEME:NAME" -> (import name, what to install, builder of an editable
+#: MjSpec from NAME). The package's files are only read; our sites and masses are added
+#: to the returned MjSpec. "myo_sim:myotorso" is MyoSuite's torso (myo_sim.load_spec).
+PACKAGE_MJCF = {"myo_sim": ("myo_sim", "pip install 'hybrid[myo]' (or myo-sim)", _myo_sim_spec)}
 
 _SITE_STEM = "hybrid_link_"
 _RK4 = int(_rigid.mujoco.mjtIntegrator.mjINT_RK4)
@@ -95,10 +108,42 @@ def resolve_mjcf(scene: Scene) -> Path:
         raise SceneError(f"rigid.mjcf: expected 'trunk' or the path of an MJCF file, received {mjcf!r}")
     if str(mjcf) in BUILTIN_MJCF:
         return BUILTIN_MJCF[str(mjcf)]
+    if _package_model(str(mjcf)) is not None:
+        raise RigidError(f"rigid.mjcf: {str(mjcf)!r} is built in memory by a package, it has no file; "
+                         f"use hybrid.coupling.load_rigid_spec")
     path = scene.resolve(str(mjcf))
     if not path.is_file():
         raise RigidError(f"rigid.mjcf: no such file {str(path)!r}; expected 'trunk' or the path of an MJCF file")
     return path
+
+
+def _package_model(mjcf: str):
+    scheme, sep, name = mjcf.partition(":")
+    return (scheme, name) if sep and scheme in PACKAGE_MJCF else None
+
+
+def load_rigid_spec(scene: Scene):
+    """(MjSpec, label, source) of `scene.rigid.mjcf`: a file read by MuJoCo (source its
+    Path), or "SCHEME:NAME" of `PACKAGE_MJCF` built by its package (source the string).
+    Raises RigidError naming the package and how to install it when it is absent."""
+    mjcf = scene.rigid.mjcf
+    pkg = _package_model(str(mjcf)) if isinstance(mjcf, (str, Path)) else None
+    if pkg is None:
+        path = resolve_mjcf(scene)
+        return _rigid.load_spec(path), path.name, path
+    scheme, name = pkg
+    module, install, builder = PACKAGE_MJCF[scheme]
+    try:
+        __import__(module)
+    except ImportError as exc:
+        raise RigidError(f"rigid.mjcf {str(mjcf)!r}: needs the package {module!r}, which is not installed "
+                         f"({exc}); {install}") from exc
+    try:
+        spec = builder(name)
+    except (ValueError, KeyError) as exc:
+        raise RigidError(f"rigid.mjcf {str(mjcf)!r}: {module} cannot build {name!r}: "
+                         f"{' '.join(str(exc).split())}") from exc
+    return spec, str(mjcf), str(mjcf)
 
 
 class CoupledRigid(_rigid.RigidSystem):
@@ -107,7 +152,8 @@ class CoupledRigid(_rigid.RigidSystem):
 
     Attributes (besides `RigidSystem`'s): link_vert (n,) int32, the linked vertices in
     site order; link_body (n,) names of their bodies; link_mass (n,) kg; mass_added
-    (n,) bool, whether each point's mass was added to its body; mjcf_path, the source.
+    (n,) bool, whether each point's mass was added to its body; mjcf_path, the source
+    (the MJCF's Path, or the "SCHEME:NAME" string of a package model).
     """
 
     def __init__(self, spec, site_names, *, timestep, link_vert, link_body, link_mass, mass_added,
@@ -151,8 +197,7 @@ def build_rigid(scene: Scene, mesh, regions: dict, vert_mass: np.ndarray):
         raise SceneError(f"rigid.prefix: expected a string, received {rig.prefix!r}")
     if not isinstance(rig.add_link_mass, bool):
         raise SceneError(f"rigid.add_link_mass: expected true or false, received {rig.add_link_mass!r}")
-    path = resolve_mjcf(scene)
-    spec = _rigid.load_spec(path)
+    spec, label, source = load_rigid_spec(scene)
     bodies = [b.name for b in spec.bodies]
     sites = [s.name for s in spec.sites if s.name]
 
@@ -164,7 +209,7 @@ def build_rigid(scene: Scene, mesh, regions: dict, vert_mass: np.ndarray):
             raise SceneError(f"{what}: expected a hybrid.scene.RigidLink, received {type(link).__name__}")
         body = _link_body(spec, link.body)
         if body is None:
-            raise RigidError(f"{what}.body: no body or site named {link.body!r} in {path.name}; "
+            raise RigidError(f"{what}.body: no body or site named {link.body!r} in {label}; "
                              f"available bodies: {bodies}; sites: {sites}")
         idx = _regions.select(link.region, mesh.vert_pos, name=f"{what}.region", regions=regions,
                               border_vert=mesh.border_vert)
@@ -179,14 +224,14 @@ def build_rigid(scene: Scene, mesh, regions: dict, vert_mass: np.ndarray):
     _check_not_constrained(scene, mesh, regions, link_vert)
 
     # Body poses at qpos0 (to place the sites) and compiled inertias (to add masses).
-    model0 = _compile(spec, path)
+    model0 = _compile(spec, label)
     data0 = _rigid.mujoco.MjData(model0)
     _rigid.mujoco.mj_kinematics(model0, data0)
     body_names = [link_body_of[int(i)] for i in link_vert]
     site_names = [f"{rig.prefix}{_SITE_STEM}{int(i)}" for i in link_vert]
     taken = [s for s in site_names if spec.site(s) is not None]
     if taken:
-        raise RigidError(f"rigid.prefix: site name(s) {taken[:3]} already exist in {path.name}; "
+        raise RigidError(f"rigid.prefix: site name(s) {taken[:3]} already exist in {label}; "
                          f"choose another prefix than {rig.prefix!r}")
     local = np.empty((link_vert.size, 3))
     for j, (i, name) in enumerate(zip(link_vert, body_names)):
@@ -204,7 +249,7 @@ def build_rigid(scene: Scene, mesh, regions: dict, vert_mass: np.ndarray):
 
     system = CoupledRigid(spec, site_names, timestep=float(scene.dt_s), link_vert=link_vert,
                           link_body=body_names, link_mass=link_mass, mass_added=mass_added,
-                          mjcf_path=path)
+                          mjcf_path=source)
     return system, link_vert
 
 
@@ -220,11 +265,11 @@ def _link_body(spec, name):
     return None
 
 
-def _compile(spec, path):
+def _compile(spec, label):
     try:
         return spec.compile()
     except ValueError as exc:
-        raise RigidError(f"MJCF {path.name}: MuJoCo cannot compile it: {' '.join(str(exc).split())}") from exc
+        raise RigidError(f"MJCF {label}: MuJoCo cannot compile it: {' '.join(str(exc).split())}") from exc
 
 
 def _check_not_constrained(scene, mesh, regions, link_vert):
@@ -281,6 +326,7 @@ def _add_point_masses(spec, model0, body_names, local, mass, added):
         body.mass = float(m_tot)
         body.ipos = com.tolist()
         body.fullinertia = [tensor[0, 0], tensor[1, 1], tensor[2, 2], tensor[0, 1], tensor[0, 2], tensor[1, 2]]
+        body.inertia = [0.0, 0.0, 0.0]  # a diagonal inertia given by the MJCF would conflict (myotorso's)
 
 
 # ----------------------------------------------------------------- the coupled step
