@@ -17,7 +17,7 @@ from numba import prange
 
 from .kernel import kernel, kernel_twin
 
-__all__ = ["ring_cross_sum", "volume_cubic", "solve_cubic_near_zero", "project_volume",
+__all__ = ["face_volume", "ring_cross_sum", "volume_cubic", "solve_cubic_near_zero", "project_volume",
            "soft_volume_force", "apply_prescribed", "apply_keep_in",
            "SHAPE_HALF_SPACE", "SHAPE_BALL", "SHAPE_BOX"]
 
@@ -46,6 +46,22 @@ def ring_cross_sum(ring_ptr, ring_vert, vec, i):
         gz += ax * by - ay * bx
         ax, ay, az = bx, by, bz
     return gx, gy, gz
+
+
+@kernel
+def face_volume(face_vert, ref, vert_pos):
+    """V = 1/6 sum_f a.(b x c) (m^3), coordinates relative to ref (m): the
+    volume measured independently of the projection, for observers.
+    # Model: face_vert (nface, 3) int32, ref (3,) m   # Data in: vert_pos (nvert, 3) m
+    """
+    vol = 0.0
+    for f in range(face_vert.shape[0]):
+        a, b, c = face_vert[f, 0], face_vert[f, 1], face_vert[f, 2]
+        ax, ay, az = vert_pos[a, 0] - ref[0], vert_pos[a, 1] - ref[1], vert_pos[a, 2] - ref[2]
+        bx, by, bz = vert_pos[b, 0] - ref[0], vert_pos[b, 1] - ref[1], vert_pos[b, 2] - ref[2]
+        cx, cy, cz = vert_pos[c, 0] - ref[0], vert_pos[c, 1] - ref[1], vert_pos[c, 2] - ref[2]
+        vol += ax * (by * cz - bz * cy) + ay * (bz * cx - bx * cz) + az * (bx * cy - by * cx)
+    return vol / 6.0
 
 
 def _cubic_terms(ring_ptr, ring_vert, ref, vert_pos, dirn, vert_acc):

@@ -8,16 +8,26 @@ passes that dominate large meshes are also compiled a second time from the
 same source with `parallel=True` (their `prange` loops then run on all
 cores); the model picks that build when the mesh has at least
 `PARALLEL_MIN_VERTS` points, below which the threads cost more than they save.
+
+Compiled code is cached on disk in a folder named after a hash of hybrid's
+own sources: numba checks only a function's own file when it reuses a cached
+build, so a kernel whose callee changed in another file could otherwise load
+stale machine code (and crash). A changed package gets a fresh cache, and
+writes into it are serialised across processes (`_lock_cache_writes`).
 """
 
 from __future__ import annotations
 
+import contextlib
+import hashlib
+import os
 import types
+from pathlib import Path
 
 import numba
 from numba import njit
 
-__all__ = ["FAST", "FLAGS", "kernel", "kernel_twin", "PARALLEL_MIN_VERTS", "use_parallel"]
+__all__ = ["CACHE_DIR", "FAST", "FLAGS", "jit", "kernel", "kernel_twin", "PARALLEL_MIN_VERTS", "use_parallel"]
 
 # Fast-math without the flags that assume no NaN or infinity: fused
 # multiply-adds and reciprocals, but the divergence check still sees NaN.
@@ -26,11 +36,83 @@ FLAGS = dict(cache=True, error_model="numpy", _nrt=False, fastmath=FAST)
 PARALLEL_MIN_VERTS = 2000
 
 
+def _cache_dir() -> str:
+    """The cache folder of this exact version of hybrid's sources."""
+    digest = hashlib.sha256(numba.__version__.encode())
+    root = Path(__file__).resolve().parent
+    for path in sorted(root.rglob("*.py")):
+        digest.update(path.relative_to(root).as_posix().encode())
+        digest.update(path.read_bytes())
+    base = os.environ.get("NUMBA_CACHE_DIR") or os.path.join(
+        os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache"), "hybrid")
+    return os.path.join(base, "numba-" + digest.hexdigest()[:16])
+
+
+CACHE_DIR = _cache_dir()
+
+
+def _lock_cache_writes() -> None:
+    """Serialise numba's cache writes into CACHE_DIR across processes.
+
+    numba saves a cache entry as read index / write index / write data, with
+    no lock: two processes compiling different signatures of one function at
+    once (the workers of `hybrid.sweep`, or two test runs) can leave an index
+    entry that points at the other's machine code, which then crashes when
+    loaded. An exclusive file lock around each save makes it one step.
+    """
+    try:
+        import fcntl
+        from numba.core import caching
+    except ImportError:  # no fcntl (Windows): numba's own behaviour
+        return
+    original = caching.IndexDataCacheFile.save
+    if getattr(original, "_hybrid_locked", False):
+        return
+
+    def save(self, key, data):
+        if not str(self._cache_path).startswith(CACHE_DIR):
+            return original(self, key, data)
+        os.makedirs(self._cache_path, exist_ok=True)
+        with open(os.path.join(self._cache_path, ".lock"), "a+") as lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)
+            try:
+                return original(self, key, data)
+            finally:
+                fcntl.flock(lock, fcntl.LOCK_UN)
+
+    save._hybrid_locked = True
+    caching.IndexDataCacheFile.save = save
+
+
+_lock_cache_writes()
+
+
+@contextlib.contextmanager
+def _our_cache():
+    """numba reads its cache folder when a function is decorated: point it at ours meanwhile."""
+    old = numba.config.CACHE_DIR
+    numba.config.CACHE_DIR = CACHE_DIR
+    try:
+        yield
+    finally:
+        numba.config.CACHE_DIR = old
+
+
+def jit(fn=None, **flags):
+    """`numba.njit(cache=True, **flags)` caching into `CACHE_DIR`; for compiled
+    helpers outside the step (they keep numba's default flags)."""
+    def wrap(f):
+        with _our_cache():
+            return njit(cache=True, **flags)(f)
+    return wrap if fn is None else wrap(fn)
+
+
 def kernel(fn=None, **extra):
     """`@kernel`: compile a step kernel with the step's flags."""
-    if fn is None:
-        return lambda f: njit(**FLAGS, **extra)(f)
-    return njit(**FLAGS, **extra)(fn)
+    def wrap(f):
+        with _our_cache():
+            return njit(**FLAGS, **extra)(f)
+    return wrap if fn is None else wrap(fn)
 
 
 def kernel_twin(fn, **extra):
@@ -40,7 +122,8 @@ def kernel_twin(fn, **extra):
                              fn.__closure__)
     par.__qualname__ = fn.__qualname__ + "_parallel"
     par.__doc__ = fn.__doc__
-    return njit(**FLAGS, **extra)(fn), njit(**FLAGS, parallel=True, **extra)(par)
+    with _our_cache():
+        return njit(**FLAGS, **extra)(fn), njit(**FLAGS, parallel=True, **extra)(par)
 
 
 def use_parallel(nvert: int) -> bool:

@@ -41,8 +41,9 @@ import struct
 import time
 from pathlib import Path
 
-import numba
 import numpy as np
+
+from .kernel import jit
 
 __all__ = ["Recorder", "read", "region_colours", "SCALAR_CHANNELS", "MESH_EVERY_FRAME_MAX"]
 
@@ -90,7 +91,7 @@ def region_colours(model) -> tuple[list[str], np.ndarray, np.ndarray]:
     return names, label, colours
 
 
-@numba.njit(cache=True)
+@jit
 def _format_points(pos, out):  # pragma: no cover - compiled
     """Write pos (n, 3) m as JSON Point3 objects, '{"x":-0.012345,"y":...,"z":...},...',
     with 6 decimals (1 um), into the uint8 buffer out; returns the length. Non-finite

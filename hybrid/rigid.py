@@ -32,11 +32,11 @@ from functools import cache
 from pathlib import Path
 
 import mujoco
-import numba
 import numpy as np
 from mujoco import rollout as _rollout
 
 from hybrid.errors import RigidError
+from hybrid.kernel import jit
 
 __all__ = [
     "TRUNK_XML",
@@ -161,7 +161,7 @@ def attach_points(spec: mujoco.MjSpec, body_names: Sequence[str], point_pos: np.
     return site_names
 
 
-@numba.njit(cache=True, _nrt=False)
+@jit(_nrt=False)
 def point_wrench_kernel(site_xpos, xipos, site_id, site_body, forces, xfrc):  # pragma: no cover
     """Set the wrench of the point forces on each attachment body (compiled).
 
@@ -190,7 +190,7 @@ def point_wrench_kernel(site_xpos, xipos, site_id, site_body, forces, xfrc):  # 
         xfrc[b, 5] += rx * fy - ry * fx
 
 
-@numba.njit(cache=True, _nrt=False)
+@jit(_nrt=False)
 def site_vel_kernel(site_xpos, cvel, subtree_com, site_id, site_body, site_root,
                     out):  # pragma: no cover
     """World linear velocities of sites, as mj_objectVelocity(flg_local=0) (compiled).

@@ -19,7 +19,7 @@ import numpy as np
 
 from .errors import HybridError
 from .model import Model
-from .schedule import Breathing, evaluate
+from .schedule import Breathing, schedule_eval, stack_schedules
 from .scene import Muscle
 from .simulation import Simulation
 
@@ -78,6 +78,17 @@ def run(sim: Simulation, duration_s: float, *, frame_dt_s: float = 0.01, progres
     apex_z0 = rest[apex, 2]
     rib_z0 = rest[link, 2].mean() if link.size else 0.0
     muscle_sched, breath = _breathing(model)
+    # the muscle stiffness at each frame: its table stacked once, evaluated compiled
+    muscle_table, muscle_fns = stack_schedules([muscle_sched]) if muscle_sched is not None else (None, [])
+    muscle_val = np.zeros(3)
+
+    def muscle_at(t):
+        if muscle_table is None:
+            return 0.0
+        if muscle_fns:
+            return float(np.atleast_1d(muscle_fns[0][1](t))[0])
+        schedule_eval(muscle_table, 0, t, muscle_val)
+        return float(muscle_val[0])
     # the end of the last complete expiration, where the body should be back at rest
     cycle_end_step = None
     if breath is not None:
@@ -102,7 +113,7 @@ def run(sim: Simulation, duration_s: float, *, frame_dt_s: float = 0.01, progres
         trace.volume_rel_error.append(abs(vol - v0) / v0 if v0 else 0.0)  # = sim.volume_rel_error
         trace.pressure_pa.append(sim.pressure)
         trace.kinetic_energy_j.append(sim.kinetic_energy)
-        trace.muscle_n_per_m.append(float(evaluate(muscle_sched, sim.time)[0]) if muscle_sched is not None else 0.0)
+        trace.muscle_n_per_m.append(muscle_at(sim.time))
         for obs in observers:
             obs(sim, trace)
 

@@ -24,7 +24,7 @@ from numba import prange
 
 from .kernel import kernel, kernel_twin
 
-from .constraints import (PROJ_NO_GRADIENT, PROJ_OK, apply_keep_in, apply_prescribed,
+from .constraints import (PROJ_NO_GRADIENT, PROJ_OK, apply_keep_in, apply_prescribed, face_volume,
                           project_volume, soft_volume_force)
 from .errors import ConstraintError, SimulationDiverged
 from .forces import (add_applied, add_attraction, add_mass_spring, add_muscle, add_shape_memory,
@@ -298,8 +298,10 @@ class Simulation:
 
     @property
     def volume(self) -> float:
-        """Enclosed volume (m^3) of the current positions."""
-        return self.model.mesh.volume(self.state.vert_pos)
+        """Enclosed volume (m^3) of the current positions, measured face by face
+        (independently of the projection)."""
+        a = self.model.arrays
+        return float(face_volume(a.face_vert, a.vol_ref, self.state.vert_pos))
 
     @property
     def volume_rel_error(self) -> float:
