@@ -88,7 +88,7 @@ def volume_cubic(ring_ptr, ring_vert, ref, vert_pos, dirn, vert_acc, out, parall
     six gathers per face; c1 = D . grad V(X) is left to the caller.
     # Model: ring_ptr, ring_vert, ref (3,) m
     # Data in: vert_pos (m), dirn (nvert, 3) (projection direction D)
-    # Scratch: vert_acc (nvert, 4)
+    # Scratch: vert_acc (nvert, 2)
     # Data out: out (2,) = (c2, c3)
     """
     if parallel:
@@ -222,7 +222,7 @@ def solve_cubic_near_zero(c0, c1, c2, c3):
 
 def _volume_gather(ring_ptr, ring_vert, ref, vert_weight, vert_pos, grad, dirn, vert_acc):
     """Per point: grad_i V (closed fan), D_i = w_i grad_i V, and the terms of
-    V, c1, |D|max and |x|max: (x_i . g_i, D_i . g_i, |D_i|^2, |x_i|^2) into vert_acc."""
+    V and c1, (x_i . g_i, D_i . g_i), into vert_acc[:, :2]."""
     sixth = 1.0 / 6.0
     for i in prange(vert_weight.shape[0]):
         gx, gy, gz = ring_cross_sum(ring_ptr, ring_vert, vert_pos, i)
@@ -240,8 +240,6 @@ def _volume_gather(ring_ptr, ring_vert, ref, vert_weight, vert_pos, grad, dirn, 
         dirn[i, 2] = dz
         vert_acc[i, 0] = px * gx + py * gy + pz * gz
         vert_acc[i, 1] = dx * gx + dy * gy + dz * gz
-        vert_acc[i, 2] = dx * dx + dy * dy + dz * dz
-        vert_acc[i, 3] = px * px + py * py + pz * pz
 
 
 def _volume_update(vert_weight, phi, dirn, h, vert_pos, vert_vel):
@@ -259,8 +257,8 @@ _volume_update_serial, _volume_update_parallel = kernel_twin(_volume_update)
 
 
 @kernel
-def project_volume(ring_ptr, ring_vert, face_vert, ref, vol0, vert_weight, h, vert_pos, vert_vel, grad,
-                   dirn, cubic, vert_acc, parallel):
+def project_volume(ring_ptr, ring_vert, ref, vol0, vert_weight, h, vert_pos, vert_vel, grad, dirn, cubic,
+                   vert_acc, parallel):
     """Exact constant-volume projection (paper 4.2-4.3, DESIGN.md).
 
     X = X* + phi D, D_i = w_i grad_i V(X*), w_i = 1/m_i (0 for points that are
@@ -275,16 +273,14 @@ def project_volume(ring_ptr, ring_vert, face_vert, ref, vol0, vert_weight, h, ve
     on the origin), and V = 1/3 sum_i (x_i - ref) . grad_i V (V is
     homogeneous of degree 3): one pass, no scatter.
 
-    The quadratic and cubic coefficients need a second pass. It is skipped
-    when a bound shows they cannot move the volume by more than 1e-17 V0 at
-    the linear root (|c2| <= nface |D|max^2 |x|max / 2, |c3| <= nface
-    |D|max^3 / 6); then the linear root is the cubic's root to within the
-    roundoff of V itself. Large corrections take the full cubic.
-    # Model: ring_ptr, ring_vert (closed fans), face_vert, ref (3,) m, vol0 m^3,
+    The quadratic and cubic coefficients take a second gather (D is needed
+    at every neighbour first). They are always computed: in quiet breathing
+    the quadratic term still moves the volume by about 2.5e-11 per step.
+    # Model: ring_ptr, ring_vert (closed fans), ref (3,) m, vol0 m^3,
     #        vert_weight (nvert,) 1/kg
     # Data in/out: vert_pos, vert_vel
     # Scratch: grad (volume gradient at X*, kept for the rib coupling), dirn, cubic (2,),
-    #          vert_acc (nvert, 4)
+    #          vert_acc (nvert, 2)
     """
     if parallel:
         _volume_gather_parallel(ring_ptr, ring_vert, ref, vert_weight, vert_pos, grad, dirn, vert_acc)
@@ -292,26 +288,16 @@ def project_volume(ring_ptr, ring_vert, face_vert, ref, vol0, vert_weight, h, ve
         _volume_gather_serial(ring_ptr, ring_vert, ref, vert_weight, vert_pos, grad, dirn, vert_acc)
     vol = 0.0
     c1 = 0.0
-    dmax2 = 0.0
-    xmax2 = 0.0
     for i in range(vert_weight.shape[0]):
         vol += vert_acc[i, 0]
         c1 += vert_acc[i, 1]
-        dmax2 = max(dmax2, vert_acc[i, 2])
-        xmax2 = max(xmax2, vert_acc[i, 3])
-    vol /= 3.0
-    c0 = vol - vol0
+    c0 = vol / 3.0 - vol0
     if not (c1 > 0.0):
         return 0.0, PROJ_NO_GRADIENT
-    phi = -c0 / c1
-    nface = face_vert.shape[0]
-    dmax = math.sqrt(dmax2)
-    bound = nface * dmax2 * (0.5 * math.sqrt(xmax2) * phi * phi + dmax * abs(phi) ** 3 / 6.0)
-    if not (bound <= 1e-17 * abs(vol0)):
-        volume_cubic(ring_ptr, ring_vert, ref, vert_pos, dirn, vert_acc, cubic, parallel)
-        phi, status = solve_cubic_near_zero(c0, c1, cubic[0], cubic[1])
-        if status != PROJ_OK:
-            return 0.0, status
+    volume_cubic(ring_ptr, ring_vert, ref, vert_pos, dirn, vert_acc, cubic, parallel)
+    phi, status = solve_cubic_near_zero(c0, c1, cubic[0], cubic[1])
+    if status != PROJ_OK:
+        return 0.0, status
     if parallel:
         _volume_update_parallel(vert_weight, phi, dirn, h, vert_pos, vert_vel)
     else:

@@ -74,7 +74,7 @@ def new_state(arrays: MembraneArrays) -> MembraneState:
     return MembraneState(
         vert_pos=arrays.vert_rest.copy(), vert_vel=np.zeros((n, 3)), vert_force=np.zeros((n, 3)),
         grad=np.zeros((n, 3)), sm_sums=np.zeros((arrays.sm_vert.shape[0], 6)),
-        vert_acc=np.zeros((n, 4)), dirn=np.zeros((n, 3)),
+        vert_acc=np.zeros((n, 2)), dirn=np.zeros((n, 3)),
         cubic=np.zeros(2),
         sched_val=np.zeros((ns, 3)), sched_next=np.zeros((ns, 3)), scal=np.zeros(8),
         status=np.zeros(4, np.int64), term_calls=np.zeros(len(TERMS), np.int64))
@@ -199,7 +199,7 @@ def membrane_advance(m, s, t, step):
         apply_keep_in(m.kin_vert, m.kin_shape, m.shape_kind, m.shape_par, pos, vel)
         s.term_calls[T_KEEP_IN] += 1
     if on[T_VOLUME]:
-        phi, st = project_volume(m.ring_ptr, m.ring_vert, m.face_vert, m.vol_ref, m.vol0, m.vert_weight, h, pos, vel,
+        phi, st = project_volume(m.ring_ptr, m.ring_vert, m.vol_ref, m.vol0, m.vert_weight, h, pos, vel,
                                  s.grad, s.dirn, s.cubic, s.vert_acc, m.parallel)
         s.term_calls[T_VOLUME] += 1
         if st != PROJ_OK:
