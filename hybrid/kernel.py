@@ -32,7 +32,8 @@ __all__ = ["CACHE_DIR", "FAST", "FLAGS", "jit", "kernel", "kernel_twin", "PARALL
 # Fast-math without the flags that assume no NaN or infinity: fused
 # multiply-adds and reciprocals, but the divergence check still sees NaN.
 FAST = {"contract", "arcp", "nsz", "afn"}
-FLAGS = dict(cache=True, error_model="numpy", _nrt=False, fastmath=FAST)
+# nogil: a compiled step lets other Python threads (the recorder) run meanwhile
+FLAGS = dict(cache=True, error_model="numpy", _nrt=False, fastmath=FAST, nogil=True)
 PARALLEL_MIN_VERTS = 2000
 
 
