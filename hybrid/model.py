@@ -20,7 +20,7 @@ from . import forces as _forces
 from . import regions as _regions
 from . import schedule as _sched
 from .constraints import SHAPE_BALL, SHAPE_BOX, SHAPE_HALF_SPACE
-from .errors import HybridError, MeshError, SceneError
+from .errors import SceneError
 from .kernel import use_parallel
 from .mesh import Mesh
 from .scene import (INTEGRATORS, AppliedForce, Attraction, Damping, Gravity, KeepIn, MassSpring,
@@ -271,10 +271,8 @@ def compile_scene(scene: Scene) -> Model:
         scheds.append(_sched.as_schedule(value, name=what, ncomp=ncomp))
         return len(scheds) - 1
 
-    empty_i = np.zeros(0, np.int32)
     empty_f = np.zeros(0)
     empty_3 = np.zeros((0, 3))
-    empty_s = np.zeros(0, np.int64)
     accel = np.zeros(3)
     app_vert, app_sched = [], []
     att_vert, att_stiff, att_target, att_sched = [], [], [], []

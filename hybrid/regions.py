@@ -7,8 +7,8 @@ that a segmented anatomy mesh can be split without writing indices by hand.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from typing import Sequence, Union
+from dataclasses import dataclass
+from typing import Union
 
 import numpy as np
 

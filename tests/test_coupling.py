@@ -20,7 +20,6 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import importlib.util
-import math
 import subprocess
 import sys
 import textwrap
@@ -31,7 +30,7 @@ import numpy as np
 import pytest
 
 from hybrid import rigid
-from hybrid.coupling import Coupling, build_rigid
+from hybrid.coupling import Coupling
 from hybrid.errors import RigidError, SceneError, SimulationDiverged
 from hybrid.model import compile_scene
 from hybrid.regions import Box, HalfSpace, Intersection

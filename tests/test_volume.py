@@ -15,7 +15,6 @@ the small per-face kernel `_face_volume` of this file.
 
 from __future__ import annotations
 
-import math
 
 import numpy as np
 import pytest

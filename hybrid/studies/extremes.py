@@ -44,7 +44,7 @@ from ..errors import ConstraintError, HybridError, SimulationDiverged
 from ..mesh import Mesh, uv_sphere
 from ..model import Model, compile_scene
 from ..regions import HalfSpace
-from ..scene import AppliedForce, Damping, MeshSpec, Muscle, Scene, ShapeMemory
+from ..scene import AppliedForce, MeshSpec, Muscle, Scene, ShapeMemory
 from ..schedule import Breathing
 from ..simulation import Simulation
 from .stability import _finite, write_json

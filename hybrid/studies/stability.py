@@ -441,7 +441,7 @@ def table3(*, small=False, seeds=tuple(range(10))) -> dict:
                       "integrator": "explicit_euler", "forces": "elastic + viscosity only",
                       "perturbation": "x_i += a l0 u_i, u_i uniform random unit vectors, seeds " + str(list(seeds)),
                       "equilibrium": f"max|v| <= {EQ_TOL} l0 sqrt(k/m) and max|F| <= {EQ_TOL} k l0",
-                      "iterations": f"median over seeds at h = 1, steps to equilibrium",
+                      "iterations": "median over seeds at h = 1, steps to equilibrium",
                       "h_max": f"largest h on the grid {grid[0]:.1f}:{grid[1]-grid[0]:.1f}:{grid[-1]:.1f} reaching "
                                f"equilibrium within t = {max_time:g} (scanning down from the top), refined by "
                                f"{n_bisect} bisections; the minimum over seeds"}}
