@@ -88,6 +88,23 @@ def _lock_cache_writes() -> None:
 _lock_cache_writes()
 
 
+def _start_threading_layer() -> None:
+    """Start numba's threading layer before any cached kernel is loaded.
+
+    A serial kernel (`run_membrane`) that calls the parallel twins, compiled in a
+    process that loaded those twins from the cache, is saved without the hook
+    that starts the threading layer (numba issue 8578). Loaded first in a new
+    process, it then calls a null pointer. Starting the layer here (about 50 ms,
+    once) makes every cached kernel safe to load in any order.
+    """
+    from numba.np.ufunc.parallel import _launch_threads
+
+    _launch_threads()
+
+
+_start_threading_layer()
+
+
 @contextlib.contextmanager
 def _our_cache():
     """numba reads its cache folder when a function is decorated: point it at ours meanwhile."""
