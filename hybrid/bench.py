@@ -70,6 +70,11 @@ def format_table(result: dict) -> str:
         c = result["coupled"]
         lines += ["", "coupled breathing step vs bare mj_step of the trunk model; medians",
                   f"  coupled {c['us_per_step']:.2f} us   mj_step {c['mj_step_us']:.2f} us   ratio {c['ratio']:.2f}"]
+    if "recording" in result:
+        r = result["recording"]
+        lines += ["", f"breathing run of {r['duration_s']:g} s, frames every 10 ms: without and with the MCAP recording; medians",
+                  f"  run {r['run_s']:.3f} s   recorded {r['recorded_s']:.3f} s (ratio {r['ratio']:.3f})   "
+                  f"encoded between steps {r['inline_s']:.3f} s (ratio {r['inline_ratio']:.3f})"]
     if "flex" in result:
         lines += ["", "MuJoCo's 2D flex sphere on a plane under gravity, 1 s, beside our membrane",
                   f"{'nvert':>8} {'flex us/step':>13} {'flex dV/V0':>11} {'ours dV/V0':>11}"]

@@ -1,6 +1,6 @@
 """`hybrid bench` sections that need MuJoCo: the coupled breathing step against a
-bare `mj_step` of the trunk model, and MuJoCo's own 2D flex sphere beside our
-membrane. Imported by `hybrid.bench` only when MuJoCo is installed."""
+bare `mj_step` of the trunk model, the cost of recording the breathing run, and
+MuJoCo's own 2D flex sphere beside our membrane. Imported by `hybrid.bench` only when MuJoCo is installed."""
 
 from __future__ import annotations
 
@@ -39,6 +39,39 @@ def coupled_row(*, nstep: int = 4000, repeats: int = 9) -> dict:
             "ratio": statistics.median(ratio)}
 
 
+def recording_row(*, duration_s: float = 12.0, repeats: int = 9) -> dict:
+    """The breathing run (`hybrid.run.run`, frames every 10 ms) without a recording,
+    with the default one (`Recorder`, encoding on its own thread), and with the
+    encoding done between steps (`background=False`), timed in turn repeat by repeat,
+    each from `Recorder(...)` to `close()`; medians of the times and of the ratios."""
+    import tempfile
+
+    from .record import Recorder
+    from .run import run as run_scene
+
+    scene = load_scene(builtin_scene("breathing"))
+    model = compile_scene(scene)
+    times: dict[str, list] = {"off": [], "on": [], "inline": []}
+    with tempfile.TemporaryDirectory() as tmp:
+        for rep in range(repeats + 1):
+            for mode in times:
+                sim = Simulation(model)
+                sim.step(0)  # compiled step loaded, as `run` does before its clock starts
+                t0 = time.perf_counter()
+                if mode == "off":
+                    run_scene(sim, duration_s)
+                else:
+                    with Recorder(f"{tmp}/run.mcap", sim, background=mode == "on") as rec:
+                        run_scene(sim, duration_s, observers=[rec])
+                if rep:  # the first round warms up (compiled encoder, file cache)
+                    times[mode].append(time.perf_counter() - t0)
+    off = times["off"]
+    return {"duration_s": duration_s, "run_s": statistics.median(off),
+            "recorded_s": statistics.median(times["on"]), "inline_s": statistics.median(times["inline"]),
+            "ratio": statistics.median([a / b for a, b in zip(times["on"], off)]),
+            "inline_ratio": statistics.median([a / b for a, b in zip(times["inline"], off)])}
+
+
 def flex_rows(*, duration_s: float = 1.0) -> list[dict]:
     """MuJoCo's closed 2D flex sphere of 80 and 642 points (4 kg, soft-tissue
     elasticity) dropped on a plane for 1 s, beside our membrane's volume change."""
@@ -62,5 +95,5 @@ def _our_volume_change(nvert: int, duration_s: float) -> float:
 
 def run(*, quick: bool = False) -> dict:
     if quick:
-        return {"coupled": coupled_row(nstep=500, repeats=3)}
-    return {"coupled": coupled_row(), "flex": flex_rows()}
+        return {"coupled": coupled_row(nstep=500, repeats=3), "recording": recording_row(duration_s=1.0, repeats=2)}
+    return {"coupled": coupled_row(), "recording": recording_row(), "flex": flex_rows()}

@@ -125,16 +125,14 @@ def test_an_unfinished_file_reads_up_to_its_last_complete_chunk(tmp_path):
     path = tmp_path / "run.mcap"
     rec = Recorder(path, sim, chunk_size=4096)
     run(sim, 0.5, observers=[rec])
-    rec._drain()  # as the periodic drain and flush do; then the process "dies" (no close)
-    rec._writer.flush_chunk()
-    rec._file.flush()
+    rec.flush()  # as the periodic flush does; then the process "dies" (no close)
     whole = path.read_bytes()
     path.write_bytes(whole[: len(whole) - 1000])  # and a torn last record
     data = read(path)
     t = data["/membrane/points"]["t"]
     assert 10 < len(t) < 51
     np.testing.assert_allclose(t, np.arange(len(t)) * 0.01, atol=1e-9)
-    rec._file.close()
+    rec._fw._file.close()
 
 
 def test_no_record_and_record_every(tmp_path):
