@@ -48,7 +48,7 @@ from .kernel import kernel
 from .errors import RigidError, SceneError, SimulationDiverged
 from .scene import Nailed, Prescribed, Rigid, RigidLink, Scene
 from .model import T_GRAVITY
-from .simulation import (OK, S_PRESSURE, S_TIME, MembraneState, membrane_advance,
+from .simulation import (OK, S_PRESSURE, S_TIME, Frames, MembraneState, capture_frame, membrane_advance,
                          membrane_forces)
 
 __all__ = ["BUILTIN_MJCF", "PACKAGE_MJCF", "resolve_mjcf", "load_rigid_spec", "build_rigid", "CoupledRigid", "Coupling",
@@ -383,6 +383,32 @@ def run_coupled(m, s, link_vert, site_id, site_body, site_root, link_extra, link
     return nstep
 
 
+@kernel
+def run_coupled_frames(m, s, link_vert, site_id, site_body, site_root, link_extra, link_force, link_vel,
+                       site_xpos, xipos, xfrc, cvel, subtree_com, qpos, xpos, xquat, m_ptr, d_ptr, rk4,
+                       stops, step0, xfrc_hist, qpos_hist, frame_pos, frame_scal, frame_body_pos,
+                       frame_body_quat):
+    """`run_coupled` to each step index of stops, capturing a frame at each (the
+    membrane's, and the bodies' poses from the MjData views xpos, xquat, world
+    excluded); returns the frames captured (fewer than stops when a step fails)."""
+    done = step0
+    for i in range(stops.shape[0]):
+        n = stops[i] - done
+        k = run_coupled(m, s, link_vert, site_id, site_body, site_root, link_extra, link_force, link_vel,
+                        site_xpos, xipos, xfrc, cvel, subtree_com, qpos, m_ptr, d_ptr, rk4, n, done,
+                        False, xfrc_hist, qpos_hist)
+        done += k
+        if k < n:
+            return i
+        capture_frame(m, s, frame_pos[i], frame_scal[i])
+        for b in range(frame_body_pos.shape[1]):
+            for a in range(3):
+                frame_body_pos[i, b, a] = xpos[b + 1, a]
+            for a in range(4):
+                frame_body_quat[i, b, a] = xquat[b + 1, a]
+    return stops.shape[0]
+
+
 class Coupling:
     """The rigid half of a `Simulation` whose scene has a `Rigid` part.
 
@@ -482,6 +508,31 @@ class Coupling:
                 step=int(step0 + done), vert=int(self.link_vert[0]) if self.link_vert.size else 0,
                 dt_suggested_s=0.5 * float(self.model.arrays.dt))
         return done
+
+    def run_frames(self, state: MembraneState, stops: np.ndarray, step0: int, frames: Frames) -> int:
+        """`run` to each step index of stops in one compiled call, capturing a frame at
+        each into frames; returns the frames captured. (Without wrench recording.)"""
+        sys = self.system
+        mjm, d = sys.model, sys.data
+        rk4 = int(mjm.opt.integrator) == _RK4
+        xh, qh = self._no_hist
+        site_xpos, xipos, xfrc, cvel, subtree_com, qpos = self._views
+        mj_time = d.time
+        count = run_coupled_frames(self.model.arrays, state, self.link_vert, sys.site_id, sys.site_body,
+                                   sys.site_root, self._extra, self._force, self._vel, site_xpos, xipos,
+                                   xfrc, cvel, subtree_com, qpos, d.xpos, d.xquat, mjm._address, d._address,
+                                   rk4, stops, int(step0), xh, qh, frames.pos, frames.scal, frames.body_pos,
+                                   frames.body_quat)
+        done = (int(stops[count - 1]) if count else int(step0)) - int(step0)
+        if done and d.time < mj_time + (done - 0.5) * mjm.opt.timestep:
+            frames.count = 0  # MuJoCo reset its data somewhere in these frames: none is to be trusted
+            raise SimulationDiverged(
+                f"MuJoCo's rigid state diverged between steps {step0} and {step0 + done} "
+                f"(t <= {state.scal[S_TIME]:.6g} s) and MuJoCo reset it; try a smaller dt_s, heavier or "
+                f"stiffer rigid bodies, or more damping", time_s=float(state.scal[S_TIME]),
+                step=int(step0 + done), vert=int(self.link_vert[0]) if self.link_vert.size else 0,
+                dt_suggested_s=0.5 * float(self.model.arrays.dt))
+        return count
 
     # -- records
     def wrench_history(self) -> np.ndarray:

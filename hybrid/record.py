@@ -49,6 +49,7 @@ from pathlib import Path
 import numpy as np
 
 from .kernel import jit
+from .simulation import F_PRESSURE, F_TIME, F_VOLUME
 
 __all__ = ["Recorder", "read", "region_colours", "SCALAR_CHANNELS", "MESH_EVERY_FRAME_MAX"]
 
@@ -827,7 +828,7 @@ class Recorder:
         n = plan["nvert"]
         self.nbody = len(plan["bodies"])
         self.flush_s = flush_s
-        self.frames = 0
+        self.frames_recorded = 0  # frames taken so far
         self._next_t = -math.inf
         self._closed = False
         self._fw = _FrameWriter(self.path, plan, chunk_size=chunk_size,
@@ -879,11 +880,53 @@ class Recorder:
             row[1:1 + len(SCALAR_CHANNELS)] = np.nan
             row[1], row[2], row[3] = sim.volume, sim.volume_rel_error, sim.pressure
         self._held = k + 1
-        self.frames += 1
+        self.frames_recorded += 1
         if self._held == len(buf.pos) or time.perf_counter() - self._last_flush > self.flush_s:
             self._hand_over()
 
     frame = __call__
+
+    def frames(self, sim, frames, trace=None) -> None:
+        """Record the frames a compiled call captured (`hybrid.simulation.Frames`,
+        `frames.count` of them; the trace's last rows are theirs), those `every_s`
+        apart: copied in blocks, handed over as the buffer fills."""
+        k = frames.count
+        if self._closed or not k:
+            return
+        t = frames.scal[:k, F_TIME]
+        pick = []
+        for j, tj in enumerate(t.tolist()):
+            if tj >= self._next_t - 1e-9 * self.every_s:
+                pick.append(j)
+                self._next_t = tj + self.every_s
+        pick = np.asarray(pick, np.int64)
+        row0 = len(trace.t_s) - k if trace is not None else 0
+        if trace is not None:
+            self._trace = trace
+        while len(pick):
+            buf, held = self._buf, self._held
+            part, pick = pick[:len(buf.pos) - held], pick[len(buf.pos) - held:]
+            end = held + len(part)
+            buf.number[held:end, 0] = t[part]
+            buf.pos[held:end] = frames.pos[part]
+            if self.nbody:
+                buf.xpos[held:end] = frames.body_pos[part]
+                buf.xquat[held:end] = frames.body_quat[part]
+            if trace is not None:
+                buf.trace_row[held:end] = row0 + part
+            else:
+                buf.trace_row[held:end] = -1
+                vol, v0 = frames.scal[part, F_VOLUME], sim.model.arrays.vol0
+                buf.number[held:end, 1:1 + len(SCALAR_CHANNELS)] = np.nan
+                buf.number[held:end, 1] = vol
+                buf.number[held:end, 2] = np.abs(vol - v0) / v0 if v0 else 0.0
+                buf.number[held:end, 3] = frames.scal[part, F_PRESSURE]
+            self._held = end
+            self.frames_recorded += len(part)
+            if end == len(buf.pos):
+                self._hand_over()
+        if time.perf_counter() - self._last_flush > self.flush_s:
+            self._hand_over()
 
     def _take_trace(self, buf, nframe: int) -> None:
         """The scalar channels of the frames held, from the runner's trace rows."""

@@ -1,9 +1,13 @@
 """Run a scene to the end and summarise it: `summary.json` and `breathing.png`.
 
-The runner is an observer: it steps the simulation in compiled chunks between
-frames (every `frame_dt_s` of simulated time), reads what it needs at each
-frame, and never changes the state. A run that fails or diverges still writes
-what it recorded up to the failure, with the error in the summary.
+The runner is an observer: it never changes the state. A frame is taken every
+`frame_dt_s` of simulated time; up to `FRAMES_PER_CALL` of them are stepped and
+captured in one compiled call (`Simulation.step_frames`: positions, volume,
+pressure, kinetic energy, the bodies' poses), and the trace is computed from them
+in whole arrays. With an observer that wants the simulation at each frame, or a
+scene with Python schedules, it steps frame by frame instead; both ways give the
+same trace to the bit. A run that fails or diverges still writes what it
+recorded up to the failure, with the error in the summary.
 """
 
 from __future__ import annotations
@@ -21,7 +25,7 @@ from .errors import HybridError
 from .model import Model
 from .schedule import Breathing, schedule_eval, stack_schedules
 from .scene import Muscle
-from .simulation import Simulation
+from .simulation import F_KE, F_PRESSURE, F_TIME, F_VOLUME, Simulation, capture_frame
 
 __all__ = ["Trace", "run", "write_outputs"]
 
@@ -49,6 +53,15 @@ def _apex_vertex(model: Model) -> int:
     return int(np.argmax(z))
 
 
+def _mean_z(pos: np.ndarray, vert: np.ndarray) -> np.ndarray:
+    """Mean z of the points vert in each frame of pos (nframe, nvert, 3), summed in
+    vert's order: the same figure whatever the number of frames."""
+    z = pos[:, vert[0], 2].copy()
+    for i in vert[1:]:
+        z += pos[:, i, 2]
+    return z / len(vert)
+
+
 def _breathing(model: Model):
     """The first muscle's schedule, and its breathing period if it has one."""
     for term in model.scene.forces:
@@ -57,12 +70,20 @@ def _breathing(model: Model):
     return None, None
 
 
+#: frames stepped in one compiled call by the runner (fewer for large meshes)
+FRAMES_PER_CALL = 100
+
+
 def run(sim: Simulation, duration_s: float, *, frame_dt_s: float = 0.01, progress: bool = False,
         observers=()) -> dict:
     """Run `sim` for `duration_s` and return the summary (see `summary keys`).
 
-    `observers`: callables `obs(sim, trace)` called at each frame, after the trace
-    has its values (e.g. `hybrid.record.Recorder`); they must not change the state.
+    `observers`: called at each frame after the trace has its values (e.g.
+    `hybrid.record.Recorder`); they must not change the state. An observer with a
+    `frames(sim, frames, trace)` method takes the frames a compiled call captured
+    (`hybrid.simulation.Frames`, `frames.count` of them, the trace's last rows);
+    otherwise it is called as `obs(sim, trace)` at each frame, the simulation then
+    stepped frame by frame.
 
     Returns a dict with the summary and the trace under "trace". On a
     HybridError the summary holds "status": "failed" and "error", and the
@@ -77,6 +98,7 @@ def run(sim: Simulation, duration_s: float, *, frame_dt_s: float = 0.01, progres
     rest = model.mesh.vert_pos
     apex_z0 = rest[apex, 2]
     rib_z0 = rest[link, 2].mean() if link.size else 0.0
+    v0 = model.arrays.vol0
     muscle_sched, breath = _breathing(model)
     # the muscle stiffness at each frame: its table stacked once, evaluated compiled
     muscle_table, muscle_fns = stack_schedules([muscle_sched]) if muscle_sched is not None else (None, [])
@@ -95,38 +117,72 @@ def run(sim: Simulation, duration_s: float, *, frame_dt_s: float = 0.01, progres
         ncycle = math.floor((duration_s - breath.onset_s) / breath.period_s + 1e-9)
         if ncycle >= 1:
             cycle_end_step = int(round((breath.onset_s + ncycle * breath.period_s) / h))
-    stops = sorted(set(list(range(frame_steps, nstep + 1, frame_steps)) + [nstep]
-                       + ([cycle_end_step] if cycle_end_step else [])))
+    stops = np.array(sorted(set(list(range(frame_steps, nstep + 1, frame_steps)) + [nstep]
+                                + ([cycle_end_step] if cycle_end_step else []))), np.int64)
     trace = Trace()
     rest_return_mm = None
     error = None
+    batch_observers = [o for o in observers if hasattr(o, "frames")]
+    per_frame = [o for o in observers if not hasattr(o, "frames")]
+    batched = sim.can_step_frames and not per_frame
+    per_call = max(1, min(FRAMES_PER_CALL, int(2e6 // (24 * model.nvert))))  # frames of at most ~2 MB
+    frames = sim.frames_buffer(per_call if batched else 1)
     sim.step(0)  # loads (or compiles, on a first run) the step, outside the timed run
-    wall0 = time.perf_counter()
+    if batched:
+        sim.step_frames(stops[:0], frames)
 
-    def record():
-        pos = sim.state.vert_pos
-        trace.t_s.append(sim.time)
-        trace.apex_descent_mm.append(-(pos[apex, 2] - apex_z0) * 1e3)
-        trace.rib_lift_mm.append((pos[link, 2].mean() - rib_z0) * 1e3 if link.size else 0.0)
-        vol, v0 = sim.volume, model.arrays.vol0
-        trace.volume_m3.append(vol)
-        trace.volume_rel_error.append(abs(vol - v0) / v0 if v0 else 0.0)  # = sim.volume_rel_error
-        trace.pressure_pa.append(sim.pressure)
-        trace.kinetic_energy_j.append(sim.kinetic_energy)
-        trace.muscle_n_per_m.append(muscle_at(sim.time))
-        for obs in observers:
+    def take(frames):
+        """The trace's rows of the frames captured, then the observers."""
+        k = frames.count
+        pos, scal = frames.pos[:k], frames.scal[:k]
+        trace.t_s.extend(scal[:, F_TIME].tolist())
+        trace.apex_descent_mm.extend((-(pos[:, apex, 2] - apex_z0) * 1e3).tolist())
+        trace.rib_lift_mm.extend(((_mean_z(pos, link) - rib_z0) * 1e3).tolist() if link.size else [0.0] * k)
+        vol = scal[:, F_VOLUME]
+        trace.volume_m3.extend(vol.tolist())
+        trace.volume_rel_error.extend((np.abs(vol - v0) / v0 if v0 else np.zeros(k)).tolist())
+        trace.pressure_pa.extend(scal[:, F_PRESSURE].tolist())
+        trace.kinetic_energy_j.extend(scal[:, F_KE].tolist())
+        trace.muscle_n_per_m.extend(muscle_at(t) for t in scal[:, F_TIME].tolist())
+        for obs in batch_observers:
+            obs.frames(sim, frames, trace)
+        for obs in per_frame:
             obs(sim, trace)
 
-    record()
+    def capture_now():
+        """The current state as one frame (the start, and frame-by-frame runs)."""
+        frames.count = 1
+        capture_frame(model.arrays, sim.state, frames.pos[0], frames.scal[0])
+        if frames.body_pos.shape[1]:
+            d = sim.mj_data
+            frames.body_pos[0] = d.xpos[1:]
+            frames.body_quat[0] = d.xquat[1:]
+        take(frames)
+
+    capture_now()
+    wall0 = time.perf_counter()
     bar = _Progress(nstep) if progress else None
     try:
-        for stop in stops:
-            sim.step(stop - sim.steps_done)
-            record()
-            if stop == cycle_end_step:
-                rest_return_mm = float(np.linalg.norm(sim.state.vert_pos - rest, axis=1).max() * 1e3)
+        i = 0
+        while i < len(stops):
+            batch = stops[i:i + (per_call if batched else 1)]
+            try:
+                if batched:
+                    sim.step_frames(batch, frames)
+                else:
+                    sim.step(int(batch[0]) - sim.steps_done)
+            finally:
+                if batched and frames.count:
+                    take(frames)
+            if not batched:
+                capture_now()
+            if cycle_end_step is not None and batch[0] <= cycle_end_step <= batch[-1]:
+                j = int(np.searchsorted(batch, cycle_end_step))
+                at = frames.pos[j] if batched else sim.state.vert_pos
+                rest_return_mm = float(np.linalg.norm(at - rest, axis=1).max() * 1e3)
+            i += len(batch)
             if bar:
-                bar.update(stop)
+                bar.update(int(batch[-1]))
     except HybridError as exc:
         error = exc
     finally:

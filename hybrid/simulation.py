@@ -244,6 +244,67 @@ def run_membrane(m, s, nstep, step0):
     return nstep
 
 
+# the numbers captured at each frame by the frame kernels (Frames.scal columns)
+F_TIME, F_VOLUME, F_PRESSURE, F_KE = range(4)
+
+
+@kernel
+def kinetic_energy_of(m, s):
+    """0.5 sum m v^2 over the integrated points (J)."""
+    ke = 0.0
+    vel = s.vert_vel
+    for i in range(vel.shape[0]):
+        if m.vert_free[i] > 0:
+            ke += m.vert_mass[i] * (vel[i, 0] * vel[i, 0] + vel[i, 1] * vel[i, 1] + vel[i, 2] * vel[i, 2])
+    return 0.5 * ke
+
+
+@kernel
+def capture_frame(m, s, pos_out, scal_out):
+    """The state's positions and numbers (F_* columns) into one frame's rows."""
+    pos = s.vert_pos
+    for i in range(pos.shape[0]):
+        for a in range(3):
+            pos_out[i, a] = pos[i, a]
+    scal_out[F_TIME] = s.scal[S_TIME]
+    scal_out[F_VOLUME] = face_volume(m.face_vert, m.vol_ref, pos)
+    scal_out[F_PRESSURE] = s.scal[S_PRESSURE]
+    scal_out[F_KE] = kinetic_energy_of(m, s)
+
+
+@kernel
+def run_membrane_frames(m, s, stops, step0, frame_pos, frame_scal):
+    """Step to each step index of stops, capturing a frame at each; returns the
+    frames captured (fewer than stops when a step fails; its status is in s.status)."""
+    done = step0
+    for i in range(stops.shape[0]):
+        n = stops[i] - done
+        k = run_membrane(m, s, n, done)
+        done += k
+        if k < n:
+            return i
+        capture_frame(m, s, frame_pos[i], frame_scal[i])
+    return stops.shape[0]
+
+
+class Frames:
+    """Frames captured in one compiled call (`Simulation.step_frames`): per frame,
+    pos (nvert, 3) m, scal (F_TIME s, F_VOLUME m^3, F_PRESSURE Pa, F_KE J), and the
+    rigid bodies' poses body_pos (nbody, 3) m, body_quat (nbody, 4) (w, x, y, z),
+    world excluded. `count`: the frames of the last call, also when it raised."""
+
+    def __init__(self, capacity: int, nvert: int, nbody: int = 0):
+        self.pos = np.zeros((capacity, nvert, 3))
+        self.scal = np.zeros((capacity, 4))
+        self.body_pos = np.zeros((capacity, nbody, 3))
+        self.body_quat = np.zeros((capacity, nbody, 4))
+        self.count = 0
+
+    @property
+    def capacity(self) -> int:
+        return len(self.pos)
+
+
 class Simulation:
     """A run of a model: `step(n)`, and the state as read-only views.
 
@@ -319,9 +380,7 @@ class Simulation:
         """Kinetic energy of the integrated points after the last step, constraints
         included (J). (The step's own figure, used by the divergence check, is
         taken before the projections and so counts velocity they remove.)"""
-        a, vel = self.model.arrays, self.state.vert_vel
-        free = a.vert_free > 0
-        return float(0.5 * np.dot(a.vert_mass[free], np.einsum("ij,ij->i", vel[free], vel[free])))
+        return float(kinetic_energy_of(self.model.arrays, self.state))
 
     @property
     def term_calls(self) -> dict:
@@ -358,6 +417,46 @@ class Simulation:
                 self._raise()
             s.scal[S_TIME] = t + m.dt
             self.steps_done += 1
+
+    @property
+    def can_step_frames(self) -> bool:
+        """Whether `step_frames` runs in one compiled call (no Python schedules, no
+        recorded wrench history)."""
+        return not self.model.python_schedules and (self.rigid is None or not self.rigid.record_wrenches)
+
+    def frames_buffer(self, capacity: int) -> Frames:
+        """A `Frames` of `capacity` frames for this model."""
+        nbody = self.mj_model.nbody - 1 if self.rigid is not None else 0
+        return Frames(capacity, self.model.nvert, nbody)
+
+    def step_frames(self, stops, frames: Frames) -> None:
+        """Step to each step index of `stops` (increasing, after `steps_done`) and
+        capture the state there into `frames` (`frames.count` of them), in one
+        compiled call (`can_step_frames`). Raises as `step` does, the frames before
+        the failing step captured."""
+        stops = np.ascontiguousarray(stops, dtype=np.int64)
+        frames.count = 0
+        if self.failed is not None:
+            raise self.failed
+        if not self.can_step_frames:
+            raise ValueError("step_frames: expected a model without Python schedules or wrench recording; "
+                             "use step()")
+        if len(stops) > frames.capacity:
+            raise ValueError(f"stops: expected at most {frames.capacity} (the frames' capacity), "
+                             f"received {len(stops)}")
+        if len(stops) and (stops[0] < self.steps_done or np.any(np.diff(stops) < 0)):
+            raise ValueError(f"stops: expected increasing step indices from {self.steps_done}, "
+                             f"received {stops[:3].tolist()}...")
+        m, s = self.model.arrays, self.state
+        if self.rigid is None:
+            count = run_membrane_frames(m, s, stops, self.steps_done, frames.pos, frames.scal)
+        else:
+            count = self.rigid.run_frames(s, stops, self.steps_done, frames)
+        frames.count = int(count)
+        if count < len(stops):
+            self.steps_done = int(s.status[1])
+            self._raise()
+        self.steps_done = int(stops[-1]) if len(stops) else self.steps_done
 
     def _python_schedules(self, t: float) -> None:
         h = self.model.arrays.dt
