@@ -92,7 +92,9 @@ def _cmd_render(args) -> int:
 
 def _cmd_view(args) -> int:
     from .render import view
-    view(args.scene, duration_s=args.duration)
+    shown = view(args.scene, duration_s=args.duration)
+    print(f"viewed {shown['frames']} frames to t = {shown['t_s']:.2f} s, the membrane drawn as "
+          f"{shown['membrane_geoms']} of its {shown['edges']} edges")
     return 0
 
 

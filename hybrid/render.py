@@ -355,14 +355,17 @@ def draw_membrane(scn, pos: np.ndarray, edges: np.ndarray, edge_rgba: np.ndarray
     return scn.ngeom
 
 
-def view(scene_arg: str | None, *, duration_s: float | None = None) -> None:
+def view(scene_arg: str | None, *, duration_s: float | None = None) -> dict:
     """Run a scene live in MuJoCo's passive viewer, the membrane drawn each frame as
-    its edges and points (user scene geoms) coloured by region; in real time, until the
-    window closes or the scene's duration ends. Raises HybridError where no display exists."""
+    its edges (user scene geoms) coloured by region; in real time, until the window
+    closes or the scene's duration ends. Returns {"frames": frames shown,
+    "membrane_geoms": geoms of the last one, "edges": the membrane's edges, "t_s":
+    simulated time}. Raises HybridError where no display exists."""
     if not has_display():
         raise HybridError("view: no display (DISPLAY and WAYLAND_DISPLAY are not set); "
                           "use `hybrid render` for pictures and video without one")
     import importlib
+    import threading
     import time as _time
 
     from . import rigid as _rigid  # the only module that imports mujoco
@@ -381,7 +384,10 @@ def view(scene_arg: str | None, *, duration_s: float | None = None) -> None:
     edges, edge_rgba = membrane_edges(sim.model)
     frame_steps = max(1, int(round(1 / 60 / sim.model.dt_s)))
     end = scene.duration_s if duration_s is None else duration_s
+    before = set(threading.enumerate())
+    frames = drawn = 0
     with viewer.launch_passive(m, d) as v:
+        window = [t for t in threading.enumerate() if t not in before]  # the viewer's own thread
         wall0 = _time.perf_counter()
         while v.is_running() and sim.time < end:
             try:
@@ -390,8 +396,14 @@ def view(scene_arg: str | None, *, duration_s: float | None = None) -> None:
                 print(f"hybrid: {exc}")
                 break
             with v.lock():
-                draw_membrane(v.user_scn, sim.vert_pos, edges, edge_rgba)
+                drawn = draw_membrane(v.user_scn, sim.vert_pos, edges, edge_rgba)
             v.sync()
+            frames += 1
             ahead = sim.time - (_time.perf_counter() - wall0)
             if ahead > 0:
                 _time.sleep(ahead)
+    # the window closes on the viewer's thread: wait for it, or the exit handlers close
+    # the display while it still renders (a crash at exit under software OpenGL)
+    for t in window:
+        t.join(timeout=10.0)
+    return {"frames": frames, "membrane_geoms": drawn, "edges": len(edges), "t_s": sim.time}

@@ -104,3 +104,38 @@ def test_the_viewer_draws_the_membrane_edges_as_user_geoms():
     i, j = edges[0]
     np.testing.assert_allclose(scn.geoms[0].pos, 0.5 * (sim.vert_pos[i] + sim.vert_pos[j]), atol=1e-6)
     np.testing.assert_allclose(scn.geoms[0].rgba, rgba[0], atol=1e-6)
+
+
+def test_view_runs_in_mujocos_viewer_on_a_virtual_display():
+    """`hybrid view` on an X display (Xvfb, software OpenGL): the window opens, the
+    membrane is drawn each frame, and the process ends cleanly (it crashed at exit,
+    exit -11, while the viewer's thread still rendered)."""
+    import os
+    import re
+    import shutil
+    import subprocess
+    import sys
+    import time
+
+    xvfb = shutil.which("Xvfb")
+    if xvfb is None:
+        pytest.skip("Xvfb is not installed (.ci/run installs it)")
+    number = 100 + os.getpid() % 800
+    server = subprocess.Popen([xvfb, f":{number}", "-screen", "0", "800x600x24", "-nolisten", "tcp"],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 20
+        while not os.path.exists(f"/tmp/.X11-unix/X{number}") and time.monotonic() < deadline:
+            time.sleep(0.05)
+        env = {**os.environ, "DISPLAY": f":{number}"}
+        for scene in ([], ["membrane_demo"]):  # the coupled trunk, and a membrane alone
+            done = subprocess.run([sys.executable, "-m", "hybrid", "view", *scene, "--duration", "0.3"],
+                                  env=env, capture_output=True, text=True, timeout=300)
+            assert done.returncode == 0, (scene, done.returncode, done.stderr[-2000:])
+            shown = re.search(r"viewed (\d+) frames .* drawn as (\d+) of its (\d+) edges", done.stdout)
+            assert shown, done.stdout
+            frames, drawn, edges = (int(g) for g in shown.groups())
+            assert frames >= 5 and drawn == edges > 0
+    finally:
+        server.terminate()
+        server.wait()
