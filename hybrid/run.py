@@ -241,7 +241,9 @@ def plot_trace(trace: Trace, path: Path, *, title: str = "") -> None:
     panels = [("rib_lift_mm", "rib elevation (mm)"), ("apex_descent_mm", "apex descent (mm)"),
               ("volume_rel_error", "|V - V0| / V0"), ("pressure_pa", "pressure (Pa)"),
               ("muscle_n_per_m", "muscle stiffness (N/m)")]
-    fig, axes = plt.subplots(len(panels), 1, figsize=(7, 9), sharex=True)
+    # fixed margins: tight_layout took half a second of every run
+    fig, axes = plt.subplots(len(panels), 1, figsize=(7, 9), sharex=True,
+                             gridspec_kw=dict(left=0.13, right=0.97, top=0.95, bottom=0.06, hspace=0.12))
     for ax, (key, label) in zip(axes, panels):
         y = a[key]
         if key == "volume_rel_error":
@@ -252,7 +254,6 @@ def plot_trace(trace: Trace, path: Path, *, title: str = "") -> None:
         ax.grid(alpha=0.3)
     axes[-1].set_xlabel("time (s)")
     axes[0].set_title(title)
-    fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
 
