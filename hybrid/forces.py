@@ -37,14 +37,17 @@ def ring_sums(vert_pos, ring_ptr, ring_vert, ring_closed, i):
     The cross sum is taken relative to N_1 and moved to G afterwards (for a
     closed fan it does not depend on the origin; for an open one it changes by
     (N_eta - N_1) x (G - N_1)). Returns (Gx, Gy, Gz, nx, ny, nz)."""
-    b, e = ring_ptr[i], ring_ptr[i + 1]
-    v = ring_vert[b]
+    # unsigned indices: numba then skips its negative-index wraparound, a
+    # fifth of the instructions of each neighbour
+    i = np.uint64(i)
+    b, e = np.uint64(ring_ptr[i]), np.uint64(ring_ptr[i + np.uint64(1)])
+    v = np.uint64(ring_vert[b])
     x1, y1, z1 = vert_pos[v, 0], vert_pos[v, 1], vert_pos[v, 2]
     sx = sy = sz = 0.0  # sum of N_j - N_1
     nx = ny = nz = 0.0
     ax = ay = az = 0.0  # previous N_j - N_1 (zero for j = 1)
-    for j in range(b + 1, e):
-        v = ring_vert[j]
+    for j in range(b + np.uint64(1), e):
+        v = np.uint64(ring_vert[j])
         bx, by, bz = vert_pos[v, 0] - x1, vert_pos[v, 1] - y1, vert_pos[v, 2] - z1
         sx += bx
         sy += by
@@ -53,7 +56,7 @@ def ring_sums(vert_pos, ring_ptr, ring_vert, ring_closed, i):
         ny += az * bx - ax * bz
         nz += ax * by - ay * bx
         ax, ay, az = bx, by, bz
-    inv = 1.0 / (e - b)
+    inv = 1.0 / float(e - b)
     gx, gy, gz = sx * inv, sy * inv, sz * inv  # G - N_1
     if not ring_closed[i]:
         nx += ay * gz - az * gy
