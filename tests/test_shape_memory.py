@@ -69,7 +69,7 @@ class ShapeMemoryForce:
         f = np.zeros((self.mesh.nvert, 3))
         m = self.mesh
         add_shape_memory(self.verts, self.stiff, self.coef, m.ring_ptr, m.ring_vert, m.ring_closed,
-                         np.ascontiguousarray(pos, dtype=np.float64), np.zeros((m.nvert, 6)), f)
+                         np.ascontiguousarray(pos, dtype=np.float64), np.zeros((m.nvert, 9)), f)
         return f
 
 
