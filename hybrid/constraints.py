@@ -15,7 +15,7 @@ import math
 import numpy as np
 from numba import prange
 
-from .kernel import kernel, kernel_twin
+from .kernel import CHUNK_VERTS, kernel, kernel_twin
 
 __all__ = ["face_volume", "ring_cross_sum", "volume_cubic", "solve_cubic_near_zero", "project_volume",
            "soft_volume_force", "apply_prescribed", "apply_keep_in",
@@ -33,13 +33,16 @@ def ring_cross_sum(ring_ptr, ring_vert, vec, i):
     N_j = vec[ring_vert[j]]: six times the volume gradient at i of a surface
     whose points are `vec` (for a closed fan the sum does not depend on the
     origin, so N_1 keeps it local and exact)."""
-    b, e = ring_ptr[i], ring_ptr[i + 1]
-    v = ring_vert[b]
+    # unsigned indices: numba then skips its negative-index wraparound, a
+    # fifth of the instructions of each neighbour
+    i = np.uint64(i)
+    b, e = np.uint64(ring_ptr[i]), np.uint64(ring_ptr[i + np.uint64(1)])
+    v = np.uint64(ring_vert[b])
     x1, y1, z1 = vec[v, 0], vec[v, 1], vec[v, 2]
     ax = ay = az = 0.0
     gx = gy = gz = 0.0
-    for j in range(b + 1, e):
-        v = ring_vert[j]
+    for j in range(b + np.uint64(1), e):
+        v = np.uint64(ring_vert[j])
         bx, by, bz = vec[v, 0] - x1, vec[v, 1] - y1, vec[v, 2] - z1
         gx += ay * bz - az * by
         gy += az * bx - ax * bz
@@ -64,20 +67,27 @@ def face_volume(face_vert, ref, vert_pos):
     return vol / 6.0
 
 
-def _cubic_terms(ring_ptr, ring_vert, ref, vert_pos, dirn, vert_acc):
-    """Per point: x_i . grad_i V(D) and D_i . grad_i V(D), times 6, into vert_acc[:, :2]."""
-    for i in prange(vert_pos.shape[0]):
-        gx, gy, gz = ring_cross_sum(ring_ptr, ring_vert, dirn, i)
-        vert_acc[i, 0] = ((vert_pos[i, 0] - ref[0]) * gx + (vert_pos[i, 1] - ref[1]) * gy
-                          + (vert_pos[i, 2] - ref[2]) * gz)
-        vert_acc[i, 1] = dirn[i, 0] * gx + dirn[i, 1] * gy + dirn[i, 2] * gz
+def _cubic_terms(ring_ptr, ring_vert, ref, vert_pos, dirn, chunk_acc):
+    """Sums of x_i . grad_i V(D) and D_i . grad_i V(D), times 6, over each
+    chunk of CHUNK_VERTS points, into chunk_acc[:, :2]."""
+    n = vert_pos.shape[0]
+    for c in prange((n + CHUNK_VERTS - 1) // CHUNK_VERTS):
+        s2 = s3 = 0.0
+        # unsigned indices: numba then skips its negative-index wraparound
+        for i in range(np.uint64(c * CHUNK_VERTS), np.uint64(min((c + 1) * CHUNK_VERTS, n))):
+            gx, gy, gz = ring_cross_sum(ring_ptr, ring_vert, dirn, i)
+            s2 += ((vert_pos[i, 0] - ref[0]) * gx + (vert_pos[i, 1] - ref[1]) * gy
+                   + (vert_pos[i, 2] - ref[2]) * gz)
+            s3 += dirn[i, 0] * gx + dirn[i, 1] * gy + dirn[i, 2] * gz
+        chunk_acc[c, 0] = s2
+        chunk_acc[c, 1] = s3
 
 
 _cubic_terms_serial, _cubic_terms_parallel = kernel_twin(_cubic_terms)
 
 
 @kernel
-def volume_cubic(ring_ptr, ring_vert, ref, vert_pos, dirn, vert_acc, out, parallel):
+def volume_cubic(ring_ptr, ring_vert, ref, vert_pos, dirn, chunk_acc, out, parallel):
     """Coefficients c2, c3 of V(X + phi D) - V(X) = c1 phi + c2 phi^2 + c3 phi^3.
 
     V is a symmetric cubic form T(X, X, X), so c2 = 3 T(X, D, D) = X . grad V(D)
@@ -88,17 +98,17 @@ def volume_cubic(ring_ptr, ring_vert, ref, vert_pos, dirn, vert_acc, out, parall
     six gathers per face; c1 = D . grad V(X) is left to the caller.
     # Model: ring_ptr, ring_vert, ref (3,) m
     # Data in: vert_pos (m), dirn (nvert, 3) (projection direction D)
-    # Scratch: vert_acc (nvert, 2)
+    # Scratch: chunk_acc (chunk_count(nvert), >= 2): the sums of each chunk of points
     # Data out: out (2,) = (c2, c3)
     """
     if parallel:
-        _cubic_terms_parallel(ring_ptr, ring_vert, ref, vert_pos, dirn, vert_acc)
+        _cubic_terms_parallel(ring_ptr, ring_vert, ref, vert_pos, dirn, chunk_acc)
     else:
-        _cubic_terms_serial(ring_ptr, ring_vert, ref, vert_pos, dirn, vert_acc)
+        _cubic_terms_serial(ring_ptr, ring_vert, ref, vert_pos, dirn, chunk_acc)
     c2 = c3 = 0.0
-    for i in range(vert_pos.shape[0]):
-        c2 += vert_acc[i, 0]
-        c3 += vert_acc[i, 1]
+    for c in range((vert_pos.shape[0] + CHUNK_VERTS - 1) // CHUNK_VERTS):
+        c2 += chunk_acc[c, 0]
+        c3 += chunk_acc[c, 1]
     out[0] = c2 / 6.0
     out[1] = c3 / 18.0
 
@@ -220,26 +230,33 @@ def solve_cubic_near_zero(c0, c1, c2, c3):
     return best, PROJ_OK
 
 
-def _volume_gather(ring_ptr, ring_vert, ref, vert_weight, vert_pos, grad, dirn, vert_acc):
-    """Per point: grad_i V (closed fan), D_i = w_i grad_i V, and the terms of
-    V and c1, (x_i . g_i, D_i . g_i), into vert_acc[:, :2]."""
+def _volume_gather(ring_ptr, ring_vert, ref, vert_weight, vert_pos, grad, dirn, chunk_acc):
+    """Per point: grad_i V (closed fan), D_i = w_i grad_i V; per chunk of
+    CHUNK_VERTS points, the sums of the terms of 3 V and c1, x_i . g_i and
+    D_i . g_i, into chunk_acc[:, :2]."""
     sixth = 1.0 / 6.0
-    for i in prange(vert_weight.shape[0]):
-        gx, gy, gz = ring_cross_sum(ring_ptr, ring_vert, vert_pos, i)
-        gx *= sixth
-        gy *= sixth
-        gz *= sixth
-        grad[i, 0] = gx
-        grad[i, 1] = gy
-        grad[i, 2] = gz
-        px, py, pz = vert_pos[i, 0] - ref[0], vert_pos[i, 1] - ref[1], vert_pos[i, 2] - ref[2]
-        w = vert_weight[i]
-        dx, dy, dz = w * gx, w * gy, w * gz
-        dirn[i, 0] = dx
-        dirn[i, 1] = dy
-        dirn[i, 2] = dz
-        vert_acc[i, 0] = px * gx + py * gy + pz * gz
-        vert_acc[i, 1] = dx * gx + dy * gy + dz * gz
+    n = vert_weight.shape[0]
+    for c in prange((n + CHUNK_VERTS - 1) // CHUNK_VERTS):
+        s_vol = s_c1 = 0.0
+        # unsigned indices: numba then skips its negative-index wraparound
+        for i in range(np.uint64(c * CHUNK_VERTS), np.uint64(min((c + 1) * CHUNK_VERTS, n))):
+            gx, gy, gz = ring_cross_sum(ring_ptr, ring_vert, vert_pos, i)
+            gx *= sixth
+            gy *= sixth
+            gz *= sixth
+            grad[i, 0] = gx
+            grad[i, 1] = gy
+            grad[i, 2] = gz
+            px, py, pz = vert_pos[i, 0] - ref[0], vert_pos[i, 1] - ref[1], vert_pos[i, 2] - ref[2]
+            w = vert_weight[i]
+            dx, dy, dz = w * gx, w * gy, w * gz
+            dirn[i, 0] = dx
+            dirn[i, 1] = dy
+            dirn[i, 2] = dz
+            s_vol += px * gx + py * gy + pz * gz
+            s_c1 += dx * gx + dy * gy + dz * gz
+        chunk_acc[c, 0] = s_vol
+        chunk_acc[c, 1] = s_c1
 
 
 def _volume_update(vert_weight, phi, dirn, h, vert_pos, vert_vel):
@@ -258,7 +275,7 @@ _volume_update_serial, _volume_update_parallel = kernel_twin(_volume_update)
 
 @kernel
 def project_volume(ring_ptr, ring_vert, ref, vol0, vert_weight, h, vert_pos, vert_vel, grad, dirn, cubic,
-                   vert_acc, parallel):
+                   chunk_acc, parallel):
     """Exact constant-volume projection (paper 4.2-4.3, DESIGN.md).
 
     X = X* + phi D, D_i = w_i grad_i V(X*), w_i = 1/m_i (0 for points that are
@@ -280,21 +297,22 @@ def project_volume(ring_ptr, ring_vert, ref, vol0, vert_weight, h, vert_pos, ver
     #        vert_weight (nvert,) 1/kg
     # Data in/out: vert_pos, vert_vel
     # Scratch: grad (volume gradient at X*, kept for the rib coupling), dirn, cubic (2,),
-    #          vert_acc (nvert, 2)
+    #          chunk_acc (chunk_count(nvert), >= 2): the sums of each chunk of points
     """
     if parallel:
-        _volume_gather_parallel(ring_ptr, ring_vert, ref, vert_weight, vert_pos, grad, dirn, vert_acc)
+        _volume_gather_parallel(ring_ptr, ring_vert, ref, vert_weight, vert_pos, grad, dirn, chunk_acc)
     else:
-        _volume_gather_serial(ring_ptr, ring_vert, ref, vert_weight, vert_pos, grad, dirn, vert_acc)
+        _volume_gather_serial(ring_ptr, ring_vert, ref, vert_weight, vert_pos, grad, dirn, chunk_acc)
     vol = 0.0
     c1 = 0.0
-    for i in range(vert_weight.shape[0]):
-        vol += vert_acc[i, 0]
-        c1 += vert_acc[i, 1]
+    # the chunks' sums in order: both builds agree to the last bit
+    for c in range((vert_pos.shape[0] + CHUNK_VERTS - 1) // CHUNK_VERTS):
+        vol += chunk_acc[c, 0]
+        c1 += chunk_acc[c, 1]
     c0 = vol / 3.0 - vol0
     if not (c1 > 0.0):
         return 0.0, PROJ_NO_GRADIENT
-    volume_cubic(ring_ptr, ring_vert, ref, vert_pos, dirn, vert_acc, cubic, parallel)
+    volume_cubic(ring_ptr, ring_vert, ref, vert_pos, dirn, chunk_acc, cubic, parallel)
     phi, status = solve_cubic_near_zero(c0, c1, cubic[0], cubic[1])
     if status != PROJ_OK:
         return 0.0, status
@@ -306,7 +324,7 @@ def project_volume(ring_ptr, ring_vert, ref, vol0, vert_weight, h, vert_pos, ver
 
 
 @kernel
-def soft_volume_force(ring_ptr, ring_vert, ref, vol0, stiff, vert_pos, grad, cubic, vert_acc, vert_force):
+def soft_volume_force(ring_ptr, ring_vert, ref, vol0, stiff, vert_pos, grad, cubic, chunk_acc, vert_force):
     """Compressibility (paper 6.2): attraction toward the volume-satisfying positions.
 
     phi solves V(X + phi grad V(X)) = V0; each point is pulled toward its
@@ -314,7 +332,7 @@ def soft_volume_force(ring_ptr, ring_vert, ref, vol0, stiff, vert_pos, grad, cub
     pressure p = k phi (Pa). Returns p.
     # Model: ring_ptr, ring_vert (closed fans), ref, vol0 m^3, stiff N/m
     # Data in: vert_pos
-    # Data out: vert_force; scratch grad, cubic, vert_acc
+    # Data out: vert_force; scratch grad, cubic, chunk_acc (chunk_count(nvert), >= 2)
     """
     vol = 0.0
     c1 = 0.0
@@ -328,7 +346,7 @@ def soft_volume_force(ring_ptr, ring_vert, ref, vol0, stiff, vert_pos, grad, cub
         grad[i, 2] = gz
         vol += (vert_pos[i, 0] - ref[0]) * gx + (vert_pos[i, 1] - ref[1]) * gy + (vert_pos[i, 2] - ref[2]) * gz
         c1 += gx * gx + gy * gy + gz * gz
-    volume_cubic(ring_ptr, ring_vert, ref, vert_pos, grad, vert_acc, cubic, False)
+    volume_cubic(ring_ptr, ring_vert, ref, vert_pos, grad, chunk_acc, cubic, False)
     phi, status = solve_cubic_near_zero(vol / 3.0 - vol0, c1, cubic[0], cubic[1])
     if status != PROJ_OK:
         return np.nan

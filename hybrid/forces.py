@@ -23,7 +23,8 @@ from .errors import MeshError
 __all__ = [
     "shape_memory_frame_coef", "muscle_pairs",
     "set_pointwise", "add_applied", "add_attraction",
-    "add_shape_memory", "add_shape_memory_parallel", "add_mass_spring", "add_muscle",
+    "add_shape_memory", "add_shape_memory_parallel", "shape_memory_frames", "shape_memory_frames_parallel",
+    "shape_memory_force", "add_mass_spring", "add_muscle",
 ]
 
 
@@ -32,19 +33,23 @@ __all__ = [
 @kernel(inline="always")
 def ring_sums(vert_pos, ring_ptr, ring_vert, ring_closed, i):
     """First half of the local frame of vertex i (DESIGN.md), one pass over its ring:
-    G, the mean of the neighbours N_1..N_eta (m), and the unnormalised normal,
-    the sum of (N_j - G) x (N_j+1 - G) over the fan's consecutive pairs (m^2).
+    G, the mean of the neighbours N_1..N_eta (m), the unnormalised normal,
+    the sum of (N_j - G) x (N_j+1 - G) over the fan's consecutive pairs (m^2),
+    and N_1 - G (m), which the second half needs.
     The cross sum is taken relative to N_1 and moved to G afterwards (for a
     closed fan it does not depend on the origin; for an open one it changes by
-    (N_eta - N_1) x (G - N_1)). Returns (Gx, Gy, Gz, nx, ny, nz)."""
-    b, e = ring_ptr[i], ring_ptr[i + 1]
-    v = ring_vert[b]
+    (N_eta - N_1) x (G - N_1)). Returns (Gx, Gy, Gz, nx, ny, nz, dx, dy, dz)."""
+    # unsigned indices: numba then skips its negative-index wraparound, a
+    # fifth of the instructions of each neighbour
+    i = np.uint64(i)
+    b, e = np.uint64(ring_ptr[i]), np.uint64(ring_ptr[i + np.uint64(1)])
+    v = np.uint64(ring_vert[b])
     x1, y1, z1 = vert_pos[v, 0], vert_pos[v, 1], vert_pos[v, 2]
     sx = sy = sz = 0.0  # sum of N_j - N_1
     nx = ny = nz = 0.0
     ax = ay = az = 0.0  # previous N_j - N_1 (zero for j = 1)
-    for j in range(b + 1, e):
-        v = ring_vert[j]
+    for j in range(b + np.uint64(1), e):
+        v = np.uint64(ring_vert[j])
         bx, by, bz = vert_pos[v, 0] - x1, vert_pos[v, 1] - y1, vert_pos[v, 2] - z1
         sx += bx
         sy += by
@@ -53,24 +58,26 @@ def ring_sums(vert_pos, ring_ptr, ring_vert, ring_closed, i):
         ny += az * bx - ax * bz
         nz += ax * by - ay * bx
         ax, ay, az = bx, by, bz
-    inv = 1.0 / (e - b)
+    inv = 1.0 / float(e - b)
     gx, gy, gz = sx * inv, sy * inv, sz * inv  # G - N_1
     if not ring_closed[i]:
         nx += ay * gz - az * gy
         ny += az * gx - ax * gz
         nz += ax * gy - ay * gx
-    return gx + x1, gy + y1, gz + z1, nx, ny, nz
+    gx += x1
+    gy += y1
+    gz += z1
+    return gx, gy, gz, nx, ny, nz, x1 - gx, y1 - gy, z1 - gz
 
 
 @kernel(inline="always")
-def frame_axes(vert_pos, first, gx, gy, gz, nx, ny, nz):
-    """Second half: unit n, t1 = unit tangential part of N_1 - G, t2 = n x t1,
-    from `ring_sums` and the first neighbour's index. Returns (t1, t2, n) as 9 floats."""
+def frame_axes(dx, dy, dz, nx, ny, nz):
+    """Second half: unit n, t1 = unit tangential part of d = N_1 - G, t2 = n x t1,
+    from `ring_sums`. Returns (t1, t2, n) as 9 floats."""
     r = 1.0 / math.sqrt(nx * nx + ny * ny + nz * nz)
     nx *= r
     ny *= r
     nz *= r
-    dx, dy, dz = vert_pos[first, 0] - gx, vert_pos[first, 1] - gy, vert_pos[first, 2] - gz
     dn = dx * nx + dy * ny + dz * nz
     tx, ty, tz = dx - dn * nx, dy - dn * ny, dz - dn * nz
     r = 1.0 / math.sqrt(tx * tx + ty * ty + tz * tz)
@@ -84,9 +91,9 @@ def frame_axes(vert_pos, first, gx, gy, gz, nx, ny, nz):
 def ring_frame(vert_pos, ring_ptr, ring_vert, ring_closed, i):
     """The local frame of vertex i from its neighbour ring only: (G, t1, t2, n)
     as 12 floats and |cross sum| (m^2), 0 when the frame is degenerate."""
-    gx, gy, gz, nx, ny, nz = ring_sums(vert_pos, ring_ptr, ring_vert, ring_closed, i)
+    gx, gy, gz, nx, ny, nz, dx, dy, dz = ring_sums(vert_pos, ring_ptr, ring_vert, ring_closed, i)
     nn = math.sqrt(nx * nx + ny * ny + nz * nz)
-    tx, ty, tz, ux, uy, uz, nx, ny, nz = frame_axes(vert_pos, ring_vert[ring_ptr[i]], gx, gy, gz, nx, ny, nz)
+    tx, ty, tz, ux, uy, uz, nx, ny, nz = frame_axes(dx, dy, dz, nx, ny, nz)
     return gx, gy, gz, tx, ty, tz, ux, uy, uz, nx, ny, nz, nn
 
 
@@ -206,40 +213,77 @@ def add_attraction(att_vert, att_stiff, att_target, att_sched, sched_val, vert_p
             vert_force[i, a] += c * (att_target[k, a] + sched_val[s, a] - vert_pos[i, a])
 
 
-def _add_shape_memory(sm_vert, sm_stiff, sm_coef, ring_ptr, ring_vert, ring_closed, vert_pos, sm_sums,
-                     vert_force):
-    """Local shape memory (paper 3.4): F_i += k_i (P_ideal - P_i).
-
-    P_ideal = G + alpha t1 + beta t2 + gamma n in the frame of the current
-    neighbour ring (`ring_frame`), so the force vanishes at rest and turns
-    with any rigid motion of the surface. No reaction on the neighbours: the
-    force is not conservative. Two passes, the ring gathers then the
-    normalisations: a third faster than one pass, which stalls on the
-    dependent square roots and divisions of each point.
-    # Model: sm_vert (n,) int32, sm_stiff (n,) N/m, sm_coef (n, 3) m, ring_*
-    # Data in: vert_pos (nvert, 3) m
-    # Scratch: sm_sums (n, 6): G (m) and the unnormalised normal (m^2)
-    # Data out: vert_force
-    Compiled twice (hybrid.kernel): `add_shape_memory` and `add_shape_memory_parallel`.
+def _shape_memory_frames(sm_vert, ring_ptr, ring_vert, ring_closed, vert_pos, sm_sums):
+    """First pass of the local shape memory: the ring gathers of `ring_sums`,
+    G, the unnormalised normal and N_1 - G, into sm_sums (n, 9). The second
+    pass (`shape_memory_force`) normalises them: kept apart, the gathers do
+    not stall on the dependent square roots and divisions of each point.
+    # Model: sm_vert (n,) int32, ring_*   # Data in: vert_pos (nvert, 3) m
+    # Data out: sm_sums (n, 9) m, m^2, m
     """
     for k in prange(sm_vert.shape[0]):
-        gx, gy, gz, nx, ny, nz = ring_sums(vert_pos, ring_ptr, ring_vert, ring_closed, sm_vert[k])
+        gx, gy, gz, nx, ny, nz, dx, dy, dz = ring_sums(vert_pos, ring_ptr, ring_vert, ring_closed, sm_vert[k])
         sm_sums[k, 0] = gx
         sm_sums[k, 1] = gy
         sm_sums[k, 2] = gz
         sm_sums[k, 3] = nx
         sm_sums[k, 4] = ny
         sm_sums[k, 5] = nz
+        sm_sums[k, 6] = dx
+        sm_sums[k, 7] = dy
+        sm_sums[k, 8] = dz
+
+
+shape_memory_frames, shape_memory_frames_parallel = kernel_twin(_shape_memory_frames)
+
+
+@kernel(inline="always")
+def shape_memory_force(sm_stiff, sm_coef, sm_sums, k, px, py, pz):
+    """Second pass, one point: k (P_ideal - P) (N) for shape-memory point k at P (m),
+    P_ideal = G + alpha t1 + beta t2 + gamma n from its `shape_memory_frames` row."""
+    gx, gy, gz = sm_sums[k, 0], sm_sums[k, 1], sm_sums[k, 2]
+    tx, ty, tz, ux, uy, uz, nx, ny, nz = frame_axes(sm_sums[k, 6], sm_sums[k, 7], sm_sums[k, 8],
+                                                    sm_sums[k, 3], sm_sums[k, 4], sm_sums[k, 5])
+    al, be, ga = sm_coef[k, 0], sm_coef[k, 1], sm_coef[k, 2]
+    c = sm_stiff[k]
+    return (c * (gx + al * tx + be * ux + ga * nx - px), c * (gy + al * ty + be * uy + ga * ny - py),
+            c * (gz + al * tz + be * uz + ga * nz - pz))
+
+
+def _add_shape_memory(sm_vert, sm_stiff, sm_coef, ring_ptr, ring_vert, ring_closed, vert_pos, sm_sums,
+                      vert_force):
+    """Local shape memory (paper 3.4): F_i += k_i (P_ideal - P_i).
+
+    P_ideal = G + alpha t1 + beta t2 + gamma n in the frame of the current
+    neighbour ring (`ring_frame`), so the force vanishes at rest and turns
+    with any rigid motion of the surface. No reaction on the neighbours: the
+    force is not conservative. Two passes, the ring gathers then the
+    normalisations (`shape_memory_frames`, `shape_memory_force`); the step
+    fuses the second pass with its other per-point work (hybrid.simulation).
+    # Model: sm_vert (n,) int32, sm_stiff (n,) N/m, sm_coef (n, 3) m, ring_*
+    # Data in: vert_pos (nvert, 3) m
+    # Scratch: sm_sums (n, 9)
+    # Data out: vert_force
+    Compiled twice (hybrid.kernel): `add_shape_memory` and `add_shape_memory_parallel`.
+    """
     for k in prange(sm_vert.shape[0]):
-        i = sm_vert[k]
-        gx, gy, gz = sm_sums[k, 0], sm_sums[k, 1], sm_sums[k, 2]
-        tx, ty, tz, ux, uy, uz, nx, ny, nz = frame_axes(vert_pos, ring_vert[ring_ptr[i]], gx, gy, gz,
-                                                        sm_sums[k, 3], sm_sums[k, 4], sm_sums[k, 5])
-        al, be, ga = sm_coef[k, 0], sm_coef[k, 1], sm_coef[k, 2]
-        c = sm_stiff[k]
-        vert_force[i, 0] += c * (gx + al * tx + be * ux + ga * nx - vert_pos[i, 0])
-        vert_force[i, 1] += c * (gy + al * ty + be * uy + ga * ny - vert_pos[i, 1])
-        vert_force[i, 2] += c * (gz + al * tz + be * uz + ga * nz - vert_pos[i, 2])
+        gx, gy, gz, nx, ny, nz, dx, dy, dz = ring_sums(vert_pos, ring_ptr, ring_vert, ring_closed, sm_vert[k])
+        sm_sums[k, 0] = gx
+        sm_sums[k, 1] = gy
+        sm_sums[k, 2] = gz
+        sm_sums[k, 3] = nx
+        sm_sums[k, 4] = ny
+        sm_sums[k, 5] = nz
+        sm_sums[k, 6] = dx
+        sm_sums[k, 7] = dy
+        sm_sums[k, 8] = dz
+    for k in prange(sm_vert.shape[0]):
+        i = np.uint64(sm_vert[k])
+        fx, fy, fz = shape_memory_force(sm_stiff, sm_coef, sm_sums, k, vert_pos[i, 0], vert_pos[i, 1],
+                                        vert_pos[i, 2])
+        vert_force[i, 0] += fx
+        vert_force[i, 1] += fy
+        vert_force[i, 2] += fz
 
 
 add_shape_memory, add_shape_memory_parallel = kernel_twin(_add_shape_memory)

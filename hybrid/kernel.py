@@ -8,6 +8,9 @@ passes that dominate large meshes are also compiled a second time from the
 same source with `parallel=True` (their `prange` loops then run on all
 cores); the model picks that build when the mesh has at least
 `PARALLEL_MIN_VERTS` points, below which the threads cost more than they save.
+Passes that also sum over the points take them in chunks of `CHUNK_VERTS`
+consecutive points, then add the chunks' sums in order, in both builds: the
+two agree to the last bit, whatever the number of threads.
 
 Compiled code is cached on disk in a folder named after a hash of hybrid's
 own sources: numba checks only a function's own file when it reuses a cached
@@ -27,7 +30,8 @@ from pathlib import Path
 import numba
 from numba import njit
 
-__all__ = ["CACHE_DIR", "FAST", "FLAGS", "jit", "kernel", "kernel_twin", "PARALLEL_MIN_VERTS", "use_parallel"]
+__all__ = ["CACHE_DIR", "FAST", "FLAGS", "jit", "kernel", "kernel_twin", "CHUNK_VERTS", "PARALLEL_MIN_VERTS",
+           "use_parallel", "chunk_count"]
 
 # Fast-math without the flags that assume no NaN or infinity: fused
 # multiply-adds and reciprocals, but the divergence check still sees NaN.
@@ -35,6 +39,9 @@ FAST = {"contract", "arcp", "nsz", "afn"}
 # nogil: a compiled step lets other Python threads (the recorder) run meanwhile
 FLAGS = dict(cache=True, error_model="numpy", _nrt=False, fastmath=FAST, nogil=True)
 PARALLEL_MIN_VERTS = 2000
+# points per chunk of the passes that sum over the points: long enough to
+# cost nothing per chunk, short enough that the threads share evenly
+CHUNK_VERTS = 64
 
 
 def _cache_dir() -> str:
@@ -142,6 +149,11 @@ def kernel_twin(fn, **extra):
     par.__doc__ = fn.__doc__
     with _our_cache():
         return njit(**FLAGS, **extra)(fn), njit(**FLAGS, parallel=True, **extra)(par)
+
+
+def chunk_count(nvert: int) -> int:
+    """How many chunks of `CHUNK_VERTS` points a mesh of nvert points has."""
+    return (nvert + CHUNK_VERTS - 1) // CHUNK_VERTS
 
 
 def use_parallel(nvert: int) -> bool:
