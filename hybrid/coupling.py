@@ -498,16 +498,21 @@ class Coupling:
         if record:
             self._xfrc_hist.append(xh[:done])
             self._qpos_hist.append(qh[:done])
+        self._check_not_reset(state, mj_time, step0, done)
+        return done
+
+    def _check_not_reset(self, state: MembraneState, mj_time: float, step0: int, done: int) -> None:
+        """Raise if MuJoCo's clock ran fewer than `done` steps since mj_time: MuJoCo found
+        a non-finite or huge qpos/qvel/qacc and reset its data (time 0, qpos0), so the
+        ribs jumped back and the run is not to be trusted any more."""
+        mjm, d = self.system.model, self.system.data
         if done and d.time < mj_time + (done - 0.5) * mjm.opt.timestep:
-            # MuJoCo found a non-finite or huge qpos/qvel/qacc and reset its data (time
-            # 0, qpos0): the ribs jumped back; the run is not to be trusted any more
             raise SimulationDiverged(
                 f"MuJoCo's rigid state diverged between steps {step0} and {step0 + done} "
                 f"(t <= {state.scal[S_TIME]:.6g} s) and MuJoCo reset it; try a smaller dt_s, heavier or "
                 f"stiffer rigid bodies, or more damping", time_s=float(state.scal[S_TIME]),
                 step=int(step0 + done), vert=int(self.link_vert[0]) if self.link_vert.size else 0,
                 dt_suggested_s=0.5 * float(self.model.arrays.dt))
-        return done
 
     def run_frames(self, state: MembraneState, stops: np.ndarray, step0: int, frames: Frames) -> int:
         """`run` to each step index of stops in one compiled call, capturing a frame at
@@ -523,15 +528,8 @@ class Coupling:
                                    xfrc, cvel, subtree_com, qpos, d.xpos, d.xquat, mjm._address, d._address,
                                    rk4, stops, int(step0), xh, qh, frames.pos, frames.scal, frames.body_pos,
                                    frames.body_quat)
-        done = (int(stops[count - 1]) if count else int(step0)) - int(step0)
-        if done and d.time < mj_time + (done - 0.5) * mjm.opt.timestep:
-            frames.count = 0  # MuJoCo reset its data somewhere in these frames: none is to be trusted
-            raise SimulationDiverged(
-                f"MuJoCo's rigid state diverged between steps {step0} and {step0 + done} "
-                f"(t <= {state.scal[S_TIME]:.6g} s) and MuJoCo reset it; try a smaller dt_s, heavier or "
-                f"stiffer rigid bodies, or more damping", time_s=float(state.scal[S_TIME]),
-                step=int(step0 + done), vert=int(self.link_vert[0]) if self.link_vert.size else 0,
-                dt_suggested_s=0.5 * float(self.model.arrays.dt))
+        # a reset anywhere in these frames makes none of them trustworthy (frames.count stays 0)
+        self._check_not_reset(state, mj_time, step0, (int(stops[count - 1]) if count else int(step0)) - int(step0))
         return count
 
     # -- records

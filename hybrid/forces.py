@@ -22,7 +22,7 @@ from .errors import MeshError
 
 __all__ = [
     "shape_memory_frame_coef", "muscle_pairs",
-    "set_pointwise", "add_applied", "add_attraction",
+    "add_applied", "add_attraction",
     "add_shape_memory", "add_shape_memory_parallel", "shape_memory_frames", "shape_memory_frames_parallel",
     "shape_memory_force", "add_mass_spring", "add_muscle",
 ]
@@ -157,33 +157,6 @@ def muscle_pairs(vert_pos, ring_ptr, ring_vert, verts, *, toward=None, axis=None
 # ---------------------------------------------------------------- kernels
 
 @kernel
-def set_pointwise(vert_mass, vert_free, accel, gravity_on, damp_coef, damping_on, vert_vel, vert_force):
-    """Start the force sum with the terms that need only the point itself:
-    gravity F = m g (integrated points) and viscous damping F = -c v (paper
-    eq. 4). One pass sets vert_force, so it needs no separate clearing.
-    # Model: vert_mass (nvert,) kg, vert_free (nvert,) uint8, accel (3,) m/s^2,
-    #        damp_coef (nvert,) N s/m; gravity_on, damping_on: bool
-    # Data in: vert_vel (nvert, 3) m/s
-    # Data out: vert_force (nvert, 3) N
-    """
-    for i in range(vert_mass.shape[0]):
-        fx = fy = fz = 0.0
-        if gravity_on and vert_free[i]:
-            m = vert_mass[i]
-            fx = m * accel[0]
-            fy = m * accel[1]
-            fz = m * accel[2]
-        if damping_on:
-            c = damp_coef[i]
-            fx -= c * vert_vel[i, 0]
-            fy -= c * vert_vel[i, 1]
-            fz -= c * vert_vel[i, 2]
-        vert_force[i, 0] = fx
-        vert_force[i, 1] = fy
-        vert_force[i, 2] = fz
-
-
-@kernel
 def add_applied(app_vert, app_sched, sched_val, vert_force):
     """F_i += f_s(t): a force per vertex from schedule s.
     # Model: app_vert (n,) int32, app_sched (n,) int64
@@ -213,6 +186,21 @@ def add_attraction(att_vert, att_stiff, att_target, att_sched, sched_val, vert_p
             vert_force[i, a] += c * (att_target[k, a] + sched_val[s, a] - vert_pos[i, a])
 
 
+@kernel(inline="always")
+def _store_ring_sums(sm_vert, ring_ptr, ring_vert, ring_closed, vert_pos, sm_sums, k):
+    """Row k of sm_sums: `ring_sums` of shape-memory point sm_vert[k]."""
+    gx, gy, gz, nx, ny, nz, dx, dy, dz = ring_sums(vert_pos, ring_ptr, ring_vert, ring_closed, sm_vert[k])
+    sm_sums[k, 0] = gx
+    sm_sums[k, 1] = gy
+    sm_sums[k, 2] = gz
+    sm_sums[k, 3] = nx
+    sm_sums[k, 4] = ny
+    sm_sums[k, 5] = nz
+    sm_sums[k, 6] = dx
+    sm_sums[k, 7] = dy
+    sm_sums[k, 8] = dz
+
+
 def _shape_memory_frames(sm_vert, ring_ptr, ring_vert, ring_closed, vert_pos, sm_sums):
     """First pass of the local shape memory: the ring gathers of `ring_sums`,
     G, the unnormalised normal and N_1 - G, into sm_sums (n, 9). The second
@@ -222,16 +210,7 @@ def _shape_memory_frames(sm_vert, ring_ptr, ring_vert, ring_closed, vert_pos, sm
     # Data out: sm_sums (n, 9) m, m^2, m
     """
     for k in prange(sm_vert.shape[0]):
-        gx, gy, gz, nx, ny, nz, dx, dy, dz = ring_sums(vert_pos, ring_ptr, ring_vert, ring_closed, sm_vert[k])
-        sm_sums[k, 0] = gx
-        sm_sums[k, 1] = gy
-        sm_sums[k, 2] = gz
-        sm_sums[k, 3] = nx
-        sm_sums[k, 4] = ny
-        sm_sums[k, 5] = nz
-        sm_sums[k, 6] = dx
-        sm_sums[k, 7] = dy
-        sm_sums[k, 8] = dz
+        _store_ring_sums(sm_vert, ring_ptr, ring_vert, ring_closed, vert_pos, sm_sums, k)
 
 
 shape_memory_frames, shape_memory_frames_parallel = kernel_twin(_shape_memory_frames)
@@ -267,16 +246,7 @@ def _add_shape_memory(sm_vert, sm_stiff, sm_coef, ring_ptr, ring_vert, ring_clos
     Compiled twice (hybrid.kernel): `add_shape_memory` and `add_shape_memory_parallel`.
     """
     for k in prange(sm_vert.shape[0]):
-        gx, gy, gz, nx, ny, nz, dx, dy, dz = ring_sums(vert_pos, ring_ptr, ring_vert, ring_closed, sm_vert[k])
-        sm_sums[k, 0] = gx
-        sm_sums[k, 1] = gy
-        sm_sums[k, 2] = gz
-        sm_sums[k, 3] = nx
-        sm_sums[k, 4] = ny
-        sm_sums[k, 5] = nz
-        sm_sums[k, 6] = dx
-        sm_sums[k, 7] = dy
-        sm_sums[k, 8] = dz
+        _store_ring_sums(sm_vert, ring_ptr, ring_vert, ring_closed, vert_pos, sm_sums, k)
     for k in prange(sm_vert.shape[0]):
         i = np.uint64(sm_vert[k])
         fx, fy, fz = shape_memory_force(sm_stiff, sm_coef, sm_sums, k, vert_pos[i, 0], vert_pos[i, 1],
