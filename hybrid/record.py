@@ -1,30 +1,31 @@
-"""Record a run to MCAP, in Foxglove's well-known schemas (JSON encoding), and read it back.
+"""Record a run to MCAP, in Foxglove's well-known schemas (protobuf encoding), and read it back.
 
 `hybrid run` writes `DIR/run.mcap` through a `Recorder`, an observer of the runner
 (`hybrid.run.run(..., observers=[rec])`) called at each frame. Channels:
 
-- `/membrane/points`   foxglove.PointCloud, every frame: the membrane's points as
-  float32 x, y, z (exact to float32) and their region colour (uint8 r, g, b, a);
 - `/membrane/mesh`     foxglove.SceneUpdate: the membrane as one TriangleListPrimitive
-  with per-vertex region colours; every frame for meshes up to `MESH_EVERY_FRAME_MAX`
-  points, every `mesh_every` frames above (the points channel carries every frame);
+  with per-vertex region colours, its points as exact doubles; every frame for
+  meshes up to `MESH_EVERY_FRAME_MAX` points, every `mesh_every` frames above;
+- `/membrane/points`   foxglove.PointCloud, every frame, for the larger meshes only:
+  the points as float32 x, y, z and their region colour (uint8 r, g, b, a);
 - `/rigid/transforms`  foxglove.FrameTransforms: each MuJoCo body's pose (`xpos`,
   `xquat`) as the frame `world` -> body name (scenes with a rigid part);
 - `/rigid/geoms`       foxglove.SceneUpdate, once: each body's geoms in its own frame
   (capsules and cylinders as cylinders, spheres, boxes), frame-locked;
-- scalars, `hybrid.Scalar` {"t": s, "value": v}: `/volume` (m^3), `/volume_rel_error`,
-  `/pressure` (Pa), `/rib_elevation` (mm), `/apex_descent` (mm), `/muscle_stiffness`
-  (N/m), `/kinetic_energy` (J), as far as the observer is given them.
+- scalars, `hybrid.Scalar` {double t (s); double value}: `/volume` (m^3),
+  `/volume_rel_error`, `/pressure` (Pa), `/rib_elevation` (mm), `/apex_descent` (mm),
+  `/muscle_stiffness` (N/m), `/kinetic_energy` (J), as far as the observer is given them.
 
-Log times are the simulated time in nanoseconds (t = 0 at the start). The model's
+Log times are the simulated time in nanoseconds (t = 0 at the start). Each schema is
+a protobuf FileDescriptorSet (foxglove's from `foxglove-schemas-protobuf`). The model's
 description (faces, region of each point, colours, geoms) is an MCAP metadata record
 named "hybrid", so that `hybrid render` needs nothing but the file.
 
 Cost: the run's thread only copies each frame (positions, body poses, its row in
 the runner's trace). A chunk's worth of frames (about 1 MiB) goes to a writer thread
-that encodes every message of every frame in one compiled pass (numbers exact, with
-17 significant digits at most; the triangle list's points to 1 um; the point cloud
-in base64), then compresses (zstd) and writes the chunk. The encoder and the
+that encodes every message of every frame in one compiled pass (protobuf: numbers
+are copied as their 8 bytes, the fields that do not change are encoded once), then
+compresses (zstd at a fast level) and writes the chunk. The encoder and the
 compressor release the GIL, so the run goes on meanwhile on another core.
 `hybrid bench` times the breathing run with and without the recording.
 
@@ -37,7 +38,7 @@ interrupt. `read` accepts unfinished files (no summary, truncated last record).
 
 from __future__ import annotations
 
-import base64
+import functools
 import json
 import math
 import queue
@@ -73,8 +74,6 @@ _PALETTE = [(0.84, 0.37, 0.30), (0.30, 0.52, 0.78), (0.45, 0.70, 0.35), (0.93, 0
             (0.74, 0.74, 0.13), (0.09, 0.75, 0.81)]
 _UNLABELLED = (0.80, 0.80, 0.80)
 
-_FLOAT32, _UINT8 = 7, 1  # foxglove.NumericType
-
 
 def region_colours(model) -> tuple[list[str], np.ndarray, np.ndarray]:
     """Each point's region for display: the smallest region that holds it (the most
@@ -98,17 +97,27 @@ def region_colours(model) -> tuple[list[str], np.ndarray, np.ndarray]:
 
 
 # ------------------------------------------------------------------ compiled encoder
-# A frame's messages are written by one compiled pass from small programs, one per
-# channel: each op is (code, a, b), run in order into the chunk buffer.
-OP_CONST = 0      # copy const[a:b]
-OP_STAMP = 1      # the frame's time as {"sec":S,"nsec":N}
-OP_NUMBER = 2     # number slot a of the frame (exact), null if not finite
-OP_BASE64 = 3     # the frame's point cloud bytes, base64
-OP_POINTS = 4     # the frame's points as JSON Point3 objects, 6 decimals (1 um)
-OP_IF_FINITE = 5  # write the message only if number slot a is finite
+# A frame's messages are written in protobuf by one compiled pass from small programs,
+# one per channel: each op is (code, a, b), run in order. A first pass over a program
+# sizes its nested messages (protobuf puts a message's length before it); only the
+# time stamps change size from frame to frame.
+OP_CONST = 0      # bytes const[a:b] (fields encoded once, by protobuf)
+OP_BEGIN = 1      # a nested message, field tag a, up to its OP_END
+OP_END = 2
+OP_STAMP = 3      # the frame's time as a google.protobuf.Timestamp, field tag a
+OP_DOUBLE = 4     # number slot b of the frame as a double, field tag a
+OP_POINTS = 5     # the frame's points as repeated foxglove.Point3, field tag a
+OP_CLOUD = 6      # the frame's point cloud bytes, field tag a
+OP_IF_FINITE = 7  # write the message only if number slot a is finite
 
-_B64 = np.frombuffer(b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/", np.uint8).copy()
 RECORD_HEAD = 31  # MCAP message record: opcode 1, length 8, channel 2, sequence 4, log and publish time 8 + 8
+POINT3_BYTES = 27  # foxglove.Point3: three doubles, each a one-byte tag and 8 bytes
+MAX_DEPTH = 16
+
+
+def _tag(field: int, wire: int) -> int:
+    """A protobuf field key: wire type 1 (64-bit), 2 (length-delimited)."""
+    return field << 3 | wire
 
 
 @jit(nogil=True)
@@ -119,216 +128,113 @@ def _put_uint(out, k, value, nbyte):  # pragma: no cover - compiled
 
 
 @jit(nogil=True)
-def _put_decimal(out, k, value):  # pragma: no cover - compiled
-    """A non-negative integer in decimal at out[k]; returns the new end."""
-    nd = 1
-    t = value // 10
-    while t > 0:
-        nd += 1
-        t //= 10
-    for d in range(nd - 1, -1, -1):
-        out[k + d] = 48 + value % 10
-        value //= 10
-    return k + nd
-
-
-def _pow10_table(lo: int, hi: int) -> np.ndarray:
-    """10^k = (m_hi + m_lo) * 2^e as rows (m_hi, m_lo, e) for k in [lo, hi], m_hi in
-    [0.5, 1): a double-double mantissa exact to ~2^-106, beyond the double range too."""
-    from fractions import Fraction
-
-    out = np.zeros((hi - lo + 1, 3))
-    for i, k in enumerate(range(lo, hi + 1)):
-        x = Fraction(10) ** k
-        e = x.numerator.bit_length() - x.denominator.bit_length()
-        while x / Fraction(2) ** e >= 1:
-            e += 1
-        while x / Fraction(2) ** e < Fraction(1, 2):
-            e -= 1
-        m = x / Fraction(2) ** e
-        out[i] = float(m), float(m - Fraction(float(m))), e
-    return out
-
-
-_POW10_MIN, _POW10_MAX = -310, 345  # 10^(16 - e10) for every finite double
-_POW10 = _pow10_table(_POW10_MIN, _POW10_MAX)
+def _varint_len(v):  # pragma: no cover - compiled
+    n = 1
+    while v >= 128:
+        v >>= 7
+        n += 1
+    return n
 
 
 @jit(nogil=True)
-def _scaled_round(a, k, pow10):  # pragma: no cover - compiled
-    """round(a * 10^k) for a > 0 where the result lies in [1e15, 1e18]; exact but for
-    ties within ~1e-30 relative: the product in double-double (Veltkamp's split and
-    Dekker's exact product) of mantissas, scaled by powers of two (exact)."""
-    am, ae = math.frexp(a)
-    hm = pow10[k - _POW10_MIN, 0]
-    lm = pow10[k - _POW10_MIN, 1]
-    s = ae + int(pow10[k - _POW10_MIN, 2])
-    p = am * hm
-    split = 134217729.0  # 2^27 + 1
-    t = split * am
-    ah = t - (t - am)
-    al = am - ah
-    t = split * hm
-    hh = t - (t - hm)
-    hl = hm - hh
-    e = ((ah * hh - p) + ah * hl + al * hh) + al * hl + am * lm  # am * (hm + lm) = p + e
-    p = math.ldexp(p, s)
-    e = math.ldexp(e, s)
-    base = math.floor(p)
-    return np.int64(base) + np.int64(math.floor((p - base) + e + 0.5))
-
-
-@jit(nogil=True)
-def _put_digits(out, k, value, width):  # pragma: no cover - compiled
-    """value in decimal on exactly `width` digits (zero-padded) at out[k]; returns the new end."""
-    for d in range(width - 1, -1, -1):
-        out[k + d] = 48 + value % 10
-        value //= 10
-    return k + width
-
-
-@jit(nogil=True)
-def _put_float(out, k, v, pow10):  # pragma: no cover - compiled
-    """v as a JSON number of 17 significant digits at most (trailing zeros dropped)
-    that reads back as exactly v; "null" where v is not finite. Returns the new end."""
-    if not np.isfinite(v):
-        for c in b"null":
-            out[k] = c
-            k += 1
-        return k
-    if v == 0.0:
-        out[k] = 48
-        return k + 1
-    if v < 0.0:
-        out[k] = 45  # -
+def _put_varint(out, k, v):  # pragma: no cover - compiled
+    """v (>= 0) as a protobuf varint at out[k]; returns the new end."""
+    while v >= 128:
+        out[k] = (v & 127) | 128
+        v >>= 7
         k += 1
-        v = -v
-    e10 = int(math.floor(math.log10(v)))
-    q = _scaled_round(v, 16 - e10, pow10)
-    if q >= 100000000000000000:
-        e10 += 1
-        q = _scaled_round(v, 16 - e10, pow10)
-    elif q < 10000000000000000:
-        e10 -= 1
-        q = _scaled_round(v, 16 - e10, pow10)
-    nd = 17
-    while nd > 1 and q % 10 == 0:
-        q //= 10
-        nd -= 1
-    if 0 <= e10 < 17:  # positional: 123.456
-        if nd <= e10 + 1:
-            k = _put_digits(out, k, q, nd)
-            for d in range(e10 + 1 - nd):
-                out[k] = 48
-                k += 1
-        else:
-            scale = np.int64(10) ** (nd - e10 - 1)
-            k = _put_digits(out, k, q // scale, e10 + 1)
-            out[k] = 46  # .
-            k = _put_digits(out, k + 1, q % scale, nd - e10 - 1)
-    elif -5 <= e10 < 0:  # 0.00123
-        out[k] = 48
-        out[k + 1] = 46
-        k += 2
-        for d in range(-e10 - 1):
-            out[k] = 48
-            k += 1
-        k = _put_digits(out, k, q, nd)
-    else:  # 1.23e-7
-        scale = np.int64(10) ** (nd - 1)
-        k = _put_digits(out, k, q // scale, 1)
-        if nd > 1:
-            out[k] = 46
-            k = _put_digits(out, k + 1, q % scale, nd - 1)
-        out[k] = 101  # e
-        k += 1
-        if e10 < 0:
-            out[k] = 45
-            k += 1
-        k = _put_decimal(out, k, abs(e10))
-    return k
+    out[k] = v
+    return k + 1
 
 
 @jit(nogil=True)
-def _put_points(pos, out, k):  # pragma: no cover - compiled
-    """pos (n, 3) m as JSON Point3 objects, '{"x":-0.012345,"y":...,"z":...},...', with
-    6 decimals (1 um), at out[k]; returns the new end. Non-finite values and values
-    beyond 1e9 are written as 0 (JSON has no NaN). ~50 times faster than '%.6g'."""
-    for i in range(pos.shape[0]):
-        if i:
-            out[k] = 44  # ,
-            k += 1
-        for a in range(3):
-            out[k] = 123 if a == 0 else 44  # { or ,
-            out[k + 1] = 34
-            out[k + 2] = 120 + a  # x y z
-            out[k + 3] = 34
-            out[k + 4] = 58  # :
-            k += 5
-            v = pos[i, a]
-            if not (abs(v) < 1e9):
-                v = 0.0
-            if v < 0.0:
-                v = -v
-                out[k] = 45  # -
-                k += 1
-            q = np.uint64(v * 1e6 + 0.5)  # unsigned: division by a constant becomes a multiplication
-            ip = q // np.uint64(1000000)
-            if ip == 0:
-                out[k] = 48
-                k += 1
-            else:
-                k = _put_decimal(out, k, np.int64(ip))
-            out[k] = 46  # .
-            fp = q - ip * np.uint64(1000000)
-            for d in range(6, 0, -1):
-                out[k + d] = np.uint64(48) + fp % np.uint64(10)
-                fp //= np.uint64(10)
-            k += 7
-        out[k] = 125  # }
-        k += 1
-    return k
+def _put_bytes(out, k, src, a, b):  # pragma: no cover - compiled
+    """src[a:b] at out[k]; returns the new end. With unsigned indices (no wraparound
+    checks) LLVM makes the loop a copy, ~50 times faster than with signed ones or a
+    slice assignment."""
+    ku, au = np.uint64(k), np.uint64(a)
+    for q in range(np.uint64(b - a)):
+        out[ku + q] = src[au + q]
+    return k + b - a
 
 
 @jit(nogil=True)
-def _put_base64(src, out, k, table):  # pragma: no cover - compiled
-    """src (uint8) in base64 (with padding) at out[k]; returns the new end."""
-    n = src.shape[0]
-    i = 0
-    while i + 2 < n:
-        v = (src[i] << 16) | (src[i + 1] << 8) | src[i + 2]
-        out[k] = table[(v >> 18) & 63]
-        out[k + 1] = table[(v >> 12) & 63]
-        out[k + 2] = table[(v >> 6) & 63]
-        out[k + 3] = table[v & 63]
-        i += 3
-        k += 4
-    rest = n - i
-    if rest:
-        v = src[i] << 16
-        if rest == 2:
-            v |= src[i + 1] << 8
-        out[k] = table[(v >> 18) & 63]
-        out[k + 1] = table[(v >> 12) & 63]
-        out[k + 2] = table[(v >> 6) & 63] if rest == 2 else 61  # =
-        out[k + 3] = 61
-        k += 4
-    return k
+def _put_bits(out, k, bits):  # pragma: no cover - compiled
+    """A double's 8 bytes (its bits as uint64), little-endian, at out[k]; returns the new end."""
+    for q in range(np.uint64(8)):
+        out[k + q] = (bits >> (np.uint64(8) * q)) & np.uint64(255)
+    return k + 8
 
 
 @jit(nogil=True)
-def _encode_frames(t_ns, number, cloud, pos, frame0, const, prog, channels, table, pow10, out,
-                   index):  # pragma: no cover - compiled
+def _put_points(out, k, key, bits):  # pragma: no cover - compiled
+    """Repeated foxglove.Point3 (field key `key`) of bits (3 nvert,) uint64, the
+    doubles x, y, z of each point; returns the new end. Unsigned indices: no
+    wraparound checks in this, the encoder's longest loop."""
+    nkey = _varint_len(key)
+    kk = np.uint64(k)
+    for i in range(np.uint64(bits.shape[0] // 3)):
+        _put_varint(out, np.int64(kk), key)
+        kk += np.uint64(nkey)
+        out[kk] = POINT3_BYTES
+        kk += np.uint64(1)
+        for j in range(np.uint64(3)):
+            out[kk] = np.uint64(9) + np.uint64(8) * j  # x, y, z: fields 1, 2, 3, 64-bit
+            v = bits[np.uint64(3) * i + j]
+            for q in range(np.uint64(8)):
+                out[kk + np.uint64(1) + q] = (v >> (np.uint64(8) * q)) & np.uint64(255)
+            kk += np.uint64(9)
+    return np.int64(kk)
+
+
+@jit(nogil=True)
+def _stamp_body_len(sec, nsec):  # pragma: no cover - compiled
+    """Bytes of a Timestamp's fields (proto3 leaves zeros out)."""
+    n = 0
+    if sec:
+        n += 1 + _varint_len(sec)
+    if nsec:
+        n += 1 + _varint_len(nsec)
+    return n
+
+
+@jit(nogil=True)
+def _leaf_len(op, a, nvert, ncloud, stamp_body):  # pragma: no cover - compiled
+    """Bytes an op writes (but OP_CONST, OP_BEGIN, OP_END)."""
+    if op == OP_STAMP:
+        return _varint_len(a) + _varint_len(stamp_body) + stamp_body
+    if op == OP_DOUBLE:
+        return _varint_len(a) + 8
+    if op == OP_POINTS:
+        return nvert * (_varint_len(a) + 1 + POINT3_BYTES)
+    if op == OP_CLOUD:
+        return _varint_len(a) + _varint_len(ncloud) + ncloud
+    return 0
+
+
+@jit(nogil=True)
+def _encode_frames(t_ns, number, number_bits, cloud, pos_bits, frame0, const, prog, channels, out,
+                   index, size):  # pragma: no cover - compiled
     """The MCAP message records of nframe frames, written into out; index[m] =
     (channel, log time ns, offset in out) of each. Returns (bytes written, messages).
 
-    t_ns (nframe,); number (nframe, nslot) the numeric slots; cloud (nframe, nbyte)
-    the point cloud bytes; pos (nframe, nvert, 3); frame0 the run's index of the first frame;
-    channels (nchannel, 4) = (channel id, first op, end op, every nth frame)."""
+    t_ns (nframe,); number (nframe, nslot) the numeric slots and number_bits their
+    bits (uint64; protobuf writes a double's bits little-endian); cloud (nframe, nbyte)
+    the point cloud bytes; pos_bits (nframe, 3 nvert) the bits of the points' x, y, z;
+    frame0 the run's index of the first frame; channels (nchannel, 4) =
+    (channel id, first op, end op, every nth frame); size (nop,) scratch for the
+    nested messages' lengths."""
+    nvert = pos_bits.shape[1] // 3
+    ncloud = cloud.shape[1]
+    acc = np.zeros(MAX_DEPTH, np.int64)
+    opened = np.zeros(MAX_DEPTH, np.int64)
     k = 0
     m = 0
     for f in range(t_ns.shape[0]):
         t = t_ns[f]
+        sec = t // 1000000000
+        nsec = t % 1000000000
+        stamp_body = _stamp_body_len(sec, nsec)
         for c in range(channels.shape[0]):
             ch, p0, p1, every = channels[c, 0], channels[c, 1], channels[c, 2], channels[c, 3]
             if (frame0 + f) % every != 0:
@@ -339,30 +245,51 @@ def _encode_frames(t_ns, number, cloud, pos, frame0, const, prog, channels, tabl
                     write = False
             if not write:
                 continue
+            # sizes: each nested message's length, innermost first
+            depth = 0
+            acc[0] = 0
+            for p in range(p0, p1):
+                op, a = prog[p, 0], prog[p, 1]
+                if op == OP_BEGIN:
+                    depth += 1
+                    acc[depth] = 0
+                    opened[depth] = p
+                elif op == OP_END:
+                    inner = acc[depth]
+                    size[opened[depth]] = inner
+                    depth -= 1
+                    acc[depth] += _varint_len(prog[opened[depth + 1], 1]) + _varint_len(inner) + inner
+                elif op == OP_CONST:
+                    acc[depth] += prog[p, 2] - a
+                else:
+                    acc[depth] += _leaf_len(op, a, nvert, ncloud, stamp_body)
             start = k
             k += RECORD_HEAD
             for p in range(p0, p1):
                 op, a, b = prog[p, 0], prog[p, 1], prog[p, 2]
                 if op == OP_CONST:
-                    out[k:k + b - a] = const[a:b]
-                    k += b - a
+                    k = _put_bytes(out, k, const, a, b)
+                elif op == OP_BEGIN:
+                    k = _put_varint(out, k, a)
+                    k = _put_varint(out, k, size[p])
                 elif op == OP_STAMP:
-                    for c8 in b'{"sec":':
-                        out[k] = c8
-                        k += 1
-                    k = _put_decimal(out, k, t // 1000000000)
-                    for c8 in b',"nsec":':
-                        out[k] = c8
-                        k += 1
-                    k = _put_decimal(out, k, t % 1000000000)
-                    out[k] = 125  # }
-                    k += 1
-                elif op == OP_NUMBER:
-                    k = _put_float(out, k, number[f, a], pow10)
-                elif op == OP_BASE64:
-                    k = _put_base64(cloud[f], out, k, table)
+                    k = _put_varint(out, k, a)
+                    k = _put_varint(out, k, stamp_body)
+                    if sec:
+                        out[k] = 8  # seconds: field 1, varint
+                        k = _put_varint(out, k + 1, sec)
+                    if nsec:
+                        out[k] = 16  # nanos: field 2, varint
+                        k = _put_varint(out, k + 1, nsec)
+                elif op == OP_DOUBLE:
+                    k = _put_varint(out, k, a)
+                    k = _put_bits(out, k, number_bits[f, b])
                 elif op == OP_POINTS:
-                    k = _put_points(pos[f], out, k)
+                    k = _put_points(out, k, a, pos_bits[f])
+                elif op == OP_CLOUD:
+                    k = _put_varint(out, k, a)
+                    k = _put_varint(out, k, ncloud)
+                    k = _put_bytes(out, k, cloud[f], 0, ncloud)
             out[start] = 5  # opcode: message
             _put_uint(out, start + 1, k - start - 9, 8)
             _put_uint(out, start + 9, ch, 2)
@@ -376,50 +303,71 @@ def _encode_frames(t_ns, number, cloud, pos, frame0, const, prog, channels, tabl
     return k, m
 
 
-_SCALAR_SCHEMA = {"title": "hybrid.Scalar", "type": "object",
-                  "properties": {"t": {"type": "number", "description": "simulated time (s)"},
-                                 "value": {"type": "number"}}}
+# ------------------------------------------------------------------ schemas
+SCALAR_PROTO = "hybrid/Scalar.proto"
 
 
-def _foxglove_schemas() -> dict:
-    """Minimal JSON schemas of the foxglove messages written here (Foxglove picks the
-    decoder by schema name; these list the fields used)."""
-    num = {"type": "number"}
-    vec = {"type": "object", "properties": {k: num for k in "xyz"}}
-    quat = {"type": "object", "properties": {k: num for k in "xyzw"}}
-    colour = {"type": "object", "properties": {k: num for k in "rgba"}}
-    time_ = {"type": "object", "properties": {"sec": {"type": "integer"}, "nsec": {"type": "integer"}}}
-    pose = {"type": "object", "properties": {"position": vec, "orientation": quat}}
-    sized = {"type": "object", "properties": {"pose": pose, "size": vec, "color": colour}}
-    cyl = {"type": "object", "properties": {"pose": pose, "size": vec, "bottom_scale": num, "top_scale": num,
-                                             "color": colour}}
-    tri = {"type": "object", "properties": {"pose": pose, "points": {"type": "array", "items": vec},
-                                             "color": colour, "colors": {"type": "array", "items": colour},
-                                             "indices": {"type": "array", "items": {"type": "integer"}}}}
-    entity = {"type": "object", "properties": {
-        "timestamp": time_, "frame_id": {"type": "string"}, "id": {"type": "string"},
-        "lifetime": time_, "frame_locked": {"type": "boolean"},
-        "cubes": {"type": "array", "items": sized}, "spheres": {"type": "array", "items": sized},
-        "cylinders": {"type": "array", "items": cyl}, "triangles": {"type": "array", "items": tri}}}
-    field = {"type": "object", "properties": {"name": {"type": "string"}, "offset": {"type": "integer"},
-                                               "type": {"type": "integer"}}}
-    return {
-        "foxglove.SceneUpdate": {"title": "foxglove.SceneUpdate", "type": "object", "properties": {
-            "deletions": {"type": "array", "items": {"type": "object"}},
-            "entities": {"type": "array", "items": entity}}},
-        "foxglove.FrameTransforms": {"title": "foxglove.FrameTransforms", "type": "object", "properties": {
-            "transforms": {"type": "array", "items": {"type": "object", "properties": {
-                "timestamp": time_, "parent_frame_id": {"type": "string"}, "child_frame_id": {"type": "string"},
-                "translation": vec, "rotation": quat}}}}},
-        "foxglove.PointCloud": {"title": "foxglove.PointCloud", "type": "object", "properties": {
-            "timestamp": time_, "frame_id": {"type": "string"}, "pose": pose,
-            "point_stride": {"type": "integer"}, "fields": {"type": "array", "items": field},
-            "data": {"type": "string", "contentEncoding": "base64"}}},
-        "hybrid.Scalar": _SCALAR_SCHEMA,
-    }
+def _scalar_file():
+    """hybrid.Scalar {double t = 1 (simulated time, s); double value = 2;} as a
+    protobuf file descriptor."""
+    from google.protobuf import descriptor_pb2
+
+    f = descriptor_pb2.FileDescriptorProto(name=SCALAR_PROTO, package="hybrid", syntax="proto3")
+    msg = f.message_type.add(name="Scalar")
+    for number, name in ((1, "t"), (2, "value")):
+        msg.field.add(name=name, number=number, type=descriptor_pb2.FieldDescriptorProto.TYPE_DOUBLE,
+                      label=descriptor_pb2.FieldDescriptorProto.LABEL_OPTIONAL, json_name=name)
+    return f
 
 
-_IDENTITY_POSE = '{"position":{"x":0,"y":0,"z":0},"orientation":{"x":0,"y":0,"z":0,"w":1}}'
+def _descriptor_set(file_descriptor) -> bytes:
+    """A FileDescriptorSet of a .proto file and everything it imports (an MCAP
+    protobuf schema)."""
+    from google.protobuf import descriptor_pb2
+
+    out = descriptor_pb2.FileDescriptorSet()
+    seen: set[str] = set()
+
+    def add(fd) -> None:
+        for dep in fd.dependencies:
+            if dep.name not in seen:
+                seen.add(dep.name)
+                add(dep)
+        fd.CopyToProto(out.file.add())
+
+    add(file_descriptor)
+    return out.SerializeToString()
+
+
+@functools.lru_cache(maxsize=1)
+def _schemas() -> dict[str, bytes]:
+    """The schemas written here, by name: foxglove's (from foxglove-schemas-protobuf) and hybrid.Scalar."""
+    from google.protobuf import descriptor_pb2
+    from foxglove_schemas_protobuf.FrameTransforms_pb2 import FrameTransforms
+    from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
+    from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate
+
+    out = {m.DESCRIPTOR.full_name: _descriptor_set(m.DESCRIPTOR.file)
+           for m in (SceneUpdate, FrameTransforms, PointCloud)}
+    out["hybrid.Scalar"] = descriptor_pb2.FileDescriptorSet(file=[_scalar_file()]).SerializeToString()
+    return out
+
+
+def _message_classes(schemas: dict[str, bytes]) -> dict:
+    """Message classes, by name, built from the schemas a file holds."""
+    from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
+
+    pool = descriptor_pool.DescriptorPool()
+    out = {}
+    for name, data in schemas.items():
+        fds = descriptor_pb2.FileDescriptorSet.FromString(data)
+        for fd in fds.file:
+            try:
+                pool.Add(fd)
+            except (TypeError, ValueError):
+                pass  # already in the pool (shared imports)
+        out[name] = message_factory.GetMessageClass(pool.FindMessageTypeByName(name))
+    return out
 
 
 def _geoms(mj_model) -> list[dict]:
@@ -439,30 +387,38 @@ def _geoms(mj_model) -> list[dict]:
 GEOM_SPHERE, GEOM_CAPSULE, GEOM_ELLIPSOID, GEOM_CYLINDER, GEOM_BOX = 2, 3, 4, 5, 6
 
 
-def _geom_scene(geoms: list[dict]) -> str:
-    """A SceneUpdate with one frame-locked entity per body holding its geoms."""
-    by_body: dict[str, dict] = {}
+def _geom_scene(geoms: list[dict]) -> bytes:
+    """A foxglove.SceneUpdate with one frame-locked entity per body holding its geoms."""
+    from foxglove_schemas_protobuf.Color_pb2 import Color
+    from foxglove_schemas_protobuf.Pose_pb2 import Pose
+    from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate
+    from foxglove_schemas_protobuf.Vector3_pb2 import Vector3
+
+    scene = SceneUpdate()
+    by_body: dict[str, object] = {}
     for g in geoms:
         if g["body_id"] == 0:
             continue  # world geoms (floors) are not drawn
-        e = by_body.setdefault(g["body"], {"timestamp": {"sec": 0, "nsec": 0}, "frame_id": g["body"],
-                                           "id": "geoms_" + g["body"], "lifetime": {"sec": 0, "nsec": 0},
-                                           "frame_locked": True, "cylinders": [], "spheres": [], "cubes": []})
-        w, x, y, z = g["quat"]
-        pose = {"position": dict(zip("xyz", g["pos"])), "orientation": {"x": x, "y": y, "z": z, "w": w}}
-        colour = dict(zip("rgba", g["rgba"]))
+        e = by_body.get(g["body"])
+        if e is None:
+            e = by_body[g["body"]] = scene.entities.add(frame_id=g["body"], id="geoms_" + g["body"], frame_locked=True)
+        pose = Pose()
+        pose.position.x, pose.position.y, pose.position.z = g["pos"]
+        q = pose.orientation
+        q.w, q.x, q.y, q.z = g["quat"]
+        colour = Color(r=g["rgba"][0], g=g["rgba"][1], b=g["rgba"][2], a=g["rgba"][3])
         s = g["size"]
         if g["type"] in (GEOM_CAPSULE, GEOM_CYLINDER):
             length = 2 * s[1] + (2 * s[0] if g["type"] == GEOM_CAPSULE else 0.0)
-            e["cylinders"].append({"pose": pose, "size": {"x": 2 * s[0], "y": 2 * s[0], "z": length},
-                                   "bottom_scale": 1, "top_scale": 1, "color": colour})
+            e.cylinders.add(pose=pose, size=Vector3(x=2 * s[0], y=2 * s[0], z=length), bottom_scale=1.0,
+                            top_scale=1.0, color=colour)
         elif g["type"] == GEOM_SPHERE:
-            e["spheres"].append({"pose": pose, "size": {"x": 2 * s[0], "y": 2 * s[0], "z": 2 * s[0]}, "color": colour})
+            e.spheres.add(pose=pose, size=Vector3(x=2 * s[0], y=2 * s[0], z=2 * s[0]), color=colour)
         elif g["type"] == GEOM_ELLIPSOID:
-            e["spheres"].append({"pose": pose, "size": dict(zip("xyz", (2 * v for v in s))), "color": colour})
+            e.spheres.add(pose=pose, size=Vector3(x=2 * s[0], y=2 * s[1], z=2 * s[2]), color=colour)
         elif g["type"] == GEOM_BOX:
-            e["cubes"].append({"pose": pose, "size": dict(zip("xyz", (2 * v for v in s))), "color": colour})
-    return json.dumps({"deletions": [], "entities": list(by_body.values())})
+            e.cubes.add(pose=pose, size=Vector3(x=2 * s[0], y=2 * s[1], z=2 * s[2]), color=colour)
+    return scene.SerializeToString()
 
 
 class _McapWriter:
@@ -579,7 +535,7 @@ class _McapWriter:
         from mcap.records import Chunk, ChunkIndex
 
         if self._zstd is None:
-            self._zstd = zstandard.ZstdCompressor(level=1)  # fast: the chunks are written during the run
+            self._zstd = zstandard.ZstdCompressor(level=-3)  # fast: the chunks are written during the run
         data = self._zstd.compress(raw)
         chunk = Chunk(compression="zstd", data=data, message_start_time=t_lo, message_end_time=t_hi,
                       uncompressed_crc=zlib.crc32(raw), uncompressed_size=len(raw))
@@ -670,6 +626,14 @@ class _FrameWriter:
     frames, each batch encoded by one compiled pass into one chunk."""
 
     def __init__(self, path: Path, plan: dict, *, mesh_every: int, chunk_size: int):
+        from foxglove_schemas_protobuf.Color_pb2 import Color
+        from foxglove_schemas_protobuf.PackedElementField_pb2 import PackedElementField
+        from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
+        from foxglove_schemas_protobuf.Pose_pb2 import Pose
+        from foxglove_schemas_protobuf.SceneEntity_pb2 import SceneEntity
+        from foxglove_schemas_protobuf.TriangleListPrimitive_pb2 import TriangleListPrimitive
+        from foxglove_schemas_protobuf.FrameTransform_pb2 import FrameTransform
+
         self._file = open(path, "wb")
         self._writer = w = _McapWriter(self._file, chunk_size=chunk_size)
         n, face, colours = plan["nvert"], plan["face_vert"], plan["colours"]
@@ -679,11 +643,10 @@ class _FrameWriter:
             "face_vert": face.tolist(), "regions": plan["regions"], "vert_label": plan["vert_label"].tolist(),
             "vert_rgba": np.round(colours, 4).tolist(), "link_vert": plan["link_vert"].tolist(),
             "geoms": plan["geoms"], "bodies": bodies})})
-        schemas = {name: w.schema(name, "jsonschema", json.dumps(s).encode())
-                   for name, s in _foxglove_schemas().items()}
+        schemas = {name: w.schema(name, "protobuf", data) for name, data in _schemas().items()}
 
         def channel(topic, schema):
-            return w.channel(topic, "json", schemas[schema])
+            return w.channel(topic, "protobuf", schemas[schema])
 
         # number slots of a frame: t, the scalars, then each body's x, y, z and w, x, y, z
         self.nbody = len(bodies)
@@ -692,59 +655,72 @@ class _FrameWriter:
         prog: list[tuple[int, int, int]] = []
         programs: list[tuple[int, int, int, int]] = []  # (channel, first op, end op, every)
 
-        def text(s: str) -> None:
+        def fields(message) -> None:
+            """Fields encoded once by protobuf (concatenated fields are a valid message)."""
             a = len(const)
-            const.extend(s.encode())
+            const.extend(message.SerializeToString())
             prog.append((OP_CONST, a, len(const)))
 
-        def program(ch: int, every: int, *ops) -> None:
+        def program(ch: int, every: int, ops) -> None:
             p0 = len(prog)
             for op in ops:
-                text(op) if isinstance(op, str) else prog.append(op)
+                fields(op) if hasattr(op, "SerializeToString") else prog.append(op)
             programs.append((ch, p0, len(prog), every))
 
-        stamp, points, cloud = (OP_STAMP, 0, 0), (OP_POINTS, 0, 0), (OP_BASE64, 0, 0)
+        def begin(field):
+            return (OP_BEGIN, _tag(field, 2), 0)
 
-        def num(slot):
-            return (OP_NUMBER, slot, 0)
+        def stamp(field):
+            return (OP_STAMP, _tag(field, 2), 0)
 
-        # point cloud: x, y, z float32 then r, g, b, a uint8 (16 bytes a point)
+        def double(field, slot):
+            return (OP_DOUBLE, _tag(field, 1), slot)
+
+        end = (OP_END, 0, 0)
+        identity = Pose()
+        identity.orientation.w = 1.0
+        # small meshes: the triangle list every frame; large ones: the point cloud every
+        # frame (x, y, z float32, r, g, b, a uint8: 16 bytes a point), the triangles less often
+        self.cloud = mesh_every > 1
         self._cloud = np.zeros((0, n), dtype=[("xyz", "<f4", 3), ("rgba", "u1", 4)])
         self._rgba = np.round(colours * 255).astype(np.uint8)
-        fields = [{"name": k, "offset": o, "type": _FLOAT32} for k, o in (("x", 0), ("y", 4), ("z", 8))]
-        fields += [{"name": k, "offset": 12 + i, "type": _UINT8} for i, k in enumerate(("red", "green", "blue", "alpha"))]
-        program(channel("/membrane/points", "foxglove.PointCloud"), 1,
-                '{"frame_id":"world","pose":%s,"point_stride":16,"fields":%s,"timestamp":'
-                % (_IDENTITY_POSE, json.dumps(fields)), stamp, ',"data":"', cloud, '"}')
-        # triangle list: the points change, indices and colours do not
-        rgba = np.round(colours, 3)
-        program(channel("/membrane/mesh", "foxglove.SceneUpdate"), mesh_every,
-                '{"deletions":[],"entities":[{"frame_id":"world","id":"membrane",'
-                '"lifetime":{"sec":0,"nsec":0},"frame_locked":false,"timestamp":', stamp,
-                ',"triangles":[{"pose":%s,"color":{"r":0.8,"g":0.8,"b":0.8,"a":1},"colors":%s,"indices":%s,"points":['
-                % (_IDENTITY_POSE, json.dumps([dict(zip("rgba", c)) for c in rgba.tolist()], separators=(",", ":")),
-                   json.dumps(face.ravel().tolist(), separators=(",", ":"))), points, "]}]}]}")
+        if self.cloud:
+            T = PackedElementField
+            cloud_fields = [PackedElementField(name=k, offset=o, type=T.FLOAT32) for k, o in (("x", 0), ("y", 4), ("z", 8))]
+            cloud_fields += [PackedElementField(name=k, offset=12 + i, type=T.UINT8)
+                             for i, k in enumerate(("red", "green", "blue", "alpha"))]
+            program(channel("/membrane/points", "foxglove.PointCloud"), 1, [
+                stamp(1), PointCloud(frame_id="world", pose=identity, point_stride=16, fields=cloud_fields),
+                (OP_CLOUD, _tag(6, 2), 0)])
+        # triangle list (SceneUpdate.entities = 2, SceneEntity.triangles = 12): the
+        # points change, indices and colours do not
+        entity = SceneEntity(frame_id="world", id="membrane", frame_locked=False)
+        entity.lifetime.SetInParent()
+        tri = TriangleListPrimitive(pose=identity, color=Color(r=0.8, g=0.8, b=0.8, a=1.0),
+                                    colors=[Color(r=r, g=g, b=b, a=a) for r, g, b, a in colours.tolist()],
+                                    indices=face.ravel().tolist())
+        program(channel("/membrane/mesh", "foxglove.SceneUpdate"), mesh_every, [
+            begin(2), stamp(1), entity, begin(12), tri, (OP_POINTS, _tag(2, 2), 0), end, end])
         for i, topic in enumerate(SCALAR_CHANNELS):
-            program(channel(topic, "hybrid.Scalar"), 1, (OP_IF_FINITE, 1 + i, 0),
-                    '{"t":', num(0), ',"value":', num(1 + i), "}")
+            program(channel(topic, "hybrid.Scalar"), 1, [(OP_IF_FINITE, 1 + i, 0), double(1, 0), double(2, 1 + i)])
         if bodies:
-            ops: list = ['{"transforms":[']
-            for b, name in enumerate(bodies):
+            ops: list = []
+            for b, name in enumerate(bodies):  # FrameTransforms.transforms = 1
                 s = 1 + len(SCALAR_CHANNELS) + 7 * b  # x, y, z, qw, qx, qy, qz
-                ops += ["," if b else "", '{"timestamp":', stamp,
-                        ',"parent_frame_id":"world","child_frame_id":%s,"translation":{"x":' % json.dumps(name),
-                        num(s), ',"y":', num(s + 1), ',"z":', num(s + 2), '},"rotation":{"x":', num(s + 4),
-                        ',"y":', num(s + 5), ',"z":', num(s + 6), ',"w":', num(s + 3), "}}"]
-            program(channel("/rigid/transforms", "foxglove.FrameTransforms"), 1, *ops, "]}")
-            w.message(channel("/rigid/geoms", "foxglove.SceneUpdate"), 0, _geom_scene(plan["geoms"]).encode())
+                ops += [begin(1), stamp(1), FrameTransform(parent_frame_id="world", child_frame_id=name),
+                        begin(4), double(1, s), double(2, s + 1), double(3, s + 2), end,
+                        begin(5), double(1, s + 4), double(2, s + 5), double(3, s + 6), double(4, s + 3), end, end]
+            program(channel("/rigid/transforms", "foxglove.FrameTransforms"), 1, ops)
+            w.message(channel("/rigid/geoms", "foxglove.SceneUpdate"), 0, _geom_scene(plan["geoms"]))
             w.flush_chunk()
         self._const = np.frombuffer(bytes(const), np.uint8)
         self._prog = np.array(prog, np.int64).reshape(-1, 3)
         self._programs = np.array(programs, np.int64)
-        # bytes of a frame at most (a number at 24 characters, a coordinate at 23)
-        cloud_b64 = 4 * ((16 * n + 2) // 3)
-        self.frame_bytes = (len(const) + len(programs) * (RECORD_HEAD + 60) + 24 * self.nslot * 2
-                            + cloud_b64 + (n * 3 * 24 + n) // mesh_every + 64)
+        self._size = np.zeros(len(prog), np.int64)
+        # bytes of a frame at most: a nested message's key and length 8 at most, a time stamp 20
+        leaf = {OP_POINTS: n * (2 + 1 + POINT3_BYTES), OP_CLOUD: 16 * n + 12}
+        self.frame_bytes = len(const) + len(programs) * RECORD_HEAD + sum(
+            leaf.get(op, 20) for op, _, _ in prog)
         self._out = np.empty(0, np.uint8)
         self._index = np.empty((0, 3), np.int64)
         # compile (or load) the encoder before the run, for the (writable) arrays the run passes
@@ -760,14 +736,18 @@ class _FrameWriter:
             self._cloud = np.zeros((nframe, pos.shape[1]), self._cloud.dtype)
             self._cloud["rgba"] = self._rgba
         cloud = self._cloud[:nframe]
-        cloud["xyz"] = pos
+        if self.cloud:
+            cloud["xyz"] = pos
         need = nframe * self.frame_bytes
         if len(self._out) < need:
             self._out = np.empty(2 * need, np.uint8)
         if len(self._index) < nframe * len(self._programs):
             self._index = np.empty((2 * nframe * len(self._programs), 3), np.int64)
-        k, m = _encode_frames(t_ns, number, cloud.view(np.uint8).reshape(nframe, -1), pos, frame0, self._const,
-                              self._prog, self._programs, _B64, _POW10, self._out, self._index)
+        number = np.ascontiguousarray(number, "<f8")
+        pos = np.ascontiguousarray(pos, "<f8")
+        k, m = _encode_frames(t_ns, number, number.view(np.uint64), cloud.view(np.uint8).reshape(nframe, -1),
+                              pos.reshape(nframe, -1).view(np.uint64), frame0, self._const, self._prog,
+                              self._programs, self._out, self._index, self._size)
         if not dry:
             self._writer.add_chunk(self._out[:k], self._index[:m])
 
@@ -894,12 +874,17 @@ class Recorder:
         if self._closed or not k:
             return
         t = frames.scal[:k, F_TIME]
-        pick = []
-        for j, tj in enumerate(t.tolist()):
-            if tj >= self._next_t - 1e-9 * self.every_s:
-                pick.append(j)
-                self._next_t = tj + self.every_s
-        pick = np.asarray(pick, np.int64)
+        tol = 1e-9 * self.every_s
+        if t[0] >= self._next_t - tol and (k == 1 or np.diff(t).min() >= self.every_s - tol):
+            pick = np.arange(k)  # every frame (the default: frames and recording every 10 ms)
+            self._next_t = t[-1] + self.every_s
+        else:
+            taken = []
+            for j, tj in enumerate(t.tolist()):
+                if tj >= self._next_t - tol:
+                    taken.append(j)
+                    self._next_t = tj + self.every_s
+            pick = np.asarray(taken, np.int64)
         row0 = len(trace.t_s) - k if trace is not None else 0
         if trace is not None:
             self._trace = trace
@@ -925,34 +910,38 @@ class Recorder:
             self.frames_recorded += len(part)
             if end == len(buf.pos):
                 self._hand_over()
-        if time.perf_counter() - self._last_flush > self.flush_s:
+        # a buffer at least half full goes now, so that the writer works while the run
+        # goes on rather than after its last call
+        if 2 * self._held >= len(self._buf.pos) or time.perf_counter() - self._last_flush > self.flush_s:
             self._hand_over()
 
-    def _take_trace(self, buf, nframe: int) -> None:
-        """The scalar channels of the frames held, from the runner's trace rows."""
+    @staticmethod
+    def _take_trace(buf, nframe: int, trace) -> None:
+        """The scalar channels of the frames held, from the runner's trace rows (rows
+        already written: the writer thread may read them while the run appends)."""
         rows = buf.trace_row[:nframe]
         have = rows >= 0
-        if self._trace is None or not have.any():
+        if trace is None or not have.any():
             return
         lo, hi = int(rows[have].min()), int(rows[have].max())
         for i, key in enumerate(SCALAR_CHANNELS.values()):
-            series = getattr(self._trace, key, None)
+            series = getattr(trace, key, None)
             col = buf.number[:nframe, 1 + i]
             if series and len(series) > hi:
                 col[have] = np.asarray(series[lo:hi + 1], float)[rows[have] - lo]
             else:
                 col[have] = np.nan
 
-    def _hand_over(self) -> None:
-        """Pass the frames held to the writer (the thread, or now)."""
+    def _hand_over(self, last: bool = False) -> None:
+        """Pass the frames held to the writer (the thread, or now); `last`: no frames follow."""
         if self._held:
-            self._take_trace(self._buf, self._held)
-            item = (self._buf, self._held, self._first)
+            item = (self._buf, self._held, self._first, self._trace)
             self._first += self._held
             self._held = 0
             if self._todo is not None:
                 self._todo.put(item)
-                self._buf = self._free.get()  # waits while both buffers are being written
+                if not last:
+                    self._buf = self._free.get()  # waits while both buffers are being written
             else:
                 self._write(item)
         self._last_flush = time.perf_counter()
@@ -960,9 +949,10 @@ class Recorder:
             raise self._error
 
     def _write(self, item) -> None:
-        buf, nframe, first = item
+        buf, nframe, first, trace = item
         try:
             if self._error is None:
+                self._take_trace(buf, nframe, trace)
                 number = buf.numbers(nframe)
                 self._fw.write(number[:, 0], number, buf.pos[:nframe], first)
         except BaseException as exc:  # raised again in the run's thread
@@ -999,7 +989,7 @@ class Recorder:
         self._closed = True
         try:
             try:
-                self._hand_over()
+                self._hand_over(last=True)
             finally:
                 if self._todo is not None:
                     self._todo.put(None)
@@ -1040,56 +1030,76 @@ def _records(path: Path):
 def read(path: str | Path) -> dict[str, dict]:
     """The recorded channels of `path` as numpy arrays, by topic.
 
+    - "membrane": every recorded frame's points, {"t": (nframe,) s, "pos": (nframe,
+      nvert, 3) m}, from "/membrane/mesh" or, where the triangle list was written less
+      often (large meshes), from "/membrane/points";
+    - "/membrane/mesh": {"t": (n,) s, "pos": (n, nvert, 3) float64 m (exact), "rgba":
+      (nvert, 4) 0..1} from the triangle list;
+    - "/membrane/points" (large meshes): {"t", "pos": float32 m, "rgba": (nvert, 4) uint8};
     - scalar topics ("/volume", ...): {"t": (n,) s, "value": (n,)};
-    - "/membrane/points": {"t": (nframe,) s, "pos": (nframe, nvert, 3) float32 m,
-      "rgba": (nvert, 4) uint8};
     - "/rigid/transforms": {"t": (nframe,), "bodies": [names], "pos": (nframe, nbody, 3),
       "quat": (nframe, nbody, 4) (w, x, y, z as MuJoCo)};
-    - "/membrane/mesh": {"t": (n,) s} (when the triangle list was written);
     - "model": the recorded description (faces as an (nface, 3) array, regions,
       per-point labels and colours, geoms).
 
-    Unfinished files (a killed run) are read up to their last complete record.
+    Messages are decoded with the schemas the file holds. Unfinished files (a killed
+    run) are read up to their last complete record.
     """
-    from mcap.records import Channel, Message, Metadata
+    from mcap.records import Channel, Message, Metadata, Schema
 
     path = Path(path)
-    topics: dict[int, str] = {}
+    schemas: dict[int, tuple[str, bytes]] = {}
+    topics: dict[int, tuple[str, int]] = {}
     raw: dict[str, list] = {}
     meta = None
     for rec in _records(path):
         if isinstance(rec, Message):
             topic = topics.get(rec.channel_id)
             if topic is not None:
-                raw.setdefault(topic, []).append((rec.log_time, rec.data))
+                raw.setdefault(topic[0], []).append((rec.log_time, rec.data))
         elif isinstance(rec, Channel):
-            topics[rec.id] = rec.topic
+            topics[rec.id] = (rec.topic, rec.schema_id)
+        elif isinstance(rec, Schema):
+            schemas[rec.id] = (rec.name, rec.data)
         elif isinstance(rec, Metadata) and rec.name == "hybrid" and meta is None:
             meta = json.loads(rec.metadata["description"])
+    classes = _message_classes({name: data for name, data in schemas.values()})
+    schema_of = {topic: schemas[sid][0] for topic, sid in topics.values() if sid in schemas}
     out: dict[str, dict] = {}
     for topic, msgs in raw.items():
         t = np.array([lt for lt, _ in msgs], np.int64) * 1e-9
+        decode = classes[schema_of[topic]].FromString
         if topic == "/membrane/points":
             frames, rgba = [], None
             for _, data in msgs:
-                m = json.loads(data)
-                arr = np.frombuffer(base64.b64decode(m["data"]), dtype=[("xyz", "<f4", 3), ("rgba", "u1", 4)])
+                arr = np.frombuffer(decode(data).data, dtype=[("xyz", "<f4", 3), ("rgba", "u1", 4)])
                 frames.append(arr["xyz"])
                 rgba = arr["rgba"]
-            out[topic] = {"t": t, "pos": np.stack(frames).astype(np.float32), "rgba": rgba}
+            out[topic] = {"t": t, "pos": np.stack(frames), "rgba": rgba}
+        elif topic == "/membrane/mesh":
+            pos, rgba = [], None
+            for _, data in msgs:
+                tri = decode(data).entities[0].triangles[0]
+                pos.append([(p.x, p.y, p.z) for p in tri.points])
+                if rgba is None:
+                    rgba = np.array([(c.r, c.g, c.b, c.a) for c in tri.colors], float)
+            out[topic] = {"t": t, "pos": np.array(pos, float), "rgba": rgba}
         elif topic == "/rigid/transforms":
             names = None
             pos, quat = [], []
             for _, data in msgs:
-                tfs = json.loads(data)["transforms"]
-                names = names or [tf["child_frame_id"] for tf in tfs]
-                pos.append([[tf["translation"][k] for k in "xyz"] for tf in tfs])
-                quat.append([[tf["rotation"][k] for k in "wxyz"] for tf in tfs])
+                tfs = decode(data).transforms
+                names = names or [tf.child_frame_id for tf in tfs]
+                pos.append([(tf.translation.x, tf.translation.y, tf.translation.z) for tf in tfs])
+                quat.append([(tf.rotation.w, tf.rotation.x, tf.rotation.y, tf.rotation.z) for tf in tfs])
             out[topic] = {"t": t, "bodies": names, "pos": np.array(pos, float), "quat": np.array(quat, float)}
         elif topic in SCALAR_CHANNELS:
-            out[topic] = {"t": t, "value": np.array([json.loads(d)["value"] for _, d in msgs], float)}
+            out[topic] = {"t": t, "value": np.array([decode(d).value for _, d in msgs], float)}
         else:
             out[topic] = {"t": t}
+    every = out.get("/membrane/points") or out.get("/membrane/mesh")
+    if every is not None:
+        out["membrane"] = {"t": every["t"], "pos": every["pos"]}
     if meta is not None:
         meta["face_vert"] = np.asarray(meta["face_vert"], np.int64).reshape(-1, 3)
         meta["vert_label"] = np.asarray(meta["vert_label"], int)

@@ -56,9 +56,9 @@ def frames_from_recording(path: str | Path) -> Frames:
     if not path.is_file():
         raise HybridError(f"recording {str(path)!r}: no such file")
     data = read(path)
-    if "model" not in data or "/membrane/points" not in data:
+    if "model" not in data or "membrane" not in data:
         raise HybridError(f"recording {str(path)!r}: no membrane frames (not written by hybrid run?)")
-    meta, pts = data["model"], data["/membrane/points"]
+    meta, pts = data["model"], data["membrane"]
     n = len(pts["t"])
     tf = data.get("/rigid/transforms")
     body_pos = body_quat = None
