@@ -61,7 +61,8 @@ def recording_row(*, duration_s: float = 12.0, repeats: int = 9) -> dict:
                 if mode == "off":
                     run_scene(sim, duration_s)
                 else:
-                    with Recorder(f"{tmp}/run.mcap", sim, background=mode == "on") as rec:
+                    # a new file each time (truncating one just written costs ~1 ms here)
+                    with Recorder(f"{tmp}/run_{rep}_{mode}.mcap", sim, background=mode == "on") as rec:
                         run_scene(sim, duration_s, observers=[rec])
                 if rep:  # the first round warms up (compiled encoder, file cache)
                     times[mode].append(time.perf_counter() - t0)

@@ -90,9 +90,9 @@ def region_colours(model) -> tuple[list[str], np.ndarray, np.ndarray]:
     remap = np.full(len(order) + 1, -1)
     remap[present] = np.arange(len(present))
     label = remap[label]  # -1 stays -1 (remap[-1])
+    table = np.array(_PALETTE + [_UNLABELLED])  # row -1: no region
     colours = np.ones((n, 4))
-    for i in range(n):
-        colours[i, :3] = _PALETTE[label[i] % len(_PALETTE)] if label[i] >= 0 else _UNLABELLED
+    colours[:, :3] = table[np.where(label >= 0, label % len(_PALETTE), -1)]
     return names, label, colours
 
 
@@ -621,11 +621,24 @@ def _plan(sim, every_s: float) -> dict:
             "geoms": _geoms(mj_model) if mj_model is not None else [], "bodies": bodies}
 
 
+def _nslot(nbody: int) -> int:
+    """Number slots of a frame: t, the scalars, then each body's x, y, z and w, x, y, z."""
+    return 1 + len(SCALAR_CHANNELS) + 7 * nbody
+
+
+def _frame_bytes_estimate(plan: dict, mesh_every: int) -> int:
+    """About the bytes of a frame's messages (to size a chunk's batch of frames)."""
+    n, nface, nbody = plan["nvert"], len(plan["face_vert"]), len(plan["bodies"])
+    mesh = 30 * n + 38 * n + 12 * nface + 200
+    cloud = 16 * n + 200 if mesh_every > 1 else 0
+    return mesh // mesh_every + cloud + 130 * nbody + 50 * len(SCALAR_CHANNELS) + 100
+
+
 class _FrameWriter:
     """Writes the file's head (metadata, schemas, channels, geoms) and then batches of
     frames, each batch encoded by one compiled pass into one chunk."""
 
-    def __init__(self, path: Path, plan: dict, *, mesh_every: int, chunk_size: int):
+    def __init__(self, file, plan: dict, *, mesh_every: int, chunk_size: int):
         from foxglove_schemas_protobuf.Color_pb2 import Color
         from foxglove_schemas_protobuf.PackedElementField_pb2 import PackedElementField
         from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
@@ -634,8 +647,8 @@ class _FrameWriter:
         from foxglove_schemas_protobuf.TriangleListPrimitive_pb2 import TriangleListPrimitive
         from foxglove_schemas_protobuf.FrameTransform_pb2 import FrameTransform
 
-        self._file = open(path, "wb")
-        self._writer = w = _McapWriter(self._file, chunk_size=chunk_size)
+        self._file = file
+        self._writer = w = _McapWriter(file, chunk_size=chunk_size)
         n, face, colours = plan["nvert"], plan["face_vert"], plan["colours"]
         bodies = [name for _, name in plan["bodies"]]
         w.metadata("hybrid", {"description": json.dumps({
@@ -648,9 +661,8 @@ class _FrameWriter:
         def channel(topic, schema):
             return w.channel(topic, "protobuf", schemas[schema])
 
-        # number slots of a frame: t, the scalars, then each body's x, y, z and w, x, y, z
         self.nbody = len(bodies)
-        self.nslot = 1 + len(SCALAR_CHANNELS) + 7 * self.nbody
+        self.nslot = _nslot(self.nbody)
         const = bytearray()
         prog: list[tuple[int, int, int]] = []
         programs: list[tuple[int, int, int, int]] = []  # (channel, first op, end op, every)
@@ -811,10 +823,15 @@ class Recorder:
         self.frames_recorded = 0  # frames taken so far
         self._next_t = -math.inf
         self._closed = False
-        self._fw = _FrameWriter(self.path, plan, chunk_size=chunk_size,
-                                mesh_every=int(mesh_every) if mesh_every else (1 if n <= MESH_EVERY_FRAME_MAX else 10))
-        batch = int(min(max(chunk_size // self._fw.frame_bytes, 1), 1000))
-        nslot = self._fw.nslot
+        mesh_every = int(mesh_every) if mesh_every else (1 if n <= MESH_EVERY_FRAME_MAX else 10)
+        self._file = open(self.path, "wb")  # a path that cannot be written fails here, at once
+        self._fw: _FrameWriter | None = None
+
+        def make_writer() -> _FrameWriter:  # the file's head, and the encoder loaded
+            return _FrameWriter(self._file, plan, chunk_size=chunk_size, mesh_every=mesh_every)
+
+        batch = int(min(max(chunk_size // _frame_bytes_estimate(plan, mesh_every), 1), 1000))
+        nslot = _nslot(self.nbody)
         # frames are held in one buffer while the other is written (double buffering)
         self._free: queue.Queue = queue.Queue()
         for _ in range(2 if background else 1):
@@ -829,8 +846,11 @@ class Recorder:
         self._todo: queue.Queue | None = None
         if background:
             self._todo = queue.Queue()
-            self._thread = threading.Thread(target=self._work, name="hybrid-recorder", daemon=True)
+            self._thread = threading.Thread(target=self._work, args=(make_writer,), name="hybrid-recorder",
+                                            daemon=True)
             self._thread.start()
+        else:
+            self._fw = make_writer()
 
     # ------------------------------------------------------------ observer
     def __call__(self, sim, trace=None) -> None:
@@ -963,9 +983,16 @@ class Recorder:
             else:
                 self._buf = item[0]
 
-    def _work(self) -> None:
+    def _work(self, make_writer) -> None:
         while True:
             item = self._todo.get()
+            if self._fw is None and self._error is None:
+                # the file's head, once the first frames come: the run is then in its
+                # compiled steps (which release the GIL), so this costs it nothing
+                try:
+                    self._fw = make_writer()
+                except BaseException as exc:  # raised again in the run's thread
+                    self._error = exc
             try:
                 if item is None:
                     return
@@ -995,7 +1022,10 @@ class Recorder:
                     self._todo.put(None)
                     self._thread.join()
         finally:
-            self._fw.close()
+            if self._fw is not None:
+                self._fw.close()
+            else:
+                self._file.close()
         if self._error is not None:
             raise self._error
 
