@@ -21,13 +21,15 @@ a protobuf FileDescriptorSet (foxglove's from `foxglove-schemas-protobuf`). The 
 description (faces, region of each point, colours, geoms) is an MCAP metadata record
 named "hybrid", so that `hybrid render` needs nothing but the file.
 
-Cost: the run's thread only copies each frame (positions, body poses, its row in
-the runner's trace). A chunk's worth of frames (about 1 MiB) goes to a writer thread
-that encodes every message of every frame in one compiled pass (protobuf: numbers
-are copied as their 8 bytes, the fields that do not change are encoded once), then
-compresses (zstd at a fast level) and writes the chunk. The encoder and the
-compressor release the GIL, so the run goes on meanwhile on another core.
-`hybrid bench` times the breathing run with and without the recording.
+Cost: the run's thread only copies each block of frames (positions, body poses,
+their rows in the runner's trace). The frames go to a writer thread (at the end of
+a block once half a chunk, about 0.5 MiB, is held) that writes the file's head with
+the first ones, takes their scalars from the trace, encodes every message of every
+frame in one compiled pass (protobuf: numbers are copied as their 8 bytes, the
+fields that do not change are encoded once), then compresses (zstd at a fast level)
+and writes the chunk. The encoder and the compressor release the GIL, as do the
+run's compiled steps, so the two go on side by side. `hybrid bench` times the
+breathing run with and without the recording.
 
 Crash safety: the frames held are handed to the writer at least every `flush_s`
 seconds of wall time, each batch written as a whole chunk, so a killed process leaves
@@ -801,7 +803,7 @@ class Recorder:
     `every_s`: the recording interval in simulated time (default 10 ms); frames the
     runner offers closer than that to the last recorded one are skipped.
     `mesh_every`: the triangle list every that many recorded frames (default: 1 up to
-    `MESH_EVERY_FRAME_MAX` points, 10 above).
+    `MESH_EVERY_FRAME_MAX` points, 10 above); above 1, a point cloud every frame.
     `chunk_size`: bytes of an MCAP chunk, about; frames are copied as they come and
     encoded a chunk at a time, and at least every `flush_s` seconds of wall time.
     `background`: encode, compress and write on a thread of their own (the compiled
