@@ -51,6 +51,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .errors import HybridError
 from .kernel import jit
 from .simulation import F_PRESSURE, F_TIME, F_VOLUME
 
@@ -1090,6 +1091,10 @@ def read(path: str | Path) -> dict[str, dict]:
             if topic is not None:
                 raw.setdefault(topic[0], []).append((rec.log_time, rec.data))
         elif isinstance(rec, Channel):
+            if rec.message_encoding != "protobuf":
+                raise HybridError(f"recording {str(path)!r}: channel {rec.topic} is encoded in "
+                                  f"{rec.message_encoding!r}; expected 'protobuf' (a recording of an earlier "
+                                  "hybrid, which wrote JSON: run the scene again to record it anew)")
             topics[rec.id] = (rec.topic, rec.schema_id)
         elif isinstance(rec, Schema):
             schemas[rec.id] = (rec.name, rec.data)

@@ -256,3 +256,20 @@ def test_a_killed_run_leaves_a_readable_file_with_its_frames(tmp_path):
     t = read(path)["membrane"]["t"]
     assert len(t) >= n
     np.testing.assert_allclose(t, np.arange(len(t)) * 0.01, atol=1e-9)  # every frame, in order, from 0
+
+
+def test_a_recording_in_another_encoding_is_refused_with_a_clear_error(tmp_path):
+    """Earlier versions of hybrid wrote JSON messages: read() names the channel and its encoding."""
+    from mcap.writer import Writer
+
+    path = tmp_path / "old.mcap"
+    with open(path, "wb") as f:
+        w = Writer(f)
+        w.start()
+        schema = w.register_schema("hybrid.Scalar", "jsonschema", b"{}")
+        ch = w.register_channel("/volume", "json", schema)
+        w.add_message(ch, 0, b'{"t":0,"value":1}', 0)
+        w.finish()
+    with pytest.raises(hybrid.HybridError, match=r"/volume is encoded in 'json'; expected 'protobuf'"):
+        read(path)
+    assert main(["render", str(path), "--out", str(tmp_path / "figs")]) == 2
