@@ -306,6 +306,24 @@ def _encode_frames(t_ns, number, number_bits, cloud, pos_bits, frame0, const, pr
     return k, m
 
 
+_encoder_loaded = False
+
+
+def _load_encoder() -> None:
+    """Compile the encoder, or load it from the cache, once a process, in the calling
+    thread (the recorder's constructor: before the run, not in the writer thread while
+    the run waits for it), with the argument types `_FrameWriter.write` passes."""
+    global _encoder_loaded
+    if _encoder_loaded:
+        return
+    number = np.zeros((1, 1))
+    pos = np.zeros((1, 1, 3))
+    _encode_frames(np.zeros(1, np.int64), number, number.view(np.uint64), np.zeros((1, 16), np.uint8),
+                   pos.reshape(1, -1).view(np.uint64), 0, np.frombuffer(b"\0", np.uint8), np.zeros((0, 3), np.int64),
+                   np.zeros((0, 4), np.int64), np.zeros(1, np.uint8), np.zeros((0, 3), np.int64), np.zeros(0, np.int64))
+    _encoder_loaded = True
+
+
 # ------------------------------------------------------------------ schemas
 SCALAR_PROTO = "hybrid/Scalar.proto"
 
@@ -738,11 +756,9 @@ class _FrameWriter:
             leaf.get(op, 20) for op, _, _ in prog)
         self._out = np.empty(0, np.uint8)
         self._index = np.empty((0, 3), np.int64)
-        # compile (or load) the encoder before the run, for the (writable) arrays the run passes
-        one = np.zeros((1, self.nslot))
-        self.write(np.zeros(1), one, np.array(plan["rest"], float)[None], 0, dry=True)
+        _load_encoder()
 
-    def write(self, t_s, number, pos, frame0: int, *, dry: bool = False) -> None:
+    def write(self, t_s, number, pos, frame0: int) -> None:
         """Frames frame0, frame0 + 1, ...: t_s (nframe,) s, number (nframe, nslot), pos
         (nframe, nvert, 3) m, as one chunk."""
         nframe = len(t_s)
@@ -763,8 +779,7 @@ class _FrameWriter:
         k, m = _encode_frames(t_ns, number, number.view(np.uint64), cloud.view(np.uint8).reshape(nframe, -1),
                               pos.reshape(nframe, -1).view(np.uint64), frame0, self._const, self._prog,
                               self._programs, self._out, self._index, self._size)
-        if not dry:
-            self._writer.add_chunk(self._out[:k], self._index[:m])
+        self._writer.add_chunk(self._out[:k], self._index[:m])
 
     def close(self) -> None:
         try:
@@ -827,6 +842,7 @@ class Recorder:
         self._next_t = -math.inf
         self._closed = False
         mesh_every = int(mesh_every) if mesh_every else (1 if n <= MESH_EVERY_FRAME_MAX else 10)
+        _load_encoder()
         self._file = open(self.path, "wb")  # a path that cannot be written fails here, at once
         self._fw: _FrameWriter | None = None
 

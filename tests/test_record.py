@@ -148,6 +148,19 @@ def test_a_large_mesh_records_a_point_cloud_every_frame_and_the_triangles_less_o
         assert stamp.seconds * 10**9 + stamp.nanos == log_ns
 
 
+def test_the_encoder_is_compiled_once_before_the_run_for_the_types_the_run_passes(tmp_path):
+    """Recorder() compiles (or loads) the encoder; the writer thread, small meshes and
+    large, then finds it ready rather than compiling again while the run waits."""
+    from hybrid.record import _encode_frames
+
+    for mesh_every in (1, 4):
+        sim = hybrid.load(membrane_demo())
+        with Recorder(tmp_path / f"run{mesh_every}.mcap", sim, mesh_every=mesh_every) as rec:
+            assert len(_encode_frames.signatures) == 1
+            run(sim, 0.2, observers=[rec])
+    assert len(_encode_frames.signatures) == 1
+
+
 def _diverging_scene():
     return dataclasses.replace(membrane_demo(), dt_s=0.006)  # diverges at step 11 (t = 0.066 s)
 
