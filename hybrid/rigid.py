@@ -27,6 +27,7 @@ Units: SI (m, kg, s, N, N m). Arrays: `(n, 3)` float64, world frame unless state
 from __future__ import annotations
 
 import ctypes
+import logging
 from collections.abc import Sequence
 from functools import cache
 from pathlib import Path
@@ -51,6 +52,19 @@ __all__ = [
     "site_vel_kernel",
     "mj_step_ctypes",
 ]
+
+_mujoco_log = logging.getLogger("hybrid.mujoco")
+
+
+def _log_mujoco_warning(message: str) -> None:
+    _mujoco_log.warning("MuJoCo: %s", message)
+
+
+# MuJoCo's default warning handler prints and appends to MUJOCO_LOG.TXT in the working
+# folder; its warnings go to the logger "hybrid.mujoco" instead (printed on stderr
+# unless logging is set up otherwise), unless the program has its own handler
+if mujoco.get_mju_user_warning() is None:
+    mujoco.set_mju_user_warning(_log_mujoco_warning)
 
 #: The packaged trunk model (spine fixed to the world, two hinged ribs, sternum spring).
 TRUNK_XML: Path = Path(__file__).resolve().parent / "data" / "trunk.xml"

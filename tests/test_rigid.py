@@ -350,3 +350,22 @@ def test_numba_loop_calls_mujoco_bit_for_bit():
         b.site_body, d.xfrc_applied, out)
     np.testing.assert_array_equal(out, z)
     np.testing.assert_array_equal(d.qpos, a.data.qpos)
+
+
+def test_mujoco_warnings_go_to_the_log_not_to_a_file_in_the_working_folder(tmp_path, monkeypatch, caplog):
+    """MuJoCo's own handler appends to MUJOCO_LOG.TXT in the working folder; hybrid
+    routes its warnings to the logger "hybrid.mujoco"."""
+    import logging
+
+    import mujoco
+
+    from hybrid import rigid
+
+    monkeypatch.chdir(tmp_path)
+    model = mujoco.MjModel.from_xml_path(str(rigid.TRUNK_XML))
+    data = mujoco.MjData(model)
+    data.qpos[0] = np.nan  # MuJoCo resets the state and warns
+    with caplog.at_level(logging.WARNING, logger="hybrid.mujoco"):
+        mujoco.mj_step(model, data)
+    assert any("MuJoCo: Nan, Inf or huge value in QPOS" in r.getMessage() for r in caplog.records)
+    assert not (tmp_path / "MUJOCO_LOG.TXT").exists()

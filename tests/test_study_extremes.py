@@ -16,9 +16,13 @@ def _strict_load(path):
     return json.loads(path.read_text(), parse_constant=no_constant)
 
 
-def test_small_extremes_catalogue(tmp_path, capsys):
+def test_small_extremes_catalogue(tmp_path, capsys, monkeypatch):
+    cwd = tmp_path / "cwd"
+    cwd.mkdir()
+    monkeypatch.chdir(cwd)
     assert main_study(["extremes", "--out", str(tmp_path), "--small"]) == 0
     assert "extremes:" in capsys.readouterr().out
+    assert not list(cwd.iterdir())  # MuJoCo's warnings (light ribs) leave no MUJOCO_LOG.TXT here
     data = _strict_load(tmp_path / "extremes.json")
     cases = data["cases"]
     assert len(cases) >= 14

@@ -25,7 +25,6 @@ temporary folder.
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import math
 import tempfile
@@ -313,14 +312,11 @@ def run(out_dir, *, small: bool = False, scheduler: str | None = None, workers: 
     t0 = time.perf_counter()
     bugs: list = []
     with tempfile.TemporaryDirectory(prefix="hybrid_extremes_") as tmp:
-        # MuJoCo writes MUJOCO_LOG.TXT into the working folder on its warnings
-        # (the light-ribs cases): keep it out of the user's folder
-        with contextlib.chdir(tmp):
-            params = [dict(name=c.name, tmp=tmp, small=small) for c in cases(Path(tmp))]
-            rows = []
-            for row, case_bugs in sweep(run_named_case, params, scheduler=scheduler, workers=workers):
-                rows.append(row)
-                bugs += case_bugs
+        params = [dict(name=c.name, tmp=tmp, small=small) for c in cases(Path(tmp))]
+        rows = []
+        for row, case_bugs in sweep(run_named_case, params, scheduler=scheduler, workers=workers):
+            rows.append(row)
+            bugs += case_bugs
     res = {"small": small, "cases": rows,
            "reasonable_failures": [r["name"] for r in rows if r["reasonable"] and r["outcome"] != "stable"],
            "bugs": bugs, "runtime_s": time.perf_counter() - t0}
