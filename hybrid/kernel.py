@@ -17,6 +17,7 @@ own sources: numba checks only a function's own file when it reuses a cached
 build, so a kernel whose callee changed in another file could otherwise load
 stale machine code (and crash). A changed package gets a fresh cache, and
 writes into it are serialised across processes (`_lock_cache_writes`).
+Folders of other versions unused for `CACHE_KEEP_DAYS` are removed at import.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import os
+import time
 import types
 from pathlib import Path
 
@@ -57,6 +59,42 @@ def _cache_dir() -> str:
 
 
 CACHE_DIR = _cache_dir()
+#: cache folders of other versions of the sources unused this long are removed
+CACHE_KEEP_DAYS = 30
+
+
+def _prune_caches(cache_dir: str, keep_days: float, now: float) -> list[str]:
+    """Mark cache_dir as used now, and remove its sibling folders of other versions
+    of the sources ("numba-" and 16 hex digits) not used for keep_days: each source
+    change or upgrade leaves one (5-12 MB). Returns the folders removed."""
+    import re
+    import shutil
+
+    base = Path(cache_dir).parent
+    try:
+        Path(cache_dir).mkdir(parents=True, exist_ok=True)
+        mark = Path(cache_dir) / ".last_used"
+        mark.touch()
+        os.utime(mark, (now, now))
+        siblings = list(base.iterdir())
+    except OSError:  # a read-only cache folder: numba's own problem, not ours
+        return []
+    removed = []
+    for folder in siblings:
+        if folder.name == Path(cache_dir).name or not re.fullmatch(r"numba-[0-9a-f]{16}", folder.name):
+            continue
+        try:
+            used = folder / ".last_used"
+            last = (used if used.exists() else folder).stat().st_mtime
+            if now - last > keep_days * 86400:
+                shutil.rmtree(folder)
+                removed.append(str(folder))
+        except OSError:  # in use or gone meanwhile: another process's business
+            continue
+    return removed
+
+
+_prune_caches(CACHE_DIR, CACHE_KEEP_DAYS, time.time())
 
 
 def _lock_cache_writes() -> None:
