@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import sys
+import tempfile
 from pathlib import Path
 
 from .errors import HybridError
@@ -57,7 +58,7 @@ def _cmd_run(args) -> int:
     duration = scene.duration_s if args.duration is None else args.duration
     if not duration > 0:
         raise HybridError(f"--duration: expected a time > 0 s, received {duration!r}")
-    out = Path(args.out) if args.out else Path("runs") / scene.name
+    out = _out_folder(Path(args.out) if args.out else Path("runs") / scene.name)
     sim = Simulation(compile_scene(scene))
     recorder = None
     if not args.no_record:
@@ -80,9 +81,21 @@ def _cmd_run(args) -> int:
     return 0
 
 
+def _out_folder(out: Path) -> Path:
+    """--out, created now: a folder that cannot be written fails before the run."""
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=out):
+            pass
+    except OSError as exc:
+        raise HybridError(f"--out: expected a folder that can be created and written, received {str(out)!r} "
+                          f"({exc.strerror or exc})") from None
+    return out
+
+
 def _cmd_render(args) -> int:
     from .render import render
-    result = render(args.source, Path(args.out), video=args.video, duration_s=args.duration)
+    result = render(args.source, _out_folder(Path(args.out)), video=args.video, duration_s=args.duration)
     rest, peak, end = result["frames"]
     extra = f" and {result['video']}" if result["video"] else ""
     print(f"rest t = {rest:.2f} s, peak inspiration t = {peak:.2f} s, end of expiration t = {end:.2f} s "
@@ -161,6 +174,10 @@ def main(argv: list[str] | None = None) -> int:
     except HybridError as exc:
         msg = " ".join(str(exc).split())  # one line, whatever the message
         sys.stderr.write(f"hybrid: error: {msg}\n")
+        return 2
+    except OSError as exc:  # the file system refused (a full disk, say): what and where
+        where = f" {str(exc.filename)!r}" if exc.filename else ""
+        sys.stderr.write(f"hybrid: error: cannot read or write{where}: {exc.strerror or exc}\n")
         return 2
     except KeyboardInterrupt:
         sys.stderr.write("hybrid: interrupted\n")

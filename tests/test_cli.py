@@ -44,6 +44,18 @@ def test_bad_input_is_one_line_with_status_2(args, culprit, tmp_path):
     assert "Traceback" not in proc.stderr
 
 
+@pytest.mark.parametrize("command", [["run", "membrane_demo", "--duration", "0.01"], ["render", "membrane_demo"]])
+def test_an_output_folder_that_cannot_be_written_is_one_line_with_status_2(command, tmp_path):
+    blocker = tmp_path / "a_file"
+    blocker.write_text("")
+    proc = run_cli(*command, "--out", str(blocker / "out"))  # a folder inside a file
+    assert proc.returncode == 2
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1, proc.stderr
+    assert "--out: expected a folder that can be created and written" in lines[0]
+    assert str(blocker / "out") in lines[0]
+
+
 def test_diverging_run_keeps_what_it_recorded(tmp_path):
     # a step ten times the stability bound: diverges, exits 2, still writes the summary
     out = tmp_path / "div"
@@ -75,3 +87,17 @@ def test_study_subcommand_reaches_the_studies(tmp_path):
     assert proc.returncode == 2
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and "nosuchstudy" in lines[0], proc.stderr
+
+
+def test_a_file_system_error_during_a_run_is_one_line_with_status_2(tmp_path, monkeypatch, capsys):
+    import errno
+
+    import hybrid.run
+
+    def full_disk(result, out):
+        raise OSError(errno.ENOSPC, "No space left on device", str(out / "summary.json"))
+
+    monkeypatch.setattr(hybrid.run, "write_outputs", full_disk)
+    assert main(["run", "membrane_demo", "--duration", "0.01", "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"hybrid: error: cannot read or write {str(tmp_path / 'o' / 'summary.json')!r}: No space left on device"]
