@@ -58,7 +58,7 @@ def _cmd_run(args) -> int:
     duration = scene.duration_s if args.duration is None else args.duration
     if not duration > 0:
         raise HybridError(f"--duration: expected a time > 0 s, received {duration!r}")
-    out = _out_folder(Path(args.out) if args.out else Path("runs") / scene.name)
+    out = out_folder(Path(args.out) if args.out else Path("runs") / scene.name)
     sim = Simulation(compile_scene(scene))
     recorder = None
     if not args.no_record:
@@ -81,7 +81,7 @@ def _cmd_run(args) -> int:
     return 0
 
 
-def _out_folder(out: Path) -> Path:
+def out_folder(out: Path) -> Path:
     """--out, created now: a folder that cannot be written fails before the run."""
     try:
         out.mkdir(parents=True, exist_ok=True)
@@ -95,7 +95,7 @@ def _out_folder(out: Path) -> Path:
 
 def _cmd_render(args) -> int:
     from .render import render
-    result = render(args.source, _out_folder(Path(args.out)), video=args.video, duration_s=args.duration)
+    result = render(args.source, out_folder(Path(args.out)), video=args.video, duration_s=args.duration)
     rest, peak, end = result["frames"]
     extra = f" and {result['video']}" if result["video"] else ""
     print(f"rest t = {rest:.2f} s, peak inspiration t = {peak:.2f} s, end of expiration t = {end:.2f} s "

@@ -44,7 +44,8 @@ def test_bad_input_is_one_line_with_status_2(args, culprit, tmp_path):
     assert "Traceback" not in proc.stderr
 
 
-@pytest.mark.parametrize("command", [["run", "membrane_demo", "--duration", "0.01"], ["render", "membrane_demo"]])
+@pytest.mark.parametrize("command", [["run", "membrane_demo", "--duration", "0.01"], ["render", "membrane_demo"],
+                                     ["study", "stability", "--small"]])
 def test_an_output_folder_that_cannot_be_written_is_one_line_with_status_2(command, tmp_path):
     blocker = tmp_path / "a_file"
     blocker.write_text("")

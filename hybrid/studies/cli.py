@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 from ..errors import HybridError
 
@@ -71,8 +72,11 @@ def _work_precision(args) -> None:
 
 
 def main_study(argv) -> int:
+    from ..cli import out_folder
+
     args = build_study_parser().parse_args(list(argv))
     try:
+        out_folder(Path(args.out))
         {"stability": _stability, "extremes": _extremes,
          "work-precision": _work_precision}[args.study](args)
         return 0
