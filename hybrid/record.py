@@ -698,6 +698,9 @@ class _FrameWriter:
             p0 = len(prog)
             for op in ops:
                 fields(op) if hasattr(op, "SerializeToString") else prog.append(op)
+            depth = np.cumsum([(op == OP_BEGIN) - (op == OP_END) for op, _, _ in prog[p0:]])
+            # the encoder sizes nested messages on a stack of MAX_DEPTH, unchecked
+            assert depth[-1] == 0 and depth.min() >= 0 and depth.max() < MAX_DEPTH, "unbalanced program"
             programs.append((ch, p0, len(prog), every))
 
         def begin(field):
