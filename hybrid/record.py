@@ -293,6 +293,8 @@ def _encode_frames(t_ns, number, number_bits, cloud, pos_bits, frame0, const, pr
                     k = _put_varint(out, k, a)
                     k = _put_varint(out, k, ncloud)
                     k = _put_bytes(out, k, cloud[f], 0, ncloud)
+            if k - start - RECORD_HEAD != acc[0]:  # the sizing pass and the writing pass disagree
+                raise RuntimeError("hybrid.record: a message's size differs from the size its fields were given")
             out[start] = 5  # opcode: message
             _put_uint(out, start + 1, k - start - 9, 8)
             _put_uint(out, start + 9, ch, 2)
