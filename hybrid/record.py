@@ -163,31 +163,26 @@ def _put_bytes(out, k, src, a, b):  # pragma: no cover - compiled
 
 @jit(nogil=True)
 def _put_bits(out, k, bits):  # pragma: no cover - compiled
-    """A double's 8 bytes (its bits as uint64), little-endian, at out[k]; returns the new end."""
+    """A double's 8 bytes (its bits as uint64), little-endian, at out[k]; returns the
+    new end. Unsigned indices: no wraparound checks in the encoder's longest loop."""
+    ku = np.uint64(k)
     for q in range(np.uint64(8)):
-        out[k + q] = (bits >> (np.uint64(8) * q)) & np.uint64(255)
+        out[ku + q] = (bits >> (np.uint64(8) * q)) & np.uint64(255)
     return k + 8
 
 
 @jit(nogil=True)
 def _put_points(out, k, key, bits):  # pragma: no cover - compiled
     """Repeated foxglove.Point3 (field key `key`) of bits (3 nvert,) uint64, the
-    doubles x, y, z of each point; returns the new end. Unsigned indices: no
-    wraparound checks in this, the encoder's longest loop."""
-    nkey = _varint_len(key)
-    kk = np.uint64(k)
-    for i in range(np.uint64(bits.shape[0] // 3)):
-        _put_varint(out, np.int64(kk), key)
-        kk += np.uint64(nkey)
-        out[kk] = POINT3_BYTES
-        kk += np.uint64(1)
-        for j in range(np.uint64(3)):
-            out[kk] = np.uint64(9) + np.uint64(8) * j  # x, y, z: fields 1, 2, 3, 64-bit
-            v = bits[np.uint64(3) * i + j]
-            for q in range(np.uint64(8)):
-                out[kk + np.uint64(1) + q] = (v >> (np.uint64(8) * q)) & np.uint64(255)
-            kk += np.uint64(9)
-    return np.int64(kk)
+    doubles x, y, z of each point; returns the new end."""
+    for i in range(bits.shape[0] // 3):
+        k = _put_varint(out, k, key)
+        out[k] = POINT3_BYTES
+        k += 1
+        for j in range(3):
+            out[k] = 9 + 8 * j  # x, y, z: fields 1, 2, 3, 64-bit
+            k = _put_bits(out, k + 1, bits[3 * i + j])
+    return k
 
 
 @jit(nogil=True)
@@ -216,18 +211,19 @@ def _leaf_len(op, a, nvert, ncloud, stamp_body):  # pragma: no cover - compiled
 
 
 @jit(nogil=True)
-def _encode_frames(t_ns, number, number_bits, cloud, pos_bits, frame0, const, prog, channels, out,
-                   index, size):  # pragma: no cover - compiled
+def _encode_frames(t_ns, number, cloud, pos, frame0, const, prog, channels, out, index,
+                   size):  # pragma: no cover - compiled
     """The MCAP message records of nframe frames, written into out; index[m] =
     (channel, log time ns, offset in out) of each. Returns (bytes written, messages).
 
-    t_ns (nframe,); number (nframe, nslot) the numeric slots and number_bits their
-    bits (uint64; protobuf writes a double's bits little-endian); cloud (nframe, nbyte)
-    the point cloud bytes; pos_bits (nframe, 3 nvert) the bits of the points' x, y, z;
-    frame0 the run's index of the first frame; channels (nchannel, 4) =
-    (channel id, first op, end op, every nth frame); size (nop,) scratch for the
-    nested messages' lengths."""
-    nvert = pos_bits.shape[1] // 3
+    t_ns (nframe,); number (nframe, nslot) the numeric slots; cloud (nframe, nbyte)
+    the point cloud bytes; pos (nframe, 3 nvert) the points' x, y, z; frame0 the run's
+    index of the first frame; channels (nchannel, 4) = (channel id, first op, end op,
+    every nth frame); size (nop,) scratch for the nested messages' lengths. Doubles
+    are written as their bits, little-endian, as protobuf does."""
+    number_bits = number.view(np.uint64)
+    pos_bits = pos.view(np.uint64)
+    nvert = pos.shape[1] // 3
     ncloud = cloud.shape[1]
     acc = np.zeros(MAX_DEPTH, np.int64)
     opened = np.zeros(MAX_DEPTH, np.int64)
@@ -308,22 +304,15 @@ def _encode_frames(t_ns, number, number_bits, cloud, pos_bits, frame0, const, pr
     return k, m
 
 
-_encoder_loaded = False
-
-
 def _load_encoder() -> None:
     """Compile the encoder, or load it from the cache, once a process, in the calling
     thread (the recorder's constructor: before the run, not in the writer thread while
     the run waits for it), with the argument types `_FrameWriter.write` passes."""
-    global _encoder_loaded
-    if _encoder_loaded:
+    if _encode_frames.signatures:
         return
-    number = np.zeros((1, 1))
-    pos = np.zeros((1, 1, 3))
-    _encode_frames(np.zeros(1, np.int64), number, number.view(np.uint64), np.zeros((1, 16), np.uint8),
-                   pos.reshape(1, -1).view(np.uint64), 0, np.frombuffer(b"\0", np.uint8), np.zeros((0, 3), np.int64),
-                   np.zeros((0, 4), np.int64), np.zeros(1, np.uint8), np.zeros((0, 3), np.int64), np.zeros(0, np.int64))
-    _encoder_loaded = True
+    _encode_frames(np.zeros(1, np.int64), np.zeros((1, 1)), np.zeros((1, 16), np.uint8), np.zeros((1, 3)), 0,
+                   np.frombuffer(b"\0", np.uint8), np.zeros((0, 3), np.int64), np.zeros((0, 4), np.int64),
+                   np.zeros(1, np.uint8), np.zeros((0, 3), np.int64), np.zeros(0, np.int64))
 
 
 # ------------------------------------------------------------------ schemas
@@ -684,8 +673,6 @@ class _FrameWriter:
         def channel(topic, schema):
             return w.channel(topic, "protobuf", schemas[schema])
 
-        self.nbody = len(bodies)
-        self.nslot = _nslot(self.nbody)
         const = bytearray()
         prog: list[tuple[int, int, int]] = []
         programs: list[tuple[int, int, int, int]] = []  # (channel, first op, end op, every)
@@ -719,10 +706,10 @@ class _FrameWriter:
         identity.orientation.w = 1.0
         # small meshes: the triangle list every frame; large ones: the point cloud every
         # frame (x, y, z float32, r, g, b, a uint8: 16 bytes a point), the triangles less often
-        self.cloud = mesh_every > 1
+        self.has_cloud = mesh_every > 1
         self._cloud = np.zeros((0, n), dtype=[("xyz", "<f4", 3), ("rgba", "u1", 4)])
         self._rgba = np.round(colours * 255).astype(np.uint8)
-        if self.cloud:
+        if self.has_cloud:
             T = PackedElementField
             cloud_fields = [PackedElementField(name=k, offset=o, type=T.FLOAT32) for k, o in (("x", 0), ("y", 4), ("z", 8))]
             cloud_fields += [PackedElementField(name=k, offset=12 + i, type=T.UINT8)
@@ -772,7 +759,7 @@ class _FrameWriter:
             self._cloud = np.zeros((nframe, pos.shape[1]), self._cloud.dtype)
             self._cloud["rgba"] = self._rgba
         cloud = self._cloud[:nframe]
-        if self.cloud:
+        if self.has_cloud:
             cloud["xyz"] = pos
         need = nframe * self.frame_bytes
         if len(self._out) < need:
@@ -781,9 +768,8 @@ class _FrameWriter:
             self._index = np.empty((2 * nframe * len(self._programs), 3), np.int64)
         number = np.ascontiguousarray(number, "<f8")
         pos = np.ascontiguousarray(pos, "<f8")
-        k, m = _encode_frames(t_ns, number, number.view(np.uint64), cloud.view(np.uint8).reshape(nframe, -1),
-                              pos.reshape(nframe, -1).view(np.uint64), frame0, self._const, self._prog,
-                              self._programs, self._out, self._index, self._size)
+        k, m = _encode_frames(t_ns, number, cloud.view(np.uint8).reshape(nframe, -1), pos.reshape(nframe, -1),
+                              frame0, self._const, self._prog, self._programs, self._out, self._index, self._size)
         self._writer.add_chunk(self._out[:k], self._index[:m])
 
     def close(self) -> None:
@@ -918,17 +904,12 @@ class Recorder:
         if self._closed or not k:
             return
         t = frames.scal[:k, F_TIME]
-        tol = 1e-9 * self.every_s
-        if t[0] >= self._next_t - tol and (k == 1 or np.diff(t).min() >= self.every_s - tol):
-            pick = np.arange(k)  # every frame (the default: frames and recording every 10 ms)
-            self._next_t = t[-1] + self.every_s
-        else:
-            taken = []
-            for j, tj in enumerate(t.tolist()):
-                if tj >= self._next_t - tol:
-                    taken.append(j)
-                    self._next_t = tj + self.every_s
-            pick = np.asarray(taken, np.int64)
+        pick = []
+        for j, tj in enumerate(t.tolist()):
+            if tj >= self._next_t - 1e-9 * self.every_s:
+                pick.append(j)
+                self._next_t = tj + self.every_s
+        pick = np.asarray(pick, np.int64)
         row0 = len(trace.t_s) - k if trace is not None else 0
         if trace is not None:
             self._trace = trace
