@@ -48,7 +48,7 @@ from .kernel import kernel
 from .errors import RigidError, SceneError, SimulationDiverged
 from .scene import Nailed, Prescribed, Rigid, RigidLink, Scene
 from .model import T_GRAVITY
-from .simulation import (OK, S_PRESSURE, S_TIME, Frames, MembraneState, capture_frame, membrane_advance,
+from .step import (OK, S_PRESSURE, S_TIME, Frames, MembraneState, capture_frame, membrane_advance,
                          membrane_forces)
 
 __all__ = ["BUILTIN_MJCF", "PACKAGE_MJCF", "resolve_mjcf", "load_rigid_spec", "build_rigid", "CoupledRigid", "Coupling",

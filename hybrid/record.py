@@ -53,7 +53,7 @@ import numpy as np
 
 from .errors import HybridError
 from .kernel import jit
-from .simulation import F_PRESSURE, F_TIME, F_VOLUME
+from .step import F_PRESSURE, F_TIME, F_VOLUME
 
 __all__ = ["Recorder", "read", "region_colours", "SCALAR_CHANNELS", "MESH_EVERY_FRAME_MAX"]
 
@@ -897,7 +897,7 @@ class Recorder:
     frame = __call__
 
     def frames(self, sim, frames, trace=None) -> None:
-        """Record the frames a compiled call captured (`hybrid.simulation.Frames`,
+        """Record the frames a compiled call captured (`hybrid.step.Frames`,
         `frames.count` of them; the trace's last rows are theirs), those `every_s`
         apart: copied in blocks, handed over as the buffer fills."""
         k = frames.count

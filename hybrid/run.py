@@ -25,7 +25,8 @@ from .errors import HybridError
 from .model import Model
 from .schedule import Breathing, schedule_eval, stack_schedules
 from .scene import Muscle
-from .simulation import F_KE, F_PRESSURE, F_TIME, F_VOLUME, Simulation, capture_frame
+from .simulation import Simulation
+from .step import F_KE, F_PRESSURE, F_TIME, F_VOLUME, capture_frame
 
 __all__ = ["Trace", "run", "write_outputs"]
 
@@ -81,7 +82,7 @@ def run(sim: Simulation, duration_s: float, *, frame_dt_s: float = 0.01, progres
     `observers`: called at each frame after the trace has its values (e.g.
     `hybrid.record.Recorder`); they must not change the state. An observer with a
     `frames(sim, frames, trace)` method takes the frames a compiled call captured
-    (`hybrid.simulation.Frames`, `frames.count` of them, the trace's last rows);
+    (`hybrid.step.Frames`, `frames.count` of them, the trace's last rows);
     otherwise it is called as `obs(sim, trace)` at each frame, the simulation then
     stepped frame by frame.
 

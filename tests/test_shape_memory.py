@@ -173,7 +173,7 @@ def test_step_forces_are_the_terms_added_point_by_point(subdivisions, parallel):
     import dataclasses
 
     from hybrid.demo import bench_membrane
-    from hybrid.simulation import membrane_forces, new_state
+    from hybrid.step import membrane_forces, new_state
 
     model = compile_scene(bench_membrane(subdivisions))
     model = dataclasses.replace(model, arrays=model.arrays._replace(parallel=parallel))

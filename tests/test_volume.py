@@ -26,7 +26,8 @@ from hybrid.model import compile_scene
 from hybrid.regions import HalfSpace, Indices
 from hybrid.scene import (AppliedForce, Damping, Gravity, Masses, MassSpring, MeshSpec, Nailed, Scene,
                           ShapeMemory, SoftVolume, Volume)
-from hybrid.simulation import S_PRESSURE, Simulation, membrane_forces, new_state, run_membrane
+from hybrid.simulation import Simulation
+from hybrid.step import S_PRESSURE, membrane_forces, new_state, run_membrane
 
 VOLUME_RTOL = 1e-12  # the bound; see the module docstring for why it is reachable
 

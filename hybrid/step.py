@@ -1,0 +1,390 @@
+"""The membrane's compiled step and its state (paper 3.5 and 4; DESIGN.md).
+
+One step, membrane only:
+1. forces at time t (only the terms the model has);
+2. free integration of the points that are not nailed, prescribed or linked
+   (explicit Euler, the paper's eq. 4, or symplectic Euler);
+3. local constraints: prescribed trajectories, keep-in-region;
+4. the exact volume projection, velocities adjusted; p = phi / h^2;
+5. the divergence check: non-finite values, or a point that moved farther
+   in one step than the body's size.
+
+The whole loop is compiled (`run_membrane`); `hybrid.simulation.Simulation`
+drives it, and `hybrid.coupling` runs it with MuJoCo between the force and
+integration phases.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+from numba import prange
+
+from .kernel import CHUNK_VERTS, chunk_count, kernel, kernel_twin
+
+from .constraints import (PROJ_OK, apply_keep_in, apply_prescribed, face_volume,
+                          project_volume, soft_volume_force)
+from .forces import (add_applied, add_attraction, add_mass_spring, add_muscle, shape_memory_force,
+                     shape_memory_frames, shape_memory_frames_parallel)
+from .model import (TERMS, T_APPLIED, T_ATTRACTION, T_DAMPING, T_GRAVITY, T_KEEP_IN, T_MASS_SPRING,
+                    T_MUSCLE, T_PRESCRIBED, T_SHAPE_MEMORY, T_SOFT_VOLUME, T_VOLUME, MembraneArrays)
+from .schedule import KIND_PYTHON, schedule_eval
+
+__all__ = ["MembraneState", "new_state", "membrane_forces", "membrane_advance", "run_membrane",
+           "run_membrane_frames", "capture_frame", "kinetic_energy_of", "Frames"]
+
+# scal slots
+S_TIME, S_PRESSURE, S_PHI, S_KE, S_MAXDISP = range(5)
+# status codes
+OK, DIVERGED_NONFINITE, DIVERGED_RUNAWAY, VOLUME_FAILED = 0, 1, 2, 3
+
+
+class MembraneState(NamedTuple):
+    """What changes during a run. vert_pos (nvert, 3) m; vert_vel (nvert, 3) m/s;
+    vert_force (nvert, 3) N (forces of the last step, before constraints);
+    grad (nvert, 3) m^2 volume gradient at the last projection; sm_sums (nsm, 9),
+    dirn, cubic: scratch; vert_acc (chunk_count(nvert), 4): scratch, the sums
+    of the per-point passes over each chunk of points (hybrid.kernel);
+    sched_val / sched_next (nsched, 3): schedules at t and t + h;
+    scal: time s, pressure Pa, phi, kinetic energy J, largest step displacement m;
+    status: code, failing step, worst vertex, projection status;
+    term_calls (nterm,): how many times each term's kernel ran."""
+    vert_pos: np.ndarray
+    vert_vel: np.ndarray
+    vert_force: np.ndarray
+    grad: np.ndarray
+    sm_sums: np.ndarray
+    vert_acc: np.ndarray
+    dirn: np.ndarray
+    cubic: np.ndarray
+    sched_val: np.ndarray
+    sched_next: np.ndarray
+    scal: np.ndarray
+    status: np.ndarray
+    term_calls: np.ndarray
+
+
+def new_state(arrays: MembraneArrays) -> MembraneState:
+    n = arrays.vert_rest.shape[0]
+    ns = arrays.sched.kind.shape[0]
+    return MembraneState(
+        vert_pos=arrays.vert_rest.copy(), vert_vel=np.zeros((n, 3)), vert_force=np.zeros((n, 3)),
+        grad=np.zeros((n, 3)), sm_sums=np.zeros((arrays.sm_vert.shape[0], 9)),
+        vert_acc=np.zeros((chunk_count(n), 4)), dirn=np.zeros((n, 3)),
+        cubic=np.zeros(2),
+        sched_val=np.zeros((ns, 3)), sched_next=np.zeros((ns, 3)), scal=np.zeros(8),
+        status=np.zeros(4, np.int64), term_calls=np.zeros(len(TERMS), np.int64))
+
+
+@kernel
+def eval_schedules(sched, t, out):
+    """All compiled schedules at time t into out (nsched, 3); Python ones are set by the caller."""
+    for row in range(sched.kind.shape[0]):
+        if sched.kind[row] != KIND_PYTHON:
+            schedule_eval(sched, row, t, out[row])
+
+
+@kernel(inline="always")
+def membrane_forces(m, s, t):
+    """Step phase 1: the force of every term the model has, at time t.
+    # Model: m (MembraneArrays)   # Data in: s.vert_pos, s.vert_vel
+    # Data out: s.vert_force, s.sched_val, s.term_calls (and pressure for soft volume)
+    """
+    eval_schedules(m.sched, t, s.sched_val)
+    on = m.term_on
+    _pointwise_forces(m, s)
+    if on[T_APPLIED]:
+        add_applied(m.app_vert, m.app_sched, s.sched_val, s.vert_force)
+        s.term_calls[T_APPLIED] += 1
+    if on[T_ATTRACTION]:
+        add_attraction(m.att_vert, m.att_stiff, m.att_target, m.att_sched, s.sched_val, s.vert_pos,
+                       s.vert_force)
+        s.term_calls[T_ATTRACTION] += 1
+    if on[T_MASS_SPRING]:
+        add_mass_spring(m.spring_vert, m.spring_stiff, m.spring_rest, s.vert_pos, s.vert_force)
+        s.term_calls[T_MASS_SPRING] += 1
+    if on[T_MUSCLE]:
+        add_muscle(m.mus_vert, m.mus_nbr, m.mus_sched, s.sched_val, s.vert_pos, s.vert_force)
+        s.term_calls[T_MUSCLE] += 1
+    if on[T_SOFT_VOLUME]:
+        s.scal[S_PRESSURE] = soft_volume_force(m.ring_ptr, m.ring_vert, m.vol_ref, m.vol0, m.soft_stiff, s.vert_pos,
+                                               s.grad, s.cubic, s.vert_acc, s.vert_force)
+        s.term_calls[T_SOFT_VOLUME] += 1
+
+
+@kernel(inline="always")
+def _first_at_least(idx, lo):
+    """The first k with idx[k] >= lo in the sorted array idx (len(idx) if none), unsigned."""
+    a, b = np.uint64(0), np.uint64(idx.shape[0])
+    while a < b:
+        mid = (a + b) >> np.uint64(1)
+        if idx[mid] < lo:
+            a = mid + np.uint64(1)
+        else:
+            b = mid
+    return a
+
+
+def _point_forces(vert_free, vert_mass, accel, gravity_on, damp_coef, damping_on, sm_vert, sm_stiff, sm_coef,
+                  sm_sums, add_sm, vert_pos, vert_vel, vert_force):
+    """Start the force sum with the terms that need only the point itself, in
+    one pass that sets vert_force (no separate clearing): gravity F = m g
+    (integrated points), viscous damping F = -c v (paper eq. 4) and, when
+    add_sm, the shape memory's second pass (`hybrid.forces.shape_memory_force`,
+    its frames already gathered into sm_sums). The points run in chunks of
+    CHUNK_VERTS, each walking the sorted sm_vert from its first point on.
+    # Model: vert_free (nvert,) uint8, vert_mass (nvert,) kg, accel (3,) m/s^2,
+    #        damp_coef (nvert,) N s/m; gravity_on, damping_on: bool;
+    #        sm_vert (nsm,) int32 sorted, sm_stiff (nsm,) N/m, sm_coef (nsm, 3) m
+    # Data in: sm_sums (nsm, 9), vert_pos (nvert, 3) m, vert_vel (nvert, 3) m/s
+    # Data out: vert_force (nvert, 3) N
+    """
+    n = vert_pos.shape[0]
+    nsm = np.uint64(sm_vert.shape[0])
+    for c in prange((n + CHUNK_VERTS - 1) // CHUNK_VERTS):
+        # unsigned indices: numba then skips its negative-index wraparound
+        lo, hi = np.uint64(c * CHUNK_VERTS), np.uint64(min((c + 1) * CHUNK_VERTS, n))
+        k = _first_at_least(sm_vert, lo) if add_sm else nsm  # the next shape-memory point
+        for i in range(lo, hi):
+            fx = fy = fz = 0.0
+            if gravity_on and vert_free[i]:
+                m = vert_mass[i]
+                fx = m * accel[0]
+                fy = m * accel[1]
+                fz = m * accel[2]
+            if damping_on:
+                cd = damp_coef[i]
+                fx -= cd * vert_vel[i, 0]
+                fy -= cd * vert_vel[i, 1]
+                fz -= cd * vert_vel[i, 2]
+            if k < nsm and np.uint64(sm_vert[k]) == i:
+                gx, gy, gz = shape_memory_force(sm_stiff, sm_coef, sm_sums, k, vert_pos[i, 0], vert_pos[i, 1],
+                                                vert_pos[i, 2])
+                fx += gx
+                fy += gy
+                fz += gz
+                k += np.uint64(1)
+            vert_force[i, 0] = fx
+            vert_force[i, 1] = fy
+            vert_force[i, 2] = fz
+
+
+def _integrate(vert_free, vert_mass, explicit, h, vert_force, vert_pos, vert_vel, chunk_acc):
+    """Free integration of the points that are not nailed, prescribed or linked,
+    with the sums the divergence check reads, per chunk of points: (sum of
+    squared step lengths, twice the kinetic energy, largest squared step, its
+    vertex) into chunk_acc (hybrid.kernel). (Fused with the force pass it ran slower:
+    each point's dependent square roots and divisions then stall the loop.)
+    # Model: vert_free (nvert,) uint8, vert_mass (nvert,) kg; explicit: the paper's
+    #        explicit Euler (eq. 4, position with the old velocity), else symplectic
+    # Data in: vert_force (N)   # Data in/out: vert_pos, vert_vel   # Scratch: chunk_acc (chunk_count(nvert), 4)
+    """
+    n = vert_pos.shape[0]
+    for c in prange((n + CHUNK_VERTS - 1) // CHUNK_VERTS):
+        dsum = ke = dmax = 0.0
+        worst = np.uint64(0)
+        # unsigned indices: numba then skips its negative-index wraparound
+        for i in range(np.uint64(c * CHUNK_VERTS), np.uint64(min((c + 1) * CHUNK_VERTS, n))):
+            if not vert_free[i]:
+                continue
+            inv_m = 1.0 / vert_mass[i]
+            d2 = 0.0
+            for a in range(3):
+                if explicit:
+                    dx = h * vert_vel[i, a]
+                    vert_vel[i, a] += h * vert_force[i, a] * inv_m
+                else:  # velocity first, position with the new velocity
+                    vert_vel[i, a] += h * vert_force[i, a] * inv_m
+                    dx = h * vert_vel[i, a]
+                vert_pos[i, a] += dx
+                d2 += dx * dx
+            dsum += d2
+            ke += vert_mass[i] * (vert_vel[i, 0] ** 2 + vert_vel[i, 1] ** 2 + vert_vel[i, 2] ** 2)
+            if d2 > dmax:
+                dmax = d2
+                worst = i
+        chunk_acc[c, 0] = dsum
+        chunk_acc[c, 1] = ke
+        chunk_acc[c, 2] = dmax
+        chunk_acc[c, 3] = worst
+
+
+_point_forces_serial, _point_forces_parallel = kernel_twin(_point_forces)
+_integrate_serial, _integrate_parallel = kernel_twin(_integrate)
+
+
+@kernel(inline="always")
+def _pointwise_forces(m, s):
+    """Step phase 1 for gravity, damping and shape memory: the shape memory's
+    ring gathers, then `_point_forces` (serial or parallel build)."""
+    on = m.term_on
+    sm = on[T_SHAPE_MEMORY] != 0
+    grav, damp = on[T_GRAVITY] != 0, on[T_DAMPING] != 0
+    if m.parallel:
+        if sm:
+            shape_memory_frames_parallel(m.sm_vert, m.ring_ptr, m.ring_vert, m.ring_closed, s.vert_pos, s.sm_sums)
+        _point_forces_parallel(m.vert_free, m.vert_mass, m.accel, grav, m.damp_coef, damp, m.sm_vert, m.sm_stiff,
+                               m.sm_coef, s.sm_sums, sm, s.vert_pos, s.vert_vel, s.vert_force)
+    else:
+        if sm:
+            shape_memory_frames(m.sm_vert, m.ring_ptr, m.ring_vert, m.ring_closed, s.vert_pos, s.sm_sums)
+        _point_forces_serial(m.vert_free, m.vert_mass, m.accel, grav, m.damp_coef, damp, m.sm_vert, m.sm_stiff,
+                             m.sm_coef, s.sm_sums, sm, s.vert_pos, s.vert_vel, s.vert_force)
+    s.term_calls[T_GRAVITY] += on[T_GRAVITY]
+    s.term_calls[T_DAMPING] += on[T_DAMPING]
+    s.term_calls[T_SHAPE_MEMORY] += on[T_SHAPE_MEMORY]
+
+
+@kernel(inline="always")
+def membrane_advance(m, s, t, step):
+    """Step phases 2-5: integrate, project, check. Returns a status code.
+    # Model: m   # Data in: s.vert_force   # Data out: s.vert_pos, s.vert_vel, s.scal, s.status
+    """
+    pos, vel = s.vert_pos, s.vert_vel
+    if m.parallel:
+        _integrate_parallel(m.vert_free, m.vert_mass, m.integrator == 0, m.dt, s.vert_force, pos, vel, s.vert_acc)
+    else:
+        _integrate_serial(m.vert_free, m.vert_mass, m.integrator == 0, m.dt, s.vert_force, pos, vel, s.vert_acc)
+    return _after_integration(m, s, t, step)
+
+
+@kernel(inline="always")
+def _after_integration(m, s, t, step):
+    """Step phases 3-5 after `_integrate`: check, local constraints, volume."""
+    h = m.dt
+    pos, vel = s.vert_pos, s.vert_vel
+    dmax = 0.0
+    dsum = 0.0
+    worst = 0
+    ke = 0.0
+    acc = s.vert_acc
+    for c in range(acc.shape[0]):  # the chunks in order: both builds agree, the first largest step wins
+        dsum += acc[c, 0]
+        ke += acc[c, 1]
+        if acc[c, 2] > dmax:
+            dmax = acc[c, 2]
+            worst = int(acc[c, 3])
+    s.scal[S_KE] = 0.5 * ke
+    s.scal[S_MAXDISP] = math.sqrt(dmax)
+    if not (dsum < np.inf and ke < np.inf):
+        return _fail(s, DIVERGED_NONFINITE, step, _first_nonfinite(pos, vel, worst))
+    # runaway: a step longer than the body's size, or a speed above max_speed
+    # (the volume projection can keep an unstable run bounded but fast)
+    lim = min(m.runaway_disp, m.max_speed * h)
+    if dmax > lim * lim:
+        return _fail(s, DIVERGED_RUNAWAY, step, worst)
+    on = m.term_on
+    if on[T_PRESCRIBED]:
+        eval_schedules(m.sched, t + h, s.sched_next)
+        apply_prescribed(m.pre_vert, m.pre_rest, m.pre_sched, s.sched_next, h, pos, vel)
+        s.term_calls[T_PRESCRIBED] += 1
+    if on[T_KEEP_IN]:
+        apply_keep_in(m.kin_vert, m.kin_shape, m.shape_kind, m.shape_par, pos, vel)
+        s.term_calls[T_KEEP_IN] += 1
+    if on[T_VOLUME]:
+        phi, st = project_volume(m.ring_ptr, m.ring_vert, m.vol_ref, m.vol0, m.vert_weight, h, pos, vel,
+                                 s.grad, s.dirn, s.cubic, s.vert_acc, m.parallel)
+        s.term_calls[T_VOLUME] += 1
+        if st != PROJ_OK:
+            s.status[3] = st
+            return _fail(s, VOLUME_FAILED, step, 0)
+        if not (abs(phi) < np.inf):
+            return _fail(s, DIVERGED_NONFINITE, step, _first_nonfinite(pos, vel, worst))
+        s.scal[S_PHI] = phi
+        s.scal[S_PRESSURE] = phi / (h * h)
+    return OK
+
+
+@kernel
+def _fail(s, code, step, vert):
+    s.status[0] = code
+    s.status[1] = step
+    s.status[2] = vert
+    return code
+
+
+@kernel
+def _first_nonfinite(pos, vel, fallback):
+    """The first vertex with a non-finite coordinate, else `fallback` (the point
+    that moved most: finite values whose kinetic energy overflowed)."""
+    for i in range(pos.shape[0]):
+        for a in range(3):
+            if not (abs(pos[i, a]) < np.inf and abs(vel[i, a]) < np.inf):
+                return i
+    return fallback
+
+
+@kernel
+def run_membrane(m, s, nstep, step0):
+    """nstep whole membrane steps; time advances as t0 + k h. Returns steps done."""
+    t0 = s.scal[S_TIME]
+    for k in range(nstep):
+        t = t0 + k * m.dt
+        membrane_forces(m, s, t)
+        if membrane_advance(m, s, t, step0 + k) != OK:
+            return k
+        s.scal[S_TIME] = t0 + (k + 1) * m.dt
+    return nstep
+
+
+# the numbers captured at each frame by the frame kernels (Frames.scal columns)
+F_TIME, F_VOLUME, F_PRESSURE, F_KE = range(4)
+
+
+@kernel
+def kinetic_energy_of(m, s):
+    """0.5 sum m v^2 over the integrated points (J)."""
+    ke = 0.0
+    vel = s.vert_vel
+    for i in range(vel.shape[0]):
+        if m.vert_free[i] > 0:
+            ke += m.vert_mass[i] * (vel[i, 0] * vel[i, 0] + vel[i, 1] * vel[i, 1] + vel[i, 2] * vel[i, 2])
+    return 0.5 * ke
+
+
+@kernel
+def capture_frame(m, s, pos_out, scal_out):
+    """The state's positions and numbers (F_* columns) into one frame's rows."""
+    pos = s.vert_pos
+    for i in range(pos.shape[0]):
+        for a in range(3):
+            pos_out[i, a] = pos[i, a]
+    scal_out[F_TIME] = s.scal[S_TIME]
+    scal_out[F_VOLUME] = face_volume(m.face_vert, m.vol_ref, pos)
+    scal_out[F_PRESSURE] = s.scal[S_PRESSURE]
+    scal_out[F_KE] = kinetic_energy_of(m, s)
+
+
+@kernel
+def run_membrane_frames(m, s, stops, step0, frame_pos, frame_scal):
+    """Step to each step index of stops, capturing a frame at each; returns the
+    frames captured (fewer than stops when a step fails; its status is in s.status)."""
+    done = step0
+    for i in range(stops.shape[0]):
+        n = stops[i] - done
+        k = run_membrane(m, s, n, done)
+        done += k
+        if k < n:
+            return i
+        capture_frame(m, s, frame_pos[i], frame_scal[i])
+    return stops.shape[0]
+
+
+class Frames:
+    """Frames captured in one compiled call (`Simulation.step_frames`): per frame,
+    pos (nvert, 3) m, scal (F_TIME s, F_VOLUME m^3, F_PRESSURE Pa, F_KE J), and the
+    rigid bodies' poses body_pos (nbody, 3) m, body_quat (nbody, 4) (w, x, y, z),
+    world excluded. `count`: the frames of the last call, also when it raised."""
+
+    def __init__(self, capacity: int, nvert: int, nbody: int = 0):
+        self.pos = np.zeros((capacity, nvert, 3))
+        self.scal = np.zeros((capacity, 4))
+        self.body_pos = np.zeros((capacity, nbody, 3))
+        self.body_quat = np.zeros((capacity, nbody, 4))
+        self.count = 0
+
+    @property
+    def capacity(self) -> int:
+        return len(self.pos)
