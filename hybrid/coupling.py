@@ -47,7 +47,7 @@ from . import rigid as _rigid
 from .kernel import kernel
 from .errors import RigidError, SceneError, SimulationDiverged
 from .scene import Nailed, Prescribed, Rigid, RigidLink, Scene
-from .model import T_GRAVITY
+from .step import T_GRAVITY
 from .step import (OK, S_PRESSURE, S_TIME, Frames, MembraneState, capture_frame, membrane_advance,
                          membrane_forces)
 

@@ -53,23 +53,22 @@ index; VALUE is a TOML value (a bare word is taken as a string). Examples:
 from __future__ import annotations
 
 import copy
-import math
+import dataclasses
 import tomllib
 from importlib import resources
 from pathlib import Path
 
+from . import checks
 from . import regions as R
 from . import schedule as S
 from .errors import SceneError
-from .scene import (INTEGRATORS, AppliedForce, Attraction, Damping, Gravity, KeepIn, Masses,
-                    MassSpring, MeshSpec, Muscle, Nailed, Prescribed, Rigid, RigidLink, Scene,
-                    ShapeMemory, SoftVolume, Volume)
+from .scene import Masses, MeshSpec, Rigid, RigidLink, Scene
+from .terms import CONSTRAINT_TYPES, FORCE_TYPES
+from .terms.base import check_value
 
 __all__ = ["load_scene", "scene_from_dict", "scene_to_dict", "apply_overrides", "builtin_scene",
            "builtin_scenes"]
 
-_MESH_GENERATORS = ("uv_sphere", "icosphere", "icosahedron")
-_KEEP_IN_SHAPES = ("half_space", "ball", "box")
 
 
 # ------------------------------------------------------------------ value checks
@@ -84,70 +83,38 @@ class _Ctx:
         raise SceneError(f"{self.source}: {path}: {msg}" if path else f"{self.source}: {msg}")
 
 
-def _is_num(v) -> bool:
-    return isinstance(v, (int, float)) and not isinstance(v, bool)
+def _where(ctx, path) -> str:
+    return f"{ctx.source}: {path}" if path else ctx.source
 
 
-def _num(ctx, path, v, *, lo=None, lo_open=True, hi=None, hi_open=True):
-    if lo is None and hi is None:
-        want = "a finite number"
-    elif hi is None:
-        want = f"a number {'>' if lo_open else '>='} {lo:g}"
-    else:
-        want = f"a number in {'(' if lo_open else '['}{lo:g}, {hi:g}{')' if hi_open else ']'}"
-    ok = _is_num(v) and math.isfinite(v)
-    if ok and lo is not None:
-        ok = v > lo if lo_open else v >= lo
-    if ok and hi is not None:
-        ok = v < hi if hi_open else v <= hi
-    if not ok:
-        ctx.fail(path, f"expected {want}, received {_show(v)}")
-    return float(v)
+_is_num = checks.is_number
+_show = checks.show
+
+
+def _num(ctx, path, v, **bounds):
+    return checks.number(_where(ctx, path), v, **bounds)
 
 
 def _int(ctx, path, v, *, lo):
-    if not (isinstance(v, int) and not isinstance(v, bool) and v >= lo):
-        ctx.fail(path, f"expected an integer >= {lo}, received {_show(v)}")
-    return int(v)
+    return checks.integer(_where(ctx, path), v, lo=lo)
 
 
 def _str(ctx, path, v, choices=None):
-    if not isinstance(v, str) or (choices is not None and v not in choices):
-        want = f"one of {list(choices)}" if choices is not None else "a string"
-        ctx.fail(path, f"expected {want}, received {_show(v)}")
-    return v
+    return checks.text(_where(ctx, path), v, choices)
 
 
 def _bool(ctx, path, v):
-    if not isinstance(v, bool):
-        ctx.fail(path, f"expected true or false, received {_show(v)}")
-    return v
+    return checks.boolean(_where(ctx, path), v)
 
 
 def _vec3(ctx, path, v):
-    if not (isinstance(v, list) and len(v) == 3 and all(_is_num(x) and math.isfinite(x) for x in v)):
-        ctx.fail(path, f"expected a 3-vector [x, y, z] of finite numbers, received {_show(v)}")
-    return tuple(float(x) for x in v)
+    if not isinstance(v, list):  # TOML's arrays only
+        ctx.fail(path, f"expected a 3-vector [x, y, z] of finite floats, received {_show(v)}")
+    return checks.vec3(_where(ctx, path), v)
 
 
 def _vec3_list(ctx, path, v):
-    if not (isinstance(v, list) and v):
-        ctx.fail(path, f"expected a list of 3-vectors, received {_show(v)}")
-    return tuple(_vec3(ctx, f"{path}[{k}]", x) for k, x in enumerate(v))
-
-
-def _show(v) -> str:
-    """A value as it would read in TOML, shortened."""
-    if isinstance(v, bool):
-        s = "true" if v else "false"
-    elif isinstance(v, str):
-        s = repr(v)
-    elif isinstance(v, dict):
-        s = "{" + ", ".join(f"{k} = {_show(x)}" for k, x in v.items()) + "}"
-        s = f"a table {s}"
-    else:
-        s = repr(v)
-    return s if len(s) <= 80 else s[:77] + "..."
+    return checks.vec3_list(_where(ctx, path), v)
 
 
 def _table(ctx, path, v, what="a table"):
@@ -264,57 +231,16 @@ def _schedule(ctx, path, v, ncomp):
 
 # ------------------------------------------------------------------ the terms
 
-def _f_pos(ctx, p, v):
-    return _num(ctx, p, v, lo=0)
-
-
-def _f_nonneg(ctx, p, v):
-    return _num(ctx, p, v, lo=0, lo_open=False)
-
-
-def _f_sched1(ctx, p, v):
-    return _schedule(ctx, p, v, 1)
-
-
-def _f_sched3(ctx, p, v):
-    return _schedule(ctx, p, v, 3)
-
-
-def _f_target(ctx, p, v):
-    if isinstance(v, list) and v and isinstance(v[0], list):
-        return _vec3_list(ctx, p, v)
-    return _vec3(ctx, p, v)
-
-
-def _f_angle(ctx, p, v):
-    return _num(ctx, p, v, lo=0, hi=90)
-
-
-def _f_shape(ctx, p, v):
-    return _str(ctx, p, v, _KEEP_IN_SHAPES)
-
-
-# type -> (class, {key: converter}, required keys)
-FORCE_TYPES = {
-    "gravity": (Gravity, {"accel_m_s2": _vec3}, ()),
-    "damping": (Damping, {"coef_n_s_per_m": _f_nonneg, "critical_fraction": _f_nonneg, "region": _selector}, ()),
-    "shape_memory": (ShapeMemory, {"stiffness_n_per_m": _f_pos, "region": _selector}, ("stiffness_n_per_m",)),
-    "mass_spring": (MassSpring, {"stiffness_n_per_m": _f_pos, "region": _selector}, ("stiffness_n_per_m",)),
-    "muscle": (Muscle, {"region": _selector, "stiffness": _f_sched1, "toward_m": _vec3, "axis": _vec3,
-                        "max_angle_deg": _f_angle}, ("region", "stiffness")),
-    "applied_force": (AppliedForce, {"region": _selector, "force_n": _f_sched3}, ("region", "force_n")),
-    "attraction": (Attraction, {"region": _selector, "stiffness_n_per_m": _f_pos, "offset_m": _f_sched3,
-                                "target_m": _f_target}, ("region", "stiffness_n_per_m")),
-    "soft_volume": (SoftVolume, {"stiffness_n_per_m": _f_pos}, ("stiffness_n_per_m",)),
-}
-CONSTRAINT_TYPES = {
-    "nailed": (Nailed, {"region": _selector}, ("region",)),
-    "keep_in": (KeepIn, {"region": _selector, "shape": _f_shape, "point_m": _vec3, "normal": _vec3,
-                         "center_m": _vec3, "radius_m": _f_pos, "lo_m": _vec3, "hi_m": _vec3},
-                ("region", "shape")),
-    "prescribed": (Prescribed, {"region": _selector, "displacement_m": _f_sched3}, ("region", "displacement_m")),
-    "volume": (Volume, {}, ()),
-}
+def _field(ctx, path, f, v):
+    """A term field's TOML value as the dataclass holds it, checked by its kind."""
+    kind = f.metadata["kind"]
+    if kind == "selector":
+        return _selector(ctx, path, v)
+    if kind == "schedule":
+        return _schedule(ctx, path, v, f.metadata["ncomp"])
+    if kind in ("vec3", "target") and not isinstance(v, list):
+        ctx.fail(path, f"expected a 3-vector [x, y, z] of finite floats, received {_show(v)}")
+    return check_value(_where(ctx, path), kind, v, f.metadata)
 
 
 def _terms(ctx, key, v, types):
@@ -326,21 +252,20 @@ def _terms(ctx, key, v, types):
         if "type" not in tbl:
             ctx.fail(p, f"missing required key 'type'; expected one of {list(types)}")
         typ = _str(ctx, f"{p}.type", tbl["type"], types)
-        cls, fields, required = types[typ]
-        _keys(ctx, p, tbl, ("type", "name", *fields), required)
-        kw = {f: conv(ctx, f"{p}.{f}", tbl[f]) for f, conv in fields.items() if f in tbl}
-        kw["name"] = _str(ctx, f"{p}.name", tbl.get("name", typ))
+        cls = types[typ]
+        fields = cls.fields()
+        _keys(ctx, p, tbl, ("type", *fields), cls.required())
+        kw = {name: _field(ctx, f"{p}.{name}", f, tbl[name]) for name, f in fields.items() if name in tbl}
         out.append(cls(**kw))
     return tuple(out)
 
 
 # ------------------------------------------------------------------ the scene
 
-_TOP = ("name", "dt_s", "integrator", "duration_s", "max_speed_m_s", "mesh", "masses", "regions", "forces", "constraints",
-        "rigid")
-_MESH = {"generator": lambda c, p, v: _str(c, p, v, _MESH_GENERATORS), "path": _str, "radius_m": _f_pos,
-         "segments": lambda c, p, v: _int(c, p, v, lo=3), "rings": lambda c, p, v: _int(c, p, v, lo=2),
-         "subdivisions": lambda c, p, v: _int(c, p, v, lo=0), "center_m": _vec3, "unit_scale": _f_pos}
+# the top level's and the mesh table's keys: the fields of Scene and MeshSpec
+_TOP_VALUES = {f.name: f for f in dataclasses.fields(Scene) if "kind" in f.metadata}
+_TOP = (*_TOP_VALUES, "mesh", "masses", "regions", "forces", "constraints", "rigid")
+_MESH = {f.name: f for f in dataclasses.fields(MeshSpec)}
 
 
 def scene_from_dict(data: dict, *, source: str = "scene", base_dir: str | Path | None = None) -> Scene:
@@ -352,21 +277,11 @@ def scene_from_dict(data: dict, *, source: str = "scene", base_dir: str | Path |
     ctx = _Ctx(source)
     _table(ctx, "", data, "a TOML table")
     _keys(ctx, "", data, _TOP, ("mesh", "masses"))
-    kw: dict = {}
-    if "name" in data:
-        kw["name"] = _str(ctx, "name", data["name"])
-    if "dt_s" in data:
-        kw["dt_s"] = _num(ctx, "dt_s", data["dt_s"], lo=0)
-    if "duration_s" in data:
-        kw["duration_s"] = _num(ctx, "duration_s", data["duration_s"], lo=0)
-    if "max_speed_m_s" in data:
-        kw["max_speed_m_s"] = _num(ctx, "max_speed_m_s", data["max_speed_m_s"], lo=0)
-    if "integrator" in data:
-        kw["integrator"] = _str(ctx, "integrator", data["integrator"], INTEGRATORS)
+    kw = {k: _field(ctx, k, f, data[k]) for k, f in _TOP_VALUES.items() if k in data}
 
     mesh = _table(ctx, "mesh", data["mesh"])
     _keys(ctx, "mesh", mesh, _MESH)
-    mkw = {k: conv(ctx, f"mesh.{k}", mesh[k]) for k, conv in _MESH.items() if k in mesh}
+    mkw = {k: _field(ctx, f"mesh.{k}", f, mesh[k]) for k, f in _MESH.items() if k in mesh}
     if "path" in mkw:
         if "generator" in mkw:
             ctx.fail("mesh", "expected either path or generator, received both")
@@ -496,22 +411,20 @@ def _value_to(v, what):
     return v
 
 
-def _term_to(term, types, what):
-    for typ, (cls, fields, _) in types.items():
-        if type(term) is cls:
-            out = {"type": typ, "name": term.name}
-            for f in fields:
-                v = getattr(term, f)
-                if v is None:
-                    continue
-                if f in ("region",):
-                    out[f] = _sel_to(v)
-                elif f in ("stiffness", "force_n", "offset_m", "displacement_m"):
-                    out[f] = _sched_to(v, f"{what}.{f}")
-                else:
-                    out[f] = _value_to(v, f"{what}.{f}")
-            return out
-    raise SceneError(f"{what}: {type(term).__name__} cannot be written as TOML")
+def _term_to(term, what):
+    out = {"type": term.toml_type}
+    for name, f in term.fields().items():
+        v = getattr(term, name)
+        if v is None:
+            continue
+        kind = f.metadata["kind"]
+        if kind == "selector":
+            out[name] = _sel_to(v)
+        elif kind == "schedule":
+            out[name] = _sched_to(v, f"{what}.{name}")
+        else:
+            out[name] = _value_to(v, f"{what}.{name}")
+    return out
 
 
 def scene_to_dict(scene: Scene) -> dict:
@@ -536,8 +449,8 @@ def scene_to_dict(scene: Scene) -> dict:
     else:
         d["masses"] = {"per_vertex_kg": list(m.per_vertex_kg or ())}
     d["regions"] = {k: _sel_to(v) for k, v in scene.regions.items()}
-    d["forces"] = [_term_to(t, FORCE_TYPES, f"forces[{k}]") for k, t in enumerate(scene.forces)]
-    d["constraints"] = [_term_to(c, CONSTRAINT_TYPES, f"constraints[{k}]") for k, c in enumerate(scene.constraints)]
+    d["forces"] = [_term_to(t, f"forces[{k}]") for k, t in enumerate(scene.forces)]
+    d["constraints"] = [_term_to(c, f"constraints[{k}]") for k, c in enumerate(scene.constraints)]
     if scene.rigid is not None:
         r = scene.rigid
         d["rigid"] = {"mjcf": str(r.mjcf), "prefix": r.prefix, "add_link_mass": r.add_link_mass,

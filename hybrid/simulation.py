@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 
-from .constraints import PROJ_NO_GRADIENT, face_volume
+from .terms.volume import PROJ_NO_GRADIENT, face_volume
 from .errors import ConstraintError, SimulationDiverged
 from .model import TERMS, Model
 from .step import (DIVERGED_NONFINITE, OK, S_MAXDISP, S_PRESSURE, S_TIME, VOLUME_FAILED, Frames,

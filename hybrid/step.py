@@ -24,17 +24,24 @@ from numba import prange
 
 from .kernel import CHUNK_VERTS, chunk_count, kernel, kernel_twin
 
-from .constraints import (PROJ_OK, apply_keep_in, apply_prescribed, face_volume,
-                          project_volume, soft_volume_force)
-from .forces import (add_applied, add_attraction, add_mass_spring, add_muscle, shape_memory_force,
-                     shape_memory_frames, shape_memory_frames_parallel)
-from .model import (TERMS, T_APPLIED, T_ATTRACTION, T_DAMPING, T_GRAVITY, T_KEEP_IN, T_MASS_SPRING,
-                    T_MUSCLE, T_PRESCRIBED, T_SHAPE_MEMORY, T_SOFT_VOLUME, T_VOLUME, MembraneArrays)
+from .model import MembraneArrays
 from .schedule import KIND_PYTHON, schedule_eval
+from .terms import (TERMS, AppliedForce, Attraction, Damping, Gravity, KeepIn, MassSpring, Muscle, Prescribed,
+                    ShapeMemory, SoftVolume, Volume)
+from .terms.local import apply_keep_in, apply_prescribed
+from .terms.muscle import add_muscle
+from .terms.pointwise import point_forces_parallel, point_forces_serial
+from .terms.shape_memory import shape_memory_frames, shape_memory_frames_parallel
+from .terms.springs import add_applied, add_attraction, add_mass_spring
+from .terms.volume import PROJ_OK, face_volume, project_volume, soft_volume_force
 
 __all__ = ["MembraneState", "new_state", "membrane_forces", "membrane_advance", "run_membrane",
            "run_membrane_frames", "capture_frame", "kinetic_energy_of", "Frames"]
 
+# each term's flag in MembraneArrays.term_on and its call counter
+(T_GRAVITY, T_APPLIED, T_ATTRACTION, T_DAMPING, T_SHAPE_MEMORY, T_MASS_SPRING, T_MUSCLE, T_SOFT_VOLUME,
+ T_PRESCRIBED, T_KEEP_IN, T_VOLUME) = (Gravity.id, AppliedForce.id, Attraction.id, Damping.id, ShapeMemory.id,
+                                       MassSpring.id, Muscle.id, SoftVolume.id, Prescribed.id, KeepIn.id, Volume.id)
 # scal slots
 S_TIME, S_PRESSURE, S_PHI, S_KE, S_MAXDISP = range(5)
 # status codes
@@ -114,63 +121,6 @@ def membrane_forces(m, s, t):
         s.term_calls[T_SOFT_VOLUME] += 1
 
 
-@kernel(inline="always")
-def _first_at_least(idx, lo):
-    """The first k with idx[k] >= lo in the sorted array idx (len(idx) if none), unsigned."""
-    a, b = np.uint64(0), np.uint64(idx.shape[0])
-    while a < b:
-        mid = (a + b) >> np.uint64(1)
-        if idx[mid] < lo:
-            a = mid + np.uint64(1)
-        else:
-            b = mid
-    return a
-
-
-def _point_forces(vert_free, vert_mass, accel, gravity_on, damp_coef, damping_on, sm_vert, sm_stiff, sm_coef,
-                  sm_sums, add_sm, vert_pos, vert_vel, vert_force):
-    """Start the force sum with the terms that need only the point itself, in
-    one pass that sets vert_force (no separate clearing): gravity F = m g
-    (integrated points), viscous damping F = -c v (paper eq. 4) and, when
-    add_sm, the shape memory's second pass (`hybrid.forces.shape_memory_force`,
-    its frames already gathered into sm_sums). The points run in chunks of
-    CHUNK_VERTS, each walking the sorted sm_vert from its first point on.
-    # Model: vert_free (nvert,) uint8, vert_mass (nvert,) kg, accel (3,) m/s^2,
-    #        damp_coef (nvert,) N s/m; gravity_on, damping_on: bool;
-    #        sm_vert (nsm,) int32 sorted, sm_stiff (nsm,) N/m, sm_coef (nsm, 3) m
-    # Data in: sm_sums (nsm, 9), vert_pos (nvert, 3) m, vert_vel (nvert, 3) m/s
-    # Data out: vert_force (nvert, 3) N
-    """
-    n = vert_pos.shape[0]
-    nsm = np.uint64(sm_vert.shape[0])
-    for c in prange((n + CHUNK_VERTS - 1) // CHUNK_VERTS):
-        # unsigned indices: numba then skips its negative-index wraparound
-        lo, hi = np.uint64(c * CHUNK_VERTS), np.uint64(min((c + 1) * CHUNK_VERTS, n))
-        k = _first_at_least(sm_vert, lo) if add_sm else nsm  # the next shape-memory point
-        for i in range(lo, hi):
-            fx = fy = fz = 0.0
-            if gravity_on and vert_free[i]:
-                m = vert_mass[i]
-                fx = m * accel[0]
-                fy = m * accel[1]
-                fz = m * accel[2]
-            if damping_on:
-                cd = damp_coef[i]
-                fx -= cd * vert_vel[i, 0]
-                fy -= cd * vert_vel[i, 1]
-                fz -= cd * vert_vel[i, 2]
-            if k < nsm and np.uint64(sm_vert[k]) == i:
-                gx, gy, gz = shape_memory_force(sm_stiff, sm_coef, sm_sums, k, vert_pos[i, 0], vert_pos[i, 1],
-                                                vert_pos[i, 2])
-                fx += gx
-                fy += gy
-                fz += gz
-                k += np.uint64(1)
-            vert_force[i, 0] = fx
-            vert_force[i, 1] = fy
-            vert_force[i, 2] = fz
-
-
 def _integrate(vert_free, vert_mass, explicit, h, vert_force, vert_pos, vert_vel, chunk_acc):
     """Free integration of the points that are not nailed, prescribed or linked,
     with the sums the divergence check reads, per chunk of points: (sum of
@@ -211,26 +161,26 @@ def _integrate(vert_free, vert_mass, explicit, h, vert_force, vert_pos, vert_vel
         chunk_acc[c, 3] = worst
 
 
-_point_forces_serial, _point_forces_parallel = kernel_twin(_point_forces)
 _integrate_serial, _integrate_parallel = kernel_twin(_integrate)
 
 
 @kernel(inline="always")
 def _pointwise_forces(m, s):
     """Step phase 1 for gravity, damping and shape memory: the shape memory's
-    ring gathers, then `_point_forces` (serial or parallel build)."""
+    ring gathers, then the fused pass `hybrid.terms.pointwise.point_forces`
+    (serial or parallel build)."""
     on = m.term_on
     sm = on[T_SHAPE_MEMORY] != 0
     grav, damp = on[T_GRAVITY] != 0, on[T_DAMPING] != 0
     if m.parallel:
         if sm:
             shape_memory_frames_parallel(m.sm_vert, m.ring_ptr, m.ring_vert, m.ring_closed, s.vert_pos, s.sm_sums)
-        _point_forces_parallel(m.vert_free, m.vert_mass, m.accel, grav, m.damp_coef, damp, m.sm_vert, m.sm_stiff,
+        point_forces_parallel(m.vert_free, m.vert_mass, m.accel, grav, m.damp_coef, damp, m.sm_vert, m.sm_stiff,
                                m.sm_coef, s.sm_sums, sm, s.vert_pos, s.vert_vel, s.vert_force)
     else:
         if sm:
             shape_memory_frames(m.sm_vert, m.ring_ptr, m.ring_vert, m.ring_closed, s.vert_pos, s.sm_sums)
-        _point_forces_serial(m.vert_free, m.vert_mass, m.accel, grav, m.damp_coef, damp, m.sm_vert, m.sm_stiff,
+        point_forces_serial(m.vert_free, m.vert_mass, m.accel, grav, m.damp_coef, damp, m.sm_vert, m.sm_stiff,
                              m.sm_coef, s.sm_sums, sm, s.vert_pos, s.vert_vel, s.vert_force)
     s.term_calls[T_GRAVITY] += on[T_GRAVITY]
     s.term_calls[T_DAMPING] += on[T_DAMPING]

@@ -169,7 +169,7 @@ CASES = [
     ("muscle_zero_axis", lambda: with_force(Muscle("top", 100.0, axis=(0, 0, 0))), SceneError,
      r"forces\['muscle'\]\.axis: expected a non-zero vector"),
     ("muscle_bad_angle", lambda: with_force(Muscle("top", 100.0, axis=(0, 0, 1), max_angle_deg=90.0)), SceneError,
-     r"forces\['muscle'\]\.max_angle_deg: expected in \(0, 90\), received 90\.0"),
+     r"forces\['muscle'\]\.max_angle_deg: expected a number in \(0, 90\), received 90\.0"),
     # the north pole's chords to its ring run ~77 deg off the z axis
     ("muscle_no_neighbour", lambda: with_force(Muscle(Indices((0,)), 100.0, axis=(0, 0, 1))), SceneError,
      r"forces\['muscle'\]: no neighbour lies within 30\.0 deg of the fibre direction"),

@@ -23,7 +23,7 @@ def test_cache_folder_changes_with_the_sources(tmp_path, monkeypatch):
 
     def edited(self):  # as if one source file had changed
         data = real(self)
-        return data + b"#" if self.name == "forces.py" else data
+        return data + b"#" if self.name == "step.py" else data
 
     monkeypatch.setattr(type(k.Path(k.__file__)), "read_bytes", edited)
     assert k._cache_dir() != before

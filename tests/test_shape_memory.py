@@ -2,7 +2,7 @@
 
 The force is F_i = k (P_ideal - P_i), P_ideal = G + alpha t1 + beta t2 + gamma n
 in a frame built from the neighbour ring alone. It is evaluated here with the
-compiled kernel `hybrid.forces.add_shape_memory` on positions we choose, with
+compiled kernel `hybrid.terms.shape_memory.add_shape_memory` on positions we choose, with
 the rest coefficients of `shape_memory_frame_coef`.
 
 Tolerances: every quantity is a difference of positions of size R ~ 0.12 m
@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hybrid.forces import add_shape_memory, shape_memory_frame_coef
+from hybrid.terms.shape_memory import add_shape_memory, shape_memory_frame_coef
 from hybrid.mesh import Mesh, icosphere, uv_sphere
 from hybrid.model import compile_scene
 from hybrid.regions import Indices

@@ -269,7 +269,7 @@ def test_cubic_root_nearest_zero_matches_numpy_roots():
     matrix roots on random cubics spanning nine decades (c1 > 0 as for the
     projection): the real root nearest 0, to 1e-6 relative (np.roots itself is
     only accurate to about sqrt(eps) near multiple roots)."""
-    from hybrid.constraints import solve_cubic_near_zero
+    from hybrid.terms.volume import solve_cubic_near_zero
 
     rng = np.random.default_rng(7)
     for _ in range(5000):

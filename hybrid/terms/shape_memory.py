@@ -1,12 +1,10 @@
-"""Force terms on the membrane points: compiled kernels and their rest data.
+"""Local shape memory (paper 3.4): each point attracted to its ideal place in
+the frame of its neighbour ring, F_i = k_i (P_ideal - P_i).
 
-Each term is one function that adds its force into `vert_force` (N) and says
-what it reads and writes. The model holds only the terms a scene has; the
-step calls a kernel only when its term is present.
-
-Terms: gravity, applied forces, attractive points, viscous damping, local
-shape memory (paper 3.4), mass-spring network (paper 6.1), muscle (paper 3.4),
-soft volume (paper 6.2).
+The frame is built from the ring only (DESIGN.md), so the force vanishes at
+rest and turns with any rigid motion of the surface. It has no reaction on the
+neighbours: the force is not conservative (FINDINGS.md). Rest data: each
+point's (alpha, beta, gamma) in its rest frame (`shape_memory_frame_coef`).
 """
 
 from __future__ import annotations
@@ -16,19 +14,48 @@ import math
 import numpy as np
 from numba import prange
 
-from .kernel import kernel, kernel_twin
+from ..errors import MeshError
+from ..kernel import kernel, kernel_twin
+from .base import Term, param, register
 
-from .errors import MeshError
-
-__all__ = [
-    "shape_memory_frame_coef", "muscle_pairs",
-    "add_applied", "add_attraction",
-    "add_shape_memory", "add_shape_memory_parallel", "shape_memory_frames", "shape_memory_frames_parallel",
-    "shape_memory_force", "add_mass_spring", "add_muscle",
-]
+__all__ = ["ShapeMemory", "ring_frame", "shape_memory_frame_coef", "shape_memory_frames",
+           "shape_memory_frames_parallel", "shape_memory_force", "add_shape_memory", "add_shape_memory_parallel"]
 
 
-# ---------------------------------------------------------------- rest data
+@register
+class ShapeMemory(Term):
+    """Local shape memory (paper 3.4): each point attracted to its ideal place
+    in the frame of its neighbours, stiffness in N/m."""
+    toml_type = "shape_memory"
+    section = "forces"
+    # sm_vert (nsm,) int32 sorted; sm_stiff (nsm,) N/m; sm_coef (nsm, 3) m
+    arrays = {"sm_vert": lambda n: np.zeros(0, np.int32), "sm_stiff": lambda n: np.zeros(0),
+              "sm_coef": lambda n: np.zeros((0, 3))}
+    stiffness_n_per_m: float = param("positive")
+    region: object = param("selector", "all")
+    name: str = param("text", "shape_memory")
+
+    def compile(self, b, what):
+        super().compile(b, what)
+        idx = b.region(self.region, f"{what}.region")
+        b.rows["shape_memory"].append((idx, self.value(b, "stiffness_n_per_m", what)))
+
+    @classmethod
+    def finish(cls, b):
+        stiff = np.zeros(b.mesh.nvert)
+        for idx, k in b.rows["shape_memory"]:
+            stiff[idx] = k  # a later term wins where regions overlap
+        sm_vert = np.nonzero((stiff > 0) & b.moving)[0].astype(np.int32)
+        mesh = b.mesh
+        b.out["sm_vert"] = sm_vert
+        b.out["sm_stiff"] = stiff[sm_vert].copy()
+        b.out["sm_coef"] = np.ascontiguousarray(shape_memory_frame_coef(
+            mesh.vert_pos, mesh.ring_ptr, mesh.ring_vert, mesh.ring_closed, sm_vert)) if sm_vert.size \
+            else np.zeros((0, 3))
+        b.vert_stiffness += stiff
+
+
+# ---------------------------------------------------------------- the local frame
 
 @kernel(inline="always")
 def ring_sums(vert_pos, ring_ptr, ring_vert, ring_closed, i):
@@ -123,68 +150,8 @@ def shape_memory_frame_coef(vert_pos, ring_ptr, ring_vert, ring_closed, verts) -
     return coef
 
 
-def muscle_pairs(vert_pos, ring_ptr, ring_vert, verts, *, toward=None, axis=None,
-                 max_angle_deg: float = 30.0):
-    """Neighbours each muscular point contracts toward (paper 3.4).
-
-    A neighbour N of point P is a contraction target when the chord P->N lies
-    within `max_angle_deg` of the fibre direction at P, either way along it:
-    the fibre points from P toward the point `toward` (m), or along `axis`.
-    Returns (pair_vert, pair_nbr) int32 arrays.
-    """
-    cos_min = math.cos(math.radians(max_angle_deg))
-    pv, pn = [], []
-    for i in verts:
-        p = vert_pos[i]
-        if toward is not None:
-            u = np.asarray(toward, float) - p
-            nu = np.linalg.norm(u)
-            if nu == 0.0:  # the point the fibres converge to: every chord qualifies
-                u = None
-            else:
-                u = u / nu
-        else:
-            u = np.asarray(axis, float) / np.linalg.norm(axis)
-        for j in ring_vert[ring_ptr[i]:ring_ptr[i + 1]]:
-            c = vert_pos[j] - p
-            cos = 1.0 if u is None else abs(c @ u) / np.linalg.norm(c)
-            if cos >= cos_min:
-                pv.append(i)
-                pn.append(j)
-    return np.asarray(pv, np.int32), np.asarray(pn, np.int32)
-
 
 # ---------------------------------------------------------------- kernels
-
-@kernel
-def add_applied(app_vert, app_sched, sched_val, vert_force):
-    """F_i += f_s(t): a force per vertex from schedule s.
-    # Model: app_vert (n,) int32, app_sched (n,) int64
-    # Data in: sched_val (nsched, 3) N (schedules at time t)
-    # Data out: vert_force
-    """
-    for k in range(app_vert.shape[0]):
-        i = app_vert[k]
-        s = app_sched[k]
-        vert_force[i, 0] += sched_val[s, 0]
-        vert_force[i, 1] += sched_val[s, 1]
-        vert_force[i, 2] += sched_val[s, 2]
-
-
-@kernel
-def add_attraction(att_vert, att_stiff, att_target, att_sched, sched_val, vert_pos, vert_force):
-    """F_i += k (P_ideal - P_i), P_ideal = target_i + offset_s(t) (paper 3.3).
-    # Model: att_vert (n,) int32, att_stiff (n,) N/m, att_target (n, 3) m, att_sched (n,) int64
-    # Data in: sched_val (offsets, m), vert_pos (nvert, 3) m
-    # Data out: vert_force
-    """
-    for k in range(att_vert.shape[0]):
-        i = att_vert[k]
-        s = att_sched[k]
-        c = att_stiff[k]
-        for a in range(3):
-            vert_force[i, a] += c * (att_target[k, a] + sched_val[s, a] - vert_pos[i, a])
-
 
 @kernel(inline="always")
 def _store_ring_sums(sm_vert, ring_ptr, ring_vert, ring_closed, vert_pos, sm_sums, k):
@@ -238,7 +205,7 @@ def _add_shape_memory(sm_vert, sm_stiff, sm_coef, ring_ptr, ring_vert, ring_clos
     with any rigid motion of the surface. No reaction on the neighbours: the
     force is not conservative. Two passes, the ring gathers then the
     normalisations (`shape_memory_frames`, `shape_memory_force`); the step
-    fuses the second pass with its other per-point work (hybrid.simulation).
+    fuses the second pass with its other per-point work (hybrid.terms.pointwise).
     # Model: sm_vert (n,) int32, sm_stiff (n,) N/m, sm_coef (n, 3) m, ring_*
     # Data in: vert_pos (nvert, 3) m
     # Scratch: sm_sums (n, 9)
@@ -257,41 +224,3 @@ def _add_shape_memory(sm_vert, sm_stiff, sm_coef, ring_ptr, ring_vert, ring_clos
 
 
 add_shape_memory, add_shape_memory_parallel = kernel_twin(_add_shape_memory)
-
-
-@kernel
-def add_mass_spring(spring_vert, spring_stiff, spring_rest, vert_pos, vert_force):
-    """Springs between neighbours (the paper's comparison model, 6.1).
-    # Model: spring_vert (ns, 2) int32, spring_stiff (ns,) N/m, spring_rest (ns,) m
-    # Data in: vert_pos
-    # Data out: vert_force (both ends)
-    """
-    for s in range(spring_vert.shape[0]):
-        a, b = spring_vert[s, 0], spring_vert[s, 1]
-        dx = vert_pos[b, 0] - vert_pos[a, 0]
-        dy = vert_pos[b, 1] - vert_pos[a, 1]
-        dz = vert_pos[b, 2] - vert_pos[a, 2]
-        ln = math.sqrt(dx * dx + dy * dy + dz * dz)
-        f = spring_stiff[s] * (ln - spring_rest[s]) / ln
-        vert_force[a, 0] += f * dx
-        vert_force[a, 1] += f * dy
-        vert_force[a, 2] += f * dz
-        vert_force[b, 0] -= f * dx
-        vert_force[b, 1] -= f * dy
-        vert_force[b, 2] -= f * dz
-
-
-@kernel
-def add_muscle(mus_vert, mus_nbr, mus_sched, sched_val, vert_pos, vert_force):
-    """Muscle (paper 3.4): F_i += k_muscle(t) (N_j - P_i) for each contraction pair.
-    # Model: mus_vert, mus_nbr (np,) int32, mus_sched (np,) int64
-    # Data in: sched_val (stiffness N/m in column 0), vert_pos
-    # Data out: vert_force
-    """
-    for k in range(mus_vert.shape[0]):
-        i = mus_vert[k]
-        j = mus_nbr[k]
-        c = sched_val[mus_sched[k], 0]
-        vert_force[i, 0] += c * (vert_pos[j, 0] - vert_pos[i, 0])
-        vert_force[i, 1] += c * (vert_pos[j, 1] - vert_pos[i, 1])
-        vert_force[i, 2] += c * (vert_pos[j, 2] - vert_pos[i, 2])

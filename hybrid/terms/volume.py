@@ -1,31 +1,77 @@
-"""Constraints, applied by projection after free integration (paper 4).
+"""The enclosed volume (paper 4): the exact constant-volume projection and the
+soft (compressible) volume of paper 6.2.
 
-Local constraints act on single points (prescribed trajectories, keep-in-
-region); the global one keeps the enclosed volume at its rest value exactly:
-after free integration to X*, X = X* + phi d with d_i = w_i grad_i V(X*),
-and V(X* + phi d) - V0 is a cubic in phi solved to machine precision
-(DESIGN.md). The same cubic gives the soft (compressible) volume force of
-paper 6.2. Nailed and rigidly linked points are simply never integrated.
+After free integration to X*, X = X* + phi d with d_i = w_i grad_i V(X*), and
+V(X* + phi d) - V0 is a cubic in phi solved to machine precision (DESIGN.md);
+the velocities are adjusted by phi d / h, and p = phi / h^2 is the gauge
+pressure inside the body. The same cubic gives the soft volume's force.
 """
 
 from __future__ import annotations
 
 import math
+from enum import IntEnum
 
 import numpy as np
 from numba import prange
 
-from .kernel import CHUNK_VERTS, kernel, kernel_twin
+from ..errors import SceneError
+from ..kernel import CHUNK_VERTS, kernel, kernel_twin
+from .base import Term, param, register
 
-__all__ = ["face_volume", "ring_cross_sum", "volume_cubic", "solve_cubic_near_zero", "project_volume",
-           "soft_volume_force", "apply_prescribed", "apply_keep_in",
-           "SHAPE_HALF_SPACE", "SHAPE_BALL", "SHAPE_BOX"]
+__all__ = ["Volume", "SoftVolume", "Projection", "face_volume", "ring_cross_sum", "volume_cubic",
+           "solve_cubic_near_zero", "project_volume", "soft_volume_force", "PROJ_OK", "PROJ_NO_GRADIENT",
+           "PROJ_NO_ROOT"]
 
-SHAPE_HALF_SPACE, SHAPE_BALL, SHAPE_BOX = 0, 1, 2
 
-# Status codes of the projection, read by the simulation.
-PROJ_OK, PROJ_NO_GRADIENT, PROJ_NO_ROOT = 0, 1, 2
+class Projection(IntEnum):
+    """Status of the volume projection, read by the simulation."""
+    OK = 0
+    NO_GRADIENT = 1  # the volume gradient vanished on the free points
+    NO_ROOT = 2  # the cubic has no real root
 
+
+PROJ_OK, PROJ_NO_GRADIENT, PROJ_NO_ROOT = int(Projection.OK), int(Projection.NO_GRADIENT), int(Projection.NO_ROOT)
+
+
+@register
+class SoftVolume(Term):
+    """Compressibility (paper 6.2): each point pulled with stiffness (N/m)
+    toward the position the exact volume projection would give it."""
+    toml_type = "soft_volume"
+    section = "forces"
+    arrays = {"soft_stiff": lambda n: 0.0}  # N/m
+    stiffness_n_per_m: float = param("positive")
+    name: str = param("text", "soft_volume")
+
+    def compile(self, b, what):
+        super().compile(b, what)
+        b.out["soft_stiff"] = self.value(b, "stiffness_n_per_m", what)
+        b.mesh.require_closed(f"{what} (compressible volume) needs a closed surface")
+        b.out["vol0"] = float(b.mesh.volume())
+
+
+@register
+class Volume(Term):
+    """The exact constant-volume constraint (paper 4.3); needs a closed surface."""
+    toml_type = "volume"
+    section = "constraints"
+    name: str = param("text", "volume")
+
+    def compile(self, b, what):
+        super().compile(b, what)
+        b.mesh.require_closed(f"{what}: a constant-volume constraint needs a closed surface")
+        b.out["vol0"] = float(b.mesh.volume())
+        b.rows["volume"].append(what)
+
+    @classmethod
+    def finish(cls, b):
+        if not np.any(b.out["vert_weight"] > 0):
+            raise SceneError(f"{b.rows['volume'][0]}: every point is nailed, prescribed or linked; "
+                             "expected at least one free point to carry the volume correction")
+
+
+# ---------------------------------------------------------------- kernels
 
 @kernel(inline="always")
 def ring_cross_sum(ring_ptr, ring_vert, vec, i):
@@ -356,67 +402,3 @@ def soft_volume_force(ring_ptr, ring_vert, ref, vol0, stiff, vert_pos, grad, cub
         vert_force[i, 1] += p * grad[i, 1]
         vert_force[i, 2] += p * grad[i, 2]
     return p
-
-
-@kernel
-def apply_prescribed(pre_vert, pre_rest, pre_sched, sched_next, h, vert_pos, vert_vel):
-    """Prescribed trajectories: x_i(t+h) = rest_i + disp_s(t+h), v_i = dx / h.
-    # Model: pre_vert (n,) int32, pre_rest (n, 3) m, pre_sched (n,) int64
-    # Data in: sched_next (nsched, 3) m, schedules at t + h
-    # Data out: vert_pos, vert_vel
-    """
-    for k in range(pre_vert.shape[0]):
-        i = pre_vert[k]
-        s = pre_sched[k]
-        for a in range(3):
-            x = pre_rest[k, a] + sched_next[s, a]
-            vert_vel[i, a] = (x - vert_pos[i, a]) / h
-            vert_pos[i, a] = x
-
-
-@kernel
-def apply_keep_in(kin_vert, kin_shape, shape_kind, shape_par, vert_pos, vert_vel):
-    """Keep points inside a half-space, ball or box: project the position onto
-    the region and remove the outward velocity component.
-    # Model: kin_vert (n,) int32, kin_shape (n,) int64, shape_kind (ns,) int64,
-    #        shape_par (ns, 6): half-space (point, unit normal pointing inside),
-    #        ball (center, radius, -, -), box (lo, hi)
-    # Data in/out: vert_pos, vert_vel
-    """
-    for k in range(kin_vert.shape[0]):
-        i = kin_vert[k]
-        s = kin_shape[k]
-        par = shape_par[s]
-        kind = shape_kind[s]
-        if kind == SHAPE_HALF_SPACE:
-            d = ((vert_pos[i, 0] - par[0]) * par[3] + (vert_pos[i, 1] - par[1]) * par[4]
-                 + (vert_pos[i, 2] - par[2]) * par[5])
-            if d < 0.0:
-                vn = vert_vel[i, 0] * par[3] + vert_vel[i, 1] * par[4] + vert_vel[i, 2] * par[5]
-                for a in range(3):
-                    vert_pos[i, a] -= d * par[3 + a]
-                    if vn < 0.0:
-                        vert_vel[i, a] -= vn * par[3 + a]
-        elif kind == SHAPE_BALL:
-            dx, dy, dz = vert_pos[i, 0] - par[0], vert_pos[i, 1] - par[1], vert_pos[i, 2] - par[2]
-            r = math.sqrt(dx * dx + dy * dy + dz * dz)
-            if r > par[3]:
-                ux, uy, uz = dx / r, dy / r, dz / r
-                vert_pos[i, 0] = par[0] + par[3] * ux
-                vert_pos[i, 1] = par[1] + par[3] * uy
-                vert_pos[i, 2] = par[2] + par[3] * uz
-                vn = vert_vel[i, 0] * ux + vert_vel[i, 1] * uy + vert_vel[i, 2] * uz
-                if vn > 0.0:
-                    vert_vel[i, 0] -= vn * ux
-                    vert_vel[i, 1] -= vn * uy
-                    vert_vel[i, 2] -= vn * uz
-        else:
-            for a in range(3):
-                if vert_pos[i, a] < par[a]:
-                    vert_pos[i, a] = par[a]
-                    if vert_vel[i, a] < 0.0:
-                        vert_vel[i, a] = 0.0
-                elif vert_pos[i, a] > par[3 + a]:
-                    vert_pos[i, a] = par[3 + a]
-                    if vert_vel[i, a] > 0.0:
-                        vert_vel[i, a] = 0.0

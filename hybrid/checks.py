@@ -1,0 +1,87 @@
+"""Value checks shared by the scene file reader and the terms' compile functions.
+
+Each check takes `where` (the culprit as the user wrote it: ``breathing.toml:
+forces[2].stiffness_n_per_m`` from a file, ``forces['muscle'].stiffness_n_per_m``
+from Python), the value, and raises a one-line `SceneError` saying what was
+expected and what was received; otherwise it returns the value normalised
+(floats, tuples). A bool is never a number.
+"""
+
+from __future__ import annotations
+
+import math
+
+from .errors import SceneError
+
+__all__ = ["fail", "show", "is_number", "number", "integer", "text", "boolean", "vec3", "vec3_list"]
+
+
+def fail(where: str, msg: str):
+    raise SceneError(f"{where}: {msg}" if where else msg)
+
+
+def show(v) -> str:
+    """A value as a user wrote it (TOML spelling for booleans and tables), shortened."""
+    if isinstance(v, bool):
+        s = "true" if v else "false"
+    elif isinstance(v, str):
+        s = repr(v)
+    elif isinstance(v, dict):
+        s = "a table {" + ", ".join(f"{k} = {show(x)}" for k, x in v.items()) + "}"
+    else:
+        s = repr(v)
+    return s if len(s) <= 80 else s[:77] + "..."
+
+
+def is_number(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def number(where, v, *, lo=None, lo_open=True, hi=None, hi_open=True) -> float:
+    """A finite number, optionally within (lo, hi) (open or closed ends)."""
+    if lo is None and hi is None:
+        want = "a finite number"
+    elif hi is None:
+        want = f"a number {'>' if lo_open else '>='} {lo:g}"
+    else:
+        want = f"a number in {'(' if lo_open else '['}{lo:g}, {hi:g}{')' if hi_open else ']'}"
+    ok = is_number(v) and math.isfinite(v)
+    if ok and lo is not None:
+        ok = v > lo if lo_open else v >= lo
+    if ok and hi is not None:
+        ok = v < hi if hi_open else v <= hi
+    if not ok:
+        fail(where, f"expected {want}, received {show(v)}")
+    return float(v)
+
+
+def integer(where, v, *, lo) -> int:
+    if not (isinstance(v, int) and not isinstance(v, bool) and v >= lo):
+        fail(where, f"expected an integer >= {lo}, received {show(v)}")
+    return int(v)
+
+
+def text(where, v, choices=None) -> str:
+    if not isinstance(v, str) or (choices is not None and v not in choices):
+        want = f"one of {list(choices)}" if choices is not None else "a string"
+        fail(where, f"expected {want}, received {show(v)}")
+    return v
+
+
+def boolean(where, v) -> bool:
+    if not isinstance(v, bool):
+        fail(where, f"expected true or false, received {show(v)}")
+    return v
+
+
+def vec3(where, v) -> tuple:
+    """Three finite numbers, as a tuple of floats."""
+    if not (isinstance(v, (list, tuple)) and len(v) == 3 and all(is_number(x) and math.isfinite(x) for x in v)):
+        fail(where, f"expected a 3-vector of finite floats, received {show(v)}")
+    return tuple(float(x) for x in v)
+
+
+def vec3_list(where, v) -> tuple:
+    if not (isinstance(v, (list, tuple)) and v):
+        fail(where, f"expected a list of 3-vectors, received {show(v)}")
+    return tuple(vec3(f"{where}[{k}]", x) for k, x in enumerate(v))

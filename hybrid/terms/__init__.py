@@ -1,0 +1,28 @@
+"""The membrane's force and constraint terms, each in one place: its dataclass
+(the scene vocabulary and the scene file's keys), its compile function and its
+compiled kernel (`hybrid.terms.base` says how they fit together).
+
+Families: `pointwise` (gravity, damping and the step's fused per-point pass),
+`shape_memory`, `springs` (mass-spring, applied forces, attractive points),
+`muscle`, `volume` (exact and soft volume), `local` (nailed, prescribed,
+keep-in). `order_terms` below registers them: a new term is its module and
+one entry there.
+"""
+
+from .base import CONSTRAINT_TYPES, FLAGGED, FORCE_TYPES, TERM_CLASSES, Build, Term, order_terms
+from .pointwise import Damping, Gravity
+from .shape_memory import ShapeMemory
+from .springs import AppliedForce, Attraction, MassSpring
+from .muscle import Muscle
+from .volume import SoftVolume, Volume
+from .local import KeepIn, Nailed, Prescribed
+
+__all__ = ["Term", "Build", "FORCE_TYPES", "CONSTRAINT_TYPES", "TERM_CLASSES", "FLAGGED", "TERMS",
+           "Gravity", "Damping", "ShapeMemory", "MassSpring", "AppliedForce", "Attraction", "Muscle",
+           "SoftVolume", "Volume", "Nailed", "KeepIn", "Prescribed"]
+
+order_terms((Gravity, AppliedForce, Attraction, Damping, ShapeMemory, MassSpring, Muscle, SoftVolume,
+             Nailed, Prescribed, KeepIn, Volume))
+
+#: names of the terms with a flag and a kernel, in id order (MembraneArrays.term_on)
+TERMS = tuple(cls.toml_type for cls in FLAGGED)

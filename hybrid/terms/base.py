@@ -1,0 +1,178 @@
+"""What every force and constraint term shares.
+
+A term is a frozen dataclass whose fields carry their kind (`param`): the kind
+says how a value is checked and how the scene file spells it, so the TOML keys
+of a term are its field names and its checks are written once. A term class
+also declares the arrays the compiled step reads for it (`arrays`: name ->
+a function of nvert giving the value when the scene lacks the term: empty
+arrays of the right dtype and dimension) and compiles itself in two phases
+into a `Build`:
+
+- `compile(self, b, what)`: per term instance, selects its regions, checks its
+  values, records its rows (`b.rows`) and marks fixed points (`b.vert_free`);
+- `finish(cls, b)`: once per term class present, after every term and rigid
+  link is known (`b.moving`), turns the rows into the final arrays.
+
+`order_terms` (called once by `hybrid.terms` with every class, in order) puts
+each class in `FORCE_TYPES` or `CONSTRAINT_TYPES` under its TOML `type`; a
+term the step calls a kernel for (`flag=True`) also gets its id, the index of
+its flag in `MembraneArrays.term_on` and of its call counter.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections import defaultdict
+from typing import ClassVar
+
+import numpy as np
+
+from .. import checks
+from .. import regions as _regions
+from .. import schedule as _sched
+
+__all__ = ["param", "register", "order_terms", "Term", "Build", "FORCE_TYPES", "CONSTRAINT_TYPES", "TERM_CLASSES",
+           "FLAGGED", "check_value", "VALUE_KINDS"]
+
+FORCE_TYPES: dict = {}
+CONSTRAINT_TYPES: dict = {}
+#: every term class, in registration order
+TERM_CLASSES: list = []
+#: the term classes with a flag and a kernel, in id order
+FLAGGED: list = []
+
+#: kinds checked by `check_value`; "selector" and "schedule" are checked where
+#: they are evaluated (hybrid.regions.select, hybrid.schedule.as_schedule)
+VALUE_KINDS = ("positive", "nonneg", "angle_deg", "vec3", "target", "choice", "text", "integer")
+
+
+def param(kind: str, default=dataclasses.MISSING, **meta):
+    """A term field of `kind` (VALUE_KINDS, "selector", or "schedule" with ncomp=1 or 3)."""
+    return dataclasses.field(default=default, metadata={"kind": kind, **meta})
+
+
+def check_value(where: str, kind: str, value, meta: dict | None = None):
+    """`value` checked as a field of `kind`; returns it normalised (floats, tuples)."""
+    meta = meta or {}
+    if kind == "positive":
+        return checks.number(where, value, lo=0)
+    if kind == "nonneg":
+        return checks.number(where, value, lo=0, lo_open=False)
+    if kind == "angle_deg":
+        return checks.number(where, value, lo=0, hi=90)
+    if kind == "vec3":
+        return checks.vec3(where, value)
+    if kind == "target":
+        if isinstance(value, (list, tuple)) and value and isinstance(value[0], (list, tuple)):
+            return checks.vec3_list(where, value)
+        return checks.vec3(where, value)
+    if kind == "choice":
+        return checks.text(where, value, meta["choices"])
+    if kind == "text":
+        return checks.text(where, value)
+    if kind == "integer":
+        return checks.integer(where, value, lo=meta["lo"])
+    raise ValueError(f"kind {kind!r}: not a value kind {VALUE_KINDS}")
+
+
+def register(cls=None, *, flag: bool = True):
+    """Class decorator: a term class made a frozen dataclass; flag=False for a
+    term the step has no kernel for (nailed points). `hybrid.terms` then puts
+    the classes in the registry, in its order (`order_terms`)."""
+    def wrap(cls):
+        cls = dataclasses.dataclass(frozen=True)(cls)
+        cls.flag = flag
+        return cls
+    return wrap if cls is None else wrap(cls)
+
+
+def order_terms(classes) -> None:
+    """Fill the registry with `classes` in order: the TOML type tables, and the
+    ids of the flagged ones (the index of each flag and call counter)."""
+    for cls in classes:
+        table = FORCE_TYPES if cls.section == "forces" else CONSTRAINT_TYPES
+        if cls.toml_type in table:
+            raise ValueError(f"term type {cls.toml_type!r} registered twice")
+        table[cls.toml_type] = cls
+        TERM_CLASSES.append(cls)
+        if cls.flag:
+            cls.id = len(FLAGGED)
+            FLAGGED.append(cls)
+
+
+class Term:
+    """Mixin of the term dataclasses (see the module docstring)."""
+    toml_type: ClassVar[str]
+    section: ClassVar[str]  # "forces" or "constraints"
+    id: ClassVar[int] = -1
+    arrays: ClassVar[dict] = {}
+    #: finish after the other classes (damping reads every point's stiffness)
+    finish_last: ClassVar[bool] = False
+
+    @classmethod
+    def fields(cls) -> dict:
+        """{field name: dataclasses.Field} of the user's fields, name included."""
+        return {f.name: f for f in dataclasses.fields(cls)}
+
+    @classmethod
+    def required(cls) -> tuple:
+        return tuple(f.name for f in dataclasses.fields(cls)
+                     if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING)
+
+    def value(self, b: "Build", field: str, what: str):
+        """Field `field` checked by its kind (None stays None when it is the default)."""
+        f = self.fields()[field]
+        v = getattr(self, field)
+        if v is None and f.default is None:
+            return None
+        return check_value(f"{what}.{field}", f.metadata["kind"], v, f.metadata)
+
+    def compile(self, b: "Build", what: str) -> None:
+        if self.id >= 0:
+            b.term_on[self.id] = 1
+
+    @classmethod
+    def finish(cls, b: "Build") -> None:
+        """Turn the rows of every term of this class into its arrays (default: none)."""
+
+
+class Build:
+    """A model being compiled: what term compile functions read and write.
+
+    mesh, regions {name: vertex indices}, vert_mass (nvert,) kg; written by the
+    terms: vert_free (nvert,) uint8, vert_stiffness (nvert,) N/m (each point's
+    elastic stiffness, for critical damping and the stability estimate),
+    term_on, rows {name: list} (rows accumulated over a class's terms),
+    out {array name: value} (the final arrays), schedules; set before the
+    finish phase: link_vert (points linked to rigid bodies) and moving
+    (nvert,) bool, the points that move (free or linked).
+    """
+
+    def __init__(self, mesh, regions: dict, vert_mass: np.ndarray, nterm: int):
+        self.mesh = mesh
+        self.regions = regions
+        self.vert_mass = vert_mass
+        self.vert_free = np.ones(mesh.nvert, np.uint8)
+        self.vert_stiffness = np.zeros(mesh.nvert)
+        self.term_on = np.zeros(nterm, np.uint8)
+        self.rows: dict = defaultdict(list)
+        self.out: dict = {}
+        self.schedules: list = []
+        self.link_vert = np.zeros(0, np.int32)
+        self.moving: np.ndarray | None = None
+
+    def region(self, sel, what: str) -> np.ndarray:
+        """The sorted vertex indices a selector picks (SceneError naming `what` if none)."""
+        return _regions.select(sel, self.mesh.vert_pos, name=what, regions=self.regions,
+                               border_vert=self.mesh.border_vert)
+
+    def schedule(self, value, what: str, ncomp: int) -> int:
+        """Row of the validated schedule `value` in the model's schedule table."""
+        self.schedules.append(_sched.as_schedule(value, name=what, ncomp=ncomp))
+        return len(self.schedules) - 1
+
+    def keep_moving(self, verts, *columns):
+        """verts and its parallel columns restricted to moving points (forces on
+        nailed and prescribed points are never used), as arrays."""
+        ok = self.moving[np.asarray(verts, dtype=np.int64)] if len(verts) else np.zeros(0, bool)
+        return [np.asarray(x)[ok] if len(x) else np.asarray(x) for x in (verts, *columns)]
