@@ -133,8 +133,6 @@ class Recorder:
         if self._held == len(buf.pos) or time.perf_counter() - self._last_flush > self.flush_s:
             self._hand_over()
 
-    frame = __call__
-
     def frames(self, sim, frames, trace=None) -> None:
         """Record the frames a compiled call captured (`hybrid.step.Frames`,
         `frames.count` of them; the trace's last rows are theirs), those `every_s`
