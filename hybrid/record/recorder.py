@@ -68,7 +68,6 @@ class Recorder:
         n = plan["nvert"]
         self.nbody = len(plan["bodies"])
         self.flush_s = flush_s
-        self.frames_recorded = 0  # frames taken so far
         self._next_t = -math.inf
         self._closed = False
         mesh_every = int(mesh_every) if mesh_every else (1 if n <= MESH_EVERY_FRAME_MAX else 10)
@@ -129,7 +128,6 @@ class Recorder:
             row[1:1 + len(SCALAR_CHANNELS)] = np.nan
             row[1], row[2], row[3] = sim.volume, sim.volume_rel_error, sim.pressure
         self._held = k + 1
-        self.frames_recorded += 1
         if self._held == len(buf.pos) or time.perf_counter() - self._last_flush > self.flush_s:
             self._hand_over()
 
@@ -169,7 +167,6 @@ class Recorder:
                 buf.number[held:end, 2] = np.abs(vol - v0) / v0 if v0 else 0.0
                 buf.number[held:end, 3] = frames.scal[part, F_PRESSURE]
             self._held = end
-            self.frames_recorded += len(part)
             if end == len(buf.pos):
                 self._hand_over()
         # a buffer at least half full goes now, so that the writer works while the run
