@@ -85,7 +85,7 @@ def frames_from_scene(scene_arg: str | None, duration_s: float | None = None, *,
     first breath."""
     from .cli import _load
     from .model import compile_scene
-    from .record import _geoms, region_colours
+    from .record import body_geoms as _geoms, region_colours
     from .run import RunFailed, _breathing, run
     from .simulation import Simulation
 

@@ -151,7 +151,7 @@ def test_a_large_mesh_records_a_point_cloud_every_frame_and_the_triangles_less_o
 def test_the_encoder_is_compiled_once_before_the_run_for_the_types_the_run_passes(tmp_path):
     """Recorder() compiles (or loads) the encoder; the writer thread, small meshes and
     large, then finds it ready rather than compiling again while the run waits."""
-    from hybrid.record import _encode_frames
+    from hybrid.record.encoder import _encode_frames
 
     for mesh_every in (1, 4):
         sim = hybrid.load(membrane_demo())

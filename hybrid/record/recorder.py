@@ -1,0 +1,277 @@
+"""The `Recorder`: an observer of the runner that copies each block of frames, holds
+them in two buffers, and hands them to a writer thread that encodes and writes them
+a chunk at a time, at least every `flush_s` seconds; `close()` finishes the file."""
+
+from __future__ import annotations
+
+import math
+import queue
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..step import F_PRESSURE, F_TIME, F_VOLUME
+from .channels import _frame_bytes_estimate, _FrameWriter, _nslot, _plan
+from .encoder import _load_encoder
+from .schemas import MESH_EVERY_FRAME_MAX, SCALAR_CHANNELS
+
+
+class _Frames:
+    """Frames held until they are written: number (batch, nslot) = t, the scalars and
+    each body's pose (copied there from xpos, xquat when written), pos (batch, nvert, 3),
+    and each frame's row in the runner's trace (-1: none)."""
+
+    def __init__(self, batch: int, nvert: int, nbody: int, nslot: int):
+        self.number = np.full((batch, nslot), np.nan)
+        self.pos = np.empty((batch, nvert, 3))
+        self.xpos = np.zeros((batch, nbody, 3))
+        self.xquat = np.zeros((batch, nbody, 4))
+        self.trace_row = np.full(batch, -1, np.int64)
+
+    def numbers(self, nframe: int) -> np.ndarray:
+        """The number slots of the first nframe frames, the bodies' poses filled in."""
+        nbody = self.xpos.shape[1]
+        if nbody:
+            body = self.number[:nframe, self.number.shape[1] - 7 * nbody:].reshape(nframe, nbody, 7)
+            body[:, :, :3] = self.xpos[:nframe]
+            body[:, :, 3:] = self.xquat[:nframe]
+        return self.number[:nframe]
+
+
+class Recorder:
+    """Write a run's frames to an MCAP file; an observer for `hybrid.run.run`.
+
+    >>> with Recorder("run.mcap", sim) as rec:
+    ...     run(sim, 12.0, observers=[rec])
+
+    `every_s`: the recording interval in simulated time (default 10 ms); frames the
+    runner offers closer than that to the last recorded one are skipped.
+    `mesh_every`: the triangle list every that many recorded frames (default: 1 up to
+    `MESH_EVERY_FRAME_MAX` points, 10 above); above 1, a point cloud every frame.
+    `chunk_size`: bytes of an MCAP chunk, about; frames are copied as they come and
+    encoded a chunk at a time, and at least every `flush_s` seconds of wall time.
+    `background`: encode, compress and write on a thread of their own (the compiled
+    encoder and the compressor release the GIL), so that the run goes on meanwhile.
+    `flush()` writes what is held; `close()` writes the rest and finishes the file.
+    """
+
+    def __init__(self, path: str | Path, sim, *, every_s: float = 0.01, mesh_every: int | None = None,
+                 chunk_size: int = 1 << 20, flush_s: float = 1.0, background: bool = True):
+        if not every_s > 0:
+            raise ValueError(f"every_s: expected a time > 0 s, received {every_s!r}")
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self.every_s = float(every_s)
+        plan = _plan(sim, self.every_s)
+        n = plan["nvert"]
+        self.nbody = len(plan["bodies"])
+        self.flush_s = flush_s
+        self._next_t = -math.inf
+        self._closed = False
+        mesh_every = int(mesh_every) if mesh_every else (1 if n <= MESH_EVERY_FRAME_MAX else 10)
+        _load_encoder()
+        self._file = open(self.path, "wb")  # a path that cannot be written fails here, at once
+        self._fw: _FrameWriter | None = None
+
+        def make_writer() -> _FrameWriter:  # the file's head, and the encoder loaded
+            return _FrameWriter(self._file, plan, chunk_size=chunk_size, mesh_every=mesh_every)
+
+        batch = int(min(max(chunk_size // _frame_bytes_estimate(plan, mesh_every), 1), 1000))
+        nslot = _nslot(self.nbody)
+        # frames are held in one buffer while the other is written (double buffering)
+        self._free: queue.Queue = queue.Queue()
+        for _ in range(2 if background else 1):
+            self._free.put(_Frames(batch, n, self.nbody, nslot))
+        self._buf = self._free.get()
+        self._trace = None
+        self._sim = self._body_src = None
+        self._held = 0
+        self._first = 0  # the run's index of the first frame held
+        self._last_flush = time.perf_counter()
+        self._error: BaseException | None = None
+        self._todo: queue.Queue | None = None
+        if background:
+            self._todo = queue.Queue()
+            self._thread = threading.Thread(target=self._work, args=(make_writer,), name="hybrid-recorder",
+                                            daemon=True)
+            self._thread.start()
+        else:
+            self._fw = make_writer()
+
+    # ------------------------------------------------------------ observer
+    def __call__(self, sim, trace=None) -> None:
+        """Record the current frame of `sim` (if `every_s` has elapsed since the last one).
+        `trace`: the runner's `Trace`, whose last values feed the scalar channels (read
+        when the frames are handed over: a frame costs the run three copies)."""
+        t = sim.time
+        if t < self._next_t - 1e-9 * self.every_s or self._closed:
+            return
+        self._next_t = t + self.every_s
+        k = self._held
+        buf = self._buf
+        buf.number[k, 0] = t
+        buf.pos[k] = sim.state.vert_pos
+        if self.nbody:
+            if sim is not self._sim:
+                self._sim, d = sim, sim.mj_data
+                self._body_src = d.xpos[1:], d.xquat[1:]  # views of the MjData's memory
+            buf.xpos[k] = self._body_src[0]
+            buf.xquat[k] = self._body_src[1]
+        if trace is not None:
+            self._trace = trace
+            buf.trace_row[k] = len(trace.t_s) - 1
+        else:
+            buf.trace_row[k] = -1
+            row = buf.number[k]
+            row[1:1 + len(SCALAR_CHANNELS)] = np.nan
+            row[1], row[2], row[3] = sim.volume, sim.volume_rel_error, sim.pressure
+        self._held = k + 1
+        if self._held == len(buf.pos) or time.perf_counter() - self._last_flush > self.flush_s:
+            self._hand_over()
+
+    def frames(self, sim, frames, trace=None) -> None:
+        """Record the frames a compiled call captured (`hybrid.step.Frames`,
+        `frames.count` of them; the trace's last rows are theirs), those `every_s`
+        apart: copied in blocks, handed over as the buffer fills."""
+        k = frames.count
+        if self._closed or not k:
+            return
+        t = frames.scal[:k, F_TIME]
+        pick = []
+        for j, tj in enumerate(t.tolist()):
+            if tj >= self._next_t - 1e-9 * self.every_s:
+                pick.append(j)
+                self._next_t = tj + self.every_s
+        pick = np.asarray(pick, np.int64)
+        row0 = len(trace.t_s) - k if trace is not None else 0
+        if trace is not None:
+            self._trace = trace
+        while len(pick):
+            buf, held = self._buf, self._held
+            part, pick = pick[:len(buf.pos) - held], pick[len(buf.pos) - held:]
+            end = held + len(part)
+            buf.number[held:end, 0] = t[part]
+            buf.pos[held:end] = frames.pos[part]
+            if self.nbody:
+                buf.xpos[held:end] = frames.body_pos[part]
+                buf.xquat[held:end] = frames.body_quat[part]
+            if trace is not None:
+                buf.trace_row[held:end] = row0 + part
+            else:
+                buf.trace_row[held:end] = -1
+                vol, v0 = frames.scal[part, F_VOLUME], sim.model.arrays.vol0
+                buf.number[held:end, 1:1 + len(SCALAR_CHANNELS)] = np.nan
+                buf.number[held:end, 1] = vol
+                buf.number[held:end, 2] = np.abs(vol - v0) / v0 if v0 else 0.0
+                buf.number[held:end, 3] = frames.scal[part, F_PRESSURE]
+            self._held = end
+            if end == len(buf.pos):
+                self._hand_over()
+        # a buffer at least half full goes now, so that the writer works while the run
+        # goes on rather than after its last call
+        if 2 * self._held >= len(self._buf.pos) or time.perf_counter() - self._last_flush > self.flush_s:
+            self._hand_over()
+
+    @staticmethod
+    def _take_trace(buf, nframe: int, trace) -> None:
+        """The scalar channels of the frames held, from the runner's trace rows (rows
+        already written: the writer thread may read them while the run appends)."""
+        rows = buf.trace_row[:nframe]
+        have = rows >= 0
+        if trace is None or not have.any():
+            return
+        lo, hi = int(rows[have].min()), int(rows[have].max())
+        for i, key in enumerate(SCALAR_CHANNELS.values()):
+            series = getattr(trace, key, None)
+            col = buf.number[:nframe, 1 + i]
+            if series and len(series) > hi:
+                col[have] = np.asarray(series[lo:hi + 1], float)[rows[have] - lo]
+            else:
+                col[have] = np.nan
+
+    def _hand_over(self, last: bool = False) -> None:
+        """Pass the frames held to the writer (the thread, or now); `last`: no frames follow."""
+        if self._held:
+            item = (self._buf, self._held, self._first, self._trace)
+            self._first += self._held
+            self._held = 0
+            if self._todo is not None:
+                self._todo.put(item)
+                if not last:
+                    self._buf = self._free.get()  # waits while both buffers are being written
+            else:
+                self._write(item)
+        self._last_flush = time.perf_counter()
+        if self._error is not None:
+            raise self._error
+
+    def _write(self, item) -> None:
+        buf, nframe, first, trace = item
+        try:
+            if self._error is None:
+                self._take_trace(buf, nframe, trace)
+                number = buf.numbers(nframe)
+                self._fw.write(number[:, 0], number, buf.pos[:nframe], first)
+        except BaseException as exc:  # raised again in the run's thread
+            self._error = exc
+        finally:
+            if self._todo is not None:
+                self._free.put(item[0])
+            else:
+                self._buf = item[0]
+
+    def _work(self, make_writer) -> None:
+        while True:
+            item = self._todo.get()
+            if self._fw is None and self._error is None:
+                # the file's head, once the first frames come: the run is then in its
+                # compiled steps (which release the GIL), so this costs it nothing
+                try:
+                    self._fw = make_writer()
+                except BaseException as exc:  # raised again in the run's thread
+                    self._error = exc
+            try:
+                if item is None:
+                    return
+                self._write(item)
+            finally:
+                self._todo.task_done()
+
+    def flush(self) -> None:
+        """Write the frames held, and wait until they are in the file."""
+        self._hand_over()
+        if self._todo is not None:
+            self._todo.join()
+        if self._error is not None:
+            raise self._error
+
+    # ------------------------------------------------------------ closing
+    def close(self) -> None:
+        """Finish the file: the frames held, then summary and footer. Idempotent."""
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            try:
+                self._hand_over(last=True)
+            finally:
+                if self._todo is not None:
+                    self._todo.put(None)
+                    self._thread.join()
+        finally:
+            if self._fw is not None:
+                self._fw.close()
+            else:
+                self._file.close()
+        if self._error is not None:
+            raise self._error
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+        return False
+
