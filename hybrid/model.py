@@ -395,7 +395,7 @@ def compile_scene(scene: Scene) -> Model:
     link_vert = np.zeros(0, np.int32)
     rigid = None
     if scene.rigid is not None and scene.rigid.links:
-        from .coupling import build_rigid  # imports mujoco, only for scenes that have rigid parts
+        from .rigid import build_rigid  # imports mujoco, only for scenes that have rigid parts
         rigid, link_vert = build_rigid(scene, mesh, regions, vert_mass)
         vert_free[link_vert] = 0
 
