@@ -268,7 +268,7 @@ class Coupling:
         self._links = LinkArrays(self.link_vert, sys.site_id, sys.site_body, sys.site_root,
                                  self.link_extra_force(), self._force, self._vel)
         d = sys.data
-        self._mj = MjViews(sys.model._address, d._address, d.site_xpos, d.xipos, d.xfrc_applied, d.cvel,
+        self._mj = MjViews(*sys.pointers(), d.site_xpos, d.xipos, d.xfrc_applied, d.cvel,
                            d.subtree_com, d.qpos, d.xpos, d.xquat)
         self.initial_state = sys.state()
         self._xfrc_hist.clear()

@@ -16,8 +16,8 @@ The trajectory is bit-for-bit that of `mj_step` with the same `xfrc_applied`, wh
 
 Compiled path: `point_wrench_kernel` and `site_vel_kernel` are numba kernels on the
 raw `MjData` arrays, and `mj_step_ctypes` gives MuJoCo's C `mj_step`, `mj_step1`,
-`mj_step2`, callable from inside `@numba.njit` code with `model._address` and
-`data._address`; a whole coupled step can then run without returning to Python.
+`mj_step2`, callable from inside `@numba.njit` code with the pointers of
+`RigidSystem.pointers`; a whole coupled step can then run without returning to Python.
 
 Units: SI (m, kg, s, N, N m). Arrays: `(n, 3)` float64, world frame unless stated.
 """
@@ -99,8 +99,8 @@ def site_vel_kernel(site_xpos, cvel, subtree_com, site_id, site_body, site_root,
 def mj_step_ctypes() -> tuple[ctypes._CFuncPtr, ctypes._CFuncPtr, ctypes._CFuncPtr]:
     """`(mj_step, mj_step1, mj_step2)` of MuJoCo's C library, callable from numba.
 
-    Call them inside an `@numba.njit` function with `model._address` and
-    `data._address` (ints); the numpy arrays of `MjData` (`data.xfrc_applied`, ...) are
+    Call them inside an `@numba.njit` function with the ints of
+    `RigidSystem.pointers()`; the numpy arrays of `MjData` (`data.xfrc_applied`, ...) are
     views of its memory and can be passed to the same function. The library is the
     one the Python bindings are linked against, so results are bit-for-bit those of
     `mujoco.mj_step`. Python's call overhead (about 0.5 us a call) disappears.
@@ -179,6 +179,11 @@ class RigidSystem:
     def time(self) -> float:
         """Simulated time, s."""
         return float(self._data.time)
+
+    def pointers(self) -> tuple[int, int]:
+        """(mjModel*, mjData*) as ints, for MuJoCo's C functions called from compiled
+        code (`mj_step_ctypes`); valid as long as this system lives."""
+        return self._model._address, self._data._address
 
     def body_names(self) -> list[str]:
         """The names of all bodies of the model, indexed by body id ("world" first)."""
