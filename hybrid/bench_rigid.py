@@ -8,7 +8,7 @@ import statistics
 import time
 
 from . import rigid
-from .coupling import resolve_mjcf
+from .rigid import resolve_mjcf
 from .mesh import icosphere, uv_sphere
 from .model import compile_scene
 from .scenefile import builtin_scene, load_scene

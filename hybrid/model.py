@@ -230,7 +230,7 @@ def compile_scene(scene: Scene) -> Model:
     # rigid links: linked points follow their sites
     rigid = None
     if scene.rigid is not None and scene.rigid.links:
-        from .coupling import build_rigid  # imports mujoco, only for scenes that have rigid parts
+        from .rigid import build_rigid  # imports mujoco, only for scenes that have rigid parts
         rigid, b.link_vert = build_rigid(scene, mesh, regions, vert_mass)
         b.vert_free[b.link_vert] = 0
     # linked points keep their forces (they go to the rigid bodies); nailed and

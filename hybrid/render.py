@@ -339,20 +339,9 @@ def membrane_edges(model) -> tuple[np.ndarray, np.ndarray]:
 def draw_membrane(scn, pos: np.ndarray, edges: np.ndarray, edge_rgba: np.ndarray, width_m: float = 0.0015) -> int:
     """Replace the geoms of a MuJoCo `MjvScene` (the viewer's user scene) by the membrane's
     edges as thin capsules at positions `pos`. Returns the number of geoms drawn."""
-    from . import rigid as _rigid  # the only module that imports mujoco
+    from .rigid import draw_capsules  # MuJoCo only when drawing
 
-    mujoco = _rigid.mujoco
-    capsule = mujoco.mjtGeom.mjGEOM_CAPSULE
-    zero, eye = np.zeros(3), np.eye(3).ravel()
-    scn.ngeom = 0
-    for (i, j), rgba in zip(edges, edge_rgba):
-        if scn.ngeom >= scn.maxgeom:
-            break
-        g = scn.geoms[scn.ngeom]
-        mujoco.mjv_initGeom(g, capsule, zero, zero, eye, rgba)
-        mujoco.mjv_connector(g, capsule, width_m, pos[i], pos[j])
-        scn.ngeom += 1
-    return scn.ngeom
+    return draw_capsules(scn, pos, edges, edge_rgba, width_m)
 
 
 def view(scene_arg: str | None, *, duration_s: float | None = None) -> dict:
@@ -364,29 +353,25 @@ def view(scene_arg: str | None, *, duration_s: float | None = None) -> dict:
     if not has_display():
         raise HybridError("view: no display (DISPLAY and WAYLAND_DISPLAY are not set); "
                           "use `hybrid render` for pictures and video without one")
-    import importlib
     import threading
     import time as _time
 
-    from . import rigid as _rigid  # the only module that imports mujoco
+    from . import rigid as _rigid  # MuJoCo's viewer
     from .cli import _load
     from .model import compile_scene
     from .simulation import Simulation
 
-    mujoco = _rigid.mujoco
-    viewer = importlib.import_module(mujoco.__name__ + ".viewer")
     scene = _load(scene_arg, [])
     sim = Simulation(compile_scene(scene))
     m, d = (sim.mj_model, sim.mj_data) if sim.mj_model is not None else (None, None)
     if m is None:  # membrane only: an empty world to look at it in
-        m = mujoco.MjModel.from_xml_string("<mujoco/>")
-        d = mujoco.MjData(m)
+        m, d = _rigid.empty_world()
     edges, edge_rgba = membrane_edges(sim.model)
     frame_steps = max(1, int(round(1 / 60 / sim.model.dt_s)))
     end = scene.duration_s if duration_s is None else duration_s
     before = set(threading.enumerate())
     frames = drawn = 0
-    with viewer.launch_passive(m, d) as v:
+    with _rigid.launch_viewer(m, d) as v:
         window = [t for t in threading.enumerate() if t not in before]  # the viewer's own thread
         wall0 = _time.perf_counter()
         while v.is_running() and sim.time < end:

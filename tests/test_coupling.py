@@ -181,6 +181,24 @@ def test_linked_points_ride_on_their_sites_and_step_by_step_equals_chunks(breath
     assert a.rigid.mj_data.time == 0.0
 
 
+def test_each_run_steps_its_own_copy_of_the_models_mujoco_model(breathing):
+    model = compile_scene(breathing)
+    a, b = Simulation(model), Simulation(model)
+    pristine = model.rigid.model
+    assert a.mj_model is not pristine and a.mj_model is not b.mj_model
+    rib = pristine.body("rib_left").id
+    mass0, dt0 = float(pristine.body_mass[rib]), float(pristine.opt.timestep)
+    a.mj_model.body_mass[rib] *= 2.0
+    a.mj_model.opt.timestep = 0.5 * dt0
+    for other in (pristine, b.mj_model, Simulation(model).mj_model):
+        assert other.body_mass[rib] == mass0 and other.opt.timestep == dt0
+    # the copy changes no result: the run's ribs are MuJoCo's own on the Model's MjModel
+    b.rigid.record_wrenches = True
+    b.step(500)
+    replay = rigid.replay_wrenches(pristine, b.rigid.initial_state, b.rigid.wrench_history())
+    np.testing.assert_array_equal(replay, b.rigid.qpos_history())
+
+
 def test_replaying_the_recorded_wrenches_through_mujoco_alone_gives_the_rib_trajectory(breathing):
     sim = Simulation(compile_scene(breathing))
     sim.rigid.record_wrenches = True

@@ -346,7 +346,7 @@ def test_numba_loop_calls_mujoco_bit_for_bit():
         z[k] = a.site_pos()[0, 2]
     d = b.data
     out = np.empty(300)
-    run(b.model._address, d._address, 300, forces, d.site_xpos, d.xipos, b.site_id,
+    run(*b.pointers(), 300, forces, d.site_xpos, d.xipos, b.site_id,
         b.site_body, d.xfrc_applied, out)
     np.testing.assert_array_equal(out, z)
     np.testing.assert_array_equal(d.qpos, a.data.qpos)

@@ -37,7 +37,7 @@ from typing import Callable
 
 import numpy as np
 
-from ..coupling import resolve_mjcf
+from ..rigid import resolve_mjcf
 from ..demo import membrane_demo
 from ..errors import ConstraintError, HybridError, SimulationDiverged
 from ..mesh import Mesh, uv_sphere

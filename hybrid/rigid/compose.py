@@ -1,0 +1,284 @@
+"""Spec composition: what hybrid adds to a loaded `mujoco.MjSpec` before compiling it
+once — an attachment site per linked membrane point on its body, at the point's rest
+position, and optionally the points' masses on their bodies (`build_rigid`, called by
+`compile_scene` for scenes with a `Rigid` part) — and the free body of the rigid
+validation study (`free_body_spec`).
+
+Link masses: with `Rigid.add_link_mass` (the default) each linked point's mass m_i
+is added to its body at the site (the paper's rigid region carries its points'
+masses; light ribs under explicit force transfer are unstable otherwise). MuJoCo
+then applies that mass's weight itself, which the coupled step corrects
+(`hybrid.coupling`). Attachment sites of a scene are named
+f"{Rigid.prefix}hybrid_link_{i}", i the vertex index.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import mujoco
+import numpy as np
+
+from hybrid import regions as _regions
+from hybrid.errors import RigidError, SceneError
+from hybrid.scene import Nailed, Prescribed, Rigid, RigidLink, Scene
+
+from .mjcf import compile_spec, load_rigid_spec
+from .system import CoupledRigid
+
+_SITE_STEM = "hybrid_link_"
+_SITE_SIZE_M = [0.002, 0.002, 0.002]
+_SITE_GROUP = 4  # hidden in the viewer by default, like the point-mass geoms (group 5)
+_INERTIA_FROM_GEOM_TRUE = mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_TRUE
+_POINT_GEOM_RADIUS = 1e-4  # m: the geoms that carry point masses (inertia 0.4 m r^2, negligible)
+
+
+def _body_names(spec: mujoco.MjSpec) -> list[str]:
+    return [b.name for b in spec.bodies]
+
+
+def _taken_sites(spec: mujoco.MjSpec, site_names: Sequence[str]) -> list[str]:
+    return [s for s in site_names if spec.site(s) is not None]
+
+
+def add_sites(spec: mujoco.MjSpec, model0: mujoco.MjModel, body_names: Sequence[str],
+              point_pos: np.ndarray, site_names: Sequence[str]) -> np.ndarray:
+    """Add site `site_names[j]` to body `body_names[j]` at world position `point_pos[j]`
+    (m) of the model's pose at `qpos0`; model0 is `spec` compiled (before the sites).
+    Returns (n, 3) m, the sites' positions in their bodies' frames."""
+    data0 = mujoco.MjData(model0)
+    mujoco.mj_kinematics(model0, data0)
+    local = np.empty((len(site_names), 3))
+    for j, (name, p) in enumerate(zip(body_names, point_pos)):
+        bid = model0.body(name).id
+        rot = data0.xmat[bid].reshape(3, 3)
+        local[j] = rot.T @ (p - data0.xpos[bid])
+        spec.body(name).add_site(name=site_names[j], pos=local[j].tolist(), size=_SITE_SIZE_M,
+                                 group=_SITE_GROUP)
+    return local
+
+
+def attach_points(spec: mujoco.MjSpec, body_names: Sequence[str], point_pos: np.ndarray,
+                  prefix: str = "hybrid_link_") -> list[str]:
+    """Add one site per linked point to its body, at the point's world rest position.
+
+    The spec is compiled once to get the bodies' world poses at `qpos0`; each point is
+    converted into its body's frame, so that the site sits exactly at the point when
+    the model is at `qpos0`. The spec is modified in place (sites added).
+
+    Parameters
+    ----------
+    spec : the model to modify.
+    body_names : (n,) the body each point is linked to ("world" fixes it in space).
+    point_pos : (n, 3) m, the points' world rest positions.
+    prefix : site i is named f"{prefix}{i}".
+
+    Returns
+    -------
+    (n,) the site names, in point order.
+
+    Raises
+    ------
+    RigidError : shapes differ, a position is not finite, a body name is unknown (the
+        message lists the available bodies), or a site name is already taken.
+    """
+    pos = np.asarray(point_pos, dtype=float)
+    names = list(body_names)
+    if pos.ndim != 2 or pos.shape[1] != 3:
+        raise RigidError(f"point_pos: expected shape (n, 3), got {pos.shape}")
+    if len(names) != pos.shape[0]:
+        raise RigidError(f"body_names: expected {pos.shape[0]} names (one per point), "
+                         f"got {len(names)}")
+    if not np.all(np.isfinite(pos)):
+        bad = int(np.flatnonzero(~np.isfinite(pos).all(axis=1))[0])
+        raise RigidError(f"point_pos[{bad}]: expected finite coordinates, got {pos[bad]}")
+    unknown = sorted({n for n in names if spec.body(n) is None})
+    if unknown:
+        raise RigidError(f"unknown body name(s) {unknown}; available bodies: {_body_names(spec)}")
+    site_names = [f"{prefix}{i}" for i in range(len(names))]
+    taken = _taken_sites(spec, site_names)
+    if taken:
+        raise RigidError(f"site name(s) already in the model: {taken[:5]}"
+                         f"{' ...' if len(taken) > 5 else ''}; choose another prefix than "
+                         f"{prefix!r}")
+    add_sites(spec, compile_spec(spec), names, pos, site_names)
+    return site_names
+
+
+def build_rigid(scene: Scene, mesh, regions: dict, vert_mass: np.ndarray) -> tuple[CoupledRigid, np.ndarray]:
+    """Load and compile the rigid part of `scene`; returns (CoupledRigid, link_vert).
+
+    mesh: the membrane (`hybrid.mesh.Mesh`, rest positions in m); regions: evaluated
+    regions {name: vertex indices}; vert_mass (nvert,) kg. link_vert (n,) int32 are the
+    linked vertices, sorted, each with a site `f"{prefix}hybrid_link_{i}"` at its rest
+    position on its body. Raises SceneError (malformed links, a point linked twice or
+    also nailed/prescribed) or RigidError (missing or unparsable MJCF, unknown body,
+    taken site name, a model MuJoCo cannot compile), each a one-line message.
+    """
+    rig = scene.rigid
+    if not isinstance(rig, Rigid):
+        raise SceneError(f"rigid: expected a hybrid.scene.Rigid, received {type(rig).__name__}")
+    if not isinstance(rig.prefix, str):
+        raise SceneError(f"rigid.prefix: expected a string, received {rig.prefix!r}")
+    if not isinstance(rig.add_link_mass, bool):
+        raise SceneError(f"rigid.add_link_mass: expected true or false, received {rig.add_link_mass!r}")
+    spec, label, source = load_rigid_spec(scene)
+    bodies = _body_names(spec)
+    sites = [s.name for s in spec.sites if s.name]
+
+    owner: dict[int, int] = {}  # vertex -> link index
+    link_body_of: dict[int, str] = {}
+    for k, link in enumerate(rig.links):
+        what = f"rigid.links[{k}]"
+        if not isinstance(link, RigidLink):
+            raise SceneError(f"{what}: expected a hybrid.scene.RigidLink, received {type(link).__name__}")
+        body = _link_body(spec, link.body)
+        if body is None:
+            raise RigidError(f"{what}.body: no body or site named {link.body!r} in {label}; "
+                             f"available bodies: {bodies}; sites: {sites}")
+        idx = _regions.select(link.region, mesh.vert_pos, name=f"{what}.region", regions=regions,
+                              border_vert=mesh.border_vert)
+        twice = [int(i) for i in idx if int(i) in owner]
+        if twice:
+            raise SceneError(f"{what}.region: vertices {twice[:8]} are already linked by "
+                             f"rigid.links[{owner[twice[0]]}]; expected each point linked to one body")
+        for i in idx:
+            owner[int(i)] = k
+            link_body_of[int(i)] = body
+    link_vert = np.array(sorted(owner), dtype=np.int32)
+    _check_not_constrained(scene, mesh, regions, link_vert)
+
+    # Body poses at qpos0 (to place the sites) and compiled inertias (to add masses).
+    model0 = compile_spec(spec, label)
+    body_names = [link_body_of[int(i)] for i in link_vert]
+    site_names = [f"{rig.prefix}{_SITE_STEM}{int(i)}" for i in link_vert]
+    taken = _taken_sites(spec, site_names)
+    if taken:
+        raise RigidError(f"rigid.prefix: site name(s) {taken[:3]} already exist in {label}; "
+                         f"choose another prefix than {rig.prefix!r}")
+    local = add_sites(spec, model0, body_names, mesh.vert_pos[link_vert], site_names)
+
+    link_mass = np.asarray(vert_mass, float)[link_vert]
+    mass_added = np.zeros(link_vert.size, bool)
+    if rig.add_link_mass:
+        mass_added = np.array([n != "world" and model0.body(n).id != 0 for n in body_names])
+        _add_point_masses(spec, model0, body_names, local, link_mass, mass_added)
+
+    system = CoupledRigid(spec, site_names, timestep=float(scene.dt_s), link_vert=link_vert,
+                          link_body=body_names, link_mass=link_mass, mass_added=mass_added,
+                          mjcf_path=source)
+    return system, link_vert
+
+
+def _link_body(spec: mujoco.MjSpec, name) -> str | None:
+    """The body a link names: a body, or the body that carries the named site."""
+    if not isinstance(name, str) or not name:
+        return None
+    if spec.body(name) is not None:
+        return name
+    site = spec.site(name)
+    if site is not None:
+        return site.parent.name
+    return None
+
+
+def _check_not_constrained(scene: Scene, mesh, regions: dict, link_vert: np.ndarray) -> None:
+    linked = set(link_vert.tolist())
+    for con in scene.constraints:
+        if isinstance(con, (Nailed, Prescribed)):
+            idx = _regions.select(con.region, mesh.vert_pos, name=f"constraints[{con.name!r}].region",
+                                  regions=regions, border_vert=mesh.border_vert)
+            both = sorted(linked.intersection(idx.tolist()))
+            if both:
+                raise SceneError(f"constraints[{con.name!r}].region: vertices {both[:8]} are also linked to a "
+                                 f"rigid body; expected a point either {type(con).__name__.lower()} or linked")
+
+
+def _add_point_masses(spec: mujoco.MjSpec, model0: mujoco.MjModel, body_names: Sequence[str],
+                      local: np.ndarray, mass: np.ndarray, added: np.ndarray) -> None:
+    """Add point masses (kg) at body-frame positions `local` (m) to their bodies.
+
+    When the model takes every inertia from its geoms (`inertiafromgeom="true"`), each
+    point becomes a tiny massive sphere geom that does not collide; otherwise the
+    body's inertial is made explicit: its compiled mass, centre of mass and inertia
+    combined with the points' (parallel-axis theorem).
+    """
+    by_body: dict[str, list[int]] = {}
+    for j, name in enumerate(body_names):
+        if added[j]:
+            by_body.setdefault(name, []).append(j)
+    from_geoms = spec.compiler.inertiafromgeom == _INERTIA_FROM_GEOM_TRUE
+    for name, js in by_body.items():
+        body = spec.body(name)
+        if from_geoms:
+            for j in js:
+                body.add_geom(name=f"{name}_{_SITE_STEM}mass_{j}", size=[_POINT_GEOM_RADIUS, 0, 0],
+                              pos=local[j].tolist(), mass=float(mass[j]), contype=0, conaffinity=0,
+                              group=5, rgba=[0, 0, 0, 0])
+            continue
+        bid = model0.body(name).id
+        m_b = float(model0.body_mass[bid])
+        c_b = model0.body_ipos[bid].copy()
+        rot = np.empty(9)
+        mujoco.mju_quat2Mat(rot, model0.body_iquat[bid])
+        rot = rot.reshape(3, 3)
+        tensor = rot @ np.diag(model0.body_inertia[bid]) @ rot.T
+        pts, mp = local[js], mass[js]
+        m_tot = m_b + mp.sum()
+        com = (m_b * c_b + (mp[:, None] * pts).sum(axis=0)) / m_tot
+
+        def shifted(m, r):
+            return m * (r @ r * np.eye(3) - np.outer(r, r))
+
+        tensor = tensor + shifted(m_b, c_b - com)
+        for p, m in zip(pts, mp):
+            tensor = tensor + shifted(m, p - com)
+        body.explicitinertial = True
+        body.mass = float(m_tot)
+        body.ipos = com.tolist()
+        body.fullinertia = [tensor[0, 0], tensor[1, 1], tensor[2, 2], tensor[0, 1], tensor[0, 2], tensor[1, 2]]
+        body.inertia = [0.0, 0.0, 0.0]  # a diagonal inertia given by the MJCF would conflict (myotorso's)
+
+
+def free_body_spec(mass: float, inertia: Sequence[float], point: Sequence[float],
+                   force: Sequence[float], *, integrator: str = "RK4",
+                   timestep: float = 1e-3) -> mujoco.MjSpec:
+    """A single free rigid body, no gravity, no contact, pushed by a body-fixed point force.
+
+    The body frame is its principal frame at the centre of mass, so that `qpos[0:3]`
+    is the centre of mass and `qpos[3:7]` the orientation (w, x, y, z). The force is a
+    `motor` actuator on a site at `point` whose gear is the force direction in the body
+    frame: with `data.ctrl[0] = |force|` (N) MuJoCo itself evaluates the force within
+    each step (at every stage of RK4), so the run converges at the integrator's own
+    order. Set `ctrl` after compiling; it is 0 by default.
+
+    Parameters
+    ----------
+    mass : kg (> 0).
+    inertia : (3,) kg m^2, principal moments about the centre of mass.
+    point : (3,) m, the point of application in the body frame.
+    force : (3,) N, the force in the body frame.
+    integrator : a MuJoCo integrator name ("Euler", "RK4", "implicit", "implicitfast").
+    timestep : s.
+    """
+    f = np.asarray(force, dtype=float)
+    fnorm = float(np.linalg.norm(f))
+    spec = mujoco.MjSpec()
+    spec.modelname = "free_body"
+    spec.option.gravity = [0.0, 0.0, 0.0]
+    spec.option.timestep = float(timestep)
+    names = {"euler": "mjINT_EULER", "rk4": "mjINT_RK4", "implicit": "mjINT_IMPLICIT",
+             "implicitfast": "mjINT_IMPLICITFAST"}
+    if integrator.lower() not in names:
+        raise RigidError(f"integrator: expected one of {sorted(names)}, got {integrator!r}")
+    spec.option.integrator = getattr(mujoco.mjtIntegrator, names[integrator.lower()])
+    body = spec.worldbody.add_body(name="body", mass=float(mass),
+                                   inertia=[float(v) for v in inertia],
+                                   explicitinertial=True)
+    body.add_freejoint(name="free")
+    body.add_site(name="push", pos=[float(v) for v in point])
+    direction = f / fnorm if fnorm > 0 else np.array([1.0, 0.0, 0.0])
+    act = spec.add_actuator(name="push", target="push",
+                            trntype=mujoco.mjtTrn.mjTRN_SITE)
+    act.gear = [*direction.tolist(), 0.0, 0.0, 0.0]
+    return spec
