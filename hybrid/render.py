@@ -83,13 +83,13 @@ def frames_from_scene(scene_arg: str | None, duration_s: float | None = None, *,
     """Run a scene (a TOML file or a built-in name) and keep its frames in memory.
     Without `duration_s`: the scene's duration if `full`, else up to the end of the
     first breath."""
-    from .cli import _load
     from .model import compile_scene
     from .record import _geoms, region_colours
+    from .resolve import resolve_scene
     from .run import RunFailed, _breathing, run
     from .simulation import Simulation
 
-    scene = _load(scene_arg, [])
+    scene = resolve_scene(scene_arg)
     sim = Simulation(compile_scene(scene))
     if duration_s is None:
         duration_s = scene.duration_s
@@ -369,13 +369,13 @@ def view(scene_arg: str | None, *, duration_s: float | None = None) -> dict:
     import time as _time
 
     from . import rigid as _rigid  # the only module that imports mujoco
-    from .cli import _load
     from .model import compile_scene
+    from .resolve import resolve_scene
     from .simulation import Simulation
 
     mujoco = _rigid.mujoco
     viewer = importlib.import_module(mujoco.__name__ + ".viewer")
-    scene = _load(scene_arg, [])
+    scene = resolve_scene(scene_arg)
     sim = Simulation(compile_scene(scene))
     m, d = (sim.mj_model, sim.mj_data) if sim.mj_model is not None else (None, None)
     if m is None:  # membrane only: an empty world to look at it in

@@ -43,6 +43,7 @@ from ..errors import ConstraintError, HybridError, SimulationDiverged
 from ..mesh import Mesh, uv_sphere
 from ..model import Model, compile_scene
 from ..regions import HalfSpace
+from ..resolve import resolve_scene
 from ..scene import AppliedForce, MeshSpec, Muscle, Scene, ShapeMemory
 from ..schedule import Breathing
 from ..simulation import Simulation
@@ -100,8 +101,7 @@ def _flat_demo(thickness_ratio: float) -> Scene:
 
 
 def _breathing():
-    from .. import load_scene
-    return load_scene("breathing")
+    return resolve_scene("breathing")
 
 
 def _rib_variant(tmp: Path, name: str, edit: Callable[[ET.Element], None]) -> Callable[[], Scene]:

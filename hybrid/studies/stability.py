@@ -46,6 +46,7 @@ from ..errors import HybridError, SimulationDiverged
 from ..mesh import Mesh, icosahedron
 from ..model import compile_scene
 from ..regions import All, Difference, Indices
+from ..resolve import resolve_scene
 from ..scene import Damping, MassSpring, Masses, Nailed, Scene, ShapeMemory
 from ..simulation import Simulation
 from ..stability import max_stable_dt, table1_eigenvalues
@@ -475,8 +476,7 @@ def stability_map(*, small=False) -> dict:
 def breathing_membrane_scene(critical_fraction: float | None = None):
     """The breathing scene's 80-point membrane without its rigid part, its
     muscles off (linearization about the rest shape, which is then an equilibrium)."""
-    from .. import load_scene
-    sc = load_scene("breathing")
+    sc = resolve_scene("breathing")
     sc = dataclasses.replace(sc, rigid=None).without("muscle", "muscle_insertion")
     if critical_fraction is not None:
         sc = dataclasses.replace(sc, forces=tuple(
@@ -511,9 +511,8 @@ def _observed_stable(model, h, *, seconds=1.0, amp=1e-3, seed=0) -> bool:
 
 def _breath_stable(scene, h) -> bool:
     """One breath (4 s) of the membrane-only breathing scene with its muscles, at step h."""
-    from .. import load
     try:
-        sim = load(dataclasses.replace(scene, dt_s=h))
+        sim = Simulation(compile_scene(dataclasses.replace(scene, dt_s=h)))
         sim.step(int(round(4.0 / h)))
         return bool(np.all(np.isfinite(sim.state.vert_pos)))
     except HybridError:
@@ -521,7 +520,6 @@ def _breath_stable(scene, h) -> bool:
 
 
 def membrane_spectrum(*, small=False) -> dict:
-    from .. import load_scene
     scene = breathing_membrane_scene()
     model = compile_scene(scene)
     free = np.nonzero(model.arrays.vert_free > 0)[0]
@@ -533,9 +531,9 @@ def membrane_spectrum(*, small=False) -> dict:
                               [h0 * f for f in (1, 2, 3, 4, 5, 6, 8)], n_b)
     grid = [h0 * f for f in (1, 2, 3, 4, 5, 6, 8, 10)]
     h_obs, _ = _largest_true(lambda h: _observed_stable(model, h, seconds=0.3 if small else 1.0), grid, n_b)
-    full = dataclasses.replace(load_scene("breathing"), rigid=None)
+    full = dataclasses.replace(resolve_scene("breathing"), rigid=None)
     h_breath, _ = _largest_true(lambda h: _breath_stable(full, h), grid, 2 if small else 8)
-    coupled = load_scene("breathing")
+    coupled = resolve_scene("breathing")
     h_coupled = None
     if not small:
         h_coupled, _ = _largest_true(lambda h: _breath_stable(coupled, h), grid, 6)

@@ -53,13 +53,10 @@ ORDER_LEVELS = 3   # the observed order from the finest levels
 
 
 def _scene(name: str):
-    if name == "breathing":
-        from .. import load_scene
-        return load_scene("breathing")
-    if name == "membrane":
-        from ..demo import membrane_demo
-        return membrane_demo()
-    raise ValueError(f"scene: expected one of {list(SCENES)}, received {name!r}")
+    from ..resolve import resolve_scene
+    if name not in SCENES:
+        raise ValueError(f"scene: expected one of {list(SCENES)}, received {name!r}")
+    return resolve_scene({"breathing": "breathing", "membrane": "membrane_demo"}[name])
 
 
 def simulate(scene: str, integrator: str, k: int, window_s: float, repeats: int = 1) -> dict:
