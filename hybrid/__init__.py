@@ -3,39 +3,76 @@
 The public API for scripted experiments:
 
 >>> import hybrid
->>> sim = hybrid.load()                 # the built-in breathing trunk (or a path, or a Scene)
+>>> sim = hybrid.load()                 # the packaged breathing trunk (or a name, a path, a Scene)
 >>> sim.step(1000); sim.time, sim.volume, sim.pressure, sim.vert_pos.shape
 >>> sim.mj_model, sim.mj_data           # MuJoCo's model and data (None for a membrane-only scene)
+>>> result = hybrid.run(hybrid.load("membrane_demo"), 4.0)   # a run summarised, its trace
 
-A `Scene` is plain dataclasses: change a field with `dataclasses.replace` and
-load it again to repeat the run with other parameters; `sim.model.with_dt(h)`
-changes the step without compiling anything else.
+A `Scene` is plain dataclasses (its terms, region selectors and schedules are
+all here): change a field with `dataclasses.replace` and load it again to
+repeat the run with other parameters; `sim.model.with_dt(h)` changes the step
+without compiling anything else; `sim.set_state(...)` starts from another state.
+`hybrid.read` (an MCAP recording) and `hybrid.sweep` (runs in parallel) are the
+observers' side. Everything else lives in the submodules, which may change.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Sequence
 
 from .errors import (ConstraintError, HybridError, MeshError, RigidError, SceneError,
                      SimulationDiverged)
 from .model import Model, compile_scene
-from .scene import Scene
+from .regions import All, Ball, Border, Box, Difference, HalfSpace, Indices, Intersection, Nearest, Union_
+from .resolve import resolve_scene, scene_names
+# `run` and `sweep` are both a module and its function: importing the function here
+# makes `hybrid.run` / `hybrid.sweep` the function (`from hybrid.run import ...` still
+# reaches the module). Both modules are light (matplotlib and dask load when used).
+from .run import RunFailed, run
+from .scene import (AppliedForce, Attraction, Damping, Gravity, KeepIn, Masses, MassSpring, MeshSpec, Muscle,
+                    Nailed, Prescribed, Rigid, RigidLink, Scene, ShapeMemory, SoftVolume, Volume)
+from .schedule import Breathing, Constant, Function, Table
 from .simulation import Simulation
+from .sweep import sweep
 
-__all__ = ["load", "load_scene", "compile_scene", "Scene", "Model", "Simulation", "HybridError",
-           "MeshError", "SceneError", "ConstraintError", "RigidError", "SimulationDiverged"]
+__all__ = [
+    # loading and running
+    "load", "load_scene", "scene_names", "compile_scene", "Model", "Simulation", "run", "read", "sweep",
+    # the scene and its terms
+    "Scene", "MeshSpec", "Masses",
+    "Gravity", "Damping", "ShapeMemory", "MassSpring", "Muscle", "AppliedForce", "Attraction", "SoftVolume",
+    "Nailed", "KeepIn", "Prescribed", "Volume", "Rigid", "RigidLink",
+    # region selectors
+    "All", "Border", "Indices", "HalfSpace", "Ball", "Box", "Nearest", "Union_", "Intersection", "Difference",
+    # schedules
+    "Constant", "Table", "Breathing", "Function",
+    # errors
+    "HybridError", "MeshError", "SceneError", "ConstraintError", "RigidError", "SimulationDiverged",
+    "RunFailed",
+]
 
 
-def load_scene(path_or_name: str | Path = "breathing") -> Scene:
-    """A scene from a TOML file, or a packaged scene by name ("breathing")."""
-    from . import scenefile
-    p = Path(path_or_name)
-    if p.suffix != ".toml":
-        p = scenefile.builtin_scene(str(path_or_name))
-    return scenefile.load_scene(p)
+def load_scene(source: str | Path | Scene = "breathing", *, overrides: Sequence[str] = (),
+               without: Sequence[str] = ()) -> Scene:
+    """The `Scene` a source names: a packaged scene ("breathing", "myotorso_breathing"),
+    a scene written in Python ("membrane_demo"), a path to a TOML file, or a `Scene`;
+    with "KEY=VALUE" `overrides` applied and the terms named in `without` removed
+    (`hybrid run SCENE --set KEY=VALUE --without NAME`). An unknown name raises
+    SceneError listing the valid ones (`scene_names()`)."""
+    return resolve_scene(source, overrides=overrides, without=without)
 
 
-def load(path_or_scene: str | Path | Scene = "breathing") -> Simulation:
-    """A ready-to-step simulation of a scene file, a packaged scene name or a `Scene`."""
-    scene = path_or_scene if isinstance(path_or_scene, Scene) else load_scene(path_or_scene)
-    return Simulation(compile_scene(scene))
+def load(source: str | Path | Scene = "breathing", *, overrides: Sequence[str] = (),
+         without: Sequence[str] = ()) -> Simulation:
+    """A ready-to-step simulation of a source, as `load_scene` takes it."""
+    return Simulation(compile_scene(load_scene(source, overrides=overrides, without=without)))
+
+
+def __getattr__(name: str):
+    # the recording's reader, with its MCAP decoding, only when asked for
+    if name == "read":
+        from .record import read
+        globals()["read"] = read
+        return read
+    raise AttributeError(f"module 'hybrid' has no attribute {name!r}")

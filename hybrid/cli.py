@@ -10,7 +10,6 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import sys
-import tempfile
 from pathlib import Path
 
 from .errors import HybridError
@@ -24,35 +23,13 @@ class _Parser(argparse.ArgumentParser):
         sys.exit(2)
 
 
-def _load(scene_arg: str | None, overrides: list[str]):
-    """A scene from a TOML file, or a built-in scene by name ("breathing", "membrane_demo")."""
-    from .demo import membrane_demo
-    name = scene_arg or "breathing"
-    if name == "membrane_demo":
-        if overrides:
-            raise HybridError("--set: the built-in membrane_demo is a Python scene; expected a TOML scene file")
-        return membrane_demo()
-    try:
-        from . import scenefile
-    except ImportError:  # pragma: no cover - scene files arrive with the trunk
-        if scene_arg is None:
-            return membrane_demo()
-        raise HybridError(f"scene {scene_arg!r}: TOML scenes are not available in this build")
-    path = scenefile.builtin_scene(name) if scene_arg is None or not scene_arg.endswith(".toml") else Path(scene_arg)
-    scene = scenefile.load_scene(path)
-    if overrides:
-        scene = scenefile.apply_overrides(scene, overrides)
-    return scene
-
-
 def _cmd_run(args) -> int:
     from .model import compile_scene
-    from .run import RunFailed, run, write_outputs
+    from .resolve import resolve_scene
+    from .run import RunFailed, out_folder, run, write_outputs
     from .simulation import Simulation
 
-    scene = _load(args.scene, args.set or [])
-    if args.without:
-        scene = scene.without(*args.without)
+    scene = resolve_scene(args.scene, overrides=args.set or (), without=args.without or ())
     if args.dt is not None:
         scene = dataclasses.replace(scene, dt_s=args.dt)
     duration = scene.duration_s if args.duration is None else args.duration
@@ -81,20 +58,9 @@ def _cmd_run(args) -> int:
     return 0
 
 
-def out_folder(out: Path) -> Path:
-    """--out, created now: a folder that cannot be written fails before the run."""
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryFile(dir=out):
-            pass
-    except OSError as exc:
-        raise HybridError(f"--out: expected a folder that can be created and written, received {str(out)!r} "
-                          f"({exc.strerror or exc})") from None
-    return out
-
-
 def _cmd_render(args) -> int:
     from .render import render
+    from .run import out_folder
     result = render(args.source, out_folder(Path(args.out)), video=args.video, duration_s=args.duration)
     rest, peak, end = result["frames"]
     extra = f" and {result['video']}" if result["video"] else ""
@@ -142,7 +108,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--dt", type=float, help="time step (s); default: the scene's")
     r.add_argument("--out", help="output folder (default runs/SCENE)")
     r.add_argument("--without", action="append", metavar="NAME", help="drop a force term or constraint by name")
-    r.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a scene value (TOML scenes)")
+    r.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a scene value, e.g. dt_s=5e-4")
     r.add_argument("--no-record", action="store_true", help="do not write OUT/run.mcap (the MCAP recording)")
     r.add_argument("--record-every", type=_positive_float, default=0.01, metavar="SECONDS",
                    help="recording interval in simulated time (default 0.01 s)")

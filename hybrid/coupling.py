@@ -333,3 +333,24 @@ class Coupling:
         """(nstep, nq): MuJoCo's qpos after every recorded step."""
         nq = self.system.model.nq
         return np.concatenate(self._qpos_hist) if self._qpos_hist else np.zeros((0, nq))
+
+    # -- a state set by hand
+    def set_state(self, state: MembraneState, *, qpos=None, qvel=None, time_s=None) -> None:
+        """MuJoCo's `qpos` (nq,), `qvel` (nv,) and time set (checked by
+        `Simulation.set_state`), everything derived from them recomputed (mj_forward),
+        and the linked points put back onto their sites, as `reset` does. Replays
+        start from here: `initial_state` is this state, the histories are cleared."""
+        sys = self.system
+        d = sys.data
+        if qpos is not None:
+            d.qpos[:] = qpos
+        if qvel is not None:
+            d.qvel[:] = qvel
+        if time_s is not None:
+            d.time = time_s
+        sys.forward()
+        self.initial_state = sys.state()
+        self._xfrc_hist.clear()
+        self._qpos_hist.clear()
+        state.vert_pos[self.link_vert] = sys.site_pos()
+        state.vert_vel[self.link_vert] = sys.site_vel()

@@ -83,13 +83,13 @@ def frames_from_scene(scene_arg: str | None, duration_s: float | None = None, *,
     """Run a scene (a TOML file or a built-in name) and keep its frames in memory.
     Without `duration_s`: the scene's duration if `full`, else up to the end of the
     first breath."""
-    from .cli import _load
     from .model import compile_scene
-    from .record import body_geoms as _geoms, region_colours
+    from .record import body_geoms, region_colours
+    from .resolve import resolve_scene
     from .run import RunFailed, _breathing, run
     from .simulation import Simulation
 
-    scene = _load(scene_arg, [])
+    scene = resolve_scene(scene_arg)
     sim = Simulation(compile_scene(scene))
     if duration_s is None:
         duration_s = scene.duration_s
@@ -122,7 +122,7 @@ def frames_from_scene(scene_arg: str | None, duration_s: float | None = None, *,
                   face_vert=np.asarray(sim.model.mesh.face_vert), vert_rgba=colours, bodies=bodies,
                   body_pos=np.asarray(keep["bpos"]) if bodies else None,
                   body_quat=np.asarray(keep["bquat"]) if bodies else None,
-                  geoms=_geoms(sim.mj_model) if sim.mj_model is not None else [],
+                  geoms=body_geoms(sim.mj_model) if sim.mj_model is not None else [],
                   apex_descent=tr["apex_descent_mm"][idx][:n], muscle=tr["muscle_n_per_m"][idx][:n])
 
 
@@ -357,11 +357,11 @@ def view(scene_arg: str | None, *, duration_s: float | None = None) -> dict:
     import time as _time
 
     from . import rigid as _rigid  # MuJoCo's viewer
-    from .cli import _load
     from .model import compile_scene
+    from .resolve import resolve_scene
     from .simulation import Simulation
 
-    scene = _load(scene_arg, [])
+    scene = resolve_scene(scene_arg)
     sim = Simulation(compile_scene(scene))
     m, d = (sim.mj_model, sim.mj_data) if sim.mj_model is not None else (None, None)
     if m is None:  # membrane only: an empty world to look at it in

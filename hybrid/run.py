@@ -15,6 +15,7 @@ from __future__ import annotations
 import json
 import math
 import sys
+import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -28,7 +29,7 @@ from .scene import Muscle
 from .simulation import Simulation
 from .step import F_KE, F_PRESSURE, F_TIME, F_VOLUME, capture_frame
 
-__all__ = ["Trace", "run", "write_outputs"]
+__all__ = ["Trace", "run", "out_folder", "write_outputs"]
 
 
 @dataclass
@@ -221,6 +222,19 @@ class RunFailed(HybridError):
         super().__init__(str(error))
         self.error = error
         self.result = result
+
+
+def out_folder(out: Path) -> Path:
+    """The output folder `out`, created now: a folder that cannot be written fails
+    before the run (a HybridError naming --out)."""
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=out):
+            pass
+    except OSError as exc:
+        raise HybridError(f"--out: expected a folder that can be created and written, received {str(out)!r} "
+                          f"({exc.strerror or exc})") from None
+    return out
 
 
 def write_outputs(result: dict, out_dir: Path, *, plot: bool = True) -> None:

@@ -14,7 +14,7 @@ import numpy as np
 from .terms.volume import PROJ_NO_GRADIENT, face_volume
 from .errors import ConstraintError, SimulationDiverged
 from .model import TERMS, Model
-from .step import (DIVERGED_NONFINITE, OK, S_MAXDISP, S_PRESSURE, S_TIME, VOLUME_FAILED, Frames,
+from .step import (DIVERGED_NONFINITE, OK, S_MAXDISP, S_PHI, S_PRESSURE, S_TIME, VOLUME_FAILED, Frames,
                    kinetic_energy_of, membrane_advance, membrane_forces, new_state, run_membrane,
                    run_membrane_frames)
 
@@ -244,3 +244,78 @@ class Simulation:
         if bound == 0.0:  # explicit Euler without damping: no step is stable
             return h / 4.0
         return min(0.5 * bound, h / 4.0)
+
+    # ------------------------------------------------------------ a state set by hand
+    def set_state(self, *, vert_pos=None, vert_vel=None, time_s: float | None = None, qpos=None,
+                  qvel=None) -> None:
+        """Start from another state; what is not given stays as it is.
+
+        vert_pos (nvert, 3) m, vert_vel (nvert, 3) m/s: every point (the linked
+        points then take their sites' positions and velocities, as at reset). New
+        positions clear the last projection (`pressure` 0 and its volume gradient):
+        it belonged to the old ones, and with a rigid part the first step then
+        transmits no pressure to the ribs;
+        time_s: simulated time, >= 0 s (the step count follows, time_s / dt rounded);
+        qpos (nq,), qvel (nv,): MuJoCo's generalized positions and velocities of the
+        rigid part (`mj_model.nq`, `mj_model.nv`), only for a scene with one.
+
+        Every value is checked (shape, finite) before any is set: ValueError names
+        the argument, what was expected and what was received. A run that failed
+        steps again from the new state.
+        """
+        nvert = self.model.nvert
+        pos = _checked_array("vert_pos", vert_pos, (nvert, 3), "positions (m)")
+        vel = _checked_array("vert_vel", vert_vel, (nvert, 3), "velocities (m/s)")
+        if time_s is not None:
+            ok = isinstance(time_s, (int, float, np.integer, np.floating)) and not isinstance(time_s, bool)
+            if not (ok and math.isfinite(time_s) and time_s >= 0):
+                raise ValueError(f"time_s: expected a finite time >= 0 s, received {time_s!r}")
+        rigid = {}
+        for name, value, size in (("qpos", qpos, "nq"), ("qvel", qvel, "nv")):
+            if value is None:
+                continue
+            if self.rigid is None:
+                raise ValueError(f"{name}: expected None (scene {self.model.scene.name!r} has no rigid part), "
+                                 f"received {_described(value)}")
+            n = int(getattr(self.mj_model, size))
+            rigid[name] = _checked_array(name, value, (n,), f"values (mj_model.{size} = {n})")
+        s = self.state
+        if pos is not None:
+            s.vert_pos[:] = pos
+            s.scal[S_PRESSURE] = s.scal[S_PHI] = 0.0
+            s.grad[:] = 0.0
+        if vel is not None:
+            s.vert_vel[:] = vel
+        if time_s is not None:
+            s.scal[S_TIME] = float(time_s)
+            self.steps_done = int(round(float(time_s) / self.model.arrays.dt))
+        if self.rigid is not None:
+            self.rigid.set_state(s, time_s=None if time_s is None else float(time_s), **rigid)
+        self.failed = None
+
+
+def _described(value) -> str:
+    """What an argument was, for an error message: its shape, or its type."""
+    if isinstance(value, (np.ndarray, list, tuple)):
+        try:
+            return f"an array of shape {np.shape(value)}"
+        except ValueError:  # nested sequences of different lengths
+            return f"a ragged {type(value).__name__}"
+    return f"{type(value).__name__} {value!r}"
+
+
+def _checked_array(name: str, value, shape: tuple, what: str) -> np.ndarray | None:
+    """`value` as a float array of `shape` with finite entries (None stays None), or ValueError."""
+    if value is None:
+        return None
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name}: expected finite {what} of shape {shape}, received {_described(value)}") from None
+    if arr.shape != shape:
+        raise ValueError(f"{name}: expected finite {what} of shape {shape}, received {_described(value)}")
+    bad = np.argwhere(~np.isfinite(arr))
+    if bad.size:
+        raise ValueError(f"{name}: expected finite {what}, received {arr[tuple(bad[0])]} at index "
+                         f"{tuple(int(i) for i in bad[0])} ({len(bad)} non-finite)")
+    return arr

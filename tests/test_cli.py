@@ -29,6 +29,14 @@ def test_run_membrane_demo_writes_summary_and_plot(tmp_path):
     assert (out / "breathing.png").stat().st_size > 10_000
 
 
+def test_set_overrides_a_python_scene_as_a_toml_one(tmp_path):
+    out = tmp_path / "o"
+    assert main(["run", "membrane_demo", "--set", "dt_s=2e-3", "--without", "muscle", "--duration", "0.1",
+                 "--no-record", "--out", str(out)]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["dt"] == 2e-3 and summary["steps"] == 50
+
+
 @pytest.mark.parametrize("args, culprit", [
     (["run", "membrane_demo", "--dt", "-1"], "dt_s"),
     (["run", "membrane_demo", "--duration", "0"], "--duration"),
@@ -92,13 +100,14 @@ def test_study_subcommand_reaches_the_studies(tmp_path):
 
 def test_a_file_system_error_during_a_run_is_one_line_with_status_2(tmp_path, monkeypatch, capsys):
     import errno
+    import importlib
 
-    import hybrid.run
+    runner = importlib.import_module("hybrid.run")  # the module (`hybrid.run` is its function)
 
     def full_disk(result, out):
         raise OSError(errno.ENOSPC, "No space left on device", str(out / "summary.json"))
 
-    monkeypatch.setattr(hybrid.run, "write_outputs", full_disk)
+    monkeypatch.setattr(runner, "write_outputs", full_disk)
     assert main(["run", "membrane_demo", "--duration", "0.01", "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert err == [f"hybrid: error: cannot read or write {str(tmp_path / 'o' / 'summary.json')!r}: No space left on device"]

@@ -72,7 +72,7 @@ def _work_precision(args) -> None:
 
 
 def main_study(argv) -> int:
-    from ..cli import out_folder
+    from ..run import out_folder
 
     args = build_study_parser().parse_args(list(argv))
     try:

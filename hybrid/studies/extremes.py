@@ -43,6 +43,7 @@ from ..errors import ConstraintError, HybridError, SimulationDiverged
 from ..mesh import Mesh, uv_sphere
 from ..model import Model, compile_scene
 from ..regions import HalfSpace
+from ..resolve import resolve_scene
 from ..scene import AppliedForce, MeshSpec, Muscle, Scene, ShapeMemory
 from ..schedule import Breathing
 from ..simulation import Simulation
@@ -100,8 +101,7 @@ def _flat_demo(thickness_ratio: float) -> Scene:
 
 
 def _breathing():
-    from .. import load_scene
-    return load_scene("breathing")
+    return resolve_scene("breathing")
 
 
 def _rib_variant(tmp: Path, name: str, edit: Callable[[ET.Element], None]) -> Callable[[], Scene]:
@@ -221,9 +221,9 @@ def _retry(model: Model, case: Case, duration: float, dt: float, max_steps: int 
     try:
         sim = Simulation(model.with_dt(dt))
         if case.perturb_l0:
-            sim.state.vert_pos[:] += _free_perturbation(model, case.perturb_l0)
+            sim.set_state(vert_pos=sim.vert_pos + _free_perturbation(model, case.perturb_l0))
         sim.step(int(min(max_steps, math.ceil(duration / dt))))
-        return bool(np.all(np.isfinite(sim.state.vert_pos)))
+        return bool(np.all(np.isfinite(sim.vert_pos)))
     except HybridError:
         return False
 
@@ -246,7 +246,7 @@ def run_case(case: Case, *, small: bool = False, bugs: list | None = None) -> di
             out.update(outcome="refused", message=f"{type(e).__name__}: {e}")
             return out
         if case.perturb_l0:
-            sim.state.vert_pos[:] += _free_perturbation(model, case.perturb_l0)
+            sim.set_state(vert_pos=sim.vert_pos + _free_perturbation(model, case.perturb_l0))
         duration = case.small_duration_s if small else case.duration_s
         nstep = max(1, int(math.ceil(duration / model.dt_s)))
         chunk = max(1, min(50, nstep // 20))
@@ -255,7 +255,7 @@ def run_case(case: Case, *, small: bool = False, bugs: list | None = None) -> di
             while sim.steps_done < nstep:
                 sim.step(min(chunk, nstep - sim.steps_done))
                 err = sim.volume_rel_error
-                if not math.isfinite(err) or not np.all(np.isfinite(sim.state.vert_pos)):
+                if not math.isfinite(err) or not np.all(np.isfinite(sim.vert_pos)):
                     raise FloatingPointError(f"non-finite state after step {sim.steps_done} not detected")
                 volmax = max(volmax, err)
         except SimulationDiverged as e:

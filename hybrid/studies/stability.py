@@ -46,6 +46,7 @@ from ..errors import HybridError, SimulationDiverged
 from ..mesh import Mesh, icosahedron
 from ..model import compile_scene
 from ..regions import All, Difference, Indices
+from ..resolve import resolve_scene
 from ..scene import Damping, MassSpring, Masses, Nailed, Scene, ShapeMemory
 from ..simulation import Simulation
 from ..stability import max_stable_dt, table1_eigenvalues
@@ -147,15 +148,15 @@ def step_jacobian(sim: Simulation, verts, dx: float, dv: float, x0=None, v0=None
         i, a = divmod(rem, 3)
         out = []
         for sign in (1.0, -1.0):
-            sim.reset()
-            sim.state.vert_pos[:] = x0
-            sim.state.vert_vel[:] = v0
+            x, v = x0.copy(), v0.copy()
             if half == 0:
-                sim.state.vert_pos[verts[i], a] += sign * dx
+                x[verts[i], a] += sign * dx
             else:
-                sim.state.vert_vel[verts[i], a] += sign * dv
+                v[verts[i], a] += sign * dv
+            sim.reset()
+            sim.set_state(vert_pos=x, vert_vel=v)
             sim.step(1)
-            out.append(np.concatenate([sim.state.vert_pos[verts].ravel(), sim.state.vert_vel[verts].ravel()]))
+            out.append(np.concatenate([sim.vert_pos[verts].ravel(), sim.vert_vel[verts].ravel()]))
         jac[:, col] = (out[0] - out[1]) / (2.0 * (dx if half == 0 else dv))
     return jac
 
@@ -371,34 +372,32 @@ def relax(model, x0, *, k=K_UNIT, m=M_UNIT, tol=EQ_TOL, max_time=3000.0, chunk=1
     max_steps = int(math.ceil(max_time / model.dt_s))
     l0 = model.mesh.edge_length_mean()
     vtol, ftol = tol * l0 * math.sqrt(k / m), tol * k * l0
-    s = sim.state
-    s.vert_pos[:] = x0
+    sim.set_state(vert_pos=x0)
     free = model.arrays.vert_free > 0
 
     def done():
-        v = np.abs(s.vert_vel[free]).max()
-        f = np.abs(s.vert_force[free]).max()
+        v = np.abs(sim.vert_vel[free]).max()
+        f = np.abs(sim.state.vert_force[free]).max()  # the step's force: no public view of it
         return v <= vtol and f <= ftol
 
     def blown():
-        x = s.vert_pos
+        x = sim.vert_pos
         return not np.all(np.isfinite(x)) or np.abs(x - x.mean(0)).max() > 100 * l0
 
     try:
         while sim.steps_done < max_steps:
-            saved = (s.vert_pos.copy(), s.vert_vel.copy(), s.scal.copy(), sim.steps_done)
+            saved = dict(vert_pos=sim.vert_pos.copy(), vert_vel=sim.vert_vel.copy(), time_s=sim.time)
             sim.step(min(chunk, max_steps - sim.steps_done))
             if blown():
                 return {"outcome": "diverged", "iterations": sim.steps_done, "shape_error_l0": None}
             if done():  # find the first step of the chunk that meets the tolerance
-                s.vert_pos[:], s.vert_vel[:], s.scal[:] = saved[0], saved[1], saved[2]
-                sim.steps_done = saved[3]
+                sim.set_state(**saved)
                 while True:
                     sim.step(1)
                     if done():
                         break
                 return {"outcome": "equilibrium", "iterations": sim.steps_done,
-                        "shape_error_l0": _shape_error(s.vert_pos, model.arrays.vert_rest) / l0}
+                        "shape_error_l0": _shape_error(sim.vert_pos, model.arrays.vert_rest) / l0}
     except SimulationDiverged:
         return {"outcome": "diverged", "iterations": sim.steps_done, "shape_error_l0": None}
     return {"outcome": "no_steady_state", "iterations": sim.steps_done, "shape_error_l0": None}
@@ -475,8 +474,7 @@ def stability_map(*, small=False) -> dict:
 def breathing_membrane_scene(critical_fraction: float | None = None):
     """The breathing scene's 80-point membrane without its rigid part, its
     muscles off (linearization about the rest shape, which is then an equilibrium)."""
-    from .. import load_scene
-    sc = load_scene("breathing")
+    sc = resolve_scene("breathing")
     sc = dataclasses.replace(sc, rigid=None).without("muscle", "muscle_insertion")
     if critical_fraction is not None:
         sc = dataclasses.replace(sc, forces=tuple(
@@ -500,28 +498,28 @@ def _observed_stable(model, h, *, seconds=1.0, amp=1e-3, seed=0) -> bool:
     rng = np.random.default_rng(seed)
     d = rng.normal(size=(int(free.sum()), 3))
     d *= amp / np.linalg.norm(d, axis=1, keepdims=True)
-    sim.state.vert_pos[free] += d
+    x = sim.vert_pos.copy()
+    x[free] += d
+    sim.set_state(vert_pos=x)
     try:
         sim.step(max(50, int(round(seconds / h))))
     except HybridError:
         return False
-    dev = np.linalg.norm(sim.state.vert_pos[free] - model.arrays.vert_rest[free], axis=1).max()
+    dev = np.linalg.norm(sim.vert_pos[free] - model.arrays.vert_rest[free], axis=1).max()
     return bool(np.isfinite(dev) and dev < amp)
 
 
 def _breath_stable(scene, h) -> bool:
     """One breath (4 s) of the membrane-only breathing scene with its muscles, at step h."""
-    from .. import load
     try:
-        sim = load(dataclasses.replace(scene, dt_s=h))
+        sim = Simulation(compile_scene(dataclasses.replace(scene, dt_s=h)))
         sim.step(int(round(4.0 / h)))
-        return bool(np.all(np.isfinite(sim.state.vert_pos)))
+        return bool(np.all(np.isfinite(sim.vert_pos)))
     except HybridError:
         return False
 
 
 def membrane_spectrum(*, small=False) -> dict:
-    from .. import load_scene
     scene = breathing_membrane_scene()
     model = compile_scene(scene)
     free = np.nonzero(model.arrays.vert_free > 0)[0]
@@ -533,9 +531,9 @@ def membrane_spectrum(*, small=False) -> dict:
                               [h0 * f for f in (1, 2, 3, 4, 5, 6, 8)], n_b)
     grid = [h0 * f for f in (1, 2, 3, 4, 5, 6, 8, 10)]
     h_obs, _ = _largest_true(lambda h: _observed_stable(model, h, seconds=0.3 if small else 1.0), grid, n_b)
-    full = dataclasses.replace(load_scene("breathing"), rigid=None)
+    full = dataclasses.replace(resolve_scene("breathing"), rigid=None)
     h_breath, _ = _largest_true(lambda h: _breath_stable(full, h), grid, 2 if small else 8)
-    coupled = load_scene("breathing")
+    coupled = resolve_scene("breathing")
     h_coupled = None
     if not small:
         h_coupled, _ = _largest_true(lambda h: _breath_stable(coupled, h), grid, 6)
@@ -569,7 +567,9 @@ def self_excitation(*, small=False) -> dict:
         sim = Simulation(model)
         free = model.arrays.vert_free > 0
         rng = np.random.default_rng(1)
-        sim.state.vert_pos[free] += 1e-4 * rng.normal(size=(int(free.sum()), 3))
+        x = sim.vert_pos.copy()
+        x[free] += 1e-4 * rng.normal(size=(int(free.sum()), 3))
+        sim.set_state(vert_pos=x)
         n = int(round(seconds / model.dt_s))
         ke = []
         try:

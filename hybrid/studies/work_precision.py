@@ -18,8 +18,9 @@ Reference  per scene, symplectic Euler at h_ref = 1e-3 s / 2^REF_K and at h_ref/
            to be far below the smallest error of the runs (`reference_ok`).
 Errors     over one breath (4 s; 0.25 s in small mode), from frames every 10 ms:
            vertex: max over frames of max over vertices of |x - x_ref| (m),
-           the runs' `error`; rib angle: max over frames and rib hinges of
-           |qpos - qpos_ref| (rad, breathing scene only); pressure: max over
+           the runs' `error`; rib angle: max over frames and joints of
+           |qpos - qpos_ref| (rad: the trunk's joints are its rib hinges; breathing
+           scene only); pressure: max over
            frames of |p - p_ref| (Pa).
 Work       wall time of the stepping (after a warm-up that compiles; the least
            of 3 repeats), and per simulated second. The runs are independent: `hybrid.sweep.sweep`
@@ -53,13 +54,10 @@ ORDER_LEVELS = 3   # the observed order from the finest levels
 
 
 def _scene(name: str):
-    if name == "breathing":
-        from .. import load_scene
-        return load_scene("breathing")
-    if name == "membrane":
-        from ..demo import membrane_demo
-        return membrane_demo()
-    raise ValueError(f"scene: expected one of {list(SCENES)}, received {name!r}")
+    from ..resolve import resolve_scene
+    if name not in SCENES:
+        raise ValueError(f"scene: expected one of {list(SCENES)}, received {name!r}")
+    return resolve_scene({"breathing": "breathing", "membrane": "membrane_demo"}[name])
 
 
 def simulate(scene: str, integrator: str, k: int, window_s: float, repeats: int = 1) -> dict:
@@ -74,16 +72,11 @@ def simulate(scene: str, integrator: str, k: int, window_s: float, repeats: int 
     model = compile_scene(_scene(scene)).with_dt(dt, integrator)
     Simulation(model).step(1)  # warm-up: compiles (or loads numba's cache) outside the timing
     sim = Simulation(model)
-    hinges = np.zeros(0, int)
-    if sim.mj_model is not None:
-        import mujoco
-        mjm = sim.mj_model
-        hinges = np.array([mjm.jnt_qposadr[j] for j in range(mjm.njnt)
-                           if mjm.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE], int)
+    nq = sim.mj_model.nq if sim.mj_model is not None else 0  # the trunk's joints: its two rib hinges
     per_frame = 10 * 2 ** k  # FRAME_S / dt, exactly
     nframe = int(round(window_s / FRAME_S))
     pos = np.empty((nframe, model.nvert, 3))
-    ang = np.empty((nframe, hinges.size))
+    ang = np.empty((nframe, nq))
     prs = np.empty(nframe)
     walls = []
     for rep in range(max(1, int(repeats))):
@@ -97,8 +90,8 @@ def simulate(scene: str, integrator: str, k: int, window_s: float, repeats: int 
             if rep == 0:  # deterministic: the frames of the first run
                 pos[f] = sim.vert_pos
                 prs[f] = sim.pressure
-                if hinges.size:
-                    ang[f] = sim.mj_data.qpos[hinges]
+                if nq:
+                    ang[f] = sim.mj_data.qpos
         walls.append(wall)
     wall = min(walls)
     return {"scene": scene, "integrator": integrator, "k": k, "dt": dt, "pos": pos, "angle": ang,
