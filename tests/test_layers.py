@@ -20,7 +20,7 @@ LAYERS = (
     ("errors, kernel", ("errors", "kernel", "checks")),
     ("geometry, regions, schedules", ("mesh", "regions", "schedule", "stability")),
     ("terms", ("terms", "terms.*")),
-    ("scene", ("scene", "scenefile", "demo", "scenes")),
+    ("scene", ("scene", "scenefile", "demo", "resolve")),
     ("model, rigid", ("model", "rigid", "rigid.*")),
     ("step", ("step",)),
     ("coupled step", ("coupling",)),

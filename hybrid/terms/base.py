@@ -4,14 +4,15 @@ A term is a frozen dataclass whose fields carry their kind (`param`): the kind
 says how a value is checked and how the scene file spells it, so the TOML keys
 of a term are its field names and its checks are written once. A term class
 also declares the arrays the compiled step reads for it (`arrays`: name ->
-a function of nvert giving the value when the scene lacks the term: empty
-arrays of the right dtype and dimension) and compiles itself in two phases
-into a `Build`:
+`Rows(dtype, *tail)`, an array of rows the terms add, or a function of nvert
+giving the value when the scene lacks the term) and compiles itself in two
+phases into a `Build`:
 
 - `compile(self, b, what)`: per term instance, selects its regions, checks its
-  values, records its rows (`b.rows`) and marks fixed points (`b.vert_free`);
+  values, adds its rows (`b.add_rows`) and marks fixed points (`b.vert_free`);
 - `finish(cls, b)`: once per term class present, after every term and rigid
-  link is known (`b.moving`), turns the rows into the final arrays.
+  link is known (`b.moving`), turns the rows into the final arrays; by
+  default each `Rows` array, a force's rows on points that do not move left out.
 
 `order_terms` (called once by `hybrid.terms` with every class, in order) puts
 each class in `FORCE_TYPES` or `CONSTRAINT_TYPES` under its TOML `type`; a
@@ -31,7 +32,7 @@ from .. import checks
 from .. import regions as _regions
 from .. import schedule as _sched
 
-__all__ = ["param", "register", "order_terms", "Term", "Build", "FORCE_TYPES", "CONSTRAINT_TYPES", "TERM_CLASSES",
+__all__ = ["param", "Rows", "register", "order_terms", "Term", "Build", "FORCE_TYPES", "CONSTRAINT_TYPES", "TERM_CLASSES",
            "FLAGGED", "check_value", "VALUE_KINDS"]
 
 FORCE_TYPES: dict = {}
@@ -49,6 +50,20 @@ VALUE_KINDS = ("positive", "nonneg", "angle_deg", "vec3", "target", "choice", "t
 def param(kind: str, default=dataclasses.MISSING, **meta):
     """A term field of `kind` (VALUE_KINDS, "selector", or "schedule" with ncomp=1 or 3)."""
     return dataclasses.field(default=default, metadata={"kind": kind, **meta})
+
+
+class Rows:
+    """An array the step reads of shape (nrow, *tail) and `dtype`, one row per
+    `Build.add_rows` entry (for a force, the first column is the vertex)."""
+
+    def __init__(self, dtype, *tail: int):
+        self.dtype, self.tail = np.dtype(dtype), tail
+
+    def build(self, rows) -> np.ndarray:
+        return np.asarray(rows, self.dtype).reshape(-1, *self.tail)
+
+    def __call__(self, nvert: int) -> np.ndarray:  # the value when the scene lacks the term
+        return np.zeros((0, *self.tail), self.dtype)
 
 
 def check_value(where: str, kind: str, value, meta: dict | None = None):
@@ -133,7 +148,14 @@ class Term:
 
     @classmethod
     def finish(cls, b: "Build") -> None:
-        """Turn the rows of every term of this class into its arrays (default: none)."""
+        """Turn the rows of every term of this class into its `Rows` arrays; a
+        force's rows on points that do not move are left out."""
+        names = [n for n, spec in cls.arrays.items() if isinstance(spec, Rows)]
+        columns = [b.rows[n] for n in names]
+        if cls.section == "forces" and names:
+            columns = b.keep_moving(*columns)
+        for n, col in zip(names, columns):
+            b.out[n] = cls.arrays[n].build(col)
 
 
 class Build:
@@ -170,6 +192,11 @@ class Build:
         """Row of the validated schedule `value` in the model's schedule table."""
         self.schedules.append(_sched.as_schedule(value, name=what, ncomp=ncomp))
         return len(self.schedules) - 1
+
+    def add_rows(self, **columns) -> None:
+        """Append rows to the named arrays (each value a sequence of rows)."""
+        for name, col in columns.items():
+            self.rows[name] += np.asarray(col).tolist()
 
     def keep_moving(self, verts, *columns):
         """verts and its parallel columns restricted to moving points (forces on

@@ -13,7 +13,7 @@ import numpy as np
 from .. import checks
 from ..errors import SceneError
 from ..kernel import kernel
-from .base import Term, param, register
+from .base import Rows, Term, param, register
 
 __all__ = ["Nailed", "Prescribed", "KeepIn", "KeepInShape", "apply_prescribed", "apply_keep_in"]
 
@@ -43,8 +43,7 @@ class Prescribed(Term):
     toml_type = "prescribed"
     section = "constraints"
     # pre_vert (n,) int32; pre_rest (n, 3) m; pre_sched (n,) int64
-    arrays = {"pre_vert": lambda n: np.zeros(0, np.int32), "pre_rest": lambda n: np.zeros((0, 3)),
-              "pre_sched": lambda n: np.zeros(0, np.int64)}
+    arrays = {"pre_vert": Rows(np.int32), "pre_rest": Rows(float, 3), "pre_sched": Rows(np.int64)}
     region: object = param("selector")
     displacement_m: object = param("schedule", ncomp=3)
     name: str = param("text", "prescribed")
@@ -54,15 +53,7 @@ class Prescribed(Term):
         idx = b.region(self.region, f"{what}.region")
         s = b.schedule(self.displacement_m, f"{what}.displacement_m", 3)
         b.vert_free[idx] = 0
-        b.rows["pre_vert"] += idx.tolist()
-        b.rows["pre_rest"] += b.mesh.vert_pos[idx].tolist()
-        b.rows["pre_sched"] += [s] * idx.size
-
-    @classmethod
-    def finish(cls, b):
-        b.out["pre_vert"] = np.asarray(b.rows["pre_vert"], np.int32).reshape(-1)
-        b.out["pre_rest"] = np.asarray(b.rows["pre_rest"], float).reshape(-1, 3)
-        b.out["pre_sched"] = np.asarray(b.rows["pre_sched"], np.int64).reshape(-1)
+        b.add_rows(pre_vert=idx, pre_rest=b.mesh.vert_pos[idx], pre_sched=np.full(idx.size, s))
 
 
 @register
@@ -73,8 +64,8 @@ class KeepIn(Term):
     section = "constraints"
     # kin_vert (n,) int32; kin_shape (n,) int64: row of shape_kind / shape_par;
     # shape_kind (ns,) int64 KeepInShape; shape_par (ns, 6) m (see apply_keep_in)
-    arrays = {"kin_vert": lambda n: np.zeros(0, np.int32), "kin_shape": lambda n: np.zeros(0, np.int64),
-              "shape_kind": lambda n: np.zeros(0, np.int64), "shape_par": lambda n: np.zeros((0, 6))}
+    arrays = {"kin_vert": Rows(np.int32), "kin_shape": Rows(np.int64), "shape_kind": Rows(np.int64),
+              "shape_par": Rows(float, 6)}
     region: object = param("selector")
     shape: str = param("choice", choices=("half_space", "ball", "box"))
     point_m: tuple = param("vec3", None)
@@ -89,10 +80,8 @@ class KeepIn(Term):
         super().compile(b, what)
         idx = b.region(self.region, f"{what}.region")
         kind, par = self._shape(what)
-        b.rows["shape_kind"].append(int(kind))
-        b.rows["shape_par"].append(par)
-        b.rows["kin_vert"] += idx.tolist()
-        b.rows["kin_shape"] += [len(b.rows["shape_kind"]) - 1] * idx.size
+        b.add_rows(shape_kind=[int(kind)], shape_par=[par])
+        b.add_rows(kin_vert=idx, kin_shape=np.full(idx.size, len(b.rows["shape_kind"]) - 1))
 
     def _shape(self, what):
         if self.shape == "half_space":
@@ -113,14 +102,6 @@ class KeepIn(Term):
                                  f"hi_m={self.hi_m!r}")
             return KeepInShape.BOX, np.concatenate([lo, hi])
         raise SceneError(f"{what}.shape: expected 'half_space', 'ball' or 'box', received {self.shape!r}")
-
-    @classmethod
-    def finish(cls, b):
-        r = b.rows
-        b.out["kin_vert"] = np.asarray(r["kin_vert"], np.int32).reshape(-1)
-        b.out["kin_shape"] = np.asarray(r["kin_shape"], np.int64).reshape(-1)
-        b.out["shape_kind"] = np.asarray(r["shape_kind"], np.int64).reshape(-1)
-        b.out["shape_par"] = np.asarray(r["shape_par"], float).reshape(-1, 6)
 
 
 # ---------------------------------------------------------------- kernels

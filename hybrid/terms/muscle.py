@@ -10,7 +10,7 @@ import numpy as np
 from .. import schedule as _sched
 from ..errors import SceneError
 from ..kernel import kernel
-from .base import Term, param, register
+from .base import Rows, Term, param, register
 
 __all__ = ["Muscle", "muscle_pairs", "add_muscle", "schedule_peak"]
 
@@ -25,8 +25,7 @@ class Muscle(Term):
     toml_type = "muscle"
     section = "forces"
     # mus_vert, mus_nbr (npair,) int32: each contraction pair; mus_sched (npair,) int64
-    arrays = {"mus_vert": lambda n: np.zeros(0, np.int32), "mus_nbr": lambda n: np.zeros(0, np.int32),
-              "mus_sched": lambda n: np.zeros(0, np.int64)}
+    arrays = {"mus_vert": Rows(np.int32), "mus_nbr": Rows(np.int32), "mus_sched": Rows(np.int64)}
     region: object = param("selector")
     stiffness: object = param("schedule", ncomp=1)
     toward_m: tuple = param("vec3", None)
@@ -53,16 +52,7 @@ class Muscle(Term):
             raise SceneError(f"{what}: no neighbour lies within {angle} deg of the fibre "
                              f"direction; widen max_angle_deg or check toward_m/axis")
         np.add.at(b.vert_stiffness, pv, schedule_peak(b.schedules[s]))
-        b.rows["mus_vert"] += pv.tolist()
-        b.rows["mus_nbr"] += pn.tolist()
-        b.rows["mus_sched"] += [s] * pv.size
-
-    @classmethod
-    def finish(cls, b):
-        vert, nbr, sched = b.keep_moving(b.rows["mus_vert"], b.rows["mus_nbr"], b.rows["mus_sched"])
-        b.out["mus_vert"] = np.asarray(vert, np.int32).reshape(-1)
-        b.out["mus_nbr"] = np.asarray(nbr, np.int32).reshape(-1)
-        b.out["mus_sched"] = np.asarray(sched, np.int64).reshape(-1)
+        b.add_rows(mus_vert=pv, mus_nbr=pn, mus_sched=np.full(pv.size, s))
 
 
 def schedule_peak(s) -> float:

@@ -16,7 +16,7 @@ from numba import prange
 
 from ..errors import MeshError
 from ..kernel import kernel, kernel_twin
-from .base import Term, param, register
+from .base import Rows, Term, param, register
 
 __all__ = ["ShapeMemory", "ring_frame", "shape_memory_frame_coef", "shape_memory_frames",
            "shape_memory_frames_parallel", "shape_memory_force", "add_shape_memory", "add_shape_memory_parallel"]
@@ -29,8 +29,7 @@ class ShapeMemory(Term):
     toml_type = "shape_memory"
     section = "forces"
     # sm_vert (nsm,) int32 sorted; sm_stiff (nsm,) N/m; sm_coef (nsm, 3) m
-    arrays = {"sm_vert": lambda n: np.zeros(0, np.int32), "sm_stiff": lambda n: np.zeros(0),
-              "sm_coef": lambda n: np.zeros((0, 3))}
+    arrays = {"sm_vert": Rows(np.int32), "sm_stiff": Rows(float), "sm_coef": Rows(float, 3)}
     stiffness_n_per_m: float = param("positive")
     region: object = param("selector", "all")
     name: str = param("text", "shape_memory")

@@ -9,7 +9,7 @@ import numpy as np
 
 from ..errors import SceneError
 from ..kernel import kernel
-from .base import Term, param, register
+from .base import Rows, Term, param, register
 
 __all__ = ["MassSpring", "AppliedForce", "Attraction", "add_mass_spring", "add_applied", "add_attraction"]
 
@@ -20,8 +20,7 @@ class MassSpring(Term):
     toml_type = "mass_spring"
     section = "forces"
     # spring_vert (ns, 2) int32; spring_stiff (ns,) N/m; spring_rest (ns,) m
-    arrays = {"spring_vert": lambda n: np.zeros((0, 2), np.int32), "spring_stiff": lambda n: np.zeros(0),
-              "spring_rest": lambda n: np.zeros(0)}
+    arrays = {"spring_vert": Rows(np.int32, 2), "spring_stiff": Rows(float), "spring_rest": Rows(float)}
     stiffness_n_per_m: float = param("positive")
     region: object = param("selector", "all")
     name: str = param("text", "mass_spring")
@@ -57,7 +56,7 @@ class AppliedForce(Term):
     toml_type = "applied_force"
     section = "forces"
     # app_vert (n,) int32; app_sched (n,) int64: each point's schedule row
-    arrays = {"app_vert": lambda n: np.zeros(0, np.int32), "app_sched": lambda n: np.zeros(0, np.int64)}
+    arrays = {"app_vert": Rows(np.int32), "app_sched": Rows(np.int64)}
     region: object = param("selector")
     force_n: object = param("schedule", ncomp=3)
     name: str = param("text", "applied_force")
@@ -66,14 +65,7 @@ class AppliedForce(Term):
         super().compile(b, what)
         idx = b.region(self.region, f"{what}.region")
         s = b.schedule(self.force_n, f"{what}.force_n", 3)
-        b.rows["app_vert"] += idx.tolist()
-        b.rows["app_sched"] += [s] * idx.size
-
-    @classmethod
-    def finish(cls, b):
-        vert, sched = b.keep_moving(b.rows["app_vert"], b.rows["app_sched"])
-        b.out["app_vert"] = np.asarray(vert, np.int32).reshape(-1)
-        b.out["app_sched"] = np.asarray(sched, np.int64).reshape(-1)
+        b.add_rows(app_vert=idx, app_sched=np.full(idx.size, s))
 
 
 @register
@@ -84,8 +76,8 @@ class Attraction(Term):
     toml_type = "attraction"
     section = "forces"
     # att_vert (n,) int32; att_stiff (n,) N/m; att_target (n, 3) m; att_sched (n,) int64 (offsets)
-    arrays = {"att_vert": lambda n: np.zeros(0, np.int32), "att_stiff": lambda n: np.zeros(0),
-              "att_target": lambda n: np.zeros((0, 3)), "att_sched": lambda n: np.zeros(0, np.int64)}
+    arrays = {"att_vert": Rows(np.int32), "att_stiff": Rows(float), "att_target": Rows(float, 3),
+              "att_sched": Rows(np.int64)}
     region: object = param("selector")
     stiffness_n_per_m: float = param("positive")
     offset_m: object = param("schedule", (0.0, 0.0, 0.0), ncomp=3)
@@ -106,20 +98,8 @@ class Attraction(Term):
                 raise SceneError(f"{what}.target_m: expected a 3-vector or {idx.size} 3-vectors, "
                                  f"received shape {np.shape(self.target_m)}")
         s = b.schedule(self.offset_m, f"{what}.offset_m", 3)
-        b.rows["att_vert"] += idx.tolist()
-        b.rows["att_stiff"] += [k] * idx.size
-        b.rows["att_target"] += target.tolist()
-        b.rows["att_sched"] += [s] * idx.size
+        b.add_rows(att_vert=idx, att_stiff=np.full(idx.size, k), att_target=target, att_sched=np.full(idx.size, s))
         b.vert_stiffness[idx] += k
-
-    @classmethod
-    def finish(cls, b):
-        r = b.rows
-        vert, stiff, target, sched = b.keep_moving(r["att_vert"], r["att_stiff"], r["att_target"], r["att_sched"])
-        b.out["att_vert"] = np.asarray(vert, np.int32).reshape(-1)
-        b.out["att_stiff"] = np.asarray(stiff, float)
-        b.out["att_target"] = np.asarray(target, float).reshape(-1, 3)
-        b.out["att_sched"] = np.asarray(sched, np.int64).reshape(-1)
 
 
 # ---------------------------------------------------------------- kernels
