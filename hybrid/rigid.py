@@ -38,6 +38,7 @@ from mujoco import rollout as _rollout
 
 from hybrid.errors import RigidError
 from hybrid.kernel import jit
+from hybrid.scenefile import packaged_model
 
 __all__ = [
     "TRUNK_XML",
@@ -67,7 +68,7 @@ if mujoco.get_mju_user_warning() is None:
     mujoco.set_mju_user_warning(_log_mujoco_warning)
 
 #: The packaged trunk model (spine fixed to the world, two hinged ribs, sternum spring).
-TRUNK_XML: Path = Path(__file__).resolve().parent / "data" / "trunk.xml"
+TRUNK_XML: Path = packaged_model("trunk.xml")
 
 #: The state signature used for snapshots and replays (`mjSTATE_FULLPHYSICS`).
 STATE_SPEC: int = int(mujoco.mjtState.mjSTATE_FULLPHYSICS)
