@@ -13,6 +13,7 @@ import sys
 from pathlib import Path
 
 from .errors import HybridError
+from .kernel import prune_old_caches
 
 __all__ = ["main"]
 
@@ -134,6 +135,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    prune_old_caches()
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)

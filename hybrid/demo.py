@@ -1,14 +1,14 @@
-"""Built-in scenes written in Python: the membrane-only breathing demo and the
-benchmark membranes. (The coupled breathing trunk is a TOML file in
-`hybrid/data/`.)"""
+"""The built-in scene written in Python: the membrane-only breathing demo. (The
+coupled breathing trunk is a TOML file in `models/scenes/`; the benchmark's
+membranes are in `hybrid.bench`.)"""
 
 from __future__ import annotations
 
 from .regions import HalfSpace
-from .scene import (Damping, Gravity, Masses, MeshSpec, Muscle, Nailed, Scene, ShapeMemory, Volume)
+from .scene import Damping, Gravity, Masses, MeshSpec, Muscle, Nailed, Scene, ShapeMemory, Volume
 from .schedule import Breathing
 
-__all__ = ["membrane_demo", "bench_membrane"]
+__all__ = ["membrane_demo"]
 
 RADIUS_M = 0.12
 
@@ -36,21 +36,4 @@ def membrane_demo(duration_s: float = 12.0) -> Scene:
         dt_s=1e-3,
         integrator="symplectic_euler",
         duration_s=duration_s,
-    )
-
-
-def bench_membrane(subdivisions: int | None, dt_s: float = 1e-4) -> Scene:
-    """The benchmark's full membrane step: shape memory, damping, gravity and
-    the exact volume, on the paper's sphere (subdivisions=None) or an
-    icosphere; a nailed cap keeps it from falling."""
-    mesh = (MeshSpec(generator="uv_sphere", radius_m=RADIUS_M) if subdivisions is None else
-            MeshSpec(generator="icosphere", subdivisions=subdivisions, radius_m=RADIUS_M))
-    return Scene(
-        name="bench_membrane",
-        mesh=mesh,
-        masses=Masses(total_kg=4.0),
-        regions={"pelvis": HalfSpace((0.0, 0.0, -0.1), (0.0, 0.0, -1.0))},
-        forces=(Gravity(), ShapeMemory(300.0), Damping(critical_fraction=0.3)),
-        constraints=(Nailed("pelvis"), Volume()),
-        dt_s=dt_s,
     )

@@ -12,12 +12,16 @@ Passes that also sum over the points take them in chunks of `CHUNK_VERTS`
 consecutive points, then add the chunks' sums in order, in both builds: the
 two agree to the last bit, whatever the number of threads.
 
-Compiled code is cached on disk in a folder named after a hash of hybrid's
-own sources: numba checks only a function's own file when it reuses a cached
-build, so a kernel whose callee changed in another file could otherwise load
-stale machine code (and crash). A changed package gets a fresh cache, and
-writes into it are serialised across processes (`_lock_cache_writes`).
-Folders of other versions unused for `CACHE_KEEP_DAYS` are removed at import.
+Compiled code is cached on disk in a folder named after a hash of the kernel
+sources (`kernel_sources`: the modules that compile code and the modules they
+import): numba checks only a function's own file when it reuses a cached
+build, so a kernel whose callee or constant changed in another file could
+otherwise load stale machine code (and crash). Changed kernels get a fresh
+cache; an edit elsewhere (an observer, the command line) keeps it.
+
+Importing this module does only what the kernels need (`_prepare_numba`: cache
+writes locked across processes, numba's threading layer started). The command
+line removes the cache folders of other versions (`prune_old_caches`).
 """
 
 from __future__ import annotations
@@ -25,6 +29,8 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import os
+import re
+import shutil
 import time
 import types
 from pathlib import Path
@@ -33,7 +39,7 @@ import numba
 from numba import njit
 
 __all__ = ["CACHE_DIR", "FAST", "FLAGS", "jit", "kernel", "kernel_twin", "CHUNK_VERTS", "PARALLEL_MIN_VERTS",
-           "use_parallel", "chunk_count"]
+           "use_parallel", "chunk_count", "kernel_sources", "prune_old_caches"]
 
 # Fast-math without the flags that assume no NaN or infinity: fused
 # multiply-adds and reciprocals, but the divergence check still sees NaN.
@@ -46,12 +52,67 @@ PARALLEL_MIN_VERTS = 2000
 CHUNK_VERTS = 64
 
 
-def _cache_dir() -> str:
-    """The cache folder of this exact version of hybrid's sources."""
+# an import statement: "from .x import a, b as c" (names maybe in parentheses
+# over several lines) or "import x.y as z"; read with a pattern, as parsing the
+# package would cost 0.2 s at each import. A docstring line that looks like an
+# import only adds a module to the key.
+_IMPORT = re.compile(r"^[ \t]*(?:from[ \t]+(\.*)([\w.]*)[ \t]+import[ \t]+(\([^)]*\)|[^\n;#]*)"
+                     r"|import[ \t]+([^\n;#]*))", re.MULTILINE)
+
+
+def _module_imports(source: str, module: str, is_package: bool, modules: set[str]) -> tuple[set[str], bool]:
+    """The package modules a module's import statements name (at any depth), and
+    whether it compiles: it imports numba, or a compiler of this module (`jit`,
+    `kernel`, `kernel_twin`, or the module whole)."""
+    here = f"{module.split('.')[0]}.kernel"  # this module, in the package read
+    compilers = {here, f"{here}.jit", f"{here}.kernel", f"{here}.kernel_twin"}
+    found, compiles = set(), False
+    for dots, origin, from_names, plain_names in _IMPORT.findall(source):
+        if plain_names:
+            names = [name.split()[0] for name in plain_names.split(",") if name.strip()]
+        else:
+            if dots:  # relative: from the module's package, up len(dots) - 1
+                parts = module.split(".")
+                origin = ".".join(parts[:len(parts) - len(dots) + is_package] + ([origin] if origin else []))
+            names = [f"{origin}.{name.split()[0]}" for name in from_names.strip("()").split(",") if name.strip()]
+        for name in names:  # a module, or a name of a module
+            compiles |= name == "numba" or name.startswith("numba.") or name in compilers
+            found |= {name} & modules or {name.rpartition(".")[0]} & modules
+    return found, compiles
+
+
+def kernel_sources(package_root: Path) -> list[Path]:
+    """The source files whose contents can change hybrid's compiled code: the
+    modules that compile (they import numba or a compiler of this module), found
+    in the sources so that a new one counts at once, and every package module
+    they import (a kernel reads the constants of those when it compiles)."""
+    package_root = Path(package_root)
+    files = {}
+    for path in sorted(package_root.rglob("*.py")):
+        parts = path.relative_to(package_root).with_suffix("").parts
+        if parts[-1] == "__init__":
+            parts = parts[:-1]
+        files[".".join((package_root.name, *parts))] = path
+    imports, compiles, modules = {}, set(), set(files)
+    for module, path in files.items():
+        source = path.read_text(encoding="utf-8", errors="replace")
+        imports[module], compiling = _module_imports(source, module, path.name == "__init__.py", modules)
+        if compiling:
+            compiles.add(module)
+    needed, todo = set(), list(compiles)
+    while todo:
+        module = todo.pop()
+        if module not in needed:
+            needed.add(module)
+            todo += imports[module]
+    return sorted(files[module] for module in needed)
+
+
+def _cache_dir(package_root: Path = Path(__file__).resolve().parent) -> str:
+    """The cache folder of this exact version of the kernel sources (and numba)."""
     digest = hashlib.sha256(numba.__version__.encode())
-    root = Path(__file__).resolve().parent
-    for path in sorted(root.rglob("*.py")):
-        digest.update(path.relative_to(root).as_posix().encode())
+    for path in kernel_sources(package_root):
+        digest.update(path.relative_to(package_root).as_posix().encode())
         digest.update(path.read_bytes())
     base = os.environ.get("NUMBA_CACHE_DIR") or os.path.join(
         os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache"), "hybrid")
@@ -59,17 +120,16 @@ def _cache_dir() -> str:
 
 
 CACHE_DIR = _cache_dir()
-#: cache folders of other versions of the sources unused this long are removed
+#: cache folders of other versions of the kernel sources unused this long are removed
 CACHE_KEEP_DAYS = 30
 
 
-def _prune_caches(cache_dir: str, keep_days: float, now: float) -> list[str]:
+def prune_old_caches(cache_dir: str = CACHE_DIR, keep_days: float = CACHE_KEEP_DAYS,
+                     now: float | None = None) -> list[str]:
     """Mark cache_dir as used now, and remove its sibling folders of other versions
-    of the sources ("numba-" and 16 hex digits) not used for keep_days: each source
-    change or upgrade leaves one (5-12 MB). Returns the folders removed."""
-    import re
-    import shutil
-
+    of the kernel sources ("numba-" and 16 hex digits) not used for keep_days: each
+    kernel change or numba upgrade leaves one (5-12 MB). Returns the folders removed."""
+    now = time.time() if now is None else now
     base = Path(cache_dir).parent
     try:
         Path(cache_dir).mkdir(parents=True, exist_ok=True)
@@ -94,60 +154,48 @@ def _prune_caches(cache_dir: str, keep_days: float, now: float) -> list[str]:
     return removed
 
 
-_prune_caches(CACHE_DIR, CACHE_KEEP_DAYS, time.time())
+def _prepare_numba() -> None:
+    """What the kernels need from numba, done once, at this module's import.
 
-
-def _lock_cache_writes() -> None:
-    """Serialise numba's cache writes into CACHE_DIR across processes.
-
-    numba saves a cache entry as read index / write index / write data, with
-    no lock: two processes compiling different signatures of one function at
-    once (the workers of `hybrid.sweep`, or two test runs) can leave an index
-    entry that points at the other's machine code, which then crashes when
-    loaded. An exclusive file lock around each save makes it one step.
+    - Cache writes into CACHE_DIR are locked across processes. numba saves a
+      cache entry as read index / write index / write data, with no lock: two
+      processes compiling different signatures of one function at once (the
+      workers of `hybrid.sweep`, or two test runs) can leave an index entry that
+      points at the other's machine code, which then crashes when loaded. An
+      exclusive file lock around each save makes it one step (where fcntl exists).
+    - numba's threading layer is started before any cached kernel is loaded. A
+      serial kernel (`run_membrane`) that calls the parallel twins, compiled in a
+      process that loaded those twins from the cache, is saved without the hook
+      that starts the threading layer (numba issue 8578); loaded first in a new
+      process, it then calls a null pointer. Starting the layer here (about 50 ms)
+      makes every cached kernel safe to load in any order.
     """
-    try:
-        import fcntl
-        from numba.core import caching
-    except ImportError:  # no fcntl (Windows): numba's own behaviour
-        return
-    original = caching.IndexDataCacheFile.save
-    if getattr(original, "_hybrid_locked", False):
-        return
-
-    def save(self, key, data):
-        if not str(self._cache_path).startswith(CACHE_DIR):
-            return original(self, key, data)
-        os.makedirs(self._cache_path, exist_ok=True)
-        with open(os.path.join(self._cache_path, ".lock"), "a+") as lock:
-            fcntl.flock(lock, fcntl.LOCK_EX)
-            try:
-                return original(self, key, data)
-            finally:
-                fcntl.flock(lock, fcntl.LOCK_UN)
-
-    save._hybrid_locked = True
-    caching.IndexDataCacheFile.save = save
-
-
-_lock_cache_writes()
-
-
-def _start_threading_layer() -> None:
-    """Start numba's threading layer before any cached kernel is loaded.
-
-    A serial kernel (`run_membrane`) that calls the parallel twins, compiled in a
-    process that loaded those twins from the cache, is saved without the hook
-    that starts the threading layer (numba issue 8578). Loaded first in a new
-    process, it then calls a null pointer. Starting the layer here (about 50 ms,
-    once) makes every cached kernel safe to load in any order.
-    """
+    from numba.core import caching
     from numba.np.ufunc.parallel import _launch_threads
 
+    try:
+        import fcntl
+    except ImportError:  # no fcntl (Windows): numba's own unlocked writes
+        fcntl = None
+    original = caching.IndexDataCacheFile.save
+    if fcntl is not None and not getattr(original, "_hybrid_locked", False):
+        def save(self, key, data):
+            if not str(self._cache_path).startswith(CACHE_DIR):
+                return original(self, key, data)
+            os.makedirs(self._cache_path, exist_ok=True)
+            with open(os.path.join(self._cache_path, ".lock"), "a+") as lock:
+                fcntl.flock(lock, fcntl.LOCK_EX)
+                try:
+                    return original(self, key, data)
+                finally:
+                    fcntl.flock(lock, fcntl.LOCK_UN)
+
+        save._hybrid_locked = True
+        caching.IndexDataCacheFile.save = save
     _launch_threads()
 
 
-_start_threading_layer()
+_prepare_numba()
 
 
 @contextlib.contextmanager

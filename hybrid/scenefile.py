@@ -66,7 +66,7 @@ from .scene import Masses, MeshSpec, Rigid, RigidLink, Scene
 from .terms import CONSTRAINT_TYPES, FORCE_TYPES
 from .terms.base import check_value
 
-__all__ = ["load_scene", "scene_from_dict", "scene_to_dict", "apply_overrides", "builtin_scene",
+__all__ = ["load_scene", "scene_from_dict", "scene_to_dict", "apply_overrides", "builtin_scene", "packaged_model",
            "builtin_scenes"]
 
 
@@ -522,15 +522,26 @@ def _list_index(node, part, item, where):
 
 # ------------------------------------------------------------------ built-in scenes
 
+def packaged_model(relative: str) -> Path:
+    """The path of a file of the packaged models (MJCF, scene TOMLs): the repository's
+    `models/` folder, installed as the package `hybrid.models` (see pyproject.toml).
+    A source tree put on sys.path without installing has no `hybrid.models`: there
+    the folder is read beside the package."""
+    try:
+        root = Path(str(resources.files("hybrid.models")))
+    except ModuleNotFoundError:
+        root = Path(__file__).resolve().parent.parent / "models"
+    return root / relative
+
+
 def builtin_scenes() -> list[str]:
-    """Names of the scene files packaged in hybrid/data."""
-    folder = resources.files("hybrid") / "data"
-    return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".toml"))
+    """Names of the packaged scene files (models/scenes)."""
+    return sorted(p.stem for p in packaged_model("scenes").glob("*.toml"))
 
 
 def builtin_scene(name: str = "breathing") -> Path:
     """The path of a packaged scene file (default: the breathing trunk of figure 4)."""
-    res = resources.files("hybrid") / "data" / f"{name}.toml"
-    if not res.is_file():
+    path = packaged_model("scenes") / f"{name}.toml"
+    if not path.is_file():
         raise SceneError(f"built-in scene {name!r}: no such scene; available: {builtin_scenes()}")
-    return Path(str(res))
+    return path

@@ -1,6 +1,7 @@
-"""The benchmark's MuJoCo flex comparison runs and measures what it says."""
+"""The benchmark: MuJoCo's flex comparison measures what it says, and every section
+gives the figures `hybrid bench --json` writes."""
 
-from hybrid import rigid
+from hybrid import bench, rigid
 from hybrid.mesh import uv_sphere
 
 
@@ -12,3 +13,19 @@ def test_flex_sphere_loses_volume_under_load():
     assert row["nvert"] == 80
     assert row["us_per_step"] > 0
     assert row["volume_change"] < -0.01
+
+
+def test_bench_sections_keep_their_keys_and_format():
+    # each section on a tiny workload: the keys `hybrid bench --json` writes
+    result = {"membrane": bench.bench_membrane_rows((None,), repeats=1, work=2e3),
+              "coupled": bench.coupled_row(nstep=8, repeats=1),
+              "recording": bench.recording_row(duration_s=0.05, repeats=1),
+              "flex": bench.flex_rows(duration_s=0.01)}
+    assert set(result["membrane"][0]) == {"nvert", "us_per_step", "ns_per_vertex_step"}
+    assert result["membrane"][0]["nvert"] == 80
+    assert set(result["coupled"]) == {"us_per_step", "mj_step_us", "ratio"}
+    assert set(result["recording"]) == {"duration_s", "run_s", "recorded_s", "inline_s", "ratio", "inline_ratio"}
+    assert [row["nvert"] for row in result["flex"]] == [80, 642]
+    assert {"us_per_step", "volume_change", "ours_volume_change"} <= set(result["flex"][0])
+    table = bench.format_table(result)
+    assert "coupled" in table and "recording" in table and "flex" in table

@@ -41,7 +41,6 @@ from hybrid.schedule import Breathing
 from hybrid.simulation import Simulation
 from hybrid.step import OK, S_PRESSURE, S_TIME, membrane_advance, membrane_forces
 
-REPO = Path(__file__).resolve().parents[1]
 PERIOD_S = 4.0
 
 
@@ -77,10 +76,6 @@ def breathing_run(scene: Scene, duration_s: float, frame_steps: int = 10) -> dic
 
 
 # ----------------------------------------------------------------- the breathing scene
-
-def test_builtin_breathing_scene_is_the_models_scene_file():
-    assert builtin_scene().read_text() == (REPO / "models" / "scenes" / "breathing.toml").read_text()
-
 
 def test_breathing_scene_is_the_papers_figure_4(breathing):
     model = compile_scene(breathing)

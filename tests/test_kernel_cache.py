@@ -1,8 +1,10 @@
-"""The compiled-code cache: a folder per version of hybrid's sources, writes locked,
-entries safe to load in any order."""
+"""The compiled-code cache: a folder per version of the kernel sources (an edit
+elsewhere keeps it), writes locked, entries safe to load in any order."""
 
+import shutil
 import subprocess
 import sys
+from pathlib import Path
 
 
 def test_cache_folder_follows_numba_cache_dir_and_saves_are_locked(tmp_path):
@@ -15,18 +17,48 @@ def test_cache_folder_follows_numba_cache_dir_and_saves_are_locked(tmp_path):
     assert out[1] == "True"
 
 
-def test_cache_folder_changes_with_the_sources(tmp_path, monkeypatch):
+def _package_copy(tmp_path) -> Path:
     import hybrid.kernel as k
 
-    before = k._cache_dir()
-    real = type(k.Path(k.__file__)).read_bytes
+    copy = tmp_path / "hybrid"
+    shutil.copytree(Path(k.__file__).parent, copy, ignore=shutil.ignore_patterns("__pycache__"))
+    return copy
 
-    def edited(self):  # as if one source file had changed
-        data = real(self)
-        return data + b"#" if self.name == "step.py" else data
 
-    monkeypatch.setattr(type(k.Path(k.__file__)), "read_bytes", edited)
-    assert k._cache_dir() != before
+def _edit(path: Path) -> None:
+    path.write_text(path.read_text() + "\n# an edit\n")
+
+
+def test_the_kernel_sources_are_the_compiling_modules_and_what_they_import(tmp_path):
+    import hybrid.kernel as k
+
+    package = _package_copy(tmp_path)
+    names = {p.relative_to(package).as_posix() for p in k.kernel_sources(package)}
+    assert {"kernel.py", "terms/shape_memory.py", "terms/volume.py", "step.py", "coupling.py", "schedule.py"} <= names
+    assert {"errors.py", "scene.py"} <= names  # imported by kernels: their constants compile in
+    assert not names & {"render.py", "cli.py", "run.py", "sweep.py", "__init__.py", "studies/cli.py"}
+
+
+def test_cache_folder_follows_the_kernel_sources_only(tmp_path):
+    import hybrid.kernel as k
+
+    package = _package_copy(tmp_path)
+    before = k._cache_dir(package)
+    _edit(package / "render.py")  # an observer: nothing compiled changes
+    _edit(package / "studies" / "cli.py")
+    (package / "notes.py").write_text("import numpy\n")
+    assert k._cache_dir(package) == before
+    _edit(package / "terms" / "muscle.py")  # a kernel module
+    after_kernel = k._cache_dir(package)
+    assert after_kernel != before
+    _edit(package / "scene.py")  # imported by kernel modules
+    assert k._cache_dir(package) != after_kernel
+    # a new module that compiles counts without being listed anywhere, and so do its imports
+    (package / "notes.py").write_text("from .kernel import kernel\nfrom . import render\n")
+    with_new = k._cache_dir(package)
+    assert with_new != after_kernel
+    _edit(package / "render.py")
+    assert k._cache_dir(package) != with_new
 
 
 def test_a_kernel_compiled_beside_cached_parallel_twins_loads_in_a_new_process(tmp_path):

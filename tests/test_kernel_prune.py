@@ -1,10 +1,13 @@
-"""Compile-cache folders of other versions of hybrid's sources are removed once unused for a while."""
+"""Compile-cache folders of other versions of the kernel sources are removed once unused
+for a while, by the command line (not by `import hybrid`)."""
 
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
 
-from hybrid.kernel import CACHE_DIR, _prune_caches
+from hybrid.kernel import prune_old_caches
 
 DAY = 86400.0
 
@@ -27,15 +30,24 @@ def test_old_cache_folders_of_other_versions_are_removed_and_nothing_else(tmp_pa
     unmarked_old = _folder(tmp_path, "numba-cccccccccccccccc", None)  # from before the marks: its own mtime
     os.utime(unmarked_old, (now - 40 * DAY, now - 40 * DAY))
     other = _folder(tmp_path, "numba-notahash", now - 400 * DAY)  # not one of ours by name
-    removed = _prune_caches(str(current), 30, now)
+    removed = prune_old_caches(str(current), 30, now)
     assert sorted(removed) == sorted([str(old), str(unmarked_old)])
     assert not old.exists() and not unmarked_old.exists()
     assert recent.exists() and other.exists()
     # the folder in use is marked as used now, and is never a candidate
     assert (current / ".last_used").stat().st_mtime == now
-    assert _prune_caches(str(current), 0, now + 10 * DAY) == [str(recent)]
+    assert prune_old_caches(str(current), 0, now + 10 * DAY) == [str(recent)]
     assert current.exists()
 
 
-def test_the_cache_in_use_is_marked_at_import():
-    assert os.path.exists(os.path.join(CACHE_DIR, ".last_used"))
+def test_the_command_line_prunes_and_import_does_not(tmp_path):
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
+    old = _folder(tmp_path, "numba-aaaaaaaaaaaaaaaa", 1_000_000_000.0)
+    where = "import hybrid.kernel as k; print(k.CACHE_DIR)"
+    current = subprocess.run([sys.executable, "-c", where], capture_output=True, text=True, env=env,
+                             check=True).stdout.strip()
+    mark = os.path.join(current, ".last_used")
+    assert old.exists() and not os.path.exists(mark)  # import hybrid: nothing marked, nothing removed
+    subprocess.run([sys.executable, "-m", "hybrid", "--help"], capture_output=True, env=env, check=True)
+    assert not old.exists()
+    assert os.path.exists(mark)

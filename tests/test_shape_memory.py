@@ -172,7 +172,7 @@ def test_step_forces_are_the_terms_added_point_by_point(subdivisions, parallel):
     forces equal the terms computed one by one."""
     import dataclasses
 
-    from hybrid.demo import bench_membrane
+    from hybrid.bench import bench_membrane
     from hybrid.step import membrane_forces, new_state
 
     model = compile_scene(bench_membrane(subdivisions))

@@ -289,7 +289,7 @@ def test_parallel_build_matches_the_serial_build():
     so the two builds must agree to the last bits over a run."""
     import dataclasses
 
-    from hybrid.demo import bench_membrane
+    from hybrid.bench import bench_membrane
     from hybrid.simulation import Simulation
 
     model = compile_scene(bench_membrane(4))  # 2562 points: above the parallel threshold

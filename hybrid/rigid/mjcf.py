@@ -13,6 +13,7 @@ import mujoco
 
 from hybrid.errors import RigidError, SceneError
 from hybrid.scene import Scene
+from hybrid.scenefile import packaged_model
 
 _mujoco_log = logging.getLogger("hybrid.mujoco")
 
@@ -28,7 +29,7 @@ if mujoco.get_mju_user_warning() is None:
     mujoco.set_mju_user_warning(_log_mujoco_warning)
 
 #: The packaged trunk model (spine fixed to the world, two hinged ribs, sternum spring).
-TRUNK_XML: Path = Path(__file__).resolve().parents[1] / "data" / "trunk.xml"
+TRUNK_XML: Path = packaged_model("trunk.xml")
 
 #: MJCF names a scene may use instead of a path.
 BUILTIN_MJCF = {"trunk": TRUNK_XML, "builtin:trunk": TRUNK_XML}
