@@ -3,7 +3,7 @@
 Its sections: the membrane step per mesh size (`bench_membrane`, the scene it
 times); the coupled breathing step against a bare `mj_step` of the trunk model;
 the cost of recording the breathing run; MuJoCo's own 2D flex sphere beside our
-membrane. The MuJoCo calls (`rigid.bare_stepper`, `rigid.flex_sphere_run`)
+membrane. The MuJoCo calls (`rigid.BareStepper`, `rigid.FlexSphere`)
 live in `hybrid.rigid`; this module only times them.
 
 The machine this runs on may be shared and noisy: every figure is the median
@@ -86,7 +86,14 @@ def coupled_row(*, nstep: int = 4000, repeats: int = 9) -> dict:
     of each repeat sees the same machine; medians of the times and of the ratios."""
     scene = load_scene(builtin_scene("breathing"))
     sim = Simulation(compile_scene(scene))
-    bare = rigid.bare_stepper(rigid.resolve_mjcf(scene))
+    stepper = rigid.BareStepper(rigid.resolve_mjcf(scene))
+
+    def bare(n):  # s per bare mj_step from the reset state
+        stepper.reset()
+        t0 = time.perf_counter()
+        stepper.step(n)
+        return (time.perf_counter() - t0) / n
+
     sim.step(nstep // 4)  # warm-up: compiled code loaded
     bare(nstep // 4)
     coupled, mj, ratio = [], [], []
@@ -136,10 +143,20 @@ def flex_rows(*, duration_s: float = 1.0) -> list[dict]:
     elasticity) dropped on a plane for 1 s, beside our membrane's volume change."""
     rows = []
     for mesh in (uv_sphere(RADIUS_M), icosphere(3, RADIUS_M)):
-        row = rigid.flex_sphere_run(mesh.vert_pos, mesh.face_vert, duration_s=duration_s)
+        row = flex_sphere_row(mesh, duration_s)
         row["ours_volume_change"] = _our_volume_change(mesh.nvert, duration_s)
         rows.append(row)
     return rows
+
+
+def flex_sphere_row(mesh, duration_s: float) -> dict:
+    """MuJoCo's flex sphere on `mesh` for duration_s: {"nvert", "us_per_step", "volume_change"}."""
+    flex = rigid.FlexSphere(mesh.vert_pos, mesh.face_vert)
+    nstep = int(round(duration_s / flex.timestep_s))
+    t0 = time.perf_counter()
+    flex.step(nstep)
+    wall = time.perf_counter() - t0
+    return {"nvert": flex.nvert, "us_per_step": wall / nstep * 1e6, "volume_change": flex.volume_change()}
 
 
 def _our_volume_change(nvert: int, duration_s: float) -> float:

@@ -1,7 +1,7 @@
 """The benchmark: MuJoCo's flex comparison measures what it says, and every section
 gives the figures `hybrid bench --json` writes."""
 
-from hybrid import bench, rigid
+from hybrid import bench
 from hybrid.mesh import uv_sphere
 
 
@@ -9,7 +9,7 @@ def test_flex_sphere_loses_volume_under_load():
     # MuJoCo's 2D flex has no volume constraint: a soft 4 kg shell resting on a
     # plane flattens, so its enclosed volume drops measurably within 0.3 s
     mesh = uv_sphere(0.12)
-    row = rigid.flex_sphere_run(mesh.vert_pos, mesh.face_vert, duration_s=0.3)
+    row = bench.flex_sphere_row(mesh, 0.3)
     assert row["nvert"] == 80
     assert row["us_per_step"] > 0
     assert row["volume_change"] < -0.01

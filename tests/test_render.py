@@ -92,14 +92,15 @@ def test_view_without_a_display_says_so_in_one_line(monkeypatch, capsys):
 
 def test_the_viewer_draws_the_membrane_edges_as_user_geoms():
     """The drawing the live viewer does each frame, on a plain (headless) MjvScene."""
-    from hybrid import rigid
+    import mujoco
+
     from hybrid.render import draw_membrane, membrane_edges
 
     sim = hybrid.load()
     sim.step(100)
     edges, rgba = membrane_edges(sim.model)
     assert len(edges) == 80 + 156 - 2  # Euler: V - E + F = 2
-    scn = rigid.mujoco.MjvScene(sim.mj_model, maxgeom=1000)
+    scn = mujoco.MjvScene(sim.mj_model, maxgeom=1000)  # the test reaches MuJoCo itself
     assert draw_membrane(scn, sim.vert_pos, edges, rgba) == len(edges)
     i, j = edges[0]
     np.testing.assert_allclose(scn.geoms[0].pos, 0.5 * (sim.vert_pos[i] + sim.vert_pos[j]), atol=1e-6)

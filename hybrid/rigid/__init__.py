@@ -12,16 +12,15 @@ lazily, so that a membrane-only scene never loads MuJoCo. By concern:
   `CoupledRigid`) and the compiled site kernels the coupled step shares;
 - `replay`: recorded wrenches through MuJoCo alone;
 - `draw`: MuJoCo's viewer for `hybrid view`;
-- `benchmarks`: timings of MuJoCo alone.
+- `references`: MuJoCo alone, what the benchmark times our step against.
 """
 
-import mujoco  # noqa: F401  (the bindings themselves, for callers that need MuJoCo's own types)
 
-from .benchmarks import bare_stepper, flex_sphere_run
 from .compose import add_sites, attach_points, build_rigid, free_body_spec
 from .draw import draw_capsules, empty_world, launch_viewer
 from .mjcf import (BUILTIN_MJCF, PACKAGE_MJCF, TRUNK_XML, compile_spec, load_rigid_spec, load_spec,
                    resolve_mjcf)
+from .references import BareStepper, FlexSphere
 from .replay import replay_wrenches
 from .system import (STATE_SPEC, CoupledRigid, RigidSystem, get_state, mj_step_ctypes, point_wrench_kernel,
                      site_vel_kernel)
@@ -49,6 +48,6 @@ __all__ = [
     "empty_world",
     "launch_viewer",
     "draw_capsules",
-    "bare_stepper",
-    "flex_sphere_run",
+    "BareStepper",
+    "FlexSphere",
 ]

@@ -91,7 +91,7 @@ def compile_spec(spec: mujoco.MjSpec, label: str | None = None) -> mujoco.MjMode
 
 def resolve_mjcf(scene: Scene) -> Path:
     """The MJCF file of `scene.rigid`: "trunk" / "builtin:trunk" is the packaged
-    `hybrid/data/trunk.xml`; anything else is a path, relative to the scene's folder."""
+    `models/trunk.xml`; anything else is a path, relative to the scene's folder."""
     mjcf = scene.rigid.mjcf
     if not isinstance(mjcf, (str, Path)) or not str(mjcf).strip():
         raise SceneError(f"rigid.mjcf: expected 'trunk' or the path of an MJCF file, received {mjcf!r}")
