@@ -14,7 +14,8 @@ phases into a `Build`:
   link is known (`b.moving`), turns the rows into the final arrays; by
   default each `Rows` array, a force's rows on points that do not move left out.
 
-`order_terms` (called once by `hybrid.terms` with every class, in order) puts
+`force(type)` and `constraint(type)` declare a term class; `order_terms`
+(called once by `hybrid.terms` with every class, in order) puts
 each class in `FORCE_TYPES` or `CONSTRAINT_TYPES` under its TOML `type`; a
 term the step calls a kernel for (`flag=True`) also gets its id, the index of
 its flag in `MembraneArrays.term_on` and of its call counter.
@@ -32,7 +33,7 @@ from .. import checks
 from .. import regions as _regions
 from .. import schedule as _sched
 
-__all__ = ["param", "Rows", "register", "order_terms", "Term", "Build", "FORCE_TYPES", "CONSTRAINT_TYPES", "TERM_CLASSES",
+__all__ = ["param", "Rows", "force", "constraint", "order_terms", "Term", "Build", "FORCE_TYPES", "CONSTRAINT_TYPES", "TERM_CLASSES",
            "FLAGGED", "check_value", "VALUE_KINDS"]
 
 FORCE_TYPES: dict = {}
@@ -90,15 +91,26 @@ def check_value(where: str, kind: str, value, meta: dict | None = None):
     raise ValueError(f"kind {kind!r}: not a value kind {VALUE_KINDS}")
 
 
-def register(cls=None, *, flag: bool = True):
-    """Class decorator: a term class made a frozen dataclass; flag=False for a
-    term the step has no kernel for (nailed points). `hybrid.terms` then puts
-    the classes in the registry, in its order (`order_terms`)."""
+def _term(section: str, toml_type: str, flag: bool):
     def wrap(cls):
-        cls = dataclasses.dataclass(frozen=True)(cls)
-        cls.flag = flag
-        return cls
-    return wrap if cls is None else wrap(cls)
+        cls.toml_type, cls.section, cls.flag = toml_type, section, flag
+        # every term has a name, by default its type: what --without and --set refer to
+        cls.__annotations__["name"] = "str"
+        cls.name = param("text", toml_type)
+        return dataclasses.dataclass(frozen=True)(cls)
+    return wrap
+
+
+def force(toml_type: str, *, flag: bool = True):
+    """Class decorator: a force term of TOML type `toml_type`, made a frozen
+    dataclass with a last field `name` (default: the type)."""
+    return _term("forces", toml_type, flag)
+
+
+def constraint(toml_type: str, *, flag: bool = True):
+    """Class decorator: a constraint term, as `force`; flag=False for a term the
+    step has no kernel for (nailed points)."""
+    return _term("constraints", toml_type, flag)
 
 
 def order_terms(classes) -> None:
@@ -142,9 +154,13 @@ class Term:
             return None
         return check_value(f"{what}.{field}", f.metadata["kind"], v, f.metadata)
 
-    def compile(self, b: "Build", what: str) -> None:
+    def compile(self, b: "Build", what: str):
+        """Mark the term present; returns the vertices of its `region` (None without one)."""
         if self.id >= 0:
             b.term_on[self.id] = 1
+        if "region" in self.fields():
+            return b.region(self.region, f"{what}.region")
+        return None
 
     @classmethod
     def finish(cls, b: "Build") -> None:

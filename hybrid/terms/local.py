@@ -13,7 +13,7 @@ import numpy as np
 from .. import checks
 from ..errors import SceneError
 from ..kernel import kernel
-from .base import Rows, Term, param, register
+from .base import Rows, Term, constraint, param
 
 __all__ = ["Nailed", "Prescribed", "KeepIn", "KeepInShape", "apply_prescribed", "apply_keep_in"]
 
@@ -25,43 +25,34 @@ class KeepInShape(IntEnum):
     BOX = 2
 
 
-@register(flag=False)
+@constraint("nailed", flag=False)
 class Nailed(Term):
     """Points fixed at their rest positions (spine, pelvis...)."""
-    toml_type = "nailed"
-    section = "constraints"
     region: object = param("selector")
-    name: str = param("text", "nailed")
 
     def compile(self, b, what):
         b.vert_free[b.region(self.region, f"{what}.region")] = 0
 
 
-@register
+@constraint("prescribed")
 class Prescribed(Term):
     """Points that follow rest position + `displacement_m`(t) (m)."""
-    toml_type = "prescribed"
-    section = "constraints"
     # pre_vert (n,) int32; pre_rest (n, 3) m; pre_sched (n,) int64
     arrays = {"pre_vert": Rows(np.int32), "pre_rest": Rows(float, 3), "pre_sched": Rows(np.int64)}
     region: object = param("selector")
     displacement_m: object = param("schedule", ncomp=3)
-    name: str = param("text", "prescribed")
 
     def compile(self, b, what):
-        super().compile(b, what)
-        idx = b.region(self.region, f"{what}.region")
+        idx = super().compile(b, what)
         s = b.schedule(self.displacement_m, f"{what}.displacement_m", 3)
         b.vert_free[idx] = 0
         b.add_rows(pre_vert=idx, pre_rest=b.mesh.vert_pos[idx], pre_sched=np.full(idx.size, s))
 
 
-@register
+@constraint("keep_in")
 class KeepIn(Term):
     """Points kept inside a half-space (`point_m`, `normal` pointing inside),
     a ball (`center_m`, `radius_m`) or a box (`lo_m`, `hi_m`)."""
-    toml_type = "keep_in"
-    section = "constraints"
     # kin_vert (n,) int32; kin_shape (n,) int64: row of shape_kind / shape_par;
     # shape_kind (ns,) int64 KeepInShape; shape_par (ns, 6) m (see apply_keep_in)
     arrays = {"kin_vert": Rows(np.int32), "kin_shape": Rows(np.int64), "shape_kind": Rows(np.int64),
@@ -74,11 +65,9 @@ class KeepIn(Term):
     radius_m: float = param("positive", None)
     lo_m: tuple = param("vec3", None)
     hi_m: tuple = param("vec3", None)
-    name: str = param("text", "keep_in")
 
     def compile(self, b, what):
-        super().compile(b, what)
-        idx = b.region(self.region, f"{what}.region")
+        idx = super().compile(b, what)
         kind, par = self._shape(what)
         b.add_rows(shape_kind=[int(kind)], shape_par=[par])
         b.add_rows(kin_vert=idx, kin_shape=np.full(idx.size, len(b.rows["shape_kind"]) - 1))

@@ -10,20 +10,18 @@ import numpy as np
 from .. import schedule as _sched
 from ..errors import SceneError
 from ..kernel import kernel
-from .base import Rows, Term, param, register
+from .base import Rows, Term, force, param
 
 __all__ = ["Muscle", "muscle_pairs", "add_muscle", "schedule_peak"]
 
 
-@register
+@force("muscle")
 class Muscle(Term):
     """Muscle (paper 3.4): each point of `region` is attracted to the
     neighbours lying along the fibre direction (within `max_angle_deg`),
     with stiffness k_muscle(t) (N/m) from `stiffness` (a number, a
     `Breathing` waveform, a `Table` or a function of time). Fibres run
     toward the point `toward_m`, or along `axis`."""
-    toml_type = "muscle"
-    section = "forces"
     # mus_vert, mus_nbr (npair,) int32: each contraction pair; mus_sched (npair,) int64
     arrays = {"mus_vert": Rows(np.int32), "mus_nbr": Rows(np.int32), "mus_sched": Rows(np.int64)}
     region: object = param("selector")
@@ -31,11 +29,9 @@ class Muscle(Term):
     toward_m: tuple = param("vec3", None)
     axis: tuple = param("vec3", None)
     max_angle_deg: float = param("angle_deg", 30.0)
-    name: str = param("text", "muscle")
 
     def compile(self, b, what):
-        super().compile(b, what)
-        idx = b.region(self.region, f"{what}.region")
+        idx = super().compile(b, what)
         if (self.toward_m is None) == (self.axis is None):
             raise SceneError(f"{what}: expected exactly one fibre direction, toward_m or axis, received "
                              f"toward_m={self.toward_m!r} axis={self.axis!r}")

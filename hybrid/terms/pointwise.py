@@ -12,27 +12,24 @@ from numba import prange
 
 from ..errors import SceneError
 from ..kernel import CHUNK_VERTS, kernel, kernel_twin
-from .base import Term, param, register
+from .base import Term, force, param
 from .shape_memory import shape_memory_force
 
 __all__ = ["Gravity", "Damping", "point_forces_serial", "point_forces_parallel"]
 
 
-@register
+@force("gravity")
 class Gravity(Term):
     """Uniform gravity on the integrated points, F = m g."""
-    toml_type = "gravity"
-    section = "forces"
     arrays = {"accel": lambda n: np.zeros(3)}  # (3,) m/s^2
     accel_m_s2: tuple = param("vec3", (0.0, 0.0, -9.81))
-    name: str = param("text", "gravity")
 
     def compile(self, b, what):
         super().compile(b, what)
         b.out["accel"] = b.out.get("accel", np.zeros(3)) + np.asarray(self.value(b, "accel_m_s2", what))
 
 
-@register
+@force("damping")
 class Damping(Term):
     """Viscous damping F = -c v on the points of `region`.
 
@@ -42,14 +39,11 @@ class Damping(Term):
     non-conservative shape-memory force excites itself below 0.15, as
     `hybrid study stability` measures).
     """
-    toml_type = "damping"
-    section = "forces"
     arrays = {"damp_coef": lambda n: np.zeros(n)}  # (nvert,) N s/m
     finish_last = True
     coef_n_s_per_m: float = param("nonneg", None)
     critical_fraction: float = param("nonneg", None)
     region: object = param("selector", "all")
-    name: str = param("text", "damping")
 
     def compile(self, b, what):
         super().compile(b, what)

@@ -16,27 +16,23 @@ from numba import prange
 
 from ..errors import MeshError
 from ..kernel import kernel, kernel_twin
-from .base import Rows, Term, param, register
+from .base import Rows, Term, force, param
 
 __all__ = ["ShapeMemory", "ring_frame", "shape_memory_frame_coef", "shape_memory_frames",
            "shape_memory_frames_parallel", "shape_memory_force", "add_shape_memory", "add_shape_memory_parallel"]
 
 
-@register
+@force("shape_memory")
 class ShapeMemory(Term):
     """Local shape memory (paper 3.4): each point attracted to its ideal place
     in the frame of its neighbours, stiffness in N/m."""
-    toml_type = "shape_memory"
-    section = "forces"
     # sm_vert (nsm,) int32 sorted; sm_stiff (nsm,) N/m; sm_coef (nsm, 3) m
     arrays = {"sm_vert": Rows(np.int32), "sm_stiff": Rows(float), "sm_coef": Rows(float, 3)}
     stiffness_n_per_m: float = param("positive")
     region: object = param("selector", "all")
-    name: str = param("text", "shape_memory")
 
     def compile(self, b, what):
-        super().compile(b, what)
-        idx = b.region(self.region, f"{what}.region")
+        idx = super().compile(b, what)
         b.rows["shape_memory"].append((idx, self.value(b, "stiffness_n_per_m", what)))
 
     @classmethod

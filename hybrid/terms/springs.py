@@ -9,25 +9,21 @@ import numpy as np
 
 from ..errors import SceneError
 from ..kernel import kernel
-from .base import Rows, Term, param, register
+from .base import Rows, Term, force, param
 
 __all__ = ["MassSpring", "AppliedForce", "Attraction", "add_mass_spring", "add_applied", "add_attraction"]
 
 
-@register
+@force("mass_spring")
 class MassSpring(Term):
     """Springs along the mesh edges within `region` (the paper's comparison model)."""
-    toml_type = "mass_spring"
-    section = "forces"
     # spring_vert (ns, 2) int32; spring_stiff (ns,) N/m; spring_rest (ns,) m
     arrays = {"spring_vert": Rows(np.int32, 2), "spring_stiff": Rows(float), "spring_rest": Rows(float)}
     stiffness_n_per_m: float = param("positive")
     region: object = param("selector", "all")
-    name: str = param("text", "mass_spring")
 
     def compile(self, b, what):
-        super().compile(b, what)
-        idx = b.region(self.region, f"{what}.region")
+        idx = super().compile(b, what)
         k = self.value(b, "stiffness_n_per_m", what)
         inside = np.zeros(b.mesh.nvert, bool)
         inside[idx] = True
@@ -50,31 +46,25 @@ class MassSpring(Term):
                                               axis=1)
 
 
-@register
+@force("applied_force")
 class AppliedForce(Term):
     """A force (N) on each point of `region`: a 3-vector, a `Table` or a function of time."""
-    toml_type = "applied_force"
-    section = "forces"
     # app_vert (n,) int32; app_sched (n,) int64: each point's schedule row
     arrays = {"app_vert": Rows(np.int32), "app_sched": Rows(np.int64)}
     region: object = param("selector")
     force_n: object = param("schedule", ncomp=3)
-    name: str = param("text", "applied_force")
 
     def compile(self, b, what):
-        super().compile(b, what)
-        idx = b.region(self.region, f"{what}.region")
+        idx = super().compile(b, what)
         s = b.schedule(self.force_n, f"{what}.force_n", 3)
         b.add_rows(app_vert=idx, app_sched=np.full(idx.size, s))
 
 
-@register
+@force("attraction")
 class Attraction(Term):
     """Attractive points (paper 3.3): a spring (N/m) from each point of
     `region` to its ideal position = rest position (or `target_m`) plus
     `offset_m` (a 3-vector, `Table` or function of time, for moving targets)."""
-    toml_type = "attraction"
-    section = "forces"
     # att_vert (n,) int32; att_stiff (n,) N/m; att_target (n, 3) m; att_sched (n,) int64 (offsets)
     arrays = {"att_vert": Rows(np.int32), "att_stiff": Rows(float), "att_target": Rows(float, 3),
               "att_sched": Rows(np.int64)}
@@ -82,11 +72,9 @@ class Attraction(Term):
     stiffness_n_per_m: float = param("positive")
     offset_m: object = param("schedule", (0.0, 0.0, 0.0), ncomp=3)
     target_m: tuple = param("target", None)
-    name: str = param("text", "attraction")
 
     def compile(self, b, what):
-        super().compile(b, what)
-        idx = b.region(self.region, f"{what}.region")
+        idx = super().compile(b, what)
         k = self.value(b, "stiffness_n_per_m", what)
         if self.target_m is None:
             target = b.mesh.vert_pos[idx]

@@ -17,7 +17,7 @@ from numba import prange
 
 from ..errors import SceneError
 from ..kernel import CHUNK_VERTS, kernel, kernel_twin
-from .base import Term, param, register
+from .base import Term, constraint, force, param
 
 __all__ = ["Volume", "SoftVolume", "Projection", "face_volume", "ring_cross_sum", "volume_cubic",
            "solve_cubic_near_zero", "project_volume", "soft_volume_force", "PROJ_OK", "PROJ_NO_GRADIENT",
@@ -34,15 +34,12 @@ class Projection(IntEnum):
 PROJ_OK, PROJ_NO_GRADIENT, PROJ_NO_ROOT = int(Projection.OK), int(Projection.NO_GRADIENT), int(Projection.NO_ROOT)
 
 
-@register
+@force("soft_volume")
 class SoftVolume(Term):
     """Compressibility (paper 6.2): each point pulled with stiffness (N/m)
     toward the position the exact volume projection would give it."""
-    toml_type = "soft_volume"
-    section = "forces"
     arrays = {"soft_stiff": lambda n: 0.0}  # N/m
     stiffness_n_per_m: float = param("positive")
-    name: str = param("text", "soft_volume")
 
     def compile(self, b, what):
         super().compile(b, what)
@@ -51,12 +48,9 @@ class SoftVolume(Term):
         b.out["vol0"] = float(b.mesh.volume())
 
 
-@register
+@constraint("volume")
 class Volume(Term):
     """The exact constant-volume constraint (paper 4.3); needs a closed surface."""
-    toml_type = "volume"
-    section = "constraints"
-    name: str = param("text", "volume")
 
     def compile(self, b, what):
         super().compile(b, what)
