@@ -17,6 +17,7 @@ integration phases.
 from __future__ import annotations
 
 import math
+from enum import IntEnum
 from typing import NamedTuple
 
 import numpy as np
@@ -35,17 +36,34 @@ from .terms.shape_memory import shape_memory_frames, shape_memory_frames_paralle
 from .terms.springs import add_applied, add_attraction, add_mass_spring
 from .terms.volume import PROJ_OK, face_volume, project_volume, soft_volume_force
 
-__all__ = ["MembraneState", "new_state", "membrane_forces", "membrane_advance", "run_membrane",
+__all__ = ["Scal", "StepStatus", "FrameColumn", "MembraneState", "new_state", "membrane_forces", "membrane_advance", "run_membrane",
            "run_membrane_frames", "capture_frame", "kinetic_energy_of", "Frames"]
 
 # each term's flag in MembraneArrays.term_on and its call counter
 (T_GRAVITY, T_APPLIED, T_ATTRACTION, T_DAMPING, T_SHAPE_MEMORY, T_MASS_SPRING, T_MUSCLE, T_SOFT_VOLUME,
  T_PRESCRIBED, T_KEEP_IN, T_VOLUME) = (Gravity.id, AppliedForce.id, Attraction.id, Damping.id, ShapeMemory.id,
                                        MassSpring.id, Muscle.id, SoftVolume.id, Prescribed.id, KeepIn.id, Volume.id)
-# scal slots
-S_TIME, S_PRESSURE, S_PHI, S_KE, S_MAXDISP = range(5)
-# status codes
-OK, DIVERGED_NONFINITE, DIVERGED_RUNAWAY, VOLUME_FAILED = 0, 1, 2, 3
+
+
+class Scal(IntEnum):
+    """The slots of `MembraneState.scal`."""
+    TIME = 0  # s
+    PRESSURE = 1  # Pa, from the last volume projection
+    PHI = 2  # the last projection's multiplier
+    KE = 3  # J, of the last step before its constraints
+    MAXDISP = 4  # m, the largest displacement of the last step
+
+
+class StepStatus(IntEnum):
+    """What a step returns, and `MembraneState.status[0]` after a failing one."""
+    OK = 0
+    DIVERGED_NONFINITE = 1
+    DIVERGED_RUNAWAY = 2
+    VOLUME_FAILED = 3
+
+
+S_TIME, S_PRESSURE, S_PHI, S_KE, S_MAXDISP = Scal
+OK, DIVERGED_NONFINITE, DIVERGED_RUNAWAY, VOLUME_FAILED = StepStatus
 
 
 class MembraneState(NamedTuple):
@@ -279,8 +297,15 @@ def run_membrane(m, s, nstep, step0):
     return nstep
 
 
-# the numbers captured at each frame by the frame kernels (Frames.scal columns)
-F_TIME, F_VOLUME, F_PRESSURE, F_KE = range(4)
+class FrameColumn(IntEnum):
+    """The numbers captured at each frame by the frame kernels (`Frames.scal` columns)."""
+    TIME = 0  # s
+    VOLUME = 1  # m^3
+    PRESSURE = 2  # Pa
+    KE = 3  # J
+
+
+F_TIME, F_VOLUME, F_PRESSURE, F_KE = FrameColumn
 
 
 @kernel
