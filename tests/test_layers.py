@@ -18,7 +18,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "hybrid"
 # Bottom to top. A module imports only modules of its own layer or below.
 LAYERS = (
     ("errors, kernel", ("errors", "kernel", "checks")),
-    ("geometry, regions, schedules", ("mesh", "regions", "schedule", "stability")),
+    ("geometry, regions, schedules", ("mesh", "mesh.*", "regions", "schedule", "stability")),
     ("terms", ("terms", "terms.*")),
     ("scene", ("scene", "scenefile", "demo", "resolve")),
     ("model, rigid", ("model", "rigid", "rigid.*")),

@@ -44,6 +44,12 @@ STATE_SPEC: int = int(mujoco.mjtState.mjSTATE_FULLPHYSICS)
 _RK4 = int(mujoco.mjtIntegrator.mjINT_RK4)
 
 
+@jit(_nrt=False, inline="always")
+def _site_offset(site_xpos, s, origin, c):  # pragma: no cover
+    """site_xpos[s] - origin[c] as three floats (m): the lever arm of a site about a point."""
+    return site_xpos[s, 0] - origin[c, 0], site_xpos[s, 1] - origin[c, 1], site_xpos[s, 2] - origin[c, 2]
+
+
 @jit(_nrt=False)
 def point_wrench_kernel(site_xpos, xipos, site_id, site_body, forces, xfrc):  # pragma: no cover
     """Set the wrench of the point forces on each attachment body (compiled).
@@ -61,9 +67,7 @@ def point_wrench_kernel(site_xpos, xipos, site_id, site_body, forces, xfrc):  # 
     for i in range(n):
         s = site_id[i]
         b = site_body[i]
-        rx = site_xpos[s, 0] - xipos[b, 0]
-        ry = site_xpos[s, 1] - xipos[b, 1]
-        rz = site_xpos[s, 2] - xipos[b, 2]
+        rx, ry, rz = _site_offset(site_xpos, s, xipos, b)
         fx, fy, fz = forces[i, 0], forces[i, 1], forces[i, 2]
         xfrc[b, 0] += fx
         xfrc[b, 1] += fy
@@ -86,9 +90,7 @@ def site_vel_kernel(site_xpos, cvel, subtree_com, site_id, site_body, site_root,
         s = site_id[i]
         b = site_body[i]
         c = site_root[i]
-        rx = site_xpos[s, 0] - subtree_com[c, 0]
-        ry = site_xpos[s, 1] - subtree_com[c, 1]
-        rz = site_xpos[s, 2] - subtree_com[c, 2]
+        rx, ry, rz = _site_offset(site_xpos, s, subtree_com, c)
         wx, wy, wz = cvel[b, 0], cvel[b, 1], cvel[b, 2]
         out[i, 0] = cvel[b, 3] + wy * rz - wz * ry
         out[i, 1] = cvel[b, 4] + wz * rx - wx * rz

@@ -47,7 +47,7 @@ from ..resolve import resolve_scene
 from ..scene import AppliedForce, MeshSpec, Muscle, Scene, ShapeMemory
 from ..schedule import Breathing
 from ..simulation import Simulation
-from .stability import _finite, write_json
+from .stability.report import finite, write_json
 
 __all__ = ["run", "cases", "run_case", "Case"]
 
@@ -321,5 +321,5 @@ def run(out_dir, *, small: bool = False, scheduler: str | None = None, workers: 
            "reasonable_failures": [r["name"] for r in rows if r["reasonable"] and r["outcome"] != "stable"],
            "bugs": bugs, "runtime_s": time.perf_counter() - t0}
     write_json(out / "extremes.json", res)
-    (out / "extremes.md").write_text(_markdown(_finite(res)))
-    return _finite(res)
+    (out / "extremes.md").write_text(_markdown(finite(res)))
+    return finite(res)

@@ -39,7 +39,7 @@ import numpy as np
 
 from ..errors import HybridError
 from ..sweep import sweep
-from .stability import write_json
+from .stability.report import write_json
 
 __all__ = ["run", "simulate", "observed_order", "SCENES", "INTEGRATORS"]
 

@@ -1,0 +1,28 @@
+"""Triangle surfaces: the `Mesh`, its volume and gradient, and sphere generators.
+
+A `Mesh` is an immutable, validated triangle surface (counter-clockwise faces
+seen from outside) with the ordered one-ring fans the force kernels need.
+The package's rooms:
+
+- `surface`: the `Mesh` class (construction, loading, immutability, geometry);
+- `geometry`: volume, its gradient and the row-wise helpers, on plain arrays;
+- `validate`: the checks of a surface and the building of its edges and fans;
+- `spheres`: `uv_sphere` (the paper's 80-point body), `icosahedron`, `icosphere`.
+"""
+
+from __future__ import annotations
+
+from .geometry import volume, volume_gradient
+from .spheres import ICOSPHERE_MAX_SUBDIVISIONS, icosahedron, icosphere, uv_sphere
+from .surface import LOAD_SUFFIXES, Mesh
+
+__all__ = [
+    "Mesh",
+    "uv_sphere",
+    "icosahedron",
+    "icosphere",
+    "volume",
+    "volume_gradient",
+    "LOAD_SUFFIXES",
+    "ICOSPHERE_MAX_SUBDIVISIONS",
+]

@@ -1,0 +1,230 @@
+"""The `Mesh`: an immutable, validated triangle surface with its one-ring fans.
+
+A `Mesh` holds the topology and rest geometry of a membrane: mass points
+(`vert_pos`, m) on a triangle surface (`face_vert`, counter-clockwise seen
+from outside, so that face normals point outward). It is validated once, when
+it is built (`hybrid.mesh.validate`), and is immutable afterwards: every
+array is read-only.
+
+Beyond the faces, a mesh stores what the force and constraint kernels need:
+
+- the ordered one-ring of every vertex (paper section 3.4, the neighbours
+  N_1 .. N_eta of a point), in CSR form `ring_ptr` / `ring_vert`: each
+  consecutive pair (N_j, N_j+1) spans a face (a, N_j, N_j+1) of the mesh, i.e.
+  the ring turns counter-clockwise around the outward normal. A closed fan
+  starts at its smallest neighbour index and wraps (N_eta, N_1 is a face too);
+  an open (border) fan runs from one border neighbour to the other;
+- the unique undirected edges `edge_vert` and the border vertices.
+
+Files are read and written through trimesh, imported only when needed.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from hybrid.errors import MeshError
+
+from .geometry import cross_rows, scatter_corners, volume, volume_gradient
+from .validate import border_edges, check_face_vert, check_vert_pos, few, merge_identical_vertices, \
+    validate_and_build
+
+if TYPE_CHECKING:  # trimesh is imported only when a file is loaded or exported
+    import trimesh
+
+__all__ = ["Mesh", "LOAD_SUFFIXES"]
+
+#: file suffixes `Mesh.load` accepts (read by trimesh)
+LOAD_SUFFIXES = (".stl", ".obj", ".ply", ".off")
+
+
+class Mesh:
+    """An immutable, validated triangle surface with its one-ring fans.
+
+    Attributes (all arrays read-only)
+    ----------
+    vert_pos : (nvert, 3) float64, m       rest positions, C-contiguous
+    face_vert : (nface, 3) int32           corners, counter-clockwise seen from outside
+    nvert, nface : int
+    closed : bool                          every edge is shared by exactly two faces
+    ring_ptr : (nvert + 1,) int32          CSR offsets into ring_vert
+    ring_vert : (ring_ptr[-1],) int32      ordered one-ring of each vertex (see module doc)
+    ring_closed : (nvert,) bool            False for border vertices (open fan)
+    edge_vert : (nedge, 2) int32           unique undirected edges, i < j, lexicographic order
+    border_vert : (nborder,) int32         sorted border vertices (empty if closed)
+    name : str
+
+    Build one with `Mesh.from_arrays`, `Mesh.load`, `uv_sphere`, `icosahedron`
+    or `icosphere`; every one of them validates (see `from_arrays`).
+    """
+
+    __slots__ = (
+        "vert_pos", "face_vert", "nvert", "nface", "closed", "ring_ptr", "ring_vert",
+        "ring_closed", "edge_vert", "border_vert", "name",
+    )
+
+    def __init__(self, vert_pos, face_vert, *, name: str = "mesh"):
+        name = str(name)
+        pos = check_vert_pos(vert_pos, name)
+        face = check_face_vert(face_vert, len(pos), name)
+        topo = validate_and_build(pos, face, name)
+        fields = dict(
+            vert_pos=pos, face_vert=face, nvert=len(pos), nface=len(face), name=name, **topo,
+        )
+        for key, value in fields.items():
+            if isinstance(value, np.ndarray):
+                value.flags.writeable = False
+            object.__setattr__(self, key, value)
+
+    # -- construction -------------------------------------------------------
+
+    @classmethod
+    def from_arrays(cls, vert_pos, face_vert, *, name: str = "mesh") -> Mesh:
+        """Validate arrays and build a mesh (the arrays are copied).
+
+        vert_pos (nvert, 3) real, m; face_vert (nface, 3) int in [0, nvert),
+        counter-clockwise seen from outside. Raises `MeshError`, naming the
+        faulty faces or vertices, for: wrong shapes or types, non-finite
+        coordinates, out-of-range indices, degenerate faces (a repeated index,
+        or area < 1e-14 * mean edge length^2), duplicate faces (same vertex
+        set in any order), duplicate vertices (identical coordinates), unused
+        vertices, non-manifold edges (> 2 faces), inconsistent orientation
+        (an edge used twice in the same direction), non-manifold vertices
+        (incident faces not a single fan) and closed surfaces that face
+        inward (negative volume). Open surfaces are allowed; see
+        `require_closed`.
+        """
+        return cls(vert_pos, face_vert, name=name)
+
+    @classmethod
+    def load(cls, path, *, name: str | None = None) -> Mesh:
+        """Read a mesh file (STL, OBJ, PLY or OFF) with trimesh and validate it.
+
+        The file is read with `trimesh.load(path, process=False, force="mesh")`,
+        so vertices keep their order. STL stores each triangle's corners
+        separately (no shared vertices), so for STL files exactly identical
+        vertices are merged first (kept in order of first appearance); any
+        other format must already share its vertices. `name` defaults to the
+        file stem. Raises `MeshError` naming the path if the file is missing,
+        has an unsupported suffix or cannot be read.
+        """
+        path = Path(path)
+        suffix = path.suffix.lower()
+        if suffix not in LOAD_SUFFIXES:
+            raise MeshError(
+                f"mesh file {str(path)!r}: unsupported suffix {path.suffix!r}; "
+                f"expected one of {', '.join(LOAD_SUFFIXES)}"
+            )
+        if not path.is_file():
+            raise MeshError(f"mesh file {str(path)!r} does not exist or is not a file")
+        import trimesh
+
+        try:
+            loaded = trimesh.load(str(path), process=False, force="mesh")
+            vert_pos = np.asarray(loaded.vertices, dtype=np.float64)
+            face_vert = np.asarray(loaded.faces, dtype=np.int64).reshape(-1, 3)
+        except Exception as exc:  # trimesh raises many types on bad input
+            raise MeshError(
+                f"mesh file {str(path)!r} cannot be read as a triangle mesh: "
+                f"{type(exc).__name__}: {exc}"
+            ) from exc
+        if suffix == ".stl":
+            vert_pos, face_vert = merge_identical_vertices(vert_pos, face_vert)
+        if name is None:
+            name = path.stem
+        try:
+            return cls(vert_pos, face_vert, name=name)
+        except MeshError as exc:
+            raise MeshError(f"mesh file {str(path)!r}: {exc}") from None
+
+    # -- immutability -------------------------------------------------------
+
+    def __setattr__(self, key, value):
+        raise AttributeError(f"Mesh is immutable: cannot set {key!r}; build a new Mesh")
+
+    def __delattr__(self, key):
+        raise AttributeError(f"Mesh is immutable: cannot delete {key!r}")
+
+    def __reduce__(self):
+        # __slots__ + a blocking __setattr__ defeat the default pickling; rebuild instead.
+        return (_rebuild_mesh, (np.array(self.vert_pos), np.array(self.face_vert), self.name))
+
+    def __repr__(self) -> str:
+        kind = "closed" if self.closed else f"open, {len(self.border_vert)} border vertices"
+        return f"Mesh({self.name!r}, nvert={self.nvert}, nface={self.nface}, {kind})"
+
+    # -- geometry -----------------------------------------------------------
+
+    def _pos(self, vert_pos) -> np.ndarray:
+        """The rest positions, or `vert_pos` checked to be (nvert, 3)."""
+        if vert_pos is None:
+            return self.vert_pos
+        pos = np.asarray(vert_pos, dtype=np.float64)
+        if pos.shape != (self.nvert, 3):
+            raise MeshError(
+                f"mesh {self.name!r}: vert_pos must have shape ({self.nvert}, 3); "
+                f"received shape {pos.shape}"
+            )
+        return pos
+
+    def volume(self, vert_pos=None) -> float:
+        """Signed enclosed volume (m^3) at `vert_pos` (nvert, 3) m, default the rest shape.
+
+        Positive for a closed, outward surface. For an open surface it is
+        relative to the mean of the positions (see module function `volume`).
+        """
+        return volume(self._pos(vert_pos), self.face_vert)
+
+    def volume_gradient(self, vert_pos=None) -> np.ndarray:
+        """dV/dx at `vert_pos` (default rest), (nvert, 3) m^2 (see module function)."""
+        return volume_gradient(self._pos(vert_pos), self.face_vert)
+
+    def vert_area_vector(self, vert_pos=None) -> np.ndarray:
+        """Area-weighted outward normal of each vertex, (nvert, 3) m^2.
+
+        Sum over the incident faces of (face area * unit outward normal) / 3,
+        i.e. (x_b - x_a) x (x_c - x_a) / 6 per face corner. Sums to zero over a
+        closed surface, and sum_i a_i . x_i = 3 V.
+        """
+        pos = self._pos(vert_pos)
+        face = self.face_vert
+        a, b, c = pos[face[:, 0]], pos[face[:, 1]], pos[face[:, 2]]
+        third = cross_rows(b - a, c - a) / 6.0
+        return scatter_corners(face, third, third, third, self.nvert)
+
+    def edge_length_mean(self, vert_pos=None) -> float:
+        """Mean length of the unique edges (m) at `vert_pos`, default rest."""
+        pos = self._pos(vert_pos)
+        edge = pos[self.edge_vert[:, 1]] - pos[self.edge_vert[:, 0]]
+        return float(np.mean(np.sqrt(np.sum(edge * edge, axis=1))))
+
+    def require_closed(self, why: str) -> None:
+        """Raise `MeshError` if the surface is open, naming its first border edges and `why`.
+
+        why: what needs the closed surface, e.g. "a volume constraint needs a
+        closed surface".
+        """
+        if self.closed:
+            return
+        edges = border_edges(self.face_vert, self.nvert)
+        listed = few(edges, lambda edge: f"({edge[0]}, {edge[1]})")
+        raise MeshError(
+            f"{why}; mesh {self.name!r} is open: {len(edges)} border edges "
+            f"(used by one face only), e.g. {listed}; expected every edge shared by two faces"
+        )
+
+    def to_trimesh(self) -> trimesh.Trimesh:
+        """A trimesh.Trimesh copy of the rest shape (vertices and faces kept as they are)."""
+        import trimesh
+
+        return trimesh.Trimesh(
+            vertices=np.array(self.vert_pos), faces=np.array(self.face_vert, dtype=np.int64),
+            process=False, validate=False,
+        )
+
+
+def _rebuild_mesh(vert_pos, face_vert, name):
+    return Mesh(vert_pos, face_vert, name=name)
