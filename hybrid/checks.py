@@ -55,9 +55,10 @@ def number(where, v, *, lo=None, lo_open=True, hi=None, hi_open=True) -> float:
     return float(v)
 
 
-def integer(where, v, *, lo) -> int:
-    if not (isinstance(v, int) and not isinstance(v, bool) and v >= lo):
-        fail(where, f"expected an integer >= {lo}, received {show(v)}")
+def integer(where, v, *, lo, hi=None) -> int:
+    """An integer >= lo (and <= hi)."""
+    if not (isinstance(v, int) and not isinstance(v, bool) and v >= lo and (hi is None or v <= hi)):
+        fail(where, f"expected an integer {f'in {lo}..{hi}' if hi is not None else f'>= {lo}'}, received {show(v)}")
     return int(v)
 
 

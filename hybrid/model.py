@@ -22,9 +22,10 @@ from . import schedule as _sched
 from .errors import SceneError
 from .kernel import use_parallel
 from .mesh import Mesh
-from .scene import INTEGRATORS, Masses, MeshSpec, Scene
+from .scene import INTEGRATORS, MESH_GENERATORS, Masses, MeshSpec, Scene
 from .stability import max_stable_dt
 from .terms import CONSTRAINT_TYPES, FORCE_TYPES, TERM_CLASSES, TERMS, Build, Volume
+from .terms.base import check_value
 
 __all__ = ["TERMS", "MembraneArrays", "Model", "compile_scene", "build_mesh"]
 
@@ -126,28 +127,23 @@ def build_mesh(scene: Scene) -> Mesh:
         return spec
     if not isinstance(spec, MeshSpec):
         raise SceneError(f"mesh: expected a MeshSpec or a hybrid.mesh.Mesh, received {type(spec).__name__}")
-    center = np.asarray(checks.vec3("mesh.center_m", spec.center_m))
+    # each field checked by the kind MeshSpec gives it (the scene file reads the same);
+    # the generator by the choice below, whose message also offers a path
+    val = {f.name: check_value(f"mesh.{f.name}", f.metadata["kind"], getattr(spec, f.name), f.metadata)
+           for f in dataclasses.fields(MeshSpec) if getattr(spec, f.name) is not None and f.name != "generator"}
+    center = np.asarray(val["center_m"])
     if spec.path is not None:
-        path = scene.resolve(spec.path)
-        m = Mesh.load(path)
-        scale = _positive(spec.unit_scale, "mesh.unit_scale")
-        return Mesh.from_arrays(m.vert_pos * scale + center, m.face_vert, name=m.name)
-    radius = _positive(spec.radius_m, "mesh.radius_m")
+        m = Mesh.load(scene.resolve(spec.path))
+        return Mesh.from_arrays(m.vert_pos * val["unit_scale"] + center, m.face_vert, name=m.name)
+    radius = val["radius_m"]
     gen = spec.generator
     if gen == "uv_sphere":
-        for key in ("segments", "rings"):
-            val = getattr(spec, key)
-            if not isinstance(val, int) or val < 3:
-                raise SceneError(f"mesh.{key}: expected an integer >= 3, received {val!r}")
-        return _mesh.uv_sphere(radius, spec.segments, spec.rings, center=tuple(center))
+        return _mesh.uv_sphere(radius, val["segments"], val["rings"], center=tuple(center))
     if gen == "icosphere":
-        if not isinstance(spec.subdivisions, int) or not 0 <= spec.subdivisions <= 7:
-            raise SceneError(f"mesh.subdivisions: expected an integer in 0..7, received {spec.subdivisions!r}")
-        return _mesh.icosphere(spec.subdivisions, radius, center=tuple(center))
+        return _mesh.icosphere(val["subdivisions"], radius, center=tuple(center))
     if gen == "icosahedron":
         return _mesh.icosahedron(radius, center=tuple(center))
-    raise SceneError(f"mesh: expected a path or a generator in ['uv_sphere', 'icosphere', 'icosahedron'], "
-                     f"received generator={gen!r}")
+    raise SceneError(f"mesh: expected a path or a generator in {list(MESH_GENERATORS)}, received generator={gen!r}")
 
 
 def _vert_area(mesh: Mesh) -> np.ndarray:

@@ -46,7 +46,7 @@ class MeshSpec:
     radius_m: float = param("positive", 0.12)
     segments: int = param("integer", 13, lo=3)
     rings: int = param("integer", 7, lo=2)
-    subdivisions: int = param("integer", 3, lo=0)
+    subdivisions: int = param("integer", 3, lo=0, hi=7)
     center_m: tuple[float, float, float] = param("vec3", (0.0, 0.0, 0.0))
     unit_scale: float = param("positive", 1.0)
 

@@ -87,7 +87,7 @@ def check_value(where: str, kind: str, value, meta: dict | None = None):
     if kind == "text":
         return checks.text(where, value)
     if kind == "integer":
-        return checks.integer(where, value, lo=meta["lo"])
+        return checks.integer(where, value, lo=meta["lo"], hi=meta.get("hi"))
     raise ValueError(f"kind {kind!r}: not a value kind {VALUE_KINDS}")
 
 
