@@ -33,8 +33,8 @@ from .. import checks
 from .. import regions as _regions
 from .. import schedule as _sched
 
-__all__ = ["param", "Rows", "force", "constraint", "order_terms", "Term", "Build", "FORCE_TYPES", "CONSTRAINT_TYPES", "TERM_CLASSES",
-           "FLAGGED", "check_value", "VALUE_KINDS"]
+__all__ = ["param", "Rows", "force", "constraint", "order_terms", "Term", "Build", "FORCE_TYPES", "CONSTRAINT_TYPES",
+           "TERM_CLASSES", "FLAGGED", "check_value", "VALUE_KINDS"]
 
 FORCE_TYPES: dict = {}
 CONSTRAINT_TYPES: dict = {}
@@ -146,7 +146,7 @@ class Term:
         return tuple(f.name for f in dataclasses.fields(cls)
                      if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING)
 
-    def value(self, b: "Build", field: str, what: str):
+    def value(self, field: str, what: str):
         """Field `field` checked by its kind (None stays None when it is the default)."""
         f = self.fields()[field]
         v = getattr(self, field)

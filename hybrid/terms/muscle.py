@@ -35,11 +35,11 @@ class Muscle(Term):
         if (self.toward_m is None) == (self.axis is None):
             raise SceneError(f"{what}: expected exactly one fibre direction, toward_m or axis, received "
                              f"toward_m={self.toward_m!r} axis={self.axis!r}")
-        toward = self.value(b, "toward_m", what)
-        axis = self.value(b, "axis", what)
+        toward = self.value("toward_m", what)
+        axis = self.value("axis", what)
         if axis is not None and not np.linalg.norm(axis) > 0:
             raise SceneError(f"{what}.axis: expected a non-zero vector, received {self.axis!r}")
-        angle = self.value(b, "max_angle_deg", what)
+        angle = self.value("max_angle_deg", what)
         s = b.schedule(self.stiffness, f"{what}.stiffness", 1)
         mesh = b.mesh
         pv, pn = muscle_pairs(mesh.vert_pos, mesh.ring_ptr, mesh.ring_vert, idx, toward=toward, axis=axis,

@@ -26,7 +26,7 @@ class Gravity(Term):
 
     def compile(self, b, what):
         super().compile(b, what)
-        b.out["accel"] = b.out.get("accel", np.zeros(3)) + np.asarray(self.value(b, "accel_m_s2", what))
+        b.out["accel"] = b.out.get("accel", np.zeros(3)) + np.asarray(self.value("accel_m_s2", what))
 
 
 @force("damping")
@@ -57,9 +57,9 @@ class Damping(Term):
                 raise SceneError(f"{what}: expected exactly one of coef_n_s_per_m or critical_fraction, received "
                                  f"coef_n_s_per_m={term.coef_n_s_per_m!r} critical_fraction={term.critical_fraction!r}")
             if term.coef_n_s_per_m is not None:
-                damp_coef[idx] = term.value(b, "coef_n_s_per_m", what)
+                damp_coef[idx] = term.value("coef_n_s_per_m", what)
             else:
-                frac = term.value(b, "critical_fraction", what)
+                frac = term.value("critical_fraction", what)
                 soft = idx[b.vert_stiffness[idx] <= 0]
                 if soft.size:
                     raise SceneError(f"{what}.critical_fraction: vertices {soft[:8].tolist()} have no elastic "

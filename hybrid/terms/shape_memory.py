@@ -33,7 +33,7 @@ class ShapeMemory(Term):
 
     def compile(self, b, what):
         idx = super().compile(b, what)
-        b.rows["shape_memory"].append((idx, self.value(b, "stiffness_n_per_m", what)))
+        b.rows["shape_memory"].append((idx, self.value("stiffness_n_per_m", what)))
 
     @classmethod
     def finish(cls, b):

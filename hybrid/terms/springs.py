@@ -24,7 +24,7 @@ class MassSpring(Term):
 
     def compile(self, b, what):
         idx = super().compile(b, what)
-        k = self.value(b, "stiffness_n_per_m", what)
+        k = self.value("stiffness_n_per_m", what)
         inside = np.zeros(b.mesh.nvert, bool)
         inside[idx] = True
         for e in np.nonzero(inside[b.mesh.edge_vert].all(axis=1))[0]:
@@ -75,7 +75,7 @@ class Attraction(Term):
 
     def compile(self, b, what):
         idx = super().compile(b, what)
-        k = self.value(b, "stiffness_n_per_m", what)
+        k = self.value("stiffness_n_per_m", what)
         if self.target_m is None:
             target = b.mesh.vert_pos[idx]
         else:

@@ -43,7 +43,7 @@ class SoftVolume(Term):
 
     def compile(self, b, what):
         super().compile(b, what)
-        b.out["soft_stiff"] = self.value(b, "stiffness_n_per_m", what)
+        b.out["soft_stiff"] = self.value("stiffness_n_per_m", what)
         b.mesh.require_closed(f"{what} (compressible volume) needs a closed surface")
         b.out["vol0"] = float(b.mesh.volume())
 
