@@ -44,10 +44,10 @@ file's head and each channel's program); `recorder` (the `Recorder` and its writ
 thread); `reader` (`read`).
 """
 
-from .reader import read
+from .reader import TOPICS, RecordingError, RecordingWarning, frames, read
 from .recorder import Recorder
 from .schemas import (GEOM_BOX, GEOM_CAPSULE, GEOM_CYLINDER, GEOM_ELLIPSOID, GEOM_SPHERE, MESH_EVERY_FRAME_MAX,
                       SCALAR_CHANNELS, body_geoms, region_colours)
 
-__all__ = ["Recorder", "read", "region_colours", "body_geoms", "SCALAR_CHANNELS", "MESH_EVERY_FRAME_MAX",
+__all__ = ["Recorder", "read", "frames", "RecordingError", "RecordingWarning", "TOPICS", "region_colours", "body_geoms", "SCALAR_CHANNELS", "MESH_EVERY_FRAME_MAX",
            "GEOM_SPHERE", "GEOM_CAPSULE", "GEOM_ELLIPSOID", "GEOM_CYLINDER", "GEOM_BOX"]
