@@ -433,6 +433,8 @@ def _scan(fh, f: _File, strict: bool) -> None:
             if op == HEADER:
                 _check_foreign(f)
         k += 9 + n
+    else:
+        f.truncated = f"the file ends at byte {f.size}, after a complete record but without its summary"
     if f.truncated is not None and last is not None and last.index_at + last.index_len == k:
         last.index_partial = True  # the file ends in (or just before) its message indexes
 
@@ -485,7 +487,7 @@ def _load(fh, f: _File, c: _Chunk) -> tuple[bytes, list]:
     if compression == "zstd":
         try:
             raw = zstandard.ZstdDecompressor().decompress(data, max_output_size=usize)
-        except zstandard.ZstdError as exc:
+        except (zstandard.ZstdError, OverflowError, MemoryError) as exc:  # a size no chunk can have
             raise _Bad(f"its data does not decompress: {exc}") from None
     elif compression == "":
         raw = data
