@@ -148,11 +148,7 @@ def _implied_length(op: int, prefix) -> int:
         c.take(c.u32())
         c.skip(c.u32())
     elif op == DATA_END:
-        c.k += 4
-    elif op == FOOTER:
-        c.k += 20
-    elif op in (STATISTICS, CHUNK_INDEX, METADATA_INDEX, ATTACHMENT_INDEX, SUMMARY_OFFSET):
-        return len(prefix)  # summary records: the summary's CRC vouches for them
+        c.skip(4)
     else:
         raise _Bad(f"opcode {op:#04x}, which hybrid does not write")
     return c.k
@@ -166,7 +162,6 @@ class _Chunk:
     t_lo: int
     t_hi: int
     usize: int
-    crc: int | None  # None: from the summary's index (the header's is checked on reading)
     compression: str
     csize: int
     index_at: int = 0  # its message indexes: where they start, and their bytes
@@ -179,7 +174,6 @@ class _Chunk:
 class _File:
     path: Path
     size: int
-    finished: bool = False
     library: str | None = None
     schemas: dict = field(default_factory=dict)  # id -> (name, encoding, data)
     channels: dict = field(default_factory=dict)  # id -> (topic, encoding, schema id)
@@ -294,7 +288,6 @@ def _read_summary(fh, f: _File) -> None:
     if actual != crc:
         raise f.error(f"the summary (bytes {summary_start} to {end}) is corrupt: its CRC is {actual:08x}, the "
                       f"footer gives {crc:08x}")
-    f.finished = True
     index, meta_at, nchunk = [], [], None
     c = _Cursor(summary)
     try:
@@ -315,7 +308,7 @@ def _read_summary(fh, f: _File) -> None:
                 t_lo, t_hi, start, length = body.u64(), body.u64(), body.u64(), body.u64()
                 offsets = body.map(_Cursor.u16, _Cursor.u64)
                 index_len, compression, csize, usize = body.u64(), body.str(), body.u64(), body.u64()
-                index.append(_Chunk(offset=start, length=length, t_lo=t_lo, t_hi=t_hi, usize=usize, crc=None,
+                index.append(_Chunk(offset=start, length=length, t_lo=t_lo, t_hi=t_hi, usize=usize,
                                     compression=compression, csize=csize, index_at=start + length,
                                     index_len=index_len, index_offsets=offsets))
             elif op == METADATA_INDEX:
@@ -338,7 +331,7 @@ def _read_summary(fh, f: _File) -> None:
         raise f.error(f"the header at byte offset 8 is corrupt: {exc or 'it overruns its length'}") from None
     data_start, data_end = 8 + 9 + n, summary_start - 13
     fh.seek(data_end)
-    if fh.read(5) != struct.pack("<BQ", DATA_END, 4)[:5]:
+    if fh.read(9) != struct.pack("<BQ", DATA_END, 4):
         raise f.error(f"no data-end record at byte offset {data_end}, before the summary")
     if nchunk is not None and nchunk != len(index):
         raise f.error(f"the summary counts {nchunk} chunks but indexes {len(index)}")
@@ -412,9 +405,9 @@ def _scan(fh, f: _File, strict: bool) -> None:
             f.truncated = f"the file ends at byte {f.size}, inside {kind} at byte {k} ({avail} of its {n} bytes)"
             break
         if op == CHUNK:
-            t_lo, t_hi, usize, crc, compression, csize = head
-            last = _Chunk(offset=k, length=9 + n, t_lo=t_lo, t_hi=t_hi, usize=usize, crc=crc,
-                          compression=compression, csize=csize, index_at=k + 9 + n)
+            t_lo, t_hi, usize, _, compression, csize = head
+            last = _Chunk(offset=k, length=9 + n, t_lo=t_lo, t_hi=t_hi, usize=usize, compression=compression,
+                          csize=csize, index_at=k + 9 + n)
             f.chunks.append(last)
         elif op == MESSAGE_INDEX:
             last.index_len += 9 + n
@@ -460,7 +453,7 @@ def _scan_summary(fh, f: _File, k: int) -> None:
 
 
 def _where(f: _File, i: int, c: _Chunk) -> str:
-    return (f"chunk {i + 1} of {len(f.chunks)}{'' if f.finished else '+'} (t {c.t_lo * 1e-9:.6g} to "
+    return (f"chunk {i + 1} of {len(f.chunks)} (t {c.t_lo * 1e-9:.6g} to "
             f"{c.t_hi * 1e-9:.6g} s, byte offset {c.offset})")
 
 
