@@ -235,3 +235,16 @@ def test_a_copy_reads_the_same(short, tmp_path):
         a, b = read(short), read(copy)
     np.testing.assert_array_equal(a["membrane"]["pos"], b["membrane"]["pos"])
     assert set(a) == set(b)
+
+
+def test_salvage_of_a_file_with_a_damaged_summary_reads_its_chunks(short, tmp_path):
+    """Issue 16, item 3: strict=False reads the chunks from their own headers when the
+    summary is corrupt, and says so."""
+    chunks, _ = _chunk_indexes(short)
+    whole = short.read_bytes()
+    summary_at = chunks[-1].chunk_start_offset + chunks[-1].chunk_length + chunks[-1].message_index_length + 13
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(_flipped(whole, summary_at + 40, 1))
+    with pytest.warns(RecordingWarning, match="summary .* is corrupt: its CRC .* one by one"):
+        got = read(bad, strict=False)
+    np.testing.assert_array_equal(got["membrane"]["pos"], read(short)["membrane"]["pos"])

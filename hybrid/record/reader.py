@@ -412,7 +412,12 @@ def _scan(fh, f: _File, strict: bool) -> None:
         elif op == MESSAGE_INDEX:
             last.index_len += 9 + n
         elif op == DATA_END:
-            _scan_summary(fh, f, k + 9 + n)
+            try:
+                _scan_summary(fh, f, k + 9 + n)
+            except RecordingError as exc:
+                if strict:
+                    raise
+                warnings.warn(f"{exc}; read its data section", RecordingWarning, stacklevel=4)
             return
         else:
             if len(prefix) < n:
@@ -443,8 +448,9 @@ def _scan_summary(fh, f: _File, k: int) -> None:
         if op not in _SUMMARY_OPS | {FOOTER}:
             raise f.error(f"the record at byte offset {k}, in the summary, is corrupt: opcode {op:#04x}")
         if op == FOOTER:
-            tail = f.size - (k + 9 + n)
-            if n == 20 and tail < 8 and fh.seek(k + 9 + n) >= 0 and MAGIC.startswith(fh.read(tail)):
+            fh.seek(k + 9 + n)
+            tail = fh.read(8)
+            if n == 20 and len(tail) < 8 and MAGIC.startswith(tail):
                 break
             raise f.error(f"the end of the file after its footer at byte offset {k} is corrupt: expected the "
                           f"8 bytes {MAGIC!r}")
