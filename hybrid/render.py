@@ -15,6 +15,7 @@ own ffmpeg binary).
 
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -50,12 +51,21 @@ class Frames:
 
 def frames_from_recording(path: str | Path) -> Frames:
     """The frames of a `run.mcap` (hybrid.record)."""
-    from .record import read
+    import warnings
+
+    from .record import RecordingWarning, read
 
     path = Path(path)
     if not path.is_file():
         raise HybridError(f"recording {str(path)!r}: no such file")
-    data = read(path)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", RecordingWarning)
+        data = read(path)
+    for w in caught:  # a killed run's recording is drawn from what it holds: say so, on one line
+        if issubclass(w.category, RecordingWarning):
+            sys.stderr.write(f"hybrid: warning: {' '.join(str(w.message).split())}\n")
+        else:
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     if "model" not in data or "membrane" not in data:
         raise HybridError(f"recording {str(path)!r}: no membrane frames (not written by hybrid run?)")
     meta, pts = data["model"], data["membrane"]

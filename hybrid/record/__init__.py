@@ -35,19 +35,25 @@ Crash safety: the frames held are handed to the writer at least every `flush_s`
 seconds of wall time, each batch written as a whole chunk, so a killed process leaves
 every frame but those of its last second or so; `close()` (called in a `finally` by `hybrid run`, or by
 `with Recorder(...)`) encodes the rest and finishes the file on an error or an
-interrupt. `read` accepts unfinished files (no summary, truncated last record).
+interrupt. `read` accepts unfinished files (no summary, truncated last record),
+with a warning.
+
+Reading (`read`, `frames`) verifies every chunk it reads (CRC, header, message
+indexes) and the file's structure; a corrupt chunk raises `RecordingError`, or is
+skipped with a `RecordingWarning` under `strict=False`. A time window (`t_s`) and a
+choice of topics read only the chunks that overlap the window.
 
 The package, by concern (imports point down the list, the reader takes only the schemas):
 `schemas` (topics, constants, the model's description, protobuf schemas); `encoder`
 (the compiled protobuf pass) and `mcap_writer` (the file's records); `channels` (the
 file's head and each channel's program); `recorder` (the `Recorder` and its writer
-thread); `reader` (`read`).
+thread); `reader` (`read`, `frames`).
 """
 
-from .reader import read
+from .reader import TOPICS, RecordingError, RecordingWarning, frames, read
 from .recorder import Recorder
 from .schemas import (GEOM_BOX, GEOM_CAPSULE, GEOM_CYLINDER, GEOM_ELLIPSOID, GEOM_SPHERE, MESH_EVERY_FRAME_MAX,
                       SCALAR_CHANNELS, body_geoms, region_colours)
 
-__all__ = ["Recorder", "read", "region_colours", "body_geoms", "SCALAR_CHANNELS", "MESH_EVERY_FRAME_MAX",
+__all__ = ["Recorder", "read", "frames", "RecordingError", "RecordingWarning", "TOPICS", "region_colours", "body_geoms", "SCALAR_CHANNELS", "MESH_EVERY_FRAME_MAX",
            "GEOM_SPHERE", "GEOM_CAPSULE", "GEOM_ELLIPSOID", "GEOM_CYLINDER", "GEOM_BOX"]

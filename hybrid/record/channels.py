@@ -5,6 +5,7 @@ batches of frames encoded into chunks."""
 from __future__ import annotations
 
 import json
+import zlib
 
 import numpy as np
 
@@ -94,11 +95,14 @@ class _FrameWriter:
         self._writer = w = _McapWriter(file, chunk_size=chunk_size)
         n, face, colours = plan["nvert"], plan["face_vert"], plan["colours"]
         bodies = [name for _, name in plan["bodies"]]
-        w.metadata("hybrid", {"description": json.dumps({
+        description = json.dumps({
             "scene": plan["scene"], "dt_s": plan["dt_s"], "every_s": plan["every_s"], "nvert": n,
             "face_vert": face.tolist(), "regions": plan["regions"], "vert_label": plan["vert_label"].tolist(),
             "vert_rgba": np.round(colours, 4).tolist(), "link_vert": plan["link_vert"].tolist(),
-            "geoms": plan["geoms"], "bodies": bodies})})
+            "geoms": plan["geoms"], "bodies": bodies})
+        # MCAP gives metadata no CRC of its own: the reader checks this one
+        w.metadata("hybrid", {"description": description,
+                              "description_crc32": f"{zlib.crc32(description.encode()):08x}"})
         schemas = {name: w.schema(name, "protobuf", data) for name, data in _schemas().items()}
 
         def channel(topic, schema):
