@@ -43,11 +43,12 @@ indexes) and the file's structure; a corrupt chunk raises `RecordingError`, or i
 skipped with a `RecordingWarning` under `strict=False`. A time window (`t_s`) and a
 choice of topics read only the chunks that overlap the window.
 
-The package, by concern (imports point down the list, the reader takes only the schemas):
+The package, by concern (imports point down the list; reading takes only the schemas):
 `schemas` (topics, constants, the model's description, protobuf schemas); `encoder`
 (the compiled protobuf pass) and `mcap_writer` (the file's records); `channels` (the
 file's head and each channel's program); `recorder` (the `Recorder` and its writer
-thread); `reader` (`read`, `frames`).
+thread); `mcap_reader` (the file's records read back and verified, chunk by chunk) and
+`reader` (`read`, `frames`: the records decoded into arrays).
 """
 
 from .reader import TOPICS, RecordingError, RecordingWarning, frames, read
