@@ -1,12 +1,14 @@
-"""The command line: outputs, one-line errors with status 2, the benchmark's JSON."""
+"""The command line: outputs, one-line errors with status 2, the benchmark's JSON, the recording."""
 
 import json
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 from hybrid.cli import main
+from hybrid.record import read
 
 
 def run_cli(*args, cwd=None):
@@ -111,3 +113,23 @@ def test_a_file_system_error_during_a_run_is_one_line_with_status_2(tmp_path, mo
     assert main(["run", "membrane_demo", "--duration", "0.01", "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert err == [f"hybrid: error: cannot read or write {str(tmp_path / 'o' / 'summary.json')!r}: No space left on device"]
+
+
+def test_the_cli_run_that_diverges_still_writes_a_readable_recording(tmp_path, capsys):
+    out = tmp_path / "out"
+    assert main(["run", "membrane_demo", "--dt", "0.006", "--duration", "1", "--out", str(out)]) == 2
+    assert "diverged" in capsys.readouterr().err
+    summary = json.loads((out / "summary.json").read_text())
+    data = read(out / "run.mcap")
+    t = data["membrane"]["t"]
+    # frames every 2 steps (0.012 s) up to the last complete one before the failing step
+    expected = np.arange(0, summary["steps"] + 1, 2) * 0.006
+    np.testing.assert_allclose(t, expected, rtol=0, atol=1e-9)
+
+
+def test_no_record_and_record_every(tmp_path):
+    assert main(["run", "membrane_demo", "--duration", "0.1", "--out", str(tmp_path / "a"), "--no-record"]) == 0
+    assert not (tmp_path / "a" / "run.mcap").exists()
+    assert main(["run", "membrane_demo", "--duration", "0.1", "--out", str(tmp_path / "b"),
+                 "--record-every", "0.05"]) == 0
+    np.testing.assert_allclose(read(tmp_path / "b" / "run.mcap")["/pressure"]["t"], [0.0, 0.05, 0.1], atol=1e-9)

@@ -41,6 +41,8 @@ from hybrid.scene import Damping, MassSpring, Masses, Nailed, Scene, ShapeMemory
 from hybrid.simulation import Simulation
 from hybrid.stability import max_stable_dt, step_matrix, table1_eigenvalues
 
+from helpers import hanging_sphere
+
 # (h s, k N/m, kv N s/m, m kg): underdamped and overdamped, stable and unstable
 CASES = [
     (1e-3, 3000.0, 2.0, 0.05),   # complex pair, the trunk's shape memory at its usual step
@@ -216,14 +218,9 @@ def test_table2_bounds_from_table1():
 
 
 def _damped_incompressible_sphere(integrator, dt, m=0.05, c=50.0, gravity=False):
-    from hybrid.regions import HalfSpace
-    from hybrid.scene import Gravity, MeshSpec, Volume
-    forces = (Damping(coef_n_s_per_m=c),)
-    if gravity:
-        forces = (Gravity(), ShapeMemory(3000.0)) + forces
-    return Scene(mesh=MeshSpec(), masses=Masses(per_vertex_kg=(m,) * 80),
-                 regions={"bottom": HalfSpace((0.0, 0.0, -0.1), (0.0, 0.0, -1.0))},
-                 forces=forces, constraints=(Nailed("bottom"), Volume()), dt_s=dt, integrator=integrator)
+    """The hanging sphere, or (gravity=False) the same sphere with damping alone."""
+    scene = hanging_sphere(dt, integrator, kv=c, m=m)
+    return scene if gravity else scene.without("gravity", "shape_memory")
 
 
 @pytest.mark.parametrize("integrator", ["explicit_euler", "symplectic_euler"])

@@ -19,6 +19,8 @@ def _square(x):
 
 
 PARAMS = [{"a": a, "b": b} for a, b in [(3, 1), (0, 2), (5, 0), (1, 1), (4, 4), (2, 9)]]
+
+
 WANT = [a * 10 + b for a, b in [(3, 1), (0, 2), (5, 0), (1, 1), (4, 4), (2, 9)]]
 
 
@@ -43,12 +45,9 @@ def test_errors_raise_or_return():
         sweep(_task, params, on_error="ignore")
 
 
-def test_dask_local_cluster_same_results():
-    distributed = pytest.importorskip("dask.distributed")
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                  dashboard_address=None) as cluster:
-        res = sweep(_task, PARAMS, scheduler=cluster.scheduler_address)
-        assert [r["ab"] for r in res] == WANT
-        assert len({r["pid"] for r in res} - {os.getpid()}) >= 1
-        out = sweep(_task, [{"a": 2}, {"a": -5}], scheduler=cluster.scheduler_address, on_error="return")
-        assert out[0]["ab"] == 20 and isinstance(out[1], SimulationDiverged) and out[1].step == 7
+def test_dask_local_cluster_same_results(dask_cluster):
+    res = sweep(_task, PARAMS, scheduler=dask_cluster.scheduler_address)
+    assert [r["ab"] for r in res] == WANT
+    assert len({r["pid"] for r in res} - {os.getpid()}) >= 1
+    out = sweep(_task, [{"a": 2}, {"a": -5}], scheduler=dask_cluster.scheduler_address, on_error="return")
+    assert out[0]["ab"] == 20 and isinstance(out[1], SimulationDiverged) and out[1].step == 7

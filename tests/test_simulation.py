@@ -1,9 +1,26 @@
-"""Simulation.set_state: a run started from a state given by hand, checked at the door."""
+"""The changing state of a run (hybrid.simulation.Simulation): set_state (a run started
+from a state given by hand, checked at the door), the step count, Python schedules,
+the compiled frame capture (step_frames), and membrane-only runs that never import MuJoCo."""
+
+from __future__ import annotations
+
+import dataclasses
+import subprocess
+import sys
+import textwrap
 
 import numpy as np
 import pytest
 
 import hybrid
+from hybrid.demo import membrane_demo
+from hybrid.errors import SimulationDiverged
+from hybrid.model import compile_scene
+from hybrid.scene import Muscle
+from hybrid.schedule import Function
+from hybrid.simulation import Simulation
+
+from helpers import BASE, with_force
 
 
 @pytest.fixture(scope="module")
@@ -12,8 +29,8 @@ def membrane_model():
 
 
 @pytest.fixture(scope="module")
-def trunk_model():
-    return hybrid.compile_scene(hybrid.load_scene("breathing"))
+def trunk_model(breathing):
+    return hybrid.compile_scene(breathing)
 
 
 def _saved(sim):
@@ -128,3 +145,115 @@ def test_a_coupled_state_set_by_hand_continues_the_run(trunk_model):
     assert np.abs(b.vert_pos - a.vert_pos).max() < 1e-5  # m, against a rib lift of millimetres
     assert np.abs(b.mj_data.qpos - a.mj_data.qpos).max() < 1e-4  # rad
     assert b.pressure == pytest.approx(a.pressure, rel=1e-3)
+
+
+def test_step_count_must_be_a_non_negative_integer():
+    sim = Simulation(compile_scene(BASE))
+    for n in (-1, 2.5, "10"):
+        with pytest.raises(ValueError, match=r"n: expected an integer >= 0, received"):
+            sim.step(n)
+    assert sim.steps_done == 0
+
+
+def test_a_python_schedule_returning_a_wrong_size_is_named():
+    def contraction(t):
+        return [1.0, 2.0]  # neither a number nor a 3-vector
+
+    sim = Simulation(compile_scene(with_force(Muscle("top", Function(contraction), toward_m=(0, 0, 0.12)))))
+    with pytest.raises(SimulationDiverged, match=r"schedule function 'contraction' returned \[1\.0, 2\.0\] at "
+                                                 r"t = 0 s; expected 1 or 3 finite numbers"):
+        sim.step(1)
+
+
+def test_step_frames_captures_the_state_at_each_stop():
+    stops = [3, 10, 10, 17]
+    sim, ref = hybrid.load(), hybrid.load()
+    frames = sim.frames_buffer(8)
+    sim.step_frames(stops, frames)
+    assert frames.count == 4 and sim.steps_done == 17
+    for i, stop in enumerate(stops):
+        ref.step(stop - ref.steps_done)
+        np.testing.assert_array_equal(frames.pos[i], ref.vert_pos)
+        np.testing.assert_array_equal(frames.body_pos[i], ref.mj_data.xpos[1:])
+        np.testing.assert_array_equal(frames.body_quat[i], ref.mj_data.xquat[1:])
+        assert frames.scal[i, 0] == ref.time
+        assert frames.scal[i, 1] == ref.volume
+        assert frames.scal[i, 2] == ref.pressure
+        assert frames.scal[i, 3] == ref.kinetic_energy
+
+
+def test_step_frames_keeps_the_frames_before_a_divergence():
+    scene = dataclasses.replace(membrane_demo(), dt_s=0.006)  # diverges at step 11
+    sim, ref = hybrid.load(scene), hybrid.load(scene)
+    frames = sim.frames_buffer(10)
+    with pytest.raises(SimulationDiverged) as caught:
+        sim.step_frames(np.arange(2, 21, 2), frames)
+    with pytest.raises(SimulationDiverged) as expected:
+        ref.step(20)
+    assert caught.value.step == expected.value.step == 11
+    assert frames.count == 5  # steps 2, 4, ..., 10
+    assert sim.steps_done == ref.steps_done == 11
+    with pytest.raises(SimulationDiverged):  # a failed simulation refuses to go on
+        sim.step_frames([12], frames)
+    assert frames.count == 0
+
+
+@pytest.mark.parametrize("stops, expected", [([5, 3], "increasing"), ([-1], "increasing"),
+                                             (list(range(1, 12)), "capacity")])
+def test_step_frames_refuses_bad_stops(stops, expected):
+    sim = hybrid.load(membrane_demo())
+    with pytest.raises(ValueError, match=expected):
+        sim.step_frames(stops, sim.frames_buffer(10))
+
+
+MEMBRANE_ONLY = textwrap.dedent("""\
+    name = "membrane_only"
+    dt_s = 1e-3
+    [mesh]
+    generator = "uv_sphere"
+    [masses]
+    total_kg = 4.0
+    [regions]
+    top = { half_space = { point = [0, 0, 0.07], normal = [0, 0, 1] } }
+    base = { half_space = { point = [0, 0, -0.09], normal = [0, 0, -1] } }
+    [[forces]]
+    type = "shape_memory"
+    stiffness_n_per_m = 3000.0
+    [[forces]]
+    type = "damping"
+    critical_fraction = 0.3
+    [[forces]]
+    type = "muscle"
+    region = "top"
+    toward_m = [0, 0, 0.12]
+    stiffness = { breathing = { peak = 60.0 } }
+    [[constraints]]
+    type = "nailed"
+    region = "base"
+    [[constraints]]
+    type = "volume"
+    """)
+
+
+def test_membrane_only_scene_never_imports_mujoco_and_absent_terms_never_run(tmp_path):
+    path = tmp_path / "membrane.toml"
+    path.write_text(MEMBRANE_ONLY)
+    code = textwrap.dedent(f"""\
+        import sys
+        from hybrid.scenefile import load_scene
+        from hybrid.model import compile_scene
+        from hybrid.simulation import Simulation
+        scene = load_scene({str(path)!r})
+        sim = Simulation(compile_scene(scene))
+        sim.step(300)
+        calls = sim.term_calls
+        assert calls["muscle"] == 300 and calls["shape_memory"] == 300, calls
+        lean = Simulation(compile_scene(scene.without("muscle")))
+        lean.step(300)
+        assert lean.term_calls["muscle"] == 0 and lean.term_calls["shape_memory"] == 300
+        assert lean.term_calls["mass_spring"] == 0 and lean.term_calls["gravity"] == 0
+        print("mujoco" in sys.modules, sim.rigid is None)
+        """)
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.split() == ["False", "True"]

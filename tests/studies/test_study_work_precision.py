@@ -3,8 +3,6 @@
 import json
 import math
 
-import pytest
-
 from hybrid.studies.cli import main_study
 from hybrid.studies.work_precision import observed_order
 
@@ -42,19 +40,10 @@ def test_small_work_precision(tmp_path, capsys):
     assert abs(observed_order([1.0, 0.5, 0.25], [4.0, 2.0, 1.0]) - 1.0) < 1e-12
 
 
-def test_small_work_precision_on_dask_cluster(tmp_path):
+def test_small_work_precision_on_dask_cluster(tmp_path, dask_cluster):
     """`--scheduler ADDRESS` sends the runs to an existing Dask cluster."""
-    distributed = pytest.importorskip("dask.distributed")
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                  dashboard_address=None) as cluster:
-        assert main_study(["work-precision", "--out", str(tmp_path), "--small",
-                           "--scheduler", cluster.scheduler_address]) == 0
+    assert main_study(["work-precision", "--out", str(tmp_path), "--small",
+                       "--scheduler", dask_cluster.scheduler_address]) == 0
     d = json.loads((tmp_path / "work_precision.json").read_text())
-    assert d["scheduler"] == cluster.scheduler_address and d["failures"] == []
+    assert d["scheduler"] == dask_cluster.scheduler_address and d["failures"] == []
     assert len(d["runs"]) == 16 and all(0.7 < p < 1.5 for p in d["order"].values())
-
-
-def test_bad_scheduler_option(capsys):
-    with pytest.raises(SystemExit) as info:
-        main_study(["work-precision", "--scheduler"])
-    assert info.value.code == 2 and "scheduler" in capsys.readouterr().err

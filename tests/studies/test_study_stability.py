@@ -2,20 +2,14 @@
 
 from __future__ import annotations
 
-import json
-
 from hybrid.studies.cli import main_study
 
-
-def _strict_load(path):
-    def no_constant(name):
-        raise ValueError(f"non-finite constant {name} in {path}")
-    return json.loads(path.read_text(), parse_constant=no_constant)
+from helpers import strict_load
 
 
 def test_small_stability_study_writes_the_json(tmp_path):
     assert main_study(["stability", "--out", str(tmp_path), "--small"]) == 0
-    data = _strict_load(tmp_path / "stability.json")
+    data = strict_load(tmp_path / "stability.json")
     assert data["table1_max_abs_error"] <= 1e-12
     rows = data["table3"]
     assert {(r["model"], r["perturbation"]) for r in rows} == {

@@ -17,32 +17,23 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hybrid.terms.shape_memory import add_shape_memory, shape_memory_frame_coef
 from hybrid.mesh import Mesh, icosphere, uv_sphere
 from hybrid.model import compile_scene
 from hybrid.regions import Indices
 from hybrid.scene import Damping, Masses, MeshSpec, Nailed, Scene, ShapeMemory, Volume
 from hybrid.simulation import Simulation
+from hybrid.terms.shape_memory import add_shape_memory, shape_memory_frame_coef
+
+from helpers import open_hemisphere
+
 
 K = 3000.0  # N/m
-
-
-def hemisphere() -> Mesh:
-    """An open surface: the northern half of a UV sphere (13 x 8), built from arrays.
-    Its 13 border points have open fans of 4 neighbours."""
-    base = uv_sphere(0.12, 13, 8)
-    centroid_z = base.vert_pos[base.face_vert].mean(axis=1)[:, 2]
-    face = base.face_vert[centroid_z > 0.0]
-    used = np.unique(face)
-    remap = np.full(base.nvert, -1)
-    remap[used] = np.arange(used.size)
-    return Mesh.from_arrays(base.vert_pos[used], remap[face], name="hemisphere")
 
 
 MESHES = {
     "uv_sphere_80": lambda: uv_sphere(0.12),
     "icosphere3": lambda: icosphere(3, 0.12),
-    "hemisphere_open": hemisphere,
+    "hemisphere_open": open_hemisphere,
 }
 
 
@@ -162,30 +153,3 @@ def test_perturbed_sphere_returns_to_its_rest_shape(with_volume):
     assert shape_dev < 1e-6 * edge
     if with_volume:
         assert abs(model.mesh.volume(pos) - model.mesh.volume()) <= 1e-12 * model.mesh.volume()
-
-
-@pytest.mark.parametrize("subdivisions, parallel", [(3, False), (4, True)])
-def test_step_forces_are_the_terms_added_point_by_point(subdivisions, parallel):
-    """The step sets gravity, damping and the shape memory in one pass over chunks
-    of points, walking the shape-memory points from each chunk's first on; with
-    a nailed cap (shape memory on a subset) and meshes of several chunks, its
-    forces equal the terms computed one by one."""
-    import dataclasses
-
-    from hybrid.bench import bench_membrane
-    from hybrid.step import membrane_forces, new_state
-
-    model = compile_scene(bench_membrane(subdivisions))
-    model = dataclasses.replace(model, arrays=model.arrays._replace(parallel=parallel))
-    a = model.arrays
-    assert 0 < a.sm_vert.size < model.nvert  # a subset: the nailed cap has none
-    rng = np.random.default_rng(3)
-    state = new_state(a)
-    state.vert_pos[:] = a.vert_rest + rng.normal(scale=1e-3, size=a.vert_rest.shape)
-    state.vert_vel[:] = rng.normal(scale=1e-2, size=a.vert_rest.shape)
-    membrane_forces(a, state, 0.0)
-    want = np.where(a.vert_free[:, None] > 0, a.vert_mass[:, None] * a.accel[None, :], 0.0)
-    want -= a.damp_coef[:, None] * state.vert_vel
-    add_shape_memory(a.sm_vert, a.sm_stiff, a.sm_coef, a.ring_ptr, a.ring_vert, a.ring_closed, state.vert_pos,
-                     np.zeros((a.sm_vert.size, 9)), want)
-    np.testing.assert_allclose(state.vert_force, want, rtol=0, atol=1e-13 * np.abs(want).max())

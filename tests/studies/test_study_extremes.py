@@ -3,17 +3,9 @@ refused, with a message; no NaN in the JSON; nothing unexpected raised."""
 
 from __future__ import annotations
 
-import json
-
-import pytest
-
 from hybrid.studies.cli import main_study
 
-
-def _strict_load(path):
-    def no_constant(name):
-        raise ValueError(f"non-finite constant {name} in {path}")
-    return json.loads(path.read_text(), parse_constant=no_constant)
+from helpers import strict_load
 
 
 def test_small_extremes_catalogue(tmp_path, capsys, monkeypatch):
@@ -23,7 +15,7 @@ def test_small_extremes_catalogue(tmp_path, capsys, monkeypatch):
     assert main_study(["extremes", "--out", str(tmp_path), "--small"]) == 0
     assert "extremes:" in capsys.readouterr().out
     assert not list(cwd.iterdir())  # MuJoCo's warnings (light ribs) leave no MUJOCO_LOG.TXT here
-    data = _strict_load(tmp_path / "extremes.json")
+    data = strict_load(tmp_path / "extremes.json")
     cases = data["cases"]
     assert len(cases) >= 14
     names = [c["name"] for c in cases]
@@ -45,11 +37,3 @@ def test_small_extremes_catalogue(tmp_path, capsys, monkeypatch):
     assert by["baseline_membrane"] == "stable" and by["baseline_coupled"] == "stable"
     assert by["invalid_dt"] == "refused" and by["missing_mjcf"] == "refused"
     assert by["dt_2x_bound"] == "diverged"
-
-
-def test_study_cli_bad_input_is_one_line_status_2(capsys):
-    with pytest.raises(SystemExit) as exc:
-        main_study(["extremes"])  # --out missing
-    assert exc.value.code == 2
-    err = capsys.readouterr().err
-    assert err.startswith("hybrid study: error:") and err.count("\n") == 1

@@ -9,15 +9,16 @@ bodies and its pelvis points to the sacrum, through `rigid.mjcf = "myo_sim:myoto
 
 import hashlib
 import importlib.util
-from pathlib import Path
 
 import numpy as np
 import pytest
+from pathlib import Path
 
 from hybrid.errors import RigidError
 
-HERE = Path(__file__).resolve().parent
-SCENE = HERE.parent / "models" / "scenes" / "myotorso_breathing.toml"
+
+SCENE = Path(__file__).resolve().parents[2] / "models" / "scenes" / "myotorso_breathing.toml"
+
 
 pytestmark = pytest.mark.skipif(importlib.util.find_spec("myo_sim") is None,
                                 reason="myo_sim (PyPI myo-sim) is not installed: pip install -e '.[myo]'")

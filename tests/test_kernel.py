@@ -1,0 +1,150 @@
+"""How the kernels are compiled (hybrid.kernel): the compiled-code cache, a folder per
+version of the kernel sources (an edit elsewhere keeps it), writes locked, entries safe
+to load in any order; folders of other versions removed once unused for a while, by the
+command line (not by `import hybrid`); and the multi-core build of the per-point passes."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from pathlib import Path
+
+from hybrid.kernel import prune_old_caches
+from hybrid.model import compile_scene
+
+
+def test_cache_folder_follows_numba_cache_dir_and_saves_are_locked(tmp_path):
+    code = ("import hybrid.kernel as k, numba.core.caching as c; "
+            "print(k.CACHE_DIR); print(getattr(c.IndexDataCacheFile.save, '_hybrid_locked', False))")
+    env = {**__import__("os").environ, "NUMBA_CACHE_DIR": str(tmp_path)}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env,
+                         check=True).stdout.split()
+    assert out[0].startswith(str(tmp_path / "numba-"))
+    assert out[1] == "True"
+
+
+def _package_copy(tmp_path) -> Path:
+    import hybrid.kernel as k
+
+    copy = tmp_path / "hybrid"
+    shutil.copytree(Path(k.__file__).parent, copy, ignore=shutil.ignore_patterns("__pycache__"))
+    return copy
+
+
+def _edit(path: Path) -> None:
+    path.write_text(path.read_text() + "\n# an edit\n")
+
+
+def test_the_kernel_sources_are_the_compiling_modules_and_what_they_import(tmp_path):
+    import hybrid.kernel as k
+
+    package = _package_copy(tmp_path)
+    names = {p.relative_to(package).as_posix() for p in k.kernel_sources(package)}
+    assert {"kernel.py", "terms/shape_memory.py", "terms/volume.py", "step.py", "coupling.py", "schedule.py"} <= names
+    assert {"errors.py", "scene.py"} <= names  # imported by kernels: their constants compile in
+    assert not names & {"render.py", "cli.py", "run.py", "sweep.py", "__init__.py", "studies/cli.py"}
+
+
+def test_cache_folder_follows_the_kernel_sources_only(tmp_path):
+    import hybrid.kernel as k
+
+    package = _package_copy(tmp_path)
+    before = k._cache_dir(package)
+    _edit(package / "render.py")  # an observer: nothing compiled changes
+    _edit(package / "studies" / "cli.py")
+    (package / "notes.py").write_text("import numpy\n")
+    assert k._cache_dir(package) == before
+    _edit(package / "terms" / "muscle.py")  # a kernel module
+    after_kernel = k._cache_dir(package)
+    assert after_kernel != before
+    _edit(package / "scene.py")  # imported by kernel modules
+    assert k._cache_dir(package) != after_kernel
+    # a new module that compiles counts without being listed anywhere, and so do its imports
+    (package / "notes.py").write_text("from .kernel import kernel\nfrom . import render\n")
+    with_new = k._cache_dir(package)
+    assert with_new != after_kernel
+    _edit(package / "render.py")
+    assert k._cache_dir(package) != with_new
+
+
+def test_a_kernel_compiled_beside_cached_parallel_twins_loads_in_a_new_process(tmp_path):
+    """numba issue 8578: the breathing trunk caches the parallel twins; a later process
+    compiles the membrane-only step beside them (loaded from the cache); a third process
+    that loads that step first crashed (a null call, exit -11) before hybrid started
+    numba's threading layer at import."""
+    env = {**__import__("os").environ, "NUMBA_CACHE_DIR": str(tmp_path)}
+    membrane = "import hybrid; from hybrid.demo import membrane_demo; hybrid.load(membrane_demo()).step(2)"
+    for code in ("import hybrid; hybrid.load('breathing').step(2)", membrane, membrane):
+        done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
+        assert done.returncode == 0, (code, done.returncode, done.stderr[-2000:])
+
+
+DAY = 86400.0
+
+
+def _folder(base, name, last_used):
+    folder = base / name
+    (folder / "index").mkdir(parents=True)
+    (folder / "index" / "kernel.nbi").write_bytes(b"x")
+    if last_used is not None:
+        (folder / ".last_used").touch()
+        os.utime(folder / ".last_used", (last_used, last_used))
+    return folder
+
+
+def test_old_cache_folders_of_other_versions_are_removed_and_nothing_else(tmp_path):
+    now = 1_800_000_000.0
+    current = tmp_path / "numba-0123456789abcdef"
+    old = _folder(tmp_path, "numba-aaaaaaaaaaaaaaaa", now - 31 * DAY)
+    recent = _folder(tmp_path, "numba-bbbbbbbbbbbbbbbb", now - 29 * DAY)
+    unmarked_old = _folder(tmp_path, "numba-cccccccccccccccc", None)  # from before the marks: its own mtime
+    os.utime(unmarked_old, (now - 40 * DAY, now - 40 * DAY))
+    other = _folder(tmp_path, "numba-notahash", now - 400 * DAY)  # not one of ours by name
+    removed = prune_old_caches(str(current), 30, now)
+    assert sorted(removed) == sorted([str(old), str(unmarked_old)])
+    assert not old.exists() and not unmarked_old.exists()
+    assert recent.exists() and other.exists()
+    # the folder in use is marked as used now, and is never a candidate
+    assert (current / ".last_used").stat().st_mtime == now
+    assert prune_old_caches(str(current), 0, now + 10 * DAY) == [str(recent)]
+    assert current.exists()
+
+
+def test_the_command_line_prunes_and_import_does_not(tmp_path):
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
+    old = _folder(tmp_path, "numba-aaaaaaaaaaaaaaaa", 1_000_000_000.0)
+    where = "import hybrid.kernel as k; print(k.CACHE_DIR)"
+    current = subprocess.run([sys.executable, "-c", where], capture_output=True, text=True, env=env,
+                             check=True).stdout.strip()
+    mark = os.path.join(current, ".last_used")
+    assert old.exists() and not os.path.exists(mark)  # import hybrid: nothing marked, nothing removed
+    subprocess.run([sys.executable, "-m", "hybrid", "--help"], capture_output=True, env=env, check=True)
+    assert not old.exists()
+    assert os.path.exists(mark)
+
+
+def test_parallel_build_matches_the_serial_build():
+    """Large meshes run the multi-core build of the per-point passes
+    (hybrid.kernel); its partial sums are reduced serially in the same order,
+    so the two builds must agree to the last bits over a run."""
+    import dataclasses
+
+    from hybrid.bench import bench_membrane
+    from hybrid.simulation import Simulation
+
+    model = compile_scene(bench_membrane(4))  # 2562 points: above the parallel threshold
+    model = model.with_dt(0.25 * model.dt_stable_s)
+    runs = {}
+    for parallel in (False, True):
+        m = dataclasses.replace(model, arrays=model.arrays._replace(parallel=parallel))
+        sim = Simulation(m)
+        sim.step(200)
+        runs[parallel] = (sim.vert_pos.copy(), sim.pressure)
+    assert np.max(np.abs(runs[True][0] - runs[False][0])) <= 1e-15
+    assert runs[True][1] == pytest.approx(runs[False][1], rel=1e-13)
+    assert runs[True][1] != 0.0
