@@ -17,7 +17,7 @@ Step 6 here, all right-hand sides taken at the old state (forward Euler):
 
 It is first order in h. `run_paper` and `run_mujoco` move the same free body (no
 gravity, no contact) under a constant force fixed in the body at a body-fixed point,
-so that their final states can be compared (tests/test_rigid.py: order of convergence
+so that their final states can be compared (tests/studies/test_rigid_reference.py: order of convergence
 as h halves, against MuJoCo's RK4 at a much smaller step).
 
 Conventions: quaternions (w, x, y, z), body -> world, as MuJoCo. SI units.

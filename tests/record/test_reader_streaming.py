@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import hybrid
-import hybrid.record.reader as reader
+import hybrid.record.mcap_reader as reader  # where the chunks are loaded
 from hybrid.demo import membrane_demo
 from hybrid.record import Recorder, RecordingWarning, frames, read
 from hybrid.run import run
