@@ -66,7 +66,7 @@ from .scene import Masses, MeshSpec, Rigid, RigidLink, Scene
 from .terms import CONSTRAINT_TYPES, FORCE_TYPES
 from .terms.base import check_value
 
-__all__ = ["load_scene", "scene_from_dict", "scene_to_dict", "apply_overrides", "builtin_scene", "packaged_model",
+__all__ = ["load_scene", "scene_from_dict", "scene_to_dict", "scene_to_toml", "apply_overrides", "builtin_scene", "packaged_model",
            "builtin_scenes"]
 
 
@@ -456,6 +456,14 @@ def scene_to_dict(scene: Scene) -> dict:
         d["rigid"] = {"mjcf": str(r.mjcf), "prefix": r.prefix, "add_link_mass": r.add_link_mass,
                       "links": [{"region": _sel_to(k.region), "body": k.body, "name": k.name} for k in r.links]}
     return d
+
+
+def scene_to_toml(scene: Scene) -> str:
+    """The scene file of `scene`: `load_scene` of it gives `scene` back (SceneError
+    for what TOML cannot hold, as `scene_to_dict`)."""
+    import tomli_w
+
+    return tomli_w.dumps(scene_to_dict(scene))
 
 
 # ------------------------------------------------------------------ overrides

@@ -1,0 +1,96 @@
+"""Property: any scene the vocabulary can express survives the scene file,
+Scene -> TOML text -> Scene, field for field (and the text is stable)."""
+
+from __future__ import annotations
+
+import tomllib
+
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from hybrid import regions as R
+from hybrid import scenefile as sf
+from hybrid.scene import (AppliedForce, Attraction, Damping, Gravity, KeepIn, Masses, MassSpring, MeshSpec, Muscle,
+                          Nailed, Prescribed, Rigid, RigidLink, Scene, ShapeMemory, SoftVolume, Volume)
+from hybrid.schedule import Breathing, Constant, Table
+
+finite = st.floats(-1e3, 1e3, allow_nan=False, allow_infinity=False)
+positive = st.floats(1e-6, 1e6, allow_nan=False, allow_infinity=False)
+fraction = st.floats(1e-3, 0.999)
+vec3 = st.tuples(finite, finite, finite)
+name = st.text("abcdefghijklmnopqrstuvwxyz_", min_size=1, max_size=8)
+
+
+def selectors(depth: int = 2):
+    leaf = st.one_of(
+        st.just("all"), st.just(R.Border()),
+        st.builds(R.Indices, st.lists(st.integers(0, 500), min_size=1, max_size=5).map(tuple)),
+        st.builds(R.HalfSpace, vec3, vec3), st.builds(R.Ball, vec3, positive), st.builds(R.Box, vec3, vec3),
+        st.builds(R.Nearest, st.lists(vec3, min_size=1, max_size=3).map(tuple)))
+    if depth == 0:
+        return leaf
+    inner = selectors(depth - 1)
+    return st.one_of(leaf, st.builds(R.Union_, st.lists(inner, min_size=1, max_size=3).map(tuple)),
+                     st.builds(R.Intersection, st.lists(inner, min_size=1, max_size=3).map(tuple)),
+                     st.builds(R.Difference, inner, inner))
+
+
+def tables(ncomp: int):
+    def build(times, values, periodic):
+        return Table(tuple(times), tuple(values[:len(times)]), periodic)
+    value = finite if ncomp == 1 else vec3
+    times = st.lists(st.floats(0, 100), min_size=2, max_size=5, unique=True).map(sorted)
+    return st.builds(build, times, st.lists(value, min_size=5, max_size=5), st.booleans())
+
+
+scalar_schedule = st.one_of(st.builds(Constant, finite), tables(1),
+                            st.builds(Breathing, positive, fraction, finite, st.floats(0, 10)))
+vector_schedule = st.one_of(st.builds(Constant, vec3), tables(3))
+
+forces = st.one_of(
+    st.builds(Gravity, vec3),
+    st.builds(ShapeMemory, positive, selectors()),
+    st.builds(Damping, coef_n_s_per_m=st.floats(0, 1e3), region=selectors()),
+    st.builds(Damping, critical_fraction=st.floats(0, 2), region=selectors()),
+    st.builds(MassSpring, positive, selectors()),
+    st.builds(Muscle, selectors(), scalar_schedule, axis=vec3, max_angle_deg=st.floats(1, 89)),
+    st.builds(Muscle, selectors(), scalar_schedule, toward_m=vec3),
+    st.builds(AppliedForce, selectors(), vector_schedule),
+    st.builds(Attraction, selectors(), positive, vector_schedule, st.one_of(st.none(), vec3)),
+    st.builds(SoftVolume, positive))
+constraints = st.one_of(
+    st.builds(Nailed, selectors()), st.just(Volume()),
+    st.builds(Prescribed, selectors(), vector_schedule),
+    st.builds(KeepIn, selectors(), st.just("half_space"), point_m=vec3, normal=vec3),
+    st.builds(KeepIn, selectors(), st.just("ball"), center_m=vec3, radius_m=positive),
+    st.builds(KeepIn, selectors(), st.just("box"), lo_m=vec3, hi_m=vec3))
+meshes = st.one_of(
+    st.builds(MeshSpec, st.just("uv_sphere"), radius_m=positive, segments=st.integers(3, 40),
+              rings=st.integers(2, 30), center_m=vec3),
+    st.builds(MeshSpec, st.just("icosphere"), radius_m=positive, subdivisions=st.integers(0, 7), center_m=vec3),
+    st.builds(MeshSpec, generator=st.none(), path=st.just("body.stl"), unit_scale=positive))
+
+
+@st.composite
+def scenes(draw):
+    fs = draw(st.lists(forces, max_size=4))
+    cs = draw(st.lists(constraints, max_size=3))
+    names = draw(st.lists(name, min_size=len(fs) + len(cs) + 2, max_size=len(fs) + len(cs) + 2, unique=True))
+    fs = tuple(f.__class__(**{**f.__dict__, "name": n}) for f, n in zip(fs, names))
+    cs = tuple(c.__class__(**{**c.__dict__, "name": n}) for c, n in zip(cs, names[len(fs):]))
+    rigid = draw(st.one_of(st.none(), st.builds(
+        Rigid, st.just("trunk"), st.just((RigidLink("all", "rib_left", names[-1]),)), name, st.booleans())))
+    return Scene(mesh=draw(meshes), masses=draw(st.builds(Masses, total_kg=positive)),
+                 regions=draw(st.dictionaries(name, selectors(1), max_size=3)), forces=fs, constraints=cs,
+                 rigid=rigid, dt_s=draw(positive), integrator=draw(st.sampled_from(["explicit_euler",
+                                                                                     "symplectic_euler"])),
+                 duration_s=draw(positive), max_speed_m_s=draw(positive), name=draw(name))
+
+
+@settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(scenes())
+def test_a_scene_survives_its_scene_file(scene):
+    text = sf.scene_to_toml(scene)
+    back = sf.scene_from_dict(tomllib.loads(text), source="roundtrip.toml")
+    assert back == scene
+    assert sf.scene_to_toml(back) == text
