@@ -45,7 +45,6 @@ _CORE_BEFORE = {
     "term_on": "(nterm,) uint8, the flags of the terms present (hybrid.terms.TERMS)",
 }
 _CORE_AFTER = {
-    "vol_ref": "(3,) m, the origin of volume sums",
     "vol0": "m^3, the rest volume (0 without a volume term)",
     "sched": "ScheduleTable",
     "dt": "s",
@@ -248,7 +247,6 @@ def compile_scene(scene: Scene) -> Model:
         vert_mass=vert_mass, vert_free=b.vert_free, term_on=b.term_on,
         **{k: b.out[k] if k in b.out else default(nvert) for k, default in _TERM_ARRAYS.items()},
         vert_weight=b.out["vert_weight"],
-        vol_ref=mesh.vert_pos.mean(axis=0),
         vol0=b.out.get("vol0", 0.0),
         sched=sched_table, dt=float(scene.dt_s), integrator=integrator,
         runaway_disp=float(np.linalg.norm(np.ptp(mesh.vert_pos, axis=0))),
