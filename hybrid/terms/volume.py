@@ -50,6 +50,7 @@ class SoftVolume(Term):
         super().compile(b, what)
         b.out["soft_stiff"] = self.value(b, "stiffness_n_per_m", what)
         b.mesh.require_closed(f"{what} (compressible volume) needs a closed surface")
+        b.mesh.require_no_self_crossing(f"{what} (compressible volume) needs a surface bounding one region")
         b.out["vol0"] = float(b.mesh.volume())
 
 
@@ -60,6 +61,7 @@ class Volume(Term):
     def compile(self, b, what):
         super().compile(b, what)
         b.mesh.require_closed(f"{what}: a constant-volume constraint needs a closed surface")
+        b.mesh.require_no_self_crossing(f"{what}: a constant-volume constraint needs a surface bounding one region")
         b.out["vol0"] = float(b.mesh.volume())
         b.rows["volume"].append(what)
 
