@@ -73,7 +73,7 @@ def check_value(where: str, kind: str, value, meta: dict | None = None):
     """`value` checked as a field of `kind`; returns it normalised (floats, tuples)."""
     meta = meta or {}
     if kind == "positive":
-        return checks.number(where, value, lo=0)
+        return checks.number(where, value, lo=0) if meta.get("hi") is None else checks.positive(where, value, meta["hi"])
     if kind == "nonneg":
         return checks.number(where, value, lo=0, lo_open=False)
     if kind == "angle_deg":

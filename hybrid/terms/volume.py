@@ -21,6 +21,7 @@ import numpy as np
 from numba import prange
 
 from ..errors import SceneError
+from .. import checks
 from ..kernel import CHUNK_VERTS, kernel, kernel_twin
 from .base import Term, constraint, force, param
 
@@ -44,7 +45,7 @@ class SoftVolume(Term):
     """Compressibility (paper 6.2): each point pulled with stiffness (N/m)
     toward the position the exact volume projection would give it."""
     arrays = {"soft_stiff": lambda n: 0.0}  # N/m
-    stiffness_n_per_m: float = param("positive")
+    stiffness_n_per_m: float = param("positive", hi=checks.MAX_STIFFNESS_N_PER_M)
 
     def compile(self, b, what):
         super().compile(b, what)
