@@ -22,7 +22,7 @@ __all__ = ["fail", "show", "is_number", "number", "integer", "text", "boolean", 
 MAX_MASS_KG = 1e6
 MAX_STIFFNESS_N_PER_M = 1e12
 MAX_LENGTH_M = 1e3
-MAX_DT_S = 1.0
+MAX_DT_S = 1e3  # the stability study probes steps of seconds on soft bodies
 MAX_DURATION_S = 1e9
 #: the most points a mesh may have, checked before any array is allocated
 MAX_POINTS = 10**7
