@@ -16,6 +16,18 @@ from .errors import SceneError
 __all__ = ["fail", "show", "is_number", "number", "integer", "text", "boolean", "vec3", "vec3_list"]
 
 
+# Physical ranges of the inputs: far beyond any body a scene describes, small
+# enough that their products (force = stiffness * length, pressure = force /
+# area, steps = duration / dt) stay finite in float64.
+MAX_MASS_KG = 1e6
+MAX_STIFFNESS_N_PER_M = 1e12
+MAX_LENGTH_M = 1e3
+MAX_DT_S = 1e3  # the stability study probes steps of seconds on soft bodies
+MAX_DURATION_S = 1e9
+#: the most points a mesh may have, checked before any array is allocated
+MAX_POINTS = 10**7
+
+
 def fail(where: str, msg: str):
     raise SceneError(f"{where}: {msg}" if where else msg)
 
@@ -55,6 +67,15 @@ def number(where, v, *, lo=None, lo_open=True, hi=None, hi_open=True) -> float:
     return float(v)
 
 
+def positive(where, v, hi, unit="") -> float:
+    """A finite number > 0 and <= hi: the lower bound checked first, so that its
+    message stays "expected a number > 0"; the physical upper bound then."""
+    x = number(where, v, lo=0)
+    if x > hi:
+        fail(where, f"expected a number > 0 and <= {hi:g}{unit} (a physical bound), received {show(v)}")
+    return x
+
+
 def integer(where, v, *, lo, hi=None) -> int:
     """An integer >= lo (and <= hi)."""
     if not (isinstance(v, int) and not isinstance(v, bool) and v >= lo and (hi is None or v <= hi)):
@@ -66,6 +87,8 @@ def text(where, v, choices=None) -> str:
     if not isinstance(v, str) or (choices is not None and v not in choices):
         want = f"one of {list(choices)}" if choices is not None else "a string"
         fail(where, f"expected {want}, received {show(v)}")
+    if "\x00" in v:  # file names and the recording's strings cannot hold it
+        fail(where, f"expected text without NUL characters, received {show(v)}")
     return v
 
 

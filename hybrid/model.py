@@ -45,7 +45,6 @@ _CORE_BEFORE = {
     "term_on": "(nterm,) uint8, the flags of the terms present (hybrid.terms.TERMS)",
 }
 _CORE_AFTER = {
-    "vol_ref": "(3,) m, the origin of volume sums",
     "vol0": "m^3, the rest volume (0 without a volume term)",
     "sched": "ScheduleTable",
     "dt": "s",
@@ -105,8 +104,17 @@ class Model:
 
 
 def _check_dt(dt):
-    if not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt > 0):
-        raise SceneError(f"dt_s: expected a time step > 0 s, received {dt!r}")
+    # a bool is an int to Python, not a time step
+    if not (checks.is_number(dt) and math.isfinite(dt) and dt > 0):
+        raise SceneError(f"dt_s: expected a time step > 0 s, received {checks.show(dt)}")
+    checks.positive("dt_s", dt, checks.MAX_DT_S, " s")
+
+
+def _check_duration(duration, dt):
+    """At least one step, at most MAX_DURATION_S."""
+    checks.positive("duration_s", duration, checks.MAX_DURATION_S, " s")
+    if duration < dt:
+        raise SceneError(f"duration_s: expected at least one step of dt_s = {dt:g} s, received {duration:g} s")
 
 
 def _integrator_id(name):
@@ -138,6 +146,10 @@ def build_mesh(scene: Scene) -> Mesh:
     radius = val["radius_m"]
     gen = spec.generator
     if gen == "uv_sphere":
+        npoint = val["segments"] * (val["rings"] - 1) + 2
+        if npoint > checks.MAX_POINTS:  # before any array is allocated
+            raise SceneError(f"mesh: segments = {val['segments']} x rings = {val['rings']} gives {npoint} points; "
+                             f"expected at most {checks.MAX_POINTS}")
         return _mesh.uv_sphere(radius, val["segments"], val["rings"], center=tuple(center))
     if gen == "icosphere":
         return _mesh.icosphere(val["subdivisions"], radius, center=tuple(center))
@@ -163,7 +175,7 @@ def _masses(spec: Masses, mesh: Mesh, regions: dict) -> np.ndarray:
                          f"received {given or 'none'}")
     area = _vert_area(mesh)
     if spec.total_kg is not None:
-        total = _positive(spec.total_kg, "masses.total_kg")
+        total = checks.positive("masses.total_kg", spec.total_kg, checks.MAX_MASS_KG, " kg")
         return total * area / area.sum()
     if spec.per_vertex_kg is not None:
         m = np.asarray(spec.per_vertex_kg, dtype=float)
@@ -173,13 +185,17 @@ def _masses(spec: Masses, mesh: Mesh, regions: dict) -> np.ndarray:
         if bad.size:
             raise SceneError(f"masses.per_vertex_kg: expected masses > 0 kg, received {float(m[bad[0]])!r} "
                              f"at vertices {bad[:8].tolist()}")
+        bad = np.nonzero(m > checks.MAX_MASS_KG)[0]
+        if bad.size:
+            raise SceneError(f"masses.per_vertex_kg: expected masses > 0 kg and <= {checks.MAX_MASS_KG:g} kg "
+                             f"(a physical bound), received {float(m[bad[0]])!r} at vertices {bad[:8].tolist()}")
         return m.copy()
     dens = spec.density_kg_per_m2
     if not isinstance(dens, dict) or not dens:
         raise SceneError(f"masses.density_kg_per_m2: expected {{region: kg/m^2}}, received {dens!r}")
     m = np.full(mesh.nvert, np.nan)
     for name, rho in dens.items():
-        rho = _positive(rho, f"masses.density_kg_per_m2[{name!r}]")
+        rho = checks.positive(f"masses.density_kg_per_m2[{name!r}]", rho, checks.MAX_MASS_KG, " kg/m^2")
         idx = _regions.select(name, mesh.vert_pos, name=f"masses.density_kg_per_m2[{name!r}]", regions=regions)
         m[idx] = rho * area[idx]
     missing = np.nonzero(np.isnan(m))[0]
@@ -198,6 +214,8 @@ def compile_scene(scene: Scene) -> Model:
     if not isinstance(scene, Scene):
         raise SceneError(f"scene: expected a hybrid.scene.Scene, received {type(scene).__name__}")
     _check_dt(scene.dt_s)
+    _check_duration(scene.duration_s, scene.dt_s)
+    checks.text("name", scene.name)
     integrator = _integrator_id(scene.integrator)
     mesh = build_mesh(scene)
     nvert = mesh.nvert
@@ -248,7 +266,6 @@ def compile_scene(scene: Scene) -> Model:
         vert_mass=vert_mass, vert_free=b.vert_free, term_on=b.term_on,
         **{k: b.out[k] if k in b.out else default(nvert) for k, default in _TERM_ARRAYS.items()},
         vert_weight=b.out["vert_weight"],
-        vol_ref=mesh.vert_pos.mean(axis=0),
         vol0=b.out.get("vol0", 0.0),
         sched=sched_table, dt=float(scene.dt_s), integrator=integrator,
         runaway_disp=float(np.linalg.norm(np.ptp(mesh.vert_pos, axis=0))),

@@ -105,8 +105,15 @@ def select(sel: Selector, vert_pos: np.ndarray, *, name: str, regions: dict | No
     return idx
 
 
-def _select(sel, vert_pos, name, regions, border_vert) -> np.ndarray:
+#: how deep union, intersection and difference may nest (a scene needs a few levels)
+MAX_SELECTOR_DEPTH = 32
+
+
+def _select(sel, vert_pos, name, regions, border_vert, depth=0) -> np.ndarray:
     nvert = len(vert_pos)
+    if depth > MAX_SELECTOR_DEPTH:
+        raise SceneError(f"region {name!r}: selectors nested more than {MAX_SELECTOR_DEPTH} levels deep; "
+                         f"expected at most {MAX_SELECTOR_DEPTH} (name an inner part as a region instead)")
     if isinstance(sel, str):
         if sel == "all":
             return np.arange(nvert)
@@ -149,14 +156,14 @@ def _select(sel, vert_pos, name, regions, border_vert) -> np.ndarray:
         d2 = ((vert_pos[None, :, :] - pts[:, None, :]) ** 2).sum(-1)
         return np.argmin(d2, axis=1)
     if isinstance(sel, (Union_, Intersection)):
-        parts = [set(_select(p, vert_pos, name, regions, border_vert).tolist()) for p in sel.parts]
+        parts = [set(_select(p, vert_pos, name, regions, border_vert, depth + 1).tolist()) for p in sel.parts]
         if not parts:
             return np.zeros(0, np.int64)
         out = set.union(*parts) if isinstance(sel, Union_) else set.intersection(*parts)
         return np.array(sorted(out), dtype=np.int64)
     if isinstance(sel, Difference):
-        a = _select(sel.base, vert_pos, name, regions, border_vert)
-        b = _select(sel.minus, vert_pos, name, regions, border_vert)
+        a = _select(sel.base, vert_pos, name, regions, border_vert, depth + 1)
+        b = _select(sel.minus, vert_pos, name, regions, border_vert, depth + 1)
         return np.setdiff1d(a, b)
     raise SceneError(f"region {name!r}: expected a selector (indices, half_space, ball, box, nearest, "
                      f"all, border, union, intersection, difference or a region name), received {sel!r}")

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Optional
 
+from . import checks
 from .errors import SceneError
 from .terms.base import param
 from .terms import (AppliedForce, Attraction, Damping, Gravity, KeepIn, MassSpring, Muscle, Nailed,
@@ -43,12 +44,12 @@ class MeshSpec:
     """
     generator: Optional[str] = param("choice", "uv_sphere", choices=MESH_GENERATORS)
     path: Optional[str] = param("text", None)
-    radius_m: float = param("positive", 0.12)
+    radius_m: float = param("positive", 0.12, hi=checks.MAX_LENGTH_M)
     segments: int = param("integer", 13, lo=3)
     rings: int = param("integer", 7, lo=2)
     subdivisions: int = param("integer", 3, lo=0, hi=7)
     center_m: tuple[float, float, float] = param("vec3", (0.0, 0.0, 0.0))
-    unit_scale: float = param("positive", 1.0)
+    unit_scale: float = param("positive", 1.0, hi=checks.MAX_LENGTH_M)
 
 
 @dataclass(frozen=True)
@@ -93,9 +94,9 @@ class Scene:
     forces: tuple = ()
     constraints: tuple = ()
     rigid: Optional[Rigid] = None
-    dt_s: float = param("positive", 1e-3)
+    dt_s: float = param("positive", 1e-3, hi=checks.MAX_DT_S)
     integrator: str = param("choice", "symplectic_euler", choices=INTEGRATORS)
-    duration_s: float = param("positive", 1.0)
+    duration_s: float = param("positive", 1.0, hi=checks.MAX_DURATION_S)
     # a point faster than this has run away (tissue moves at cm/s)
     max_speed_m_s: float = param("positive", 50.0)
     name: str = param("text", "scene")

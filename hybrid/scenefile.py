@@ -142,8 +142,11 @@ _SELECTOR_KINDS = ("border", "indices", "half_space", "ball", "box", "nearest", 
                    "intersection", "difference")
 
 
-def _selector(ctx, path, v):
+def _selector(ctx, path, v, depth=0):
     """A region selector (module docstring) -> a `hybrid.regions` selector."""
+    if depth > R.MAX_SELECTOR_DEPTH:
+        ctx.fail(path, f"selectors nested more than {R.MAX_SELECTOR_DEPTH} levels deep; expected at most "
+                       f"{R.MAX_SELECTOR_DEPTH} (name an inner part as a region instead)")
     if isinstance(v, str):
         if not v:
             ctx.fail(path, "expected a region name or a selector table, received ''")
@@ -179,12 +182,13 @@ def _selector(ctx, path, v):
     if kind in ("union", "intersection"):
         if not (isinstance(arg, list) and arg):
             ctx.fail(p, f"expected a non-empty list of selectors, received {_show(arg)}")
-        parts = tuple(_selector(ctx, f"{p}[{k}]", x) for k, x in enumerate(arg))
+        parts = tuple(_selector(ctx, f"{p}[{k}]", x, depth + 1) for k, x in enumerate(arg))
         return R.Union_(parts) if kind == "union" else R.Intersection(parts)
     if kind == "difference":
         _table(ctx, p, arg)
         _keys(ctx, p, arg, ("base", "minus"), ("base", "minus"))
-        return R.Difference(_selector(ctx, f"{p}.base", arg["base"]), _selector(ctx, f"{p}.minus", arg["minus"]))
+        return R.Difference(_selector(ctx, f"{p}.base", arg["base"], depth + 1),
+                            _selector(ctx, f"{p}.minus", arg["minus"], depth + 1))
     ctx.fail(p, f"unknown selector; expected one of {list(_SELECTOR_KINDS)} or a region name")
 
 
@@ -356,6 +360,9 @@ def load_scene(path: str | Path) -> Scene:
         raise SceneError(f"{p.name}: not valid TOML: {' '.join(str(exc).split())}") from None
     except UnicodeDecodeError as exc:
         raise SceneError(f"{p.name}: not a UTF-8 text file ({exc.reason})") from None
+    except RecursionError:  # the TOML reader recurses once per nested table or list
+        raise SceneError(f"{p.name}: tables or lists nested too deep to read; expected selectors at most "
+                         f"{R.MAX_SELECTOR_DEPTH} levels deep") from None
     return scene_from_dict(data, source=p.name, base_dir=p.resolve().parent)
 
 
@@ -473,6 +480,9 @@ def _parse_value(text: str):
         return tomllib.loads(f"v = {text}")["v"]
     except tomllib.TOMLDecodeError:
         return text.strip()  # a bare word: a string
+    except RecursionError:  # the TOML reader recurses once per nested table or list
+        raise SceneError(f"--set value {text[:40]!r}...: tables or lists nested too deep to read; expected "
+                         f"selectors at most {R.MAX_SELECTOR_DEPTH} levels deep") from None
 
 
 def apply_overrides(scene: Scene, overrides) -> Scene:

@@ -82,7 +82,7 @@ class Simulation:
         """Enclosed volume (m^3) of the current positions, measured face by face
         (independently of the projection)."""
         a = self.model.arrays
-        return float(face_volume(a.face_vert, a.vol_ref, self.state.vert_pos))
+        return float(face_volume(a.face_vert, self.state.vert_pos))
 
     @property
     def volume_rel_error(self) -> float:

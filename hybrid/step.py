@@ -134,7 +134,7 @@ def membrane_forces(m, s, t):
         add_muscle(m.mus_vert, m.mus_nbr, m.mus_sched, s.sched_val, s.vert_pos, s.vert_force)
         s.term_calls[T_MUSCLE] += 1
     if on[T_SOFT_VOLUME]:
-        s.scal[S_PRESSURE] = soft_volume_force(m.ring_ptr, m.ring_vert, m.vol_ref, m.vol0, m.soft_stiff, s.vert_pos,
+        s.scal[S_PRESSURE] = soft_volume_force(m.ring_ptr, m.ring_vert, m.vol0, m.soft_stiff, s.vert_pos,
                                                s.grad, s.cubic, s.vert_acc, s.vert_force)
         s.term_calls[T_SOFT_VOLUME] += 1
 
@@ -252,7 +252,7 @@ def _after_integration(m, s, t, step):
         apply_keep_in(m.kin_vert, m.kin_shape, m.shape_kind, m.shape_par, pos, vel)
         s.term_calls[T_KEEP_IN] += 1
     if on[T_VOLUME]:
-        phi, st = project_volume(m.ring_ptr, m.ring_vert, m.vol_ref, m.vol0, m.vert_weight, h, pos, vel,
+        phi, st = project_volume(m.ring_ptr, m.ring_vert, m.vol0, m.vert_weight, h, pos, vel,
                                  s.grad, s.dirn, s.cubic, s.vert_acc, m.parallel)
         s.term_calls[T_VOLUME] += 1
         if st != PROJ_OK:
@@ -327,7 +327,7 @@ def capture_frame(m, s, pos_out, scal_out):
         for a in range(3):
             pos_out[i, a] = pos[i, a]
     scal_out[F_TIME] = s.scal[S_TIME]
-    scal_out[F_VOLUME] = face_volume(m.face_vert, m.vol_ref, pos)
+    scal_out[F_VOLUME] = face_volume(m.face_vert, pos)
     scal_out[F_PRESSURE] = s.scal[S_PRESSURE]
     scal_out[F_KE] = kinetic_energy_of(m, s)
 

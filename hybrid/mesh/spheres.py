@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from hybrid.checks import MAX_POINTS
 from hybrid.errors import MeshError
 
 from .surface import Mesh
@@ -41,6 +42,9 @@ def uv_sphere(radius: float = 1.0, segments: int = 13, rings: int = 7,
         raise MeshError(f"uv_sphere: rings must be an integer >= 2; received {rings!r}")
     ctr = _check_sphere_args(radius, center, "uv_sphere")
     segments, rings = int(segments), int(rings)
+    if segments * (rings - 1) + 2 > MAX_POINTS:  # before any array is allocated
+        raise MeshError(f"uv_sphere: segments = {segments} x rings = {rings} gives {segments * (rings - 1) + 2} "
+                        f"points; expected at most {MAX_POINTS}")
 
     theta = np.pi * np.arange(1, rings) / rings  # polar angle of each circle
     phi = 2.0 * np.pi * np.arange(segments) / segments

@@ -16,7 +16,8 @@ Beyond the faces, a mesh stores what the force and constraint kernels need:
   an open (border) fan runs from one border neighbour to the other;
 - the unique undirected edges `edge_vert` and the border vertices.
 
-Files are read and written through trimesh, imported only when needed.
+Files are read through trimesh, imported only when needed (OBJ files by
+`hybrid.mesh.obj`, which keeps their vertex order).
 """
 
 from __future__ import annotations
@@ -29,7 +30,8 @@ import numpy as np
 from hybrid.errors import MeshError
 
 from .geometry import cross_rows, scatter_corners, volume, volume_gradient
-from .validate import border_edges, check_face_vert, check_vert_pos, few, merge_identical_vertices, \
+from .obj import read_obj
+from .validate import FEW, border_edges, check_face_vert, check_vert_pos, few, merge_identical_vertices, \
     validate_and_build
 
 if TYPE_CHECKING:  # trimesh is imported only when a file is loaded or exported
@@ -103,8 +105,11 @@ class Mesh:
     def load(cls, path, *, name: str | None = None) -> Mesh:
         """Read a mesh file (STL, OBJ, PLY or OFF) with trimesh and validate it.
 
-        The file is read with `trimesh.load(path, process=False, force="mesh")`,
-        so vertices keep their order. STL stores each triangle's corners
+        Vertex k of the file is vertex k of the mesh: OBJ files are read by
+        `hybrid.mesh.obj.read_obj` (trimesh's reader drops unused vertices and
+        renumbers the rest), PLY, OFF and STL by
+        `trimesh.load(path, process=False, force="mesh")`, which keeps them.
+        A vertex in no face is refused, never dropped. STL stores each triangle's corners
         separately (no shared vertices), so for STL files exactly identical
         vertices are merged first (kept in order of first appearance); any
         other format must already share its vertices. `name` defaults to the
@@ -120,17 +125,20 @@ class Mesh:
             )
         if not path.is_file():
             raise MeshError(f"mesh file {str(path)!r} does not exist or is not a file")
-        import trimesh
+        if suffix == ".obj":
+            vert_pos, face_vert = read_obj(str(path))
+        else:
+            import trimesh
 
-        try:
-            loaded = trimesh.load(str(path), process=False, force="mesh")
-            vert_pos = np.asarray(loaded.vertices, dtype=np.float64)
-            face_vert = np.asarray(loaded.faces, dtype=np.int64).reshape(-1, 3)
-        except Exception as exc:  # trimesh raises many types on bad input
-            raise MeshError(
-                f"mesh file {str(path)!r} cannot be read as a triangle mesh: "
-                f"{type(exc).__name__}: {exc}"
-            ) from exc
+            try:
+                loaded = trimesh.load(str(path), process=False, force="mesh")
+                vert_pos = np.asarray(loaded.vertices, dtype=np.float64)
+                face_vert = np.asarray(loaded.faces, dtype=np.int64).reshape(-1, 3)
+            except Exception as exc:  # trimesh raises many types on bad input
+                raise MeshError(
+                    f"mesh file {str(path)!r} cannot be read as a triangle mesh: "
+                    f"{type(exc).__name__}: {exc}"
+                ) from exc
         if suffix == ".stl":
             vert_pos, face_vert = merge_identical_vertices(vert_pos, face_vert)
         if name is None:
@@ -215,6 +223,22 @@ class Mesh:
             f"{why}; mesh {self.name!r} is open: {len(edges)} border edges "
             f"(used by one face only), e.g. {listed}; expected every edge shared by two faces"
         )
+
+    def require_no_self_crossing(self, why: str) -> None:
+        """Raise `MeshError` if faces of the surface pass through (or touch) each
+        other, naming the first pairs of faces, their count and `why`."""
+        from .intersect import crossing_faces
+
+        pairs, count = crossing_faces(self.vert_pos, self.face_vert)
+        if count:
+            shown = pairs[:FEW]
+            listed = ", ".join(f"faces {f} and {g}" for f, g in shown.tolist())
+            if count > len(shown):
+                listed += f" and {count - len(shown)} more pairs"
+            raise MeshError(
+                f"{why}; mesh {self.name!r} intersects itself: {count} pairs of faces cross, "
+                f"e.g. {listed}; expected a surface that does not pass through itself"
+            )
 
     def to_trimesh(self) -> trimesh.Trimesh:
         """A trimesh.Trimesh copy of the rest shape (vertices and faces kept as they are)."""

@@ -21,7 +21,8 @@ import numpy as np
 
 from hybrid import regions as _regions
 from hybrid.errors import RigidError, SceneError
-from hybrid.scene import Nailed, Prescribed, Rigid, RigidLink, Scene
+from hybrid.scene import KeepIn, Nailed, Prescribed, Rigid, RigidLink, Scene
+from hybrid.terms.base import claim_points
 
 from .mjcf import compile_spec, load_rigid_spec
 from .system import CoupledRigid
@@ -183,15 +184,16 @@ def _link_body(spec: mujoco.MjSpec, name) -> str | None:
 
 
 def _check_not_constrained(scene: Scene, mesh, regions: dict, link_vert: np.ndarray) -> None:
-    linked = set(link_vert.tolist())
+    """Refuse a point both linked and nailed, prescribed or kept in a region (see
+    hybrid.terms.base.claim_points), before MuJoCo compiles anything."""
+    claims = [("linked", "rigid.links", link_vert)]
     for con in scene.constraints:
-        if isinstance(con, (Nailed, Prescribed)):
-            idx = _regions.select(con.region, mesh.vert_pos, name=f"constraints[{con.name!r}].region",
-                                  regions=regions, border_vert=mesh.border_vert)
-            both = sorted(linked.intersection(idx.tolist()))
-            if both:
-                raise SceneError(f"constraints[{con.name!r}].region: vertices {both[:8]} are also linked to a "
-                                 f"rigid body; expected a point either {type(con).__name__.lower()} or linked")
+        if isinstance(con, (Nailed, Prescribed, KeepIn)):
+            what = f"constraints[{con.name!r}].region"
+            idx = _regions.select(con.region, mesh.vert_pos, name=what, regions=regions,
+                                  border_vert=mesh.border_vert)
+            kind = "keep_in" if isinstance(con, KeepIn) else type(con).__name__.lower()
+            claim_points(claims[:1], idx, kind, what)
 
 
 def _add_point_masses(spec: mujoco.MjSpec, model0: mujoco.MjModel, body_names: Sequence[str],

@@ -32,9 +32,11 @@ import numpy as np
 from .. import checks
 from .. import regions as _regions
 from .. import schedule as _sched
+from ..errors import SceneError
+from ..mesh.validate import few
 
 __all__ = ["param", "Rows", "force", "constraint", "order_terms", "Term", "Build", "FORCE_TYPES", "CONSTRAINT_TYPES",
-           "TERM_CLASSES", "FLAGGED", "check_value", "VALUE_KINDS"]
+           "TERM_CLASSES", "FLAGGED", "check_value", "VALUE_KINDS", "claim_points", "POINT_CLAIMS"]
 
 FORCE_TYPES: dict = {}
 CONSTRAINT_TYPES: dict = {}
@@ -71,7 +73,7 @@ def check_value(where: str, kind: str, value, meta: dict | None = None):
     """`value` checked as a field of `kind`; returns it normalised (floats, tuples)."""
     meta = meta or {}
     if kind == "positive":
-        return checks.number(where, value, lo=0)
+        return checks.number(where, value, lo=0) if meta.get("hi") is None else checks.positive(where, value, meta["hi"])
     if kind == "nonneg":
         return checks.number(where, value, lo=0, lo_open=False)
     if kind == "angle_deg":
@@ -174,6 +176,33 @@ class Term:
             b.out[n] = cls.arrays[n].build(col)
 
 
+#: what a constraint does to its points, as an error message says it
+POINT_CLAIMS = {"nailed": "nailed", "prescribed": "prescribed", "keep_in": "kept in a region",
+                "linked": "linked to a rigid body"}
+# pairs of point constraints that cannot both hold on one point: each sets the
+# position its own way (two nails agree; two keep-in regions may overlap)
+_CONFLICTS = {frozenset(p) for p in (("nailed", "prescribed"), ("nailed", "keep_in"), ("prescribed", "keep_in"),
+                                     ("prescribed",), ("linked", "nailed"), ("linked", "prescribed"),
+                                     ("linked", "keep_in"))}
+
+
+def claim_points(claims: list, idx, kind: str, what: str) -> None:
+    """Record that constraint `what` (of `kind`, a key of POINT_CLAIMS) sets the
+    points idx, after refusing it, with one SceneError line naming the points
+    (a few and their count) and both constraints, if an earlier claim on any of
+    them cannot hold together with it. claims: the list of (kind, what, idx) so far."""
+    idx = np.asarray(idx, dtype=np.int64)
+    for kind0, what0, idx0 in claims:
+        if frozenset((kind, kind0)) not in _CONFLICTS:
+            continue
+        both = np.intersect1d(idx, idx0)
+        if both.size:
+            raise SceneError(f"{what}: {both.size} points are also {POINT_CLAIMS[kind0]} by {what0}: vertices "
+                             f"{few(both.tolist())}; expected a point {POINT_CLAIMS[kind]} or "
+                             f"{POINT_CLAIMS[kind0]}, not both")
+    claims.append((kind, what, idx))
+
+
 class Build:
     """A model being compiled: what term compile functions read and write.
 
@@ -183,7 +212,8 @@ class Build:
     term_on, rows {name: list} (rows accumulated over a class's terms),
     out {array name: value} (the final arrays), schedules; set before the
     finish phase: link_vert (points linked to rigid bodies) and moving
-    (nvert,) bool, the points that move (free or linked).
+    (nvert,) bool, the points that move (free or linked); claims, the points
+    each point constraint sets (`claim_points` refuses two that conflict).
     """
 
     def __init__(self, mesh, regions: dict, vert_mass: np.ndarray, nterm: int):
@@ -198,6 +228,7 @@ class Build:
         self.schedules: list = []
         self.link_vert = np.zeros(0, np.int32)
         self.moving: np.ndarray | None = None
+        self.claims: list = []  # (kind, what, points) of the point constraints (claim_points)
 
     def region(self, sel, what: str) -> np.ndarray:
         """The sorted vertex indices a selector picks (SceneError naming `what` if none)."""

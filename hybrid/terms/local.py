@@ -13,7 +13,7 @@ import numpy as np
 from .. import checks
 from ..errors import SceneError
 from ..kernel import kernel
-from .base import Rows, Term, constraint, param
+from .base import Rows, Term, claim_points, constraint, param
 
 __all__ = ["Nailed", "Prescribed", "KeepIn", "KeepInShape", "apply_prescribed", "apply_keep_in"]
 
@@ -31,7 +31,9 @@ class Nailed(Term):
     region: object = param("selector")
 
     def compile(self, b, what):
-        b.vert_free[b.region(self.region, f"{what}.region")] = 0
+        idx = b.region(self.region, f"{what}.region")
+        claim_points(b.claims, idx, "nailed", what)
+        b.vert_free[idx] = 0
 
 
 @constraint("prescribed")
@@ -45,6 +47,7 @@ class Prescribed(Term):
     def compile(self, b, what):
         idx = super().compile(b, what)
         s = b.schedule(self.displacement_m, f"{what}.displacement_m", 3)
+        claim_points(b.claims, idx, "prescribed", what)
         b.vert_free[idx] = 0
         b.add_rows(pre_vert=idx, pre_rest=b.mesh.vert_pos[idx], pre_sched=np.full(idx.size, s))
 
@@ -69,6 +72,7 @@ class KeepIn(Term):
     def compile(self, b, what):
         idx = super().compile(b, what)
         kind, par = self._shape(what)
+        claim_points(b.claims, idx, "keep_in", what)
         b.add_rows(shape_kind=[int(kind)], shape_par=[par])
         b.add_rows(kin_vert=idx, kin_shape=np.full(idx.size, len(b.rows["shape_kind"]) - 1))
 

@@ -15,6 +15,7 @@ import numpy as np
 from numba import prange
 
 from ..errors import MeshError
+from .. import checks
 from ..kernel import kernel, kernel_twin
 from .base import Rows, Term, force, param
 
@@ -28,7 +29,7 @@ class ShapeMemory(Term):
     in the frame of its neighbours, stiffness in N/m."""
     # sm_vert (nsm,) int32 sorted; sm_stiff (nsm,) N/m; sm_coef (nsm, 3) m
     arrays = {"sm_vert": Rows(np.int32), "sm_stiff": Rows(float), "sm_coef": Rows(float, 3)}
-    stiffness_n_per_m: float = param("positive")
+    stiffness_n_per_m: float = param("positive", hi=checks.MAX_STIFFNESS_N_PER_M)
     region: object = param("selector", "all")
 
     def compile(self, b, what):

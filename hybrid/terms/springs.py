@@ -8,6 +8,7 @@ import math
 import numpy as np
 
 from ..errors import SceneError
+from .. import checks
 from ..kernel import kernel
 from .base import Rows, Term, force, param
 
@@ -19,7 +20,7 @@ class MassSpring(Term):
     """Springs along the mesh edges within `region` (the paper's comparison model)."""
     # spring_vert (ns, 2) int32; spring_stiff (ns,) N/m; spring_rest (ns,) m
     arrays = {"spring_vert": Rows(np.int32, 2), "spring_stiff": Rows(float), "spring_rest": Rows(float)}
-    stiffness_n_per_m: float = param("positive")
+    stiffness_n_per_m: float = param("positive", hi=checks.MAX_STIFFNESS_N_PER_M)
     region: object = param("selector", "all")
 
     def compile(self, b, what):
@@ -69,7 +70,7 @@ class Attraction(Term):
     arrays = {"att_vert": Rows(np.int32), "att_stiff": Rows(float), "att_target": Rows(float, 3),
               "att_sched": Rows(np.int64)}
     region: object = param("selector")
-    stiffness_n_per_m: float = param("positive")
+    stiffness_n_per_m: float = param("positive", hi=checks.MAX_STIFFNESS_N_PER_M)
     offset_m: object = param("schedule", (0.0, 0.0, 0.0), ncomp=3)
     target_m: tuple = param("target", None)
 

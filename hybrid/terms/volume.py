@@ -5,6 +5,11 @@ After free integration to X*, X = X* + phi d with d_i = w_i grad_i V(X*), and
 V(X* + phi d) - V0 is a cubic in phi solved to machine precision (DESIGN.md);
 the velocities are adjusted by phi d / h, and p = phi / h^2 is the gauge
 pressure inside the body. The same cubic gives the soft volume's force.
+
+Every volume sum is taken about the body's current centroid: for a closed
+surface the origin does not change the volume, but its terms are then of the
+size of the body, not of its distance from a fixed point (a small or flat body
+that moved far from where it started keeps its digits).
 """
 
 from __future__ import annotations
@@ -16,10 +21,11 @@ import numpy as np
 from numba import prange
 
 from ..errors import SceneError
+from .. import checks
 from ..kernel import CHUNK_VERTS, kernel, kernel_twin
 from .base import Term, constraint, force, param
 
-__all__ = ["Volume", "SoftVolume", "Projection", "face_volume", "ring_cross_sum", "volume_cubic",
+__all__ = ["Volume", "SoftVolume", "Projection", "centroid", "face_volume", "ring_cross_sum", "volume_cubic",
            "solve_cubic_near_zero", "project_volume", "soft_volume_force", "PROJ_OK", "PROJ_NO_GRADIENT",
            "PROJ_NO_ROOT"]
 
@@ -39,12 +45,13 @@ class SoftVolume(Term):
     """Compressibility (paper 6.2): each point pulled with stiffness (N/m)
     toward the position the exact volume projection would give it."""
     arrays = {"soft_stiff": lambda n: 0.0}  # N/m
-    stiffness_n_per_m: float = param("positive")
+    stiffness_n_per_m: float = param("positive", hi=checks.MAX_STIFFNESS_N_PER_M)
 
     def compile(self, b, what):
         super().compile(b, what)
         b.out["soft_stiff"] = self.value("stiffness_n_per_m", what)
         b.mesh.require_closed(f"{what} (compressible volume) needs a closed surface")
+        b.mesh.require_no_self_crossing(f"{what} (compressible volume) needs a surface bounding one region")
         b.out["vol0"] = float(b.mesh.volume())
 
 
@@ -55,6 +62,7 @@ class Volume(Term):
     def compile(self, b, what):
         super().compile(b, what)
         b.mesh.require_closed(f"{what}: a constant-volume constraint needs a closed surface")
+        b.mesh.require_no_self_crossing(f"{what}: a constant-volume constraint needs a surface bounding one region")
         b.out["vol0"] = float(b.mesh.volume())
         b.rows["volume"].append(what)
 
@@ -91,12 +99,55 @@ def ring_cross_sum(ring_ptr, ring_vert, vec, i):
     return gx, gy, gz
 
 
+def _position_sums(vert_pos, chunk_acc):
+    """Sum of the positions of each chunk of CHUNK_VERTS points into chunk_acc[:, :3]."""
+    n = vert_pos.shape[0]
+    for c in prange((n + CHUNK_VERTS - 1) // CHUNK_VERTS):
+        sx = sy = sz = 0.0
+        for i in range(np.uint64(c * CHUNK_VERTS), np.uint64(min((c + 1) * CHUNK_VERTS, n))):
+            sx += vert_pos[i, 0]
+            sy += vert_pos[i, 1]
+            sz += vert_pos[i, 2]
+        chunk_acc[c, 0] = sx
+        chunk_acc[c, 1] = sy
+        chunk_acc[c, 2] = sz
+
+
+_position_sums_serial, _position_sums_parallel = kernel_twin(_position_sums)
+
+
 @kernel
-def face_volume(face_vert, ref, vert_pos):
-    """V = 1/6 sum_f a.(b x c) (m^3), coordinates relative to ref (m): the
-    volume measured independently of the projection, for observers.
-    # Model: face_vert (nface, 3) int32, ref (3,) m   # Data in: vert_pos (nvert, 3) m
+def centroid(vert_pos, chunk_acc, parallel):
+    """The mean of the positions (m), a tuple (x, y, z): the origin of the volume
+    sums. The chunks' sums are added in order, so both builds agree to the bit.
+    # Data in: vert_pos (nvert, 3) m   # Scratch: chunk_acc (chunk_count(nvert), >= 3)
     """
+    if parallel:
+        _position_sums_parallel(vert_pos, chunk_acc)
+    else:
+        _position_sums_serial(vert_pos, chunk_acc)
+    sx = sy = sz = 0.0
+    for c in range((vert_pos.shape[0] + CHUNK_VERTS - 1) // CHUNK_VERTS):
+        sx += chunk_acc[c, 0]
+        sy += chunk_acc[c, 1]
+        sz += chunk_acc[c, 2]
+    n = vert_pos.shape[0]
+    return sx / n, sy / n, sz / n
+
+
+@kernel
+def face_volume(face_vert, vert_pos):
+    """V = 1/6 sum_f a.(b x c) (m^3), coordinates relative to the centroid of
+    the points: the volume measured independently of the projection, for observers.
+    # Model: face_vert (nface, 3) int32   # Data in: vert_pos (nvert, 3) m
+    """
+    sx = sy = sz = 0.0
+    for i in range(vert_pos.shape[0]):
+        sx += vert_pos[i, 0]
+        sy += vert_pos[i, 1]
+        sz += vert_pos[i, 2]
+    n = vert_pos.shape[0]
+    ref = (sx / n, sy / n, sz / n)
     vol = 0.0
     for f in range(face_vert.shape[0]):
         a, b, c = face_vert[f, 0], face_vert[f, 1], face_vert[f, 2]
@@ -136,7 +187,7 @@ def volume_cubic(ring_ptr, ring_vert, ref, vert_pos, dirn, chunk_acc, out, paral
     closed to have a volume constraint). This equals the per-face expansion
     of (a + phi da).((b + phi db) x (c + phi dc)) in DESIGN.md, without its
     six gathers per face; c1 = D . grad V(X) is left to the caller.
-    # Model: ring_ptr, ring_vert, ref (3,) m
+    # Model: ring_ptr, ring_vert   # Data in: ref (x, y, z) m, the origin of the sums
     # Data in: vert_pos (m), dirn (nvert, 3) (projection direction D)
     # Scratch: chunk_acc (chunk_count(nvert), >= 2): the sums of each chunk of points
     # Data out: out (2,) = (c2, c3)
@@ -314,7 +365,7 @@ _volume_update_serial, _volume_update_parallel = kernel_twin(_volume_update)
 
 
 @kernel
-def project_volume(ring_ptr, ring_vert, ref, vol0, vert_weight, h, vert_pos, vert_vel, grad, dirn, cubic,
+def project_volume(ring_ptr, ring_vert, vol0, vert_weight, h, vert_pos, vert_vel, grad, dirn, cubic,
                    chunk_acc, parallel):
     """Exact constant-volume projection (paper 4.2-4.3, DESIGN.md).
 
@@ -328,17 +379,17 @@ def project_volume(ring_ptr, ring_vert, ref, vol0, vert_weight, h, vert_pos, ver
     grad_i V = 1/6 sum_j (N_j - N_1) x (N_j+1 - N_1), which is the face
     formula summed around the point (for a closed fan the sum does not depend
     on the origin), and V = 1/3 sum_i (x_i - ref) . grad_i V (V is
-    homogeneous of degree 3): one pass, no scatter.
+    homogeneous of degree 3), ref the centroid of X*: one pass, no scatter.
 
     The quadratic and cubic coefficients take a second gather (D is needed
     at every neighbour first). They are always computed: in quiet breathing
     the quadratic term still moves the volume by about 2.5e-11 per step.
-    # Model: ring_ptr, ring_vert (closed fans), ref (3,) m, vol0 m^3,
-    #        vert_weight (nvert,) 1/kg
+    # Model: ring_ptr, ring_vert (closed fans), vol0 m^3, vert_weight (nvert,) 1/kg
     # Data in/out: vert_pos, vert_vel
     # Scratch: grad (volume gradient at X*, kept for the rib coupling), dirn, cubic (2,),
-    #          chunk_acc (chunk_count(nvert), >= 2): the sums of each chunk of points
+    #          chunk_acc (chunk_count(nvert), >= 3): the sums of each chunk of points
     """
+    ref = centroid(vert_pos, chunk_acc, parallel)
     if parallel:
         _volume_gather_parallel(ring_ptr, ring_vert, ref, vert_weight, vert_pos, grad, dirn, chunk_acc)
     else:
@@ -364,16 +415,17 @@ def project_volume(ring_ptr, ring_vert, ref, vol0, vert_weight, h, vert_pos, ver
 
 
 @kernel
-def soft_volume_force(ring_ptr, ring_vert, ref, vol0, stiff, vert_pos, grad, cubic, chunk_acc, vert_force):
+def soft_volume_force(ring_ptr, ring_vert, vol0, stiff, vert_pos, grad, cubic, chunk_acc, vert_force):
     """Compressibility (paper 6.2): attraction toward the volume-satisfying positions.
 
     phi solves V(X + phi grad V(X)) = V0; each point is pulled toward its
     target X_i + phi grad_i with stiffness k: F_i = k phi grad_i V, a uniform
     pressure p = k phi (Pa). Returns p.
-    # Model: ring_ptr, ring_vert (closed fans), ref, vol0 m^3, stiff N/m
+    # Model: ring_ptr, ring_vert (closed fans), vol0 m^3, stiff N/m
     # Data in: vert_pos
-    # Data out: vert_force; scratch grad, cubic, chunk_acc (chunk_count(nvert), >= 2)
+    # Data out: vert_force; scratch grad, cubic, chunk_acc (chunk_count(nvert), >= 3)
     """
+    ref = centroid(vert_pos, chunk_acc, False)
     vol = 0.0
     c1 = 0.0
     for i in range(vert_pos.shape[0]):
