@@ -24,6 +24,13 @@ class _Parser(argparse.ArgumentParser):
         sys.exit(2)
 
 
+def _out_arg(text: str) -> Path:
+    """--out as a path: an empty one is refused (Path('') would be the current folder)."""
+    if not text.strip():
+        raise HybridError(f"--out: expected a folder, received {text!r}")
+    return Path(text)
+
+
 def _cmd_run(args) -> int:
     from .model import compile_scene
     from .resolve import resolve_scene
@@ -35,7 +42,7 @@ def _cmd_run(args) -> int:
     if args.dt is not None:
         scene = dataclasses.replace(scene, dt_s=args.dt)
     duration = scene.duration_s if args.duration is None else args.duration
-    out = Path(args.out) if args.out is not None else default_out(scene.name)
+    out = _out_arg(args.out) if args.out is not None else default_out(scene.name)
     sim = Simulation(compile_scene(scene))
     run_steps(duration, sim.model.dt_s, confirmed=args.yes)
     if not args.no_record:
@@ -57,8 +64,9 @@ def _cmd_run(args) -> int:
 
 def _run_into(args, sim, duration: float, out: Path) -> int:
     """The run, its folder locked. summary.json says "running" from the start, then
-    "ok", "failed" or "interrupted": never an earlier run's. SIGTERM and SIGHUP stop
-    the run as Ctrl-C does; the recording is finished whatever stopped it."""
+    "ok", "failed" or "interrupted": never an earlier run's. SIGINT (Ctrl-C), SIGTERM
+    and SIGHUP stop the run after its current compiled call (a second one at once);
+    the recording is finished whatever stopped it."""
     import os
     import signal
     import tempfile
@@ -72,7 +80,8 @@ def _run_into(args, sim, duration: float, out: Path) -> int:
 
     def as_interrupt(signum, frame):
         caught.append(signum)
-        raise KeyboardInterrupt(signal.Signals(signum).name)
+        if len(caught) > 1:
+            raise KeyboardInterrupt(signal.Signals(signum).name)
 
     stops = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
     previous = {sig: signal.signal(sig, as_interrupt) for sig in stops}
@@ -86,7 +95,7 @@ def _run_into(args, sim, duration: float, out: Path) -> int:
                     recorder = Recorder(out / "run.mcap", sim, every_s=args.record_every)
                 try:
                     result = run(sim, duration, progress=True, observers=[recorder] if recorder else [],
-                                 trace_spill=spill)
+                                 trace_spill=spill, stop=lambda: bool(caught))
                 except RunFailed as failed:
                     result, failure = failed.result, failed.error
                 except RunInterrupted as interrupted:
@@ -131,7 +140,7 @@ def _interrupted(caught, sim, out: Path) -> int:
 def _cmd_render(args) -> int:
     from .render import render
     from .run import out_folder
-    result = render(args.source, out_folder(Path(args.out)), video=args.video, duration_s=args.duration)
+    result = render(args.source, out_folder(_out_arg(args.out)), video=args.video, duration_s=args.duration)
     rest, peak, end = result["frames"]
     extra = f" and {result['video']}" if result["video"] else ""
     print(f"rest t = {rest:.2f} s, peak inspiration t = {peak:.2f} s, end of expiration t = {end:.2f} s "

@@ -230,7 +230,7 @@ def _count_stops(nstep: int, periods, extra) -> int:
 
 
 def run(sim: Simulation, duration_s: float, *, frame_dt_s: float = 0.01, progress: bool = False,
-        observers=(), trace_spill=None) -> dict:
+        observers=(), trace_spill=None, stop=None) -> dict:
     """Run `sim` for `duration_s` and return the summary (see `summary keys`).
 
     `observers`: called at each frame after the trace has its values (e.g.
@@ -242,7 +242,9 @@ def run(sim: Simulation, duration_s: float, *, frame_dt_s: float = 0.01, progres
     frame at every multiple of that many steps, besides those `frame_dt_s` apart.
     `trace_spill`: a binary file to stream the trace to (`Trace`), so that the
     run's memory does not grow with its length; by default the trace is held in
-    memory (64 bytes a frame).
+    memory (64 bytes a frame). `stop`: a function of no argument, asked after each
+    compiled call; when it returns true the run stops there as on Ctrl-C (a signal
+    handler can set it without breaking a call in the middle).
 
     Returns a dict with the summary and the trace under "trace". On a
     HybridError the summary holds "status": "failed" and "error", and the
@@ -343,6 +345,8 @@ def run(sim: Simulation, duration_s: float, *, frame_dt_s: float = 0.01, progres
                 rest_return_mm = float(np.linalg.norm(at - rest, axis=1).max() * 1e3)
             if bar:
                 bar.update(int(batch[-1]))
+            if stop is not None and stop():
+                raise KeyboardInterrupt
     except HybridError as exc:
         error = exc
     except KeyboardInterrupt as exc:  # Ctrl-C, or a signal the command line turns into one
@@ -400,8 +404,6 @@ class RunInterrupted(KeyboardInterrupt):
 def out_folder(out: Path) -> Path:
     """The output folder `out`, created now: a folder that cannot be written fails
     before the run (a HybridError naming --out)."""
-    if not str(out):
-        raise HybridError("--out: expected a folder, received ''")
     try:
         out.mkdir(parents=True, exist_ok=True)
         with tempfile.TemporaryFile(dir=out):
