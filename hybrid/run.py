@@ -1,13 +1,15 @@
 """Run a scene to the end and summarise it: `summary.json` and `breathing.png`.
 
 The runner is an observer: it never changes the state. A frame is taken every
-`frame_dt_s` of simulated time; up to `FRAMES_PER_CALL` of them are stepped and
+`frame_dt_s` of simulated time (and at least every `MAX_STEPS_PER_CALL` steps, and
+at each multiple of an observer's `every_steps`); up to `FRAMES_PER_CALL` of them are stepped and
 captured in one compiled call (`Simulation.step_frames`: positions, volume,
 pressure, kinetic energy, the bodies' poses), and the trace is computed from them
 in whole arrays. With an observer that wants the simulation at each frame, or a
 scene with Python schedules, it steps frame by frame instead; both ways give the
-same trace to the bit. A run that fails or diverges still writes what it
-recorded up to the failure, with the error in the summary.
+same trace to the bit. The trace is kept in preallocated rows, or streamed to a
+file (`trace_spill`): no Python object per frame. A run that fails, diverges or
+is interrupted still returns what it recorded, with its status in the summary.
 """
 
 from __future__ import annotations
@@ -205,17 +207,22 @@ def run_steps(duration_s, dt_s: float, *, confirmed: bool = True, name: str = "-
 
 #: frames stepped in one compiled call by the runner (fewer for large meshes)
 FRAMES_PER_CALL = 100
+#: steps of one compiled call at most, and so between two frames: a run stops within
+#: about a second of a signal (compiled code cannot be interrupted) however far apart
+#: its frames are
+MAX_STEPS_PER_CALL = 100_000
 
 
 def _stop_batches(nstep: int, periods, extra, size: int):
     """The step indices where frames are taken, in increasing batches of at most
     `size`: every multiple of each of `periods` (steps) up to `nstep`, and `extra`
-    (nstep among them). Made a batch at a time: memory independent of nstep."""
+    (nstep among them), a batch spanning at most `MAX_STEPS_PER_CALL` steps. Made a
+    batch at a time: memory independent of nstep."""
     extra = np.array(sorted({int(e) for e in extra if 0 < e <= nstep}), np.int64)
     step = min(periods)
     done = 0
     while done < nstep:
-        hi = min(nstep, done + size * step)
+        hi = min(nstep, done + min(size * step, MAX_STEPS_PER_CALL))
         parts = [np.arange((done // p + 1) * p, hi + 1, p, dtype=np.int64) for p in periods]
         parts.append(extra[(extra > done) & (extra <= hi)])
         batch = np.unique(np.concatenate(parts))[:size]
@@ -255,7 +262,8 @@ def run(sim: Simulation, duration_s: float, *, frame_dt_s: float = 0.01, progres
     h = model.dt_s
     nstep = run_steps(duration_s, h, name="duration_s")
     frame_steps = max(1, int(round(frame_dt_s / h)))
-    periods = sorted({frame_steps} | {int(o.every_steps) for o in observers if getattr(o, "every_steps", None)})
+    periods = sorted({min(frame_steps, MAX_STEPS_PER_CALL)}
+                     | {int(o.every_steps) for o in observers if getattr(o, "every_steps", None)})
     apex = _apex_vertex(model)
     link = model.link_vert
     rest = model.mesh.vert_pos
