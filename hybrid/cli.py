@@ -24,34 +24,103 @@ class _Parser(argparse.ArgumentParser):
         sys.exit(2)
 
 
+def _out_arg(text: str) -> Path:
+    """--out as a path: an empty one is refused (Path('') would be the current folder)."""
+    if not text.strip():
+        raise HybridError(f"--out: expected a folder, received {text!r}")
+    return Path(text)
+
+
 def _cmd_run(args) -> int:
     from .model import compile_scene
     from .resolve import resolve_scene
-    from .run import RunFailed, out_folder, run, write_outputs
+    from .run import FolderLock, default_out, out_folder, run_steps
     from .simulation import Simulation
 
+    # everything that can be refused is, before the output folder is touched
     scene = resolve_scene(args.scene, overrides=args.set or (), without=args.without or ())
     if args.dt is not None:
         scene = dataclasses.replace(scene, dt_s=args.dt)
     duration = scene.duration_s if args.duration is None else args.duration
-    if not duration > 0:
-        raise HybridError(f"--duration: expected a time > 0 s, received {duration!r}")
-    out = out_folder(Path(args.out) if args.out else Path("runs") / scene.name)
+    out = _out_arg(args.out) if args.out is not None else default_out(scene.name)
     sim = Simulation(compile_scene(scene))
-    recorder = None
+    run_steps(duration, sim.model.dt_s, confirmed=args.yes)
     if not args.no_record:
-        from .record import Recorder
-        recorder = Recorder(out / "run.mcap", sim, every_s=args.record_every)
+        from .record import record_steps
+        record_steps(args.record_every, sim.model.dt_s, name="--record-every")
+    created = not out.exists()
+    out = out_folder(out)
     try:
-        result = run(sim, duration, progress=True, observers=[recorder] if recorder else [])
-    except RunFailed as failed:
-        write_outputs(failed.result, out)
-        raise failed.error
-    finally:  # the recording is complete and readable whatever stopped the run
-        if recorder is not None:
-            recorder.close()
-    write_outputs(result, out)
+        lock = FolderLock(out)
+    except HybridError:
+        if created:
+            out.rmdir()
+        raise
+    try:
+        return _run_into(args, sim, duration, out)
+    finally:
+        lock.release()
+
+
+def _run_into(args, sim, duration: float, out: Path) -> int:
+    """The run, its folder locked. summary.json says "running" from the start, then
+    "ok", "failed" or "interrupted": never an earlier run's. SIGINT (Ctrl-C), SIGTERM
+    and SIGHUP stop the run after its current compiled call (a second one at once);
+    the recording is finished whatever stopped it."""
+    import os
+    import signal
+    import tempfile
+
+    from .run import RunFailed, RunInterrupted, run, write_outputs, write_summary
+
+    model = sim.model
+    base = {"scene": model.scene.name, "dt": model.dt_s, "duration_requested_s": duration}
+    write_summary({**base, "status": "running", "pid": os.getpid()}, out)
+    caught = []
+
+    def as_interrupt(signum, frame):
+        caught.append(signum)
+        if len(caught) > 1:
+            raise KeyboardInterrupt(signal.Signals(signum).name)
+
+    stops = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+    previous = {sig: signal.signal(sig, as_interrupt) for sig in stops}
+    recorder = failure = None
+    try:
+        # the trace streamed to an unlinked file in the folder: memory independent of the run's length
+        with tempfile.TemporaryFile(dir=out) as spill:
+            try:
+                if not args.no_record:
+                    from .record import Recorder
+                    recorder = Recorder(out / "run.mcap", sim, every_s=args.record_every)
+                try:
+                    result = run(sim, duration, progress=True, observers=[recorder] if recorder else [],
+                                 trace_spill=spill, stop=lambda: bool(caught))
+                except RunFailed as failed:
+                    result, failure = failed.result, failed.error
+                except RunInterrupted as interrupted:
+                    result = interrupted.result
+            finally:
+                for sig in stops:  # a second signal must not break the finishing of the files
+                    signal.signal(sig, signal.SIG_IGN)
+                if recorder is not None:
+                    recorder.close()
+            write_outputs(result, out)
+    except KeyboardInterrupt:  # before the run's loop, or in its last lines
+        write_summary({**base, "status": "interrupted", "steps": sim.steps_done, "duration_s": sim.time}, out)
+        return _interrupted(caught, sim, out)
+    except (HybridError, OSError) as exc:
+        write_summary({**base, "status": "failed", "error": " ".join(str(exc).split()), "steps": sim.steps_done,
+                       "duration_s": sim.time}, out)
+        raise
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
     s = result["summary"]
+    if failure is not None:
+        raise failure
+    if s["status"] == "interrupted":
+        return _interrupted(caught, sim, out)
     print(f"{s['scene']}: {s['steps']} steps of {s['dt']:g} s in {s['wall_s']:.2f} s "
           f"({s['us_per_step']:.1f} us/step); volume error max {s['volume_rel_error_max']:.1e}; "
           f"rib lift {s['rib_lift_mm']:.2f} mm; apex descent {s['apex_descent_mm']:.2f} mm; "
@@ -59,10 +128,19 @@ def _cmd_run(args) -> int:
     return 0
 
 
+def _interrupted(caught, sim, out: Path) -> int:
+    """One line, and the shell's status for the signal (128 + its number: 130 for Ctrl-C)."""
+    import signal
+    signum = caught[-1] if caught else signal.SIGINT
+    sys.stderr.write(f"hybrid: interrupted by {signal.Signals(signum).name} at t = {sim.time:.6g} s "
+                     f"(step {sim.steps_done}); what was recorded is in {out}\n")
+    return 128 + int(signum)
+
+
 def _cmd_render(args) -> int:
     from .render import render
     from .run import out_folder
-    result = render(args.source, out_folder(Path(args.out)), video=args.video, duration_s=args.duration)
+    result = render(args.source, out_folder(_out_arg(args.out)), video=args.video, duration_s=args.duration)
     rest, peak, end = result["frames"]
     extra = f" and {result['video']}" if result["video"] else ""
     print(f"rest t = {rest:.2f} s, peak inspiration t = {peak:.2f} s, end of expiration t = {end:.2f} s "
@@ -107,12 +185,14 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("scene", nargs="?", help="a scene TOML file, or a built-in name: breathing, membrane_demo")
     r.add_argument("--duration", type=float, help="simulated time (s); default: the scene's")
     r.add_argument("--dt", type=float, help="time step (s); default: the scene's")
-    r.add_argument("--out", help="output folder (default runs/SCENE)")
+    r.add_argument("--out", help="output folder (default runs/SCENE, SCENE the scene's name)")
+    r.add_argument("--yes", action="store_true", help="run even more than 1e8 steps")
     r.add_argument("--without", action="append", metavar="NAME", help="drop a force term or constraint by name")
     r.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a scene value, e.g. dt_s=5e-4")
     r.add_argument("--no-record", action="store_true", help="do not write OUT/run.mcap (the MCAP recording)")
-    r.add_argument("--record-every", type=_positive_float, default=0.01, metavar="SECONDS",
-                   help="recording interval in simulated time (default 0.01 s)")
+    r.add_argument("--record-every", type=_positive_float, metavar="SECONDS",
+                   help="recording interval in simulated time, a whole number of steps "
+                        "(default: the steps nearest 0.01 s)")
     r.set_defaults(func=_cmd_run)
     d = sub.add_parser("render", help="draw rest, peak inspiration and end of expiration (figure 4) headless")
     d.add_argument("source", nargs="?", help="a run.mcap recording, or a scene to run (default: breathing)")

@@ -49,8 +49,7 @@ _CORE_AFTER = {
     "sched": "ScheduleTable",
     "dt": "s",
     "integrator": "0 explicit Euler, 1 symplectic Euler",
-    "runaway_disp": "m: a step moving a point farther than this has run away",
-    "max_speed": "m/s: so has a point faster than this",
+    "max_speed": "m/s: a point faster than this has run away",
     "parallel": "bool: the per-point passes run their multi-core build (hybrid.kernel)",
 }
 _TERM_ARRAYS = {name: default for cls in TERM_CLASSES for name, default in cls.arrays.items()}
@@ -268,7 +267,6 @@ def compile_scene(scene: Scene) -> Model:
         vert_weight=b.out["vert_weight"],
         vol0=b.out.get("vol0", 0.0),
         sched=sched_table, dt=float(scene.dt_s), integrator=integrator,
-        runaway_disp=float(np.linalg.norm(np.ptp(mesh.vert_pos, axis=0))),
         max_speed=_positive(scene.max_speed_m_s, "max_speed_m_s"),
         parallel=use_parallel(nvert),
     )

@@ -1,13 +1,15 @@
 """Run a scene to the end and summarise it: `summary.json` and `breathing.png`.
 
 The runner is an observer: it never changes the state. A frame is taken every
-`frame_dt_s` of simulated time; up to `FRAMES_PER_CALL` of them are stepped and
+`frame_dt_s` of simulated time (and at least every `MAX_STEPS_PER_CALL` steps, and
+at each multiple of an observer's `every_steps`); up to `FRAMES_PER_CALL` of them are stepped and
 captured in one compiled call (`Simulation.step_frames`: positions, volume,
 pressure, kinetic energy, the bodies' poses), and the trace is computed from them
 in whole arrays. With an observer that wants the simulation at each frame, or a
 scene with Python schedules, it steps frame by frame instead; both ways give the
-same trace to the bit. A run that fails or diverges still writes what it
-recorded up to the failure, with the error in the summary.
+same trace to the bit. The trace is kept in preallocated rows, or streamed to a
+file (`trace_spill`): no Python object per frame. A run that fails, diverges or
+is interrupted still returns what it recorded, with its status in the summary.
 """
 
 from __future__ import annotations
@@ -17,7 +19,6 @@ import math
 import sys
 import tempfile
 import time
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -29,23 +30,127 @@ from .scene import Muscle
 from .simulation import Simulation
 from .step import F_KE, F_PRESSURE, F_TIME, F_VOLUME, capture_frame
 
-__all__ = ["Trace", "run", "out_folder", "write_outputs"]
+__all__ = ["TRACE_KEYS", "Trace", "run", "RunFailed", "RunInterrupted", "FolderLock", "default_out", "run_steps",
+           "out_folder", "write_summary", "write_outputs"]
 
 
-@dataclass
+#: the trace's series, one column each (SI units unless the name says mm)
+TRACE_KEYS = (
+    "t_s",
+    "volume_m3",
+    "rib_lift_mm",        # cranial (+z) displacement of the linked points' centroid
+    "apex_descent_mm",    # caudal (-z) displacement of the apex
+    "volume_rel_error",
+    "pressure_pa",
+    "muscle_n_per_m",
+    "kinetic_energy_j",
+)
+_COL = {key: i for i, key in enumerate(TRACE_KEYS)}
+
+#: rows a streamed trace holds in memory before it writes them to its file
+SPILL_ROWS = 8192
+
+
 class Trace:
-    """Time series recorded at each frame (SI units unless the name says mm)."""
-    t_s: list = field(default_factory=list)
-    volume_m3: list = field(default_factory=list)
-    rib_lift_mm: list = field(default_factory=list)      # cranial (+z) displacement of the linked points' centroid
-    apex_descent_mm: list = field(default_factory=list)  # caudal (-z) displacement of the apex
-    volume_rel_error: list = field(default_factory=list)
-    pressure_pa: list = field(default_factory=list)
-    muscle_n_per_m: list = field(default_factory=list)
-    kinetic_energy_j: list = field(default_factory=list)
+    """Time series recorded at each frame, one row a frame and one column per key
+    of `TRACE_KEYS` (`trace.t_s`, `trace.arrays()`), in a preallocated array: no
+    Python object per frame. `capacity`: the rows to expect (more still fit: the
+    array then doubles). `spill`: a binary file (e.g. an unlinked temporary file)
+    to stream the rows to, `SPILL_ROWS` at a time, so that memory does not grow
+    with the run; `arrays()` then reads them back. The running minima and maxima
+    of each series (`lowest`, `highest`) are kept as rows come."""
+
+    def __init__(self, capacity: int = 1024, spill=None):
+        self._spill = spill
+        rows = SPILL_ROWS if spill is not None else max(int(capacity), 1)
+        self._buf = np.empty((rows, len(TRACE_KEYS)))
+        self._held = 0      # rows in _buf
+        self._written = 0   # rows in the spill file
+        self.lowest = np.full(len(TRACE_KEYS), np.inf)
+        self.highest = np.full(len(TRACE_KEYS), -np.inf)
+
+    def __len__(self) -> int:
+        return self._written + self._held
+
+    def reserve(self, k: int) -> np.ndarray:
+        """(k, len(TRACE_KEYS)) rows to fill; they count once `commit(k)` is called,
+        so that an interrupt between the two leaves the trace as it was."""
+        if self._held + k > len(self._buf):
+            if self._spill is not None and self._held:
+                self._spill.write(self._buf[:self._held].tobytes())
+                self._written += self._held
+                self._held = 0
+            if self._held + k > len(self._buf):
+                grown = np.empty((max(2 * len(self._buf), self._held + k), len(TRACE_KEYS)))
+                grown[:self._held] = self._buf[:self._held]
+                self._buf = grown
+        return self._buf[self._held:self._held + k]
+
+    def commit(self, k: int) -> None:
+        rows = self._buf[self._held:self._held + k]
+        np.minimum(self.lowest, rows.min(axis=0, initial=np.inf), out=self.lowest)
+        np.maximum(self.highest, rows.max(axis=0, initial=-np.inf), out=self.highest)
+        self._held += k
+
+    def last(self, k: int) -> np.ndarray:
+        """The last k rows committed (k at most the rows of the last commit), a view."""
+        return self._buf[self._held - k:self._held]
+
+    def _table(self) -> np.ndarray:
+        if self._spill is None or not self._written:
+            return self._buf[:self._held]
+        self._spill.seek(0)
+        head = np.fromfile(self._spill, dtype=float, count=self._written * len(TRACE_KEYS))
+        self._spill.seek(0, 2)
+        return np.concatenate([head.reshape(-1, len(TRACE_KEYS)), self._buf[:self._held]])
 
     def arrays(self) -> dict:
-        return {k: np.asarray(v, float) for k, v in self.__dict__.items()}
+        """Every series as a float array of len(self) values: copies."""
+        table = self._table()
+        return {key: table[:, i].copy() for i, key in enumerate(TRACE_KEYS)}
+
+    def __getattr__(self, key):
+        if key in _COL:
+            return self._table()[:, _COL[key]].copy()
+        raise AttributeError(key)
+
+    def envelope(self, bins: int) -> dict:
+        """Each series with at most 2 `bins` points, for a plot: the lowest and the
+        highest value of each of `bins` runs of rows (every row when there are
+        fewer), read from the spill file a run at a time."""
+        n = len(self)
+        if n <= 2 * bins:
+            return self.arrays()
+        per = -(-n // bins)
+        parts = []
+
+        def reduce(rows):
+            for lo in range(0, len(rows), per):
+                run_ = rows[lo:lo + per]
+                lo_i, hi_i = run_.argmin(axis=0), run_.argmax(axis=0)
+                first, second = np.minimum(lo_i, hi_i), np.maximum(lo_i, hi_i)
+                cols = np.arange(len(TRACE_KEYS))
+                pair = np.stack([run_[first, cols], run_[second, cols]])
+                pair[:, 0] = run_[[0, -1], 0]  # time: the run's first and last
+                parts.append(pair)
+
+        if self._spill is not None and self._written:
+            self._spill.seek(0)
+            left, carry = self._written, np.empty((0, len(TRACE_KEYS)))
+            while left:
+                count = min(left, 64 * per)
+                rows = np.fromfile(self._spill, dtype=float, count=count * len(TRACE_KEYS))
+                rows = np.concatenate([carry, rows.reshape(-1, len(TRACE_KEYS))])
+                whole = len(rows) // per * per
+                reduce(rows[:whole])
+                carry = rows[whole:]
+                left -= count
+            self._spill.seek(0, 2)
+            reduce(np.concatenate([carry, self._buf[:self._held]]))
+        else:
+            reduce(self._buf[:self._held])
+        table = np.concatenate(parts)
+        return {key: table[:, i] for i, key in enumerate(TRACE_KEYS)}
 
 
 def _apex_vertex(model: Model) -> int:
@@ -72,12 +177,67 @@ def _breathing(model: Model):
     return None, None
 
 
+#: steps a command-line run starts only when confirmed (--yes)
+CONFIRM_STEPS = 10 ** 8
+#: beyond this many steps the time t = n dt no longer grows by dt in double precision
+MAX_STEPS = 2 ** 53
+
+
+def run_steps(duration_s, dt_s: float, *, confirmed: bool = True, name: str = "--duration") -> int:
+    """The number of steps of a run of `duration_s` at `dt_s`, or a HybridError on
+    one line: a duration that is not a finite time > 0 s, fewer than one step, more
+    than `MAX_STEPS`, or more than `CONFIRM_STEPS` unless `confirmed` (the message
+    then says how many and to add --yes). `name`: the duration's, for the messages."""
+    ok = isinstance(duration_s, (int, float, np.integer, np.floating)) and not isinstance(duration_s, bool)
+    if not (ok and math.isfinite(duration_s) and duration_s > 0):
+        raise HybridError(f"{name}: expected a finite time > 0 s, received {duration_s!r}")
+    steps = duration_s / dt_s
+    if not steps < MAX_STEPS:
+        raise HybridError(f"{name} {duration_s:g} s at dt_s = {dt_s:g} s: expected at most 2^53 = "
+                          f"{MAX_STEPS:.3g} steps (beyond, t + dt no longer advances t), received {steps:.3g}")
+    n = int(round(steps))
+    if n < 1:
+        raise HybridError(f"{name} {duration_s:g} s: expected at least one step of dt_s = {dt_s:g} s, "
+                          f"received {steps:.3g} steps")
+    if n > CONFIRM_STEPS and not confirmed:
+        raise HybridError(f"{name} {duration_s:g} s at dt_s = {dt_s:g} s is {n:.4g} steps, more than "
+                          f"{CONFIRM_STEPS:.0e}; add --yes to run them")
+    return n
+
+
 #: frames stepped in one compiled call by the runner (fewer for large meshes)
 FRAMES_PER_CALL = 100
+#: steps of one compiled call at most, and so between two frames: a run stops within
+#: about a second of a signal (compiled code cannot be interrupted) however far apart
+#: its frames are
+MAX_STEPS_PER_CALL = 100_000
+
+
+def _stop_batches(nstep: int, periods, extra, size: int):
+    """The step indices where frames are taken, in increasing batches of at most
+    `size`: every multiple of each of `periods` (steps) up to `nstep`, and `extra`
+    (nstep among them), a batch spanning at most `MAX_STEPS_PER_CALL` steps. Made a
+    batch at a time: memory independent of nstep."""
+    extra = np.array(sorted({int(e) for e in extra if 0 < e <= nstep}), np.int64)
+    step = min(periods)
+    done = 0
+    while done < nstep:
+        hi = min(nstep, done + min(size * step, MAX_STEPS_PER_CALL))
+        parts = [np.arange((done // p + 1) * p, hi + 1, p, dtype=np.int64) for p in periods]
+        parts.append(extra[(extra > done) & (extra <= hi)])
+        batch = np.unique(np.concatenate(parts))[:size]
+        yield batch
+        done = int(batch[-1])
+
+
+def _count_stops(nstep: int, periods, extra) -> int:
+    """How many stops `_stop_batches` makes (exactly for one period, at most otherwise)."""
+    extra = {int(e) for e in extra if 0 < e <= nstep}
+    return sum(nstep // p for p in periods) + sum(1 for e in extra if all(e % p for p in periods))
 
 
 def run(sim: Simulation, duration_s: float, *, frame_dt_s: float = 0.01, progress: bool = False,
-        observers=()) -> dict:
+        observers=(), trace_spill=None, stop=None) -> dict:
     """Run `sim` for `duration_s` and return the summary (see `summary keys`).
 
     `observers`: called at each frame after the trace has its values (e.g.
@@ -85,16 +245,25 @@ def run(sim: Simulation, duration_s: float, *, frame_dt_s: float = 0.01, progres
     `frames(sim, frames, trace)` method takes the frames a compiled call captured
     (`hybrid.step.Frames`, `frames.count` of them, the trace's last rows);
     otherwise it is called as `obs(sim, trace)` at each frame, the simulation then
-    stepped frame by frame.
+    stepped frame by frame. An observer with an `every_steps` attribute gets a
+    frame at every multiple of that many steps, besides those `frame_dt_s` apart.
+    `trace_spill`: a binary file to stream the trace to (`Trace`), so that the
+    run's memory does not grow with its length; by default the trace is held in
+    memory (64 bytes a frame). `stop`: a function of no argument, asked after each
+    compiled call; when it returns true the run stops there as on Ctrl-C (a signal
+    handler can set it without breaking a call in the middle).
 
     Returns a dict with the summary and the trace under "trace". On a
     HybridError the summary holds "status": "failed" and "error", and the
-    error is re-raised as `RunFailed` carrying the partial result.
+    error is re-raised as `RunFailed` carrying the partial result; on a
+    KeyboardInterrupt, "status": "interrupted", re-raised as `RunInterrupted`.
     """
     model = sim.model
     h = model.dt_s
-    nstep = int(round(duration_s / h))
+    nstep = run_steps(duration_s, h, name="duration_s")
     frame_steps = max(1, int(round(frame_dt_s / h)))
+    periods = sorted({min(frame_steps, MAX_STEPS_PER_CALL)}
+                     | {int(o.every_steps) for o in observers if getattr(o, "every_steps", None)})
     apex = _apex_vertex(model)
     link = model.link_vert
     rest = model.mesh.vert_pos
@@ -119,11 +288,10 @@ def run(sim: Simulation, duration_s: float, *, frame_dt_s: float = 0.01, progres
         ncycle = math.floor((duration_s - breath.onset_s) / breath.period_s + 1e-9)
         if ncycle >= 1:
             cycle_end_step = int(round((breath.onset_s + ncycle * breath.period_s) / h))
-    stops = np.array(sorted(set(list(range(frame_steps, nstep + 1, frame_steps)) + [nstep]
-                                + ([cycle_end_step] if cycle_end_step else []))), np.int64)
-    trace = Trace()
+    extra = [nstep] + ([cycle_end_step] if cycle_end_step else [])
+    trace = Trace(1 + _count_stops(nstep, periods, extra), spill=trace_spill)
     rest_return_mm = None
-    error = None
+    error = interrupted = None
     batch_observers = [o for o in observers if hasattr(o, "frames")]
     per_frame = [o for o in observers if not hasattr(o, "frames")]
     batched = sim.can_step_frames and not per_frame
@@ -131,21 +299,24 @@ def run(sim: Simulation, duration_s: float, *, frame_dt_s: float = 0.01, progres
     frames = sim.frames_buffer(per_call if batched else 1)
     sim.step(0)  # loads (or compiles, on a first run) the step, outside the timed run
     if batched:
-        sim.step_frames(stops[:0], frames)
+        sim.step_frames(np.zeros(0, np.int64), frames)
 
     def take(frames):
         """The trace's rows of the frames captured, then the observers."""
         k = frames.count
         pos, scal = frames.pos[:k], frames.scal[:k]
-        trace.t_s.extend(scal[:, F_TIME].tolist())
-        trace.apex_descent_mm.extend((-(pos[:, apex, 2] - apex_z0) * 1e3).tolist())
-        trace.rib_lift_mm.extend(((_mean_z(pos, link) - rib_z0) * 1e3).tolist() if link.size else [0.0] * k)
+        rows = trace.reserve(k)
+        rows[:, _COL["t_s"]] = scal[:, F_TIME]
+        rows[:, _COL["apex_descent_mm"]] = -(pos[:, apex, 2] - apex_z0) * 1e3
+        rows[:, _COL["rib_lift_mm"]] = (_mean_z(pos, link) - rib_z0) * 1e3 if link.size else 0.0
         vol = scal[:, F_VOLUME]
-        trace.volume_m3.extend(vol.tolist())
-        trace.volume_rel_error.extend((np.abs(vol - v0) / v0 if v0 else np.zeros(k)).tolist())
-        trace.pressure_pa.extend(scal[:, F_PRESSURE].tolist())
-        trace.kinetic_energy_j.extend(scal[:, F_KE].tolist())
-        trace.muscle_n_per_m.extend(muscle_at(t) for t in scal[:, F_TIME].tolist())
+        rows[:, _COL["volume_m3"]] = vol
+        rows[:, _COL["volume_rel_error"]] = np.abs(vol - v0) / v0 if v0 else 0.0
+        rows[:, _COL["pressure_pa"]] = scal[:, F_PRESSURE]
+        rows[:, _COL["kinetic_energy_j"]] = scal[:, F_KE]
+        for j, t in enumerate(scal[:, F_TIME].tolist()):
+            rows[j, _COL["muscle_n_per_m"]] = muscle_at(t)
+        trace.commit(k)
         for obs in batch_observers:
             obs.frames(sim, frames, trace)
         for obs in per_frame:
@@ -165,9 +336,7 @@ def run(sim: Simulation, duration_s: float, *, frame_dt_s: float = 0.01, progres
     wall0 = time.perf_counter()
     bar = _Progress(nstep) if progress else None
     try:
-        i = 0
-        while i < len(stops):
-            batch = stops[i:i + (per_call if batched else 1)]
+        for batch in _stop_batches(nstep, periods, extra, per_call if batched else 1):
             try:
                 if batched:
                     sim.step_frames(batch, frames)
@@ -182,36 +351,43 @@ def run(sim: Simulation, duration_s: float, *, frame_dt_s: float = 0.01, progres
                 j = int(np.searchsorted(batch, cycle_end_step))
                 at = frames.pos[j] if batched else sim.state.vert_pos
                 rest_return_mm = float(np.linalg.norm(at - rest, axis=1).max() * 1e3)
-            i += len(batch)
             if bar:
                 bar.update(int(batch[-1]))
+            if stop is not None and stop():
+                raise KeyboardInterrupt
     except HybridError as exc:
         error = exc
+    except KeyboardInterrupt as exc:  # Ctrl-C, or a signal the command line turns into one
+        interrupted = exc
     finally:
         if bar:
             bar.close()
     wall = time.perf_counter() - wall0
-    arr = trace.arrays()
+    lo, hi = trace.lowest, trace.highest
     summary = {
         "scene": model.scene.name,
-        "status": "ok" if error is None else "failed",
+        "status": "ok" if error is None and interrupted is None else "failed" if error else "interrupted",
         "steps": sim.steps_done,
         "dt": h,
         "duration_s": sim.time,
         "wall_s": wall,
         "us_per_step": wall / max(sim.steps_done, 1) * 1e6,
-        "volume_rel_error_max": float(arr["volume_rel_error"].max()),
-        "pressure_min_pa": float(arr["pressure_pa"].min()),
-        "pressure_max_pa": float(arr["pressure_pa"].max()),
-        "rib_lift_mm": float(arr["rib_lift_mm"].max()),
-        "apex_descent_mm": float(arr["apex_descent_mm"].max()),
+        "volume_rel_error_max": float(hi[_COL["volume_rel_error"]]),
+        "pressure_min_pa": float(lo[_COL["pressure_pa"]]),
+        "pressure_max_pa": float(hi[_COL["pressure_pa"]]),
+        "rib_lift_mm": float(hi[_COL["rib_lift_mm"]]),
+        "apex_descent_mm": float(hi[_COL["apex_descent_mm"]]),
         "rest_return_mm": rest_return_mm,
     }
     if error is not None:
         summary["error"] = str(error)
+    if interrupted is not None:
+        summary["duration_requested_s"] = nstep * h
     result = {"summary": summary, "trace": trace}
     if error is not None:
         raise RunFailed(error, result) from error
+    if interrupted is not None:
+        raise RunInterrupted(result) from interrupted
     return result
 
 
@@ -221,6 +397,15 @@ class RunFailed(HybridError):
     def __init__(self, error: Exception, result: dict):
         super().__init__(str(error))
         self.error = error
+        self.result = result
+
+
+class RunInterrupted(KeyboardInterrupt):
+    """A run stopped by Ctrl-C (or a signal taken as one); `.result` holds what was
+    recorded before it, its summary's "status" "interrupted"."""
+
+    def __init__(self, result: dict):
+        super().__init__(f"interrupted at t = {result['summary']['duration_s']:.6g} s")
         self.result = result
 
 
@@ -237,12 +422,71 @@ def out_folder(out: Path) -> Path:
     return out
 
 
+def default_out(scene_name: str) -> Path:
+    """runs/<scene name>, the folder of a run without --out. The name is a name:
+    one that could lead elsewhere (a path separator, '..', a NUL) or none at all
+    is refused, so that only --out chooses where a run writes."""
+    why = ("is empty" if not scene_name.strip() else
+           "holds a NUL character" if "\0" in scene_name else
+           "holds a path separator" if "/" in scene_name or "\\" in scene_name else
+           "holds '..'" if ".." in scene_name else
+           "is '.'" if scene_name == "." else None)
+    if why is not None:
+        raise HybridError(f"scene name: expected a plain name (the folder runs/<name> when --out is not given), "
+                          f"received {scene_name!r}, which {why}; choose the folder with --out")
+    return Path("runs") / scene_name
+
+
+#: the lock file a run holds in its output folder, with the process id inside
+LOCK_NAME = ".hybrid-run.lock"
+
+
+class FolderLock:
+    """An exclusive lock on an output folder (fcntl.flock on `LOCK_NAME` inside it)
+    for as long as a run writes there: a second run into the same folder is refused
+    with a HybridError naming the first's process id. The lock goes with the process,
+    however it ends; the file stays."""
+
+    def __init__(self, folder: Path):
+        import fcntl
+        import os
+
+        path = folder / LOCK_NAME
+        self._fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(self._fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.pread(self._fd, 32, 0).decode(errors="replace").strip() or "unknown"
+            os.close(self._fd)
+            raise HybridError(f"--out: expected a folder no other run is writing, received {str(folder)!r}, "
+                              f"in use by hybrid run process {holder}; wait for it or choose another --out") from None
+        os.ftruncate(self._fd, 0)
+        os.pwrite(self._fd, f"{os.getpid()}\n".encode(), 0)
+
+    def release(self) -> None:
+        import os
+        if self._fd is not None:
+            os.close(self._fd)  # closing the descriptor releases the flock
+            self._fd = None
+
+
+def write_summary(summary: dict, out_dir: Path) -> None:
+    """summary.json in out_dir, replaced whole (written aside, then renamed)."""
+    tmp = out_dir / "summary.json.part"
+    tmp.write_text(json.dumps(summary, indent=2) + "\n")
+    tmp.replace(out_dir / "summary.json")
+
+
 def write_outputs(result: dict, out_dir: Path, *, plot: bool = True) -> None:
     """Write summary.json (and breathing.png) into out_dir."""
     out_dir.mkdir(parents=True, exist_ok=True)
-    (out_dir / "summary.json").write_text(json.dumps(result["summary"], indent=2) + "\n")
+    write_summary(result["summary"], out_dir)
     if plot:
         plot_trace(result["trace"], out_dir / "breathing.png", title=result["summary"]["scene"])
+
+
+#: a plot draws each series' lowest and highest value in this many runs of frames
+PLOT_BINS = 2000
 
 
 def plot_trace(trace: Trace, path: Path, *, title: str = "") -> None:
@@ -252,7 +496,7 @@ def plot_trace(trace: Trace, path: Path, *, title: str = "") -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    a = trace.arrays()
+    a = trace.envelope(PLOT_BINS)
     panels = [("rib_lift_mm", "rib elevation (mm)"), ("apex_descent_mm", "apex descent (mm)"),
               ("volume_rel_error", "|V - V0| / V0"), ("pressure_pa", "pressure (Pa)"),
               ("muscle_n_per_m", "muscle stiffness (N/m)")]

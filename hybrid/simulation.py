@@ -204,21 +204,12 @@ class Simulation:
                 f"volume projection failed at t = {t:.6g} s (step {step}): {why}; expected a closed surface "
                 f"with free points to move")
         else:
-            suggest = self.suggest_dt()
             disp = float(s.scal[S_MAXDISP])
             if code == DIVERGED_NONFINITE:
                 what = "became non-finite"
-            elif disp > model.arrays.runaway_disp:
-                what = f"moved {disp:.3g} m in one step, more than the body's size {model.arrays.runaway_disp:.3g} m"
             else:
                 what = f"reached {disp / h:.3g} m/s, above max_speed_m_s = {model.arrays.max_speed:.3g}"
-            remedy = f"try dt_s <= {suggest:.3g} s"
-            damping = self._damping_fraction()
-            if h <= model.dt_stable_s and damping < SELF_EXCITATION_DAMPING:
-                # the step is not the cause: the non-conservative shape memory excites itself
-                remedy = (f"the step is within the stability bound {model.dt_stable_s:.3g} s but damping is "
-                          f"{damping:.3g} of critical, below the {SELF_EXCITATION_DAMPING} where shape memory "
-                          f"excites itself; add Damping(critical_fraction=0.3)")
+            remedy, suggest = self._advice()
             err = SimulationDiverged(
                 f"simulation diverged at t = {t:.6g} s (step {step}): vertex {vert} {what}; "
                 f"time step {h:.3g} s with {model.scene.integrator}; {remedy}",
@@ -238,12 +229,50 @@ class Simulation:
 
     def suggest_dt(self) -> float:
         """A time step (s) to try after a divergence: half the linear stability
-        bound, and at most a quarter of the step that failed."""
-        h = self.model.arrays.dt
-        bound = self.model.dt_stable_s
-        if bound == 0.0:  # explicit Euler without damping: no step is stable
-            return h / 4.0
-        return min(0.5 * bound, h / 4.0)
+        bound, and at most a quarter of the step that failed; nan where no step
+        is stable (explicit Euler on an undamped spring)."""
+        return self._advice()[1]
+
+    def _advice(self) -> tuple[str, float]:
+        """What to try after a divergence, and the step it suggests (nan: none helps)."""
+        model, a = self.model, self.model.arrays
+        h = a.dt
+        k, c, m = model.vert_stiffness, a.damp_coef, a.vert_mass
+        held = (a.vert_free > 0) & (k > 0)
+        if a.integrator == 0 and np.any(held & (c == 0)):
+            # one step of x'' = -k/m x multiplies the amplitude by sqrt(1 + h^2 k/m) > 1
+            undamped = np.flatnonzero(held & (c == 0))
+            i = int(undamped[0])
+            # symplectic Euler keeps a conservative spring bounded, not shape memory
+            # (it excites itself below SELF_EXCITATION_DAMPING): there only damping helps
+            other = ("" if np.isin(undamped, a.sm_vert).any() else " or use integrator = 'symplectic_euler'")
+            return (f"explicit Euler grows every undamped oscillation whatever the step (vertex {i} has stiffness "
+                    f"{k[i]:.3g} N/m and no damping), so no smaller step helps; add Damping(critical_fraction=0.3)"
+                    f"{other}"), math.nan
+        bound = model.dt_stable_s
+        if bound == 0.0:
+            # below what the stability estimate resolves (1e-9 s): the tightest point's
+            # bound in closed form: c/k for damped explicit Euler (|1 - h c/m + h^2 k/m| < 1),
+            # 2 sqrt(m/k) for symplectic Euler, 2 m/c for the damping alone
+            with np.errstate(divide="ignore", invalid="ignore", over="ignore", under="ignore"):
+                spring = np.where(k > 0, c / k if a.integrator == 0 else 2.0 * np.sqrt(m / k), np.inf)
+                drag = np.where(c > 0, 2.0 * m / c, np.inf)
+            per = np.where(a.vert_free > 0, np.minimum(spring, drag), np.inf)
+            i = int(np.argmin(per))
+            est = float(per[i])
+            stiff = f"vertex {i}: stiffness {k[i]:.3g} N/m, damping {c[i]:.3g} N s/m, mass {m[i]:.3g} kg"
+            if not est > 0:
+                return f"no representable step is stable ({stiff}); lower the stiffness or damping", math.nan
+            return (f"a stable step would be about {est:.3g} s ({stiff}), {1.0 / est:.3g} steps per simulated "
+                    f"second: lower the stiffness or damping (or raise the mass) rather than the step"), 0.5 * est
+        suggest = min(0.5 * bound, h / 4.0)
+        damping = self._damping_fraction()
+        if h <= bound and damping < SELF_EXCITATION_DAMPING:
+            # the step is not the cause: the non-conservative shape memory excites itself
+            return (f"the step is within the stability bound {bound:.3g} s but damping is {damping:.3g} of "
+                    f"critical, below the {SELF_EXCITATION_DAMPING} where shape memory excites itself; add "
+                    f"Damping(critical_fraction=0.3)"), suggest
+        return f"try dt_s <= {suggest:.3g} s", suggest
 
     # ------------------------------------------------------------ a state set by hand
     def set_state(self, *, vert_pos=None, vert_vel=None, time_s: float | None = None, qpos=None,

@@ -238,9 +238,11 @@ def _after_integration(m, s, t, step):
     s.scal[S_MAXDISP] = math.sqrt(dmax)
     if not (dsum < np.inf and ke < np.inf):
         return _fail(s, DIVERGED_NONFINITE, step, _first_nonfinite(pos, vel, worst))
-    # runaway: a step longer than the body's size, or a speed above max_speed
-    # (the volume projection can keep an unstable run bounded but fast)
-    lim = min(m.runaway_disp, m.max_speed * h)
+    # runaway: a speed above max_speed (the volume projection can keep an unstable
+    # run bounded but fast). Not the body's size: a small body falling freely
+    # travels its size in a step while nothing is unstable, and an unstable step
+    # grows the speed geometrically, past any max_speed within a few steps.
+    lim = m.max_speed * h
     if dmax > lim * lim:
         return _fail(s, DIVERGED_RUNAWAY, step, worst)
     on = m.term_on

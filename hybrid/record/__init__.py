@@ -22,9 +22,9 @@ description (faces, region of each point, colours, geoms) is an MCAP metadata re
 named "hybrid", so that `hybrid render` needs nothing but the file.
 
 Cost: the run's thread only copies each block of frames (positions, body poses,
-their rows in the runner's trace). The frames go to a writer thread (at the end of
+their scalars from the runner's trace). The frames go to a writer thread (at the end of
 a block once half a chunk, about 0.5 MiB, is held) that writes the file's head with
-the first ones, takes their scalars from the trace, encodes every message of every
+the first ones, encodes every message of every
 frame in one compiled pass (protobuf: numbers are copied as their 8 bytes, the
 fields that do not change are encoded once), then compresses (zstd at a fast level)
 and writes the chunk. The encoder and the compressor release the GIL, as do the
@@ -52,9 +52,10 @@ thread); `mcap_reader` (the file's records read back and verified, chunk by chun
 """
 
 from .reader import TOPICS, RecordingError, RecordingWarning, frames, read
-from .recorder import Recorder
+from .recorder import Recorder, record_steps
 from .schemas import (GEOM_BOX, GEOM_CAPSULE, GEOM_CYLINDER, GEOM_ELLIPSOID, GEOM_SPHERE, MESH_EVERY_FRAME_MAX,
                       SCALAR_CHANNELS, body_geoms, region_colours)
 
-__all__ = ["Recorder", "read", "frames", "RecordingError", "RecordingWarning", "TOPICS", "region_colours", "body_geoms", "SCALAR_CHANNELS", "MESH_EVERY_FRAME_MAX",
+__all__ = ["Recorder", "record_steps", "read", "frames", "RecordingError", "RecordingWarning", "TOPICS",
+           "region_colours", "body_geoms", "SCALAR_CHANNELS", "MESH_EVERY_FRAME_MAX",
            "GEOM_SPHERE", "GEOM_CAPSULE", "GEOM_ELLIPSOID", "GEOM_CYLINDER", "GEOM_BOX"]

@@ -12,23 +12,49 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import HybridError
 from ..step import F_PRESSURE, F_TIME, F_VOLUME
 from .channels import _frame_bytes_estimate, _FrameWriter, _nslot, _plan
 from .encoder import _load_encoder
 from .schemas import MESH_EVERY_FRAME_MAX, SCALAR_CHANNELS
+from ..run import TRACE_KEYS
+
+
+#: the recording interval when none is given (s), as a whole number of steps
+DEFAULT_EVERY_S = 0.01
+
+
+def record_steps(every_s: float | None, dt_s: float, *, name: str = "every_s") -> int:
+    """The steps of dt_s in a recording interval of every_s, which must be a whole
+    number of them (frames are then exactly every_s apart); else a HybridError on one
+    line naming the nearest steps (and intervals) that divide. None: the whole number
+    of steps nearest `DEFAULT_EVERY_S`, at least one."""
+    if every_s is None:
+        return max(1, round(DEFAULT_EVERY_S / dt_s))
+    if not (isinstance(every_s, (int, float)) and not isinstance(every_s, bool) and math.isfinite(every_s)
+            and every_s > 0):
+        raise HybridError(f"{name}: expected a finite time > 0 s, received {every_s!r}")
+    n = every_s / dt_s
+    k = round(n)
+    if k >= 1 and abs(n - k) <= 1e-9 * n:
+        return int(k)
+    lo, hi = max(math.floor(n), 1), math.floor(n) + 1
+    pair = n > 1  # between two whole numbers of steps; below one, only one step fits
+    steps = f"{every_s / lo:.6g} s" + (f" or {every_s / hi:.6g} s ({lo} or {hi} steps)" if pair else " (1 step)")
+    intervals = f"{lo * dt_s:.6g} s" + (f" or {hi * dt_s:.6g} s" if pair else "")
+    raise HybridError(f"{name}: expected a whole number of steps of dt_s = {dt_s:.6g} s, received {every_s:.6g} s "
+                      f"({n:.6g} steps); a step dt_s = {steps} divides it, or record every {intervals}")
 
 
 class _Frames:
     """Frames held until they are written: number (batch, nslot) = t, the scalars and
-    each body's pose (copied there from xpos, xquat when written), pos (batch, nvert, 3),
-    and each frame's row in the runner's trace (-1: none)."""
+    each body's pose (copied there from xpos, xquat when written), pos (batch, nvert, 3)."""
 
     def __init__(self, batch: int, nvert: int, nbody: int, nslot: int):
         self.number = np.full((batch, nslot), np.nan)
         self.pos = np.empty((batch, nvert, 3))
         self.xpos = np.zeros((batch, nbody, 3))
         self.xquat = np.zeros((batch, nbody, 4))
-        self.trace_row = np.full(batch, -1, np.int64)
 
     def numbers(self, nframe: int) -> np.ndarray:
         """The number slots of the first nframe frames, the bodies' poses filled in."""
@@ -40,14 +66,20 @@ class _Frames:
         return self.number[:nframe]
 
 
+# the trace's columns the scalar channels take, in the channels' order
+_SCALAR_COLS = [TRACE_KEYS.index(key) for key in SCALAR_CHANNELS.values()]
+
+
 class Recorder:
     """Write a run's frames to an MCAP file; an observer for `hybrid.run.run`.
 
     >>> with Recorder("run.mcap", sim) as rec:
     ...     run(sim, 12.0, observers=[rec])
 
-    `every_s`: the recording interval in simulated time (default 10 ms); frames the
-    runner offers closer than that to the last recorded one are skipped.
+    `every_s`: the recording interval in simulated time, a whole number of the
+    model's steps (`record_steps`; `every_steps` of them; default: the steps nearest
+    10 ms): the frames recorded are those at the multiples of it, and the runner
+    offers each of them.
     `mesh_every`: the triangle list every that many recorded frames (default: 1 up to
     `MESH_EVERY_FRAME_MAX` points, 10 above); above 1, a point cloud every frame.
     `chunk_size`: bytes of an MCAP chunk, about; frames are copied as they come and
@@ -57,18 +89,18 @@ class Recorder:
     `flush()` writes what is held; `close()` writes the rest and finishes the file.
     """
 
-    def __init__(self, path: str | Path, sim, *, every_s: float = 0.01, mesh_every: int | None = None,
+    def __init__(self, path: str | Path, sim, *, every_s: float | None = None, mesh_every: int | None = None,
                  chunk_size: int = 1 << 20, flush_s: float = 1.0, background: bool = True):
-        if not every_s > 0:
-            raise ValueError(f"every_s: expected a time > 0 s, received {every_s!r}")
+        self.every_steps = record_steps(every_s, sim.model.dt_s)
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        self.every_s = float(every_s)
+        self._dt_s = sim.model.dt_s
+        self.every_s = self.every_steps * self._dt_s if every_s is None else float(every_s)
         plan = _plan(sim, self.every_s)
         n = plan["nvert"]
         self.nbody = len(plan["bodies"])
         self.flush_s = flush_s
-        self._next_t = -math.inf
+        self._last_step = -1  # the step index of the last frame recorded
         self._closed = False
         mesh_every = int(mesh_every) if mesh_every else (1 if n <= MESH_EVERY_FRAME_MAX else 10)
         _load_encoder()
@@ -85,7 +117,6 @@ class Recorder:
         for _ in range(2 if background else 1):
             self._free.put(_Frames(batch, n, self.nbody, nslot))
         self._buf = self._free.get()
-        self._trace = None
         self._sim = self._body_src = None
         self._held = 0
         self._first = 0  # the run's index of the first frame held
@@ -102,16 +133,15 @@ class Recorder:
 
     # ------------------------------------------------------------ observer
     def __call__(self, sim, trace=None) -> None:
-        """Record the current frame of `sim` (if `every_s` has elapsed since the last one).
-        `trace`: the runner's `Trace`, whose last values feed the scalar channels (read
-        when the frames are handed over: a frame costs the run three copies)."""
-        t = sim.time
-        if t < self._next_t - 1e-9 * self.every_s or self._closed:
+        """Record the current frame of `sim` if its step is a multiple of `every_steps`.
+        `trace`: the runner's `Trace`, whose last row feeds the scalar channels."""
+        step = sim.steps_done
+        if step % self.every_steps or step <= self._last_step or self._closed:
             return
-        self._next_t = t + self.every_s
+        self._last_step = step
         k = self._held
         buf = self._buf
-        buf.number[k, 0] = t
+        buf.number[k, 0] = sim.time
         buf.pos[k] = sim.state.vert_pos
         if self.nbody:
             if sim is not self._sim:
@@ -119,12 +149,10 @@ class Recorder:
                 self._body_src = d.xpos[1:], d.xquat[1:]  # views of the MjData's memory
             buf.xpos[k] = self._body_src[0]
             buf.xquat[k] = self._body_src[1]
+        row = buf.number[k]
         if trace is not None:
-            self._trace = trace
-            buf.trace_row[k] = len(trace.t_s) - 1
+            row[1:1 + len(SCALAR_CHANNELS)] = trace.last(1)[0, _SCALAR_COLS]
         else:
-            buf.trace_row[k] = -1
-            row = buf.number[k]
             row[1:1 + len(SCALAR_CHANNELS)] = np.nan
             row[1], row[2], row[3] = sim.volume, sim.volume_rel_error, sim.pressure
         self._held = k + 1
@@ -133,21 +161,17 @@ class Recorder:
 
     def frames(self, sim, frames, trace=None) -> None:
         """Record the frames a compiled call captured (`hybrid.step.Frames`,
-        `frames.count` of them; the trace's last rows are theirs), those `every_s`
-        apart: copied in blocks, handed over as the buffer fills."""
+        `frames.count` of them; the trace's last rows are theirs), those at the
+        multiples of `every_steps`: copied in blocks, handed over as the buffer fills."""
         k = frames.count
         if self._closed or not k:
             return
         t = frames.scal[:k, F_TIME]
-        pick = []
-        for j, tj in enumerate(t.tolist()):
-            if tj >= self._next_t - 1e-9 * self.every_s:
-                pick.append(j)
-                self._next_t = tj + self.every_s
-        pick = np.asarray(pick, np.int64)
-        row0 = len(trace.t_s) - k if trace is not None else 0
-        if trace is not None:
-            self._trace = trace
+        step = np.rint(t / self._dt_s).astype(np.int64)
+        pick = np.flatnonzero((step % self.every_steps == 0) & (step > self._last_step))
+        if len(pick):
+            self._last_step = int(step[pick[-1]])
+        rows = trace.last(k) if trace is not None else None
         while len(pick):
             buf, held = self._buf, self._held
             part, pick = pick[:len(buf.pos) - held], pick[len(buf.pos) - held:]
@@ -157,10 +181,9 @@ class Recorder:
             if self.nbody:
                 buf.xpos[held:end] = frames.body_pos[part]
                 buf.xquat[held:end] = frames.body_quat[part]
-            if trace is not None:
-                buf.trace_row[held:end] = row0 + part
+            if rows is not None:
+                buf.number[held:end, 1:1 + len(SCALAR_CHANNELS)] = rows[part][:, _SCALAR_COLS]
             else:
-                buf.trace_row[held:end] = -1
                 vol, v0 = frames.scal[part, F_VOLUME], sim.model.arrays.vol0
                 buf.number[held:end, 1:1 + len(SCALAR_CHANNELS)] = np.nan
                 buf.number[held:end, 1] = vol
@@ -174,27 +197,10 @@ class Recorder:
         if 2 * self._held >= len(self._buf.pos) or time.perf_counter() - self._last_flush > self.flush_s:
             self._hand_over()
 
-    @staticmethod
-    def _take_trace(buf, nframe: int, trace) -> None:
-        """The scalar channels of the frames held, from the runner's trace rows (rows
-        already written: the writer thread may read them while the run appends)."""
-        rows = buf.trace_row[:nframe]
-        have = rows >= 0
-        if trace is None or not have.any():
-            return
-        lo, hi = int(rows[have].min()), int(rows[have].max())
-        for i, key in enumerate(SCALAR_CHANNELS.values()):
-            series = getattr(trace, key, None)
-            col = buf.number[:nframe, 1 + i]
-            if series and len(series) > hi:
-                col[have] = np.asarray(series[lo:hi + 1], float)[rows[have] - lo]
-            else:
-                col[have] = np.nan
-
     def _hand_over(self, last: bool = False) -> None:
         """Pass the frames held to the writer (the thread, or now); `last`: no frames follow."""
         if self._held:
-            item = (self._buf, self._held, self._first, self._trace)
+            item = (self._buf, self._held, self._first)
             self._first += self._held
             self._held = 0
             if self._todo is not None:
@@ -208,10 +214,9 @@ class Recorder:
             raise self._error
 
     def _write(self, item) -> None:
-        buf, nframe, first, trace = item
+        buf, nframe, first = item
         try:
             if self._error is None:
-                self._take_trace(buf, nframe, trace)
                 number = buf.numbers(nframe)
                 self._fw.write(number[:, 0], number, buf.pos[:nframe], first)
         except BaseException as exc:  # raised again in the run's thread

@@ -19,7 +19,7 @@ def no_runaway_check(model):
     """The same model without the runaway heuristics (dimensionless runs move
     farther than the body's size in one step while still converging);
     divergence is then non-finite values, or our own bound in `_relax`."""
-    return dataclasses.replace(model, arrays=model.arrays._replace(runaway_disp=1e300, max_speed=1e300))
+    return dataclasses.replace(model, arrays=model.arrays._replace(max_speed=1e300))
 
 
 class single_thread_blas:
