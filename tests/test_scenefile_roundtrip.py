@@ -15,7 +15,8 @@ from hybrid.scene import (AppliedForce, Attraction, Damping, Gravity, KeepIn, Ma
 from hybrid.schedule import Breathing, Constant, Table
 
 finite = st.floats(-1e3, 1e3, allow_nan=False, allow_infinity=False)
-positive = st.floats(1e-6, 1e6, allow_nan=False, allow_infinity=False)
+# within every field's physical bounds (hybrid.checks): sizes and steps up to 1e3
+positive = st.floats(1e-6, 1e3, allow_nan=False, allow_infinity=False)
 fraction = st.floats(1e-3, 0.999)
 vec3 = st.tuples(finite, finite, finite)
 name = st.text("abcdefghijklmnopqrstuvwxyz_", min_size=1, max_size=8)

@@ -36,7 +36,9 @@ def test_what_is_recorded_reads_back_exactly(mesh, nframe, seed, scale, backgrou
     sim = _sim(mesh)
     rng = np.random.default_rng(seed)
     rest = sim.model.mesh.vert_pos
-    times = np.cumsum(rng.uniform(0.01, 0.5, nframe))  # at least the recording interval apart
+    # frames at whole numbers of recording intervals (10 steps of 1 ms), a random gap apart
+    steps = 10 * np.cumsum(rng.integers(1, 50, nframe))
+    times = steps * sim.model.dt_s
     poses = [rest * (1 + 0.1 * rng.standard_normal()) + scale * rng.standard_normal(rest.shape)
              for _ in range(nframe)]
     with tempfile.TemporaryDirectory() as tmp:
@@ -44,7 +46,7 @@ def test_what_is_recorded_reads_back_exactly(mesh, nframe, seed, scale, backgrou
         rec = Recorder(path, sim, every_s=0.01, background=background)
         volumes = []
         for t, pos in zip(times, poses):
-            sim.set_state(vert_pos=pos, time_s=float(t))
+            sim.set_state(vert_pos=pos, time_s=float(t))  # its step count follows: t / dt
             rec(sim)
             volumes.append(sim.volume)
         rec.close()
