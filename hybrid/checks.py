@@ -13,7 +13,7 @@ import math
 
 from .errors import SceneError
 
-__all__ = ["fail", "show", "is_number", "number", "integer", "text", "boolean", "vec3", "vec3_list"]
+__all__ = ["fail", "show", "is_number", "number", "integer", "text", "plain_name", "boolean", "vec3", "vec3_list"]
 
 
 # Physical ranges of the inputs: far beyond any body a scene describes, small
@@ -89,6 +89,21 @@ def text(where, v, choices=None) -> str:
         fail(where, f"expected {want}, received {show(v)}")
     if "\x00" in v:  # file names and the recording's strings cannot hold it
         fail(where, f"expected text without NUL characters, received {show(v)}")
+    return v
+
+
+def plain_name(where, v) -> str:
+    """A name that is only a name (a run's folder is runs/<name> without --out): not
+    empty, no path separator, no '..', no NUL, not '.'."""
+    text(where, v)
+    why = ("is empty" if not v.strip() else
+           "holds a NUL character" if "\0" in v else
+           "holds a path separator" if "/" in v or "\\" in v else
+           "holds '..'" if ".." in v else
+           "is '.'" if v == "." else None)
+    if why is not None:
+        fail(where, f"expected a plain name (the folder runs/<name> when --out is not given), received "
+                    f"{v!r}, which {why}; choose the folder with --out")
     return v
 
 

@@ -242,7 +242,10 @@ def compile_scene(scene: Scene) -> Model:
 
     # rigid links: linked points follow their sites
     rigid = None
-    if scene.rigid is not None and scene.rigid.links:
+    if scene.rigid is not None and not scene.rigid.links:
+        raise SceneError(f"rigid.links: expected at least one link of membrane points to a body of "
+                         f"{scene.rigid.mjcf!r}, received none; add [[rigid.links]] or remove [rigid]")
+    if scene.rigid is not None:
         from .rigid import build_rigid  # imports mujoco, only for scenes that have rigid parts
         rigid, b.link_vert = build_rigid(scene, mesh, regions, vert_mass)
         b.vert_free[b.link_vert] = 0

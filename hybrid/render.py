@@ -61,13 +61,13 @@ def frames_from_recording(path: str | Path) -> Frames:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", RecordingWarning)
         data = read(path)
+    if "model" not in data or "membrane" not in data:  # the error alone, on its one line
+        raise HybridError(f"recording {str(path)!r}: no membrane frames (not written by hybrid run?)")
     for w in caught:  # a killed run's recording is drawn from what it holds: say so, on one line
         if issubclass(w.category, RecordingWarning):
             sys.stderr.write(f"hybrid: warning: {' '.join(str(w.message).split())}\n")
         else:
             warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-    if "model" not in data or "membrane" not in data:
-        raise HybridError(f"recording {str(path)!r}: no membrane frames (not written by hybrid run?)")
     meta, pts = data["model"], data["membrane"]
     n = len(pts["t"])
     tf = data.get("/rigid/transforms")

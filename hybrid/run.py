@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from . import checks
 from .errors import HybridError
 from .model import Model
 from .schedule import Breathing, schedule_eval, stack_schedules
@@ -426,14 +427,7 @@ def default_out(scene_name: str) -> Path:
     """runs/<scene name>, the folder of a run without --out. The name is a name:
     one that could lead elsewhere (a path separator, '..', a NUL) or none at all
     is refused, so that only --out chooses where a run writes."""
-    why = ("is empty" if not scene_name.strip() else
-           "holds a NUL character" if "\0" in scene_name else
-           "holds a path separator" if "/" in scene_name or "\\" in scene_name else
-           "holds '..'" if ".." in scene_name else
-           "is '.'" if scene_name == "." else None)
-    if why is not None:
-        raise HybridError(f"scene name: expected a plain name (the folder runs/<name> when --out is not given), "
-                          f"received {scene_name!r}, which {why}; choose the folder with --out")
+    checks.plain_name("scene name", scene_name)
     return Path("runs") / scene_name
 
 

@@ -99,7 +99,7 @@ class Scene:
     duration_s: float = param("positive", 1.0, hi=checks.MAX_DURATION_S)
     # a point faster than this has run away (tissue moves at cm/s)
     max_speed_m_s: float = param("positive", 50.0)
-    name: str = param("text", "scene")
+    name: str = param("name", "scene")
     base_dir: Optional[str] = None  # relative paths (mesh, MJCF) resolve here
 
     def term_names(self) -> list[str]:

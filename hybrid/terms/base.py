@@ -47,7 +47,7 @@ FLAGGED: list = []
 
 #: kinds checked by `check_value`; "selector" and "schedule" are checked where
 #: they are evaluated (hybrid.regions.select, hybrid.schedule.as_schedule)
-VALUE_KINDS = ("positive", "nonneg", "angle_deg", "vec3", "target", "choice", "text", "integer")
+VALUE_KINDS = ("positive", "nonneg", "angle_deg", "vec3", "target", "choice", "text", "name", "integer")
 
 
 def param(kind: str, default=dataclasses.MISSING, **meta):
@@ -88,6 +88,8 @@ def check_value(where: str, kind: str, value, meta: dict | None = None):
         return checks.text(where, value, meta["choices"])
     if kind == "text":
         return checks.text(where, value)
+    if kind == "name":
+        return checks.plain_name(where, value)
     if kind == "integer":
         return checks.integer(where, value, lo=meta["lo"], hi=meta.get("hi"))
     raise ValueError(f"kind {kind!r}: not a value kind {VALUE_KINDS}")
