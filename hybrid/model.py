@@ -101,6 +101,12 @@ class Model:
         return Model(scene, self.mesh, self.regions, arrays, self.terms, self.python_schedules,
                      self.vert_stiffness, dt_stable, self.rigid, self.link_vert)
 
+    def without_speed_limit(self) -> "Model":
+        """The same model without the runaway test (`max_speed_m_s`): for numerical
+        studies of runs that move fast while converging; a run still stops on
+        non-finite values."""
+        return dataclasses.replace(self, arrays=self.arrays._replace(max_speed=math.inf))
+
 
 def _check_dt(dt):
     # a bool is an int to Python, not a time step

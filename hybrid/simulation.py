@@ -78,6 +78,13 @@ class Simulation:
         return v
 
     @property
+    def vert_force(self) -> np.ndarray:
+        """(nvert, 3) N, the forces of the last step before its constraints, a read-only view."""
+        v = self.state.vert_force.view()
+        v.flags.writeable = False
+        return v
+
+    @property
     def volume(self) -> float:
         """Enclosed volume (m^3) of the current positions, measured face by face
         (independently of the projection)."""

@@ -5,7 +5,6 @@ the runs' settings (no runaway heuristics, numpy's BLAS on one thread).
 
 from __future__ import annotations
 
-import dataclasses
 
 import numpy as np
 
@@ -19,7 +18,7 @@ def no_runaway_check(model):
     """The same model without the runaway heuristics (dimensionless runs move
     farther than the body's size in one step while still converging);
     divergence is then non-finite values, or our own bound in `_relax`."""
-    return dataclasses.replace(model, arrays=model.arrays._replace(max_speed=1e300))
+    return model.without_speed_limit()
 
 
 class single_thread_blas:

@@ -68,7 +68,7 @@ def relax(model, x0, *, k=K_UNIT, m=M_UNIT, tol=EQ_TOL, max_time=3000.0, chunk=1
 
     def done():
         v = np.abs(sim.vert_vel[free]).max()
-        f = np.abs(sim.state.vert_force[free]).max()  # the step's force: no public view of it
+        f = np.abs(sim.vert_force[free]).max()
         return v <= vtol and f <= ftol
 
     def blown():
