@@ -95,7 +95,8 @@ def text(where, v, choices=None) -> str:
 def plain_name(where, v) -> str:
     """A name that is only a name (a run's folder is runs/<name> without --out): not
     empty, no path separator, no '..', no NUL, not '.'."""
-    text(where, v)
+    if not isinstance(v, str):
+        fail(where, f"expected a string, received {show(v)}")
     why = ("is empty" if not v.strip() else
            "holds a NUL character" if "\0" in v else
            "holds a path separator" if "/" in v or "\\" in v else

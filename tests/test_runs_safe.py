@@ -79,7 +79,8 @@ def test_hybrid_run_writes_nothing_where_a_scene_name_points(name, tmp_path, mon
     monkeypatch.chdir(work)
     name = name.replace("/elsewhere", str(tmp_path / "elsewhere"))
     assert main(["run", "membrane_demo", "--duration", "0.01", "--set", f"name={json.dumps(name)}"]) == 2
-    assert "scene name" in _one_line(capsys.readouterr().err)
+    # refused where the scene is checked, before any folder is chosen
+    assert "name: expected a plain name" in _one_line(capsys.readouterr().err)
     assert sorted(p.name for p in tmp_path.rglob("*")) == ["a", "b"]
 
 
