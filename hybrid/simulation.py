@@ -25,6 +25,12 @@ __all__ = ["Simulation"]
 SELF_EXCITATION_DAMPING = 0.15
 
 
+def _read_only(a: np.ndarray) -> np.ndarray:
+    v = a.view()
+    v.flags.writeable = False
+    return v
+
+
 class Simulation:
     """A run of a model: `step(n)`, and the state as read-only views.
 
@@ -66,23 +72,17 @@ class Simulation:
     @property
     def vert_pos(self) -> np.ndarray:
         """(nvert, 3) m, a read-only view."""
-        v = self.state.vert_pos.view()
-        v.flags.writeable = False
-        return v
+        return _read_only(self.state.vert_pos)
 
     @property
     def vert_vel(self) -> np.ndarray:
         """(nvert, 3) m/s, a read-only view."""
-        v = self.state.vert_vel.view()
-        v.flags.writeable = False
-        return v
+        return _read_only(self.state.vert_vel)
 
     @property
     def vert_force(self) -> np.ndarray:
         """(nvert, 3) N, the forces of the last step before its constraints, a read-only view."""
-        v = self.state.vert_force.view()
-        v.flags.writeable = False
-        return v
+        return _read_only(self.state.vert_force)
 
     @property
     def volume(self) -> float:
