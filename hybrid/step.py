@@ -27,9 +27,10 @@ from .kernel import CHUNK_VERTS, chunk_count, kernel, kernel_twin
 
 from .model import MembraneArrays
 from .schedule import KIND_PYTHON, schedule_eval
-from .terms import (TERMS, AppliedForce, Attraction, Damping, Gravity, KeepIn, MassSpring, Muscle, Prescribed,
-                    ShapeMemory, SoftVolume, Volume)
+from .terms import (TERMS, AppliedForce, Attraction, Damping, Gravity, KeepIn, MassSpring, Membrane, Muscle,
+                    Prescribed, ShapeMemory, SoftVolume, Volume)
 from .terms.local import apply_keep_in, apply_prescribed
+from .terms.membrane import add_membrane_serial, membrane_faces_parallel, membrane_gather_parallel
 from .terms.muscle import add_muscle
 from .terms.pointwise import point_forces_parallel, point_forces_serial
 from .terms.shape_memory import shape_memory_frames, shape_memory_frames_parallel
@@ -43,6 +44,7 @@ __all__ = ["Scal", "StepStatus", "FrameColumn", "MembraneState", "new_state", "m
 (T_GRAVITY, T_APPLIED, T_ATTRACTION, T_DAMPING, T_SHAPE_MEMORY, T_MASS_SPRING, T_MUSCLE, T_SOFT_VOLUME,
  T_PRESCRIBED, T_KEEP_IN, T_VOLUME) = (Gravity.id, AppliedForce.id, Attraction.id, Damping.id, ShapeMemory.id,
                                        MassSpring.id, Muscle.id, SoftVolume.id, Prescribed.id, KeepIn.id, Volume.id)
+T_MEMBRANE = Membrane.id
 
 
 class Scal(IntEnum):
@@ -69,7 +71,8 @@ OK, DIVERGED_NONFINITE, DIVERGED_RUNAWAY, VOLUME_FAILED = StepStatus
 class MembraneState(NamedTuple):
     """What changes during a run. vert_pos (nvert, 3) m; vert_vel (nvert, 3) m/s;
     vert_force (nvert, 3) N (forces of the last step, before constraints);
-    grad (nvert, 3) m^2 volume gradient at the last projection; sm_sums (nsm, 9),
+    grad (nvert, 3) m^2 volume gradient at the last projection; face_force (nface_m, 6) N:
+    the membrane triangles' forces (parallel build's scratch); sm_sums (nsm, 9),
     dirn, cubic: scratch; vert_acc (chunk_count(nvert), 4): scratch, the sums
     of the per-point passes over each chunk of points (hybrid.kernel);
     sched_val / sched_next (nsched, 3): schedules at t and t + h;
@@ -80,6 +83,7 @@ class MembraneState(NamedTuple):
     vert_vel: np.ndarray
     vert_force: np.ndarray
     grad: np.ndarray
+    face_force: np.ndarray
     sm_sums: np.ndarray
     vert_acc: np.ndarray
     dirn: np.ndarray
@@ -96,7 +100,7 @@ def new_state(arrays: MembraneArrays) -> MembraneState:
     ns = arrays.sched.kind.shape[0]
     return MembraneState(
         vert_pos=arrays.vert_rest.copy(), vert_vel=np.zeros((n, 3)), vert_force=np.zeros((n, 3)),
-        grad=np.zeros((n, 3)), sm_sums=np.zeros((arrays.sm_vert.shape[0], 9)),
+        grad=np.zeros((n, 3)), face_force=np.zeros((arrays.mem_vert.shape[0], 6)), sm_sums=np.zeros((arrays.sm_vert.shape[0], 9)),
         vert_acc=np.zeros((chunk_count(n), 4)), dirn=np.zeros((n, 3)),
         cubic=np.zeros(2),
         sched_val=np.zeros((ns, 3)), sched_next=np.zeros((ns, 3)), scal=np.zeros(8),
@@ -120,6 +124,13 @@ def membrane_forces(m, s, t):
     eval_schedules(m.sched, t, s.sched_val)
     on = m.term_on
     _pointwise_forces(m, s)
+    if on[T_MEMBRANE]:
+        if m.parallel:
+            membrane_faces_parallel(m.mem_vert, m.mem_par, m.kv_on, s.vert_pos, s.vert_vel, s.face_force)
+            membrane_gather_parallel(m.mvf_ptr, m.mvf_slot, s.face_force, s.vert_force)
+        else:
+            add_membrane_serial(m.mem_vert, m.mem_par, m.kv_on, s.vert_pos, s.vert_vel, s.vert_force)
+        s.term_calls[T_MEMBRANE] += 1
     if on[T_APPLIED]:
         add_applied(m.app_vert, m.app_sched, s.sched_val, s.vert_force)
         s.term_calls[T_APPLIED] += 1

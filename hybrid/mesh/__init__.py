@@ -7,13 +7,13 @@ The package's rooms:
 - `surface`: the `Mesh` class (construction, loading, immutability, geometry);
 - `geometry`: volume, its gradient and the row-wise helpers, on plain arrays;
 - `validate`: the checks of a surface and the building of its edges and fans;
-- `spheres`: `uv_sphere` (the paper's 80-point body), `icosahedron`, `icosphere`.
+- `spheres`: `uv_sphere` (the paper's 80-point body), `icosahedron`, `icosphere`, `irregular_sphere`.
 """
 
 from __future__ import annotations
 
 from .geometry import volume, volume_gradient
-from .spheres import ICOSPHERE_MAX_SUBDIVISIONS, icosahedron, icosphere, uv_sphere
+from .spheres import ICOSPHERE_MAX_SUBDIVISIONS, icosahedron, icosphere, irregular_sphere, uv_sphere
 from .surface import LOAD_SUFFIXES, Mesh
 
 __all__ = [
@@ -21,6 +21,7 @@ __all__ = [
     "uv_sphere",
     "icosahedron",
     "icosphere",
+    "irregular_sphere",
     "volume",
     "volume_gradient",
     "LOAD_SUFFIXES",

@@ -12,16 +12,17 @@ one entry there.
 from .base import CONSTRAINT_TYPES, FLAGGED, FORCE_TYPES, TERM_CLASSES, Build, Term, order_terms
 from .pointwise import Damping, Gravity
 from .shape_memory import ShapeMemory
+from .membrane import Membrane
 from .springs import AppliedForce, Attraction, MassSpring
 from .muscle import Muscle
 from .volume import SoftVolume, Volume
 from .local import KeepIn, Nailed, Prescribed
 
 __all__ = ["Term", "Build", "FORCE_TYPES", "CONSTRAINT_TYPES", "TERM_CLASSES", "FLAGGED", "TERMS",
-           "Gravity", "Damping", "ShapeMemory", "MassSpring", "AppliedForce", "Attraction", "Muscle",
+           "Gravity", "Damping", "ShapeMemory", "Membrane", "MassSpring", "AppliedForce", "Attraction", "Muscle",
            "SoftVolume", "Volume", "Nailed", "KeepIn", "Prescribed"]
 
-order_terms((Gravity, AppliedForce, Attraction, Damping, ShapeMemory, MassSpring, Muscle, SoftVolume,
+order_terms((Gravity, AppliedForce, Attraction, Damping, ShapeMemory, MassSpring, Muscle, SoftVolume, Membrane,
              Nailed, Prescribed, KeepIn, Volume))
 
 #: names of the terms with a flag and a kernel, in id order (MembraneArrays.term_on)
