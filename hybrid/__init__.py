@@ -32,6 +32,7 @@ from .resolve import resolve_scene, scene_names
 from .run import RunFailed, run
 from .scene import (AppliedForce, Attraction, Damping, Gravity, KeepIn, Masses, MassSpring, MeshSpec, Muscle,
                     Nailed, Prescribed, Rigid, RigidLink, Scene, ShapeMemory, SoftVolume, Volume, Membrane)
+from .scene import MuscleFibres, Pressure
 from .schedule import Breathing, Constant, Function, Table
 from .simulation import Simulation
 from .sweep import sweep
@@ -43,6 +44,7 @@ __all__ = [
     "Scene", "MeshSpec", "Masses",
     "Gravity", "Damping", "ShapeMemory", "Membrane", "MassSpring", "Muscle", "AppliedForce", "Attraction", "SoftVolume",
     "Nailed", "KeepIn", "Prescribed", "Volume", "Rigid", "RigidLink",
+    "Pressure", "MuscleFibres",
     # region selectors
     "All", "Border", "Indices", "HalfSpace", "Ball", "Box", "Nearest", "Union_", "Intersection", "Difference",
     # schedules

@@ -10,7 +10,8 @@ from __future__ import annotations
 import numpy as np
 
 from .model import MembraneArrays
-from .terms import Membrane, MassSpring, Muscle, ShapeMemory
+from .terms import Membrane, MassSpring, Muscle, MuscleFibres, ShapeMemory
+from .terms.fibres import add_muscle_fibres
 from .terms.membrane import add_membrane_serial, membrane_energy
 from .terms.muscle import add_muscle
 from .terms.shape_memory import add_shape_memory
@@ -19,7 +20,7 @@ from .terms.springs import add_mass_spring
 __all__ = ["internal_forces", "net_internal", "elastic_energy", "region_faces", "swept_volume"]
 
 #: terms whose forces are internal to the membrane (between its points)
-INTERNAL_TERMS = (Membrane, ShapeMemory, Muscle, MassSpring)
+INTERNAL_TERMS = (Membrane, ShapeMemory, Muscle, MassSpring, MuscleFibres)
 #: internal terms that are no energy's gradient (paper formulation)
 NON_CONSERVATIVE = (ShapeMemory, Muscle)
 
@@ -39,6 +40,8 @@ def internal_forces(a: MembraneArrays, vert_pos: np.ndarray, sched_val: np.ndarr
         add_muscle(a.mus_vert, a.mus_nbr, a.mus_sched, sched_val, vert_pos, f)
     if on[MassSpring.id]:
         add_mass_spring(a.spring_vert, a.spring_stiff, a.spring_rest, vert_pos, f)
+    if on[MuscleFibres.id]:
+        add_muscle_fibres(a.fib_edge, a.fib_share, a.fib_sched, sched_val, vert_pos, f)
     return f
 
 
@@ -53,8 +56,9 @@ def net_internal(vert_pos: np.ndarray, force: np.ndarray) -> dict:
 
 
 def elastic_energy(a: MembraneArrays, vert_pos: np.ndarray) -> float | None:
-    """The elastic energy (J) of the membrane's conservative terms; None when an
-    elastic or muscle term of the paper formulation has no energy."""
+    """The elastic energy (J) of the membrane's conservative terms (the muscle fibres'
+    active work is not counted); None when an elastic or muscle term of the paper
+    formulation has no energy."""
     if any(a.term_on[cls.id] for cls in NON_CONSERVATIVE):
         return None
     e = 0.0

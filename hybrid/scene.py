@@ -21,12 +21,14 @@ from .errors import SceneError
 from .terms.base import FORMULATIONS, param
 from .terms import (AppliedForce, Attraction, Damping, Gravity, KeepIn, MassSpring, Membrane, Muscle, Nailed,
                     Prescribed, ShapeMemory, SoftVolume, Volume)
+from .terms import MuscleFibres, Pressure
 
 __all__ = [
     "MeshSpec", "Masses",
     "Gravity", "Damping", "ShapeMemory", "Membrane", "MassSpring", "Muscle", "AppliedForce", "Attraction",
     "SoftVolume", "Nailed", "KeepIn", "Prescribed", "Volume", "RigidLink", "Rigid", "Scene",
     "INTEGRATORS", "FORMULATIONS",
+    "Pressure", "MuscleFibres",
 ]
 
 INTEGRATORS = ("explicit_euler", "symplectic_euler")

@@ -36,6 +36,8 @@ from .terms.pointwise import point_forces_parallel, point_forces_serial
 from .terms.shape_memory import shape_memory_frames, shape_memory_frames_parallel
 from .terms.springs import add_applied, add_attraction, add_mass_spring
 from .terms.volume import PROJ_OK, face_volume, project_volume, soft_volume_force
+from .terms.volume import Pressure, add_pressure
+from .terms.fibres import MuscleFibres, add_muscle_fibres
 
 __all__ = ["Scal", "StepStatus", "FrameColumn", "MembraneState", "new_state", "membrane_forces", "membrane_advance", "run_membrane",
            "run_membrane_frames", "capture_frame", "kinetic_energy_of", "Frames"]
@@ -45,6 +47,7 @@ __all__ = ["Scal", "StepStatus", "FrameColumn", "MembraneState", "new_state", "m
  T_PRESCRIBED, T_KEEP_IN, T_VOLUME) = (Gravity.id, AppliedForce.id, Attraction.id, Damping.id, ShapeMemory.id,
                                        MassSpring.id, Muscle.id, SoftVolume.id, Prescribed.id, KeepIn.id, Volume.id)
 T_MEMBRANE = Membrane.id
+T_PRESSURE, T_MUSCLE_FIBRES = Pressure.id, MuscleFibres.id
 
 
 class Scal(IntEnum):
@@ -145,9 +148,15 @@ def membrane_forces(m, s, t):
         add_muscle(m.mus_vert, m.mus_nbr, m.mus_sched, s.sched_val, s.vert_pos, s.vert_force)
         s.term_calls[T_MUSCLE] += 1
     if on[T_SOFT_VOLUME]:
-        s.scal[S_PRESSURE] = soft_volume_force(m.ring_ptr, m.ring_vert, m.vol0, m.soft_stiff, s.vert_pos,
-                                               s.grad, s.cubic, s.vert_acc, s.vert_force)
+        s.scal[S_PRESSURE] = soft_volume_force(m.ring_ptr, m.ring_vert, m.vol0, m.soft_stiff, m.soft_bulk,
+                                               s.vert_pos, s.grad, s.cubic, s.vert_acc, s.vert_force)
         s.term_calls[T_SOFT_VOLUME] += 1
+    if on[T_PRESSURE]:
+        add_pressure(m.ring_ptr, m.ring_vert, m.pres_sched, s.sched_val, s.vert_pos, s.vert_force)
+        s.term_calls[T_PRESSURE] += 1
+    if on[T_MUSCLE_FIBRES]:
+        add_muscle_fibres(m.fib_edge, m.fib_share, m.fib_sched, s.sched_val, s.vert_pos, s.vert_force)
+        s.term_calls[T_MUSCLE_FIBRES] += 1
 
 
 def _integrate(vert_free, vert_mass, explicit, h, vert_force, vert_pos, vert_vel, chunk_acc):
