@@ -25,7 +25,7 @@ class Muscle(Term):
     # mus_vert, mus_nbr (npair,) int32: each contraction pair; mus_sched (npair,) int64
     arrays = {"mus_vert": Rows(np.int32), "mus_nbr": Rows(np.int32), "mus_sched": Rows(np.int64)}
     region: object = param("selector")
-    stiffness: object = param("schedule", ncomp=1)
+    stiffness: object = param("schedule", ncomp=1, unit="N/m")
     toward_m: tuple = param("vec3", None)
     axis: tuple = param("vec3", None)
     max_angle_deg: float = param("angle_deg", 30.0)

@@ -42,7 +42,7 @@ class Damping(Term):
     arrays = {"damp_coef": lambda n: np.zeros(n)}  # (nvert,) N s/m
     finish_last = True
     coef_n_s_per_m: float = param("nonneg", None)
-    critical_fraction: float = param("nonneg", None)
+    critical_fraction: float = param("nonneg", None, unit="of critical")
     region: object = param("selector", "all")
 
     def compile(self, b, what):
