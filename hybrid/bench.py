@@ -42,7 +42,7 @@ def bench_membrane(subdivisions: int | None, dt_s: float = 1e-4) -> Scene:
     icosphere; a nailed cap keeps it from falling."""
     mesh = (MeshSpec(generator="uv_sphere", radius_m=RADIUS_M) if subdivisions is None else
             MeshSpec(generator="icosphere", subdivisions=subdivisions, radius_m=RADIUS_M))
-    return Scene(
+    return Scene(formulation="paper", 
         name="bench_membrane",
         mesh=mesh,
         masses=Masses(total_kg=4.0),

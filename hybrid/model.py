@@ -22,7 +22,7 @@ from . import schedule as _sched
 from .errors import SceneError
 from .kernel import use_parallel
 from .mesh import Mesh
-from .scene import INTEGRATORS, MESH_GENERATORS, Masses, MeshSpec, Scene
+from .scene import FORMULATIONS, INTEGRATORS, MESH_GENERATORS, Masses, MeshSpec, Scene
 from .stability import max_stable_dt
 from .terms import CONSTRAINT_TYPES, FORCE_TYPES, TERM_CLASSES, TERMS, Build, Volume
 from .terms.base import check_value
@@ -221,6 +221,9 @@ def compile_scene(scene: Scene) -> Model:
     _check_dt(scene.dt_s)
     _check_duration(scene.duration_s, scene.dt_s)
     checks.text("name", scene.name)
+    checks.text("formulation", scene.formulation, FORMULATIONS)
+    if scene.formulation == "continuum":
+        _refuse_single_points(scene)
     integrator = _integrator_id(scene.integrator)
     mesh = build_mesh(scene)
     nvert = mesh.nvert
@@ -244,6 +247,7 @@ def compile_scene(scene: Scene) -> Model:
             if type(term) not in types.values():
                 raise SceneError(f"{section}: expected {_or(cls.__name__ for cls in types.values())}, received "
                                  f"{type(term).__name__}")
+            term.check_formulation(scene.formulation, f"{section}[{term.name!r}]")
             term.compile(b, f"{section}[{term.name!r}]")
 
     # rigid links: linked points follow their sites
@@ -286,6 +290,21 @@ def compile_scene(scene: Scene) -> Model:
     return Model(scene=scene, mesh=mesh, regions=regions, arrays=arrays, terms=terms,
                  python_schedules=tuple(python_fns), vert_stiffness=b.vert_stiffness,
                  dt_stable_s=_stable_dt(arrays, b.vert_stiffness), rigid=rigid, link_vert=b.link_vert)
+
+
+def _refuse_single_points(scene: Scene) -> None:
+    """A continuum scene's regions have a physical size: a `nearest` selector (one
+    point, whatever the mesh) is refused, naming where it is used."""
+    where = [(f"regions.{k}", sel) for k, sel in scene.regions.items()]
+    where += [(f"{t.section}[{t.name!r}].region", t.region) for t in (*scene.forces, *scene.constraints)
+              if "region" in getattr(t, "fields", dict)()]
+    if scene.rigid is not None:
+        where += [(f"rigid.links[{k.name!r}].region", k.region) for k in scene.rigid.links]
+    for what, sel in where:
+        if _regions.contains(sel, _regions.Nearest):
+            raise SceneError(f"{what}: a `nearest` selector picks single points, whose share of the surface "
+                             f"changes with the mesh; expected a region of physical size in formulation "
+                             f"'continuum' (a patch of radius_m, a ball, a box, a half-space)")
 
 
 def _or(names) -> str:

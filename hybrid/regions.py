@@ -15,7 +15,7 @@ import numpy as np
 from .errors import SceneError
 
 __all__ = ["Indices", "HalfSpace", "Ball", "Box", "Nearest", "All", "Border",
-           "Union_", "Intersection", "Difference", "Selector", "select"]
+           "Union_", "Intersection", "Difference", "Selector", "select", "contains"]
 
 
 def _vec3(v, name):
@@ -87,6 +87,17 @@ class Difference:
 
 Selector = Union[All, Border, Indices, HalfSpace, Ball, Box, Nearest, Union_, Intersection,
                  Difference, str]
+
+
+def contains(sel, cls) -> bool:
+    """Whether selector `sel` uses a selector of class `cls` (region names not followed)."""
+    if isinstance(sel, cls):
+        return True
+    if isinstance(sel, (Union_, Intersection)):
+        return any(contains(p, cls) for p in sel.parts)
+    if isinstance(sel, Difference):
+        return contains(sel.base, cls) or contains(sel.minus, cls)
+    return False
 
 
 def select(sel: Selector, vert_pos: np.ndarray, *, name: str, regions: dict | None = None,

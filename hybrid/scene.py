@@ -18,7 +18,7 @@ from typing import Optional
 
 from . import checks
 from .errors import SceneError
-from .terms.base import param
+from .terms.base import FORMULATIONS, param
 from .terms import (AppliedForce, Attraction, Damping, Gravity, KeepIn, MassSpring, Muscle, Nailed,
                     Prescribed, ShapeMemory, SoftVolume, Volume)
 
@@ -26,10 +26,14 @@ __all__ = [
     "MeshSpec", "Masses",
     "Gravity", "Damping", "ShapeMemory", "MassSpring", "Muscle", "AppliedForce", "Attraction",
     "SoftVolume", "Nailed", "KeepIn", "Prescribed", "Volume", "RigidLink", "Rigid", "Scene",
-    "INTEGRATORS",
+    "INTEGRATORS", "FORMULATIONS",
 ]
 
 INTEGRATORS = ("explicit_euler", "symplectic_euler")
+#: how the membrane's parameters are meant (hybrid.terms.base.FORMULATIONS): "paper", the
+#: per-point model of Promayon et al. 1997 kept exactly; "continuum", material parameters
+#: that mean the same on every mesh, internal forces that obey action and reaction
+FORMULATIONS = FORMULATIONS
 MESH_GENERATORS = ("uv_sphere", "icosphere", "icosahedron")
 
 
@@ -96,6 +100,7 @@ class Scene:
     rigid: Optional[Rigid] = None
     dt_s: float = param("positive", 1e-3, hi=checks.MAX_DT_S)
     integrator: str = param("choice", "symplectic_euler", choices=INTEGRATORS)
+    formulation: str = param("choice", "continuum", choices=FORMULATIONS)
     duration_s: float = param("positive", 1.0, hi=checks.MAX_DURATION_S)
     # a point faster than this has run away (tissue moves at cm/s)
     max_speed_m_s: float = param("positive", 50.0)

@@ -8,7 +8,8 @@ with one line naming the file and the key path, e.g.
 
 The format (SI units; every key optional unless marked *required*)::
 
-    name = "breathing"            # top level: name, dt_s, integrator, duration_s
+    name = "breathing"            # top level: name, formulation, dt_s, integrator, duration_s
+    formulation = "paper"         # or "continuum" (the default): what the parameters mean
     dt_s = 1e-3
     integrator = "symplectic_euler"    # or "explicit_euler"
     duration_s = 12.0
@@ -440,7 +441,8 @@ def scene_to_dict(scene: Scene) -> dict:
     function schedules."""
     if not isinstance(scene.mesh, MeshSpec):
         raise SceneError("mesh: a hybrid.mesh.Mesh object cannot be written as TOML; use a MeshSpec")
-    d: dict = {"name": scene.name, "dt_s": scene.dt_s, "integrator": scene.integrator,
+    d: dict = {"name": scene.name, "formulation": scene.formulation, "dt_s": scene.dt_s,
+               "integrator": scene.integrator,
                "duration_s": scene.duration_s, "max_speed_m_s": scene.max_speed_m_s}
     ms = scene.mesh
     mesh = {k: getattr(ms, k) for k in _MESH if getattr(ms, k) is not None}

@@ -33,7 +33,7 @@ def test_two_point_constraints_that_cannot_both_hold_are_refused(first, second, 
     """Item 4: the points of the top cap both nailed and prescribed (they moved
     50 mm), nailed and kept in a region (74.8 mm), ... : one line naming a few
     of the points, their count and both constraints."""
-    scene = Scene(masses=Masses(total_kg=1.0), constraints=(first, second, Volume()))
+    scene = Scene(formulation="paper", masses=Masses(total_kg=1.0), constraints=(first, second, Volume()))
     with pytest.raises(SceneError) as err:
         compile_scene(scene)
     message = str(err.value)
@@ -46,7 +46,7 @@ def test_two_point_constraints_that_cannot_both_hold_are_refused(first, second, 
 def test_the_message_counts_the_points_and_lists_a_few():
     """Item 4: 14 shared points, the first five listed and the rest counted."""
     with pytest.raises(SceneError) as err:
-        compile_scene(Scene(constraints=(_nailed(), _prescribed())))
+        compile_scene(Scene(formulation="paper", constraints=(_nailed(), _prescribed())))
     message = str(err.value)
     assert "14 points are also nailed by constraints['spine']: vertices 0, 1, 2, 3, 4 and 9 more;" in message
 
@@ -54,9 +54,9 @@ def test_the_message_counts_the_points_and_lists_a_few():
 def test_constraints_that_agree_or_do_not_share_points_compile():
     """Item 4: two nails on one point agree, two keep-in regions may overlap, and
     a nail beside a prescribed point on other points is fine."""
-    compile_scene(Scene(constraints=(_nailed(), Nailed(region=Indices([0, 1]), name="more"))))
-    compile_scene(Scene(constraints=(_keep_in("a"), _keep_in("b"))))
-    compile_scene(Scene(constraints=(Nailed(region=Indices([0]), name="n"), _prescribed(region=Indices([1])))))
+    compile_scene(Scene(formulation="paper", constraints=(_nailed(), Nailed(region=Indices([0, 1]), name="more"))))
+    compile_scene(Scene(formulation="paper", constraints=(_keep_in("a"), _keep_in("b"))))
+    compile_scene(Scene(formulation="paper", constraints=(Nailed(region=Indices([0]), name="n"), _prescribed(region=Indices([1])))))
 
 
 def test_a_linked_point_kept_in_a_region_is_refused_by_the_same_check():
@@ -65,7 +65,7 @@ def test_a_linked_point_kept_in_a_region_is_refused_by_the_same_check():
     pytest.importorskip("mujoco")
     from hybrid.scene import Rigid, RigidLink
 
-    scene = Scene(masses=Masses(total_kg=4.0), constraints=(_keep_in(),),
+    scene = Scene(formulation="paper", masses=Masses(total_kg=4.0), constraints=(_keep_in(),),
                   rigid=Rigid(mjcf="trunk", links=(RigidLink(TOP, "rib_left"),)))
     with pytest.raises(SceneError) as err:
         compile_scene(scene)

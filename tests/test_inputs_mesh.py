@@ -127,7 +127,7 @@ def test_self_intersecting_closed_mesh_is_refused_under_a_volume_term(term):
     through itself, so its signed volume is not the body's: refused at compile,
     one line naming the crossing faces and their count."""
     mesh = _pushed_through()
-    scene = Scene(mesh=mesh, masses=Masses(total_kg=1.0), constraints=(term,) if isinstance(term, Volume) else (),
+    scene = Scene(formulation="paper", mesh=mesh, masses=Masses(total_kg=1.0), constraints=(term,) if isinstance(term, Volume) else (),
                   forces=() if isinstance(term, Volume) else (term,))
     with pytest.raises((MeshError, SceneError)) as err:
         compile_scene(scene)
@@ -136,7 +136,7 @@ def test_self_intersecting_closed_mesh_is_refused_under_a_volume_term(term):
     assert "intersects itself: 12 pairs of faces cross, e.g. faces 108 and 166" in message
     assert "and 7 more pairs" in message
     # without a volume term the same surface is a membrane like any other
-    compile_scene(Scene(mesh=mesh, masses=Masses(total_kg=1.0)))
+    compile_scene(Scene(formulation="paper", mesh=mesh, masses=Masses(total_kg=1.0)))
 
 
 def test_crossing_faces_finds_the_crossings_and_nothing_on_a_sphere():

@@ -72,7 +72,7 @@ def test_selectors_nested_deep_through_the_python_api_are_refused_with_one_line(
     for _ in range(100):
         sel = Union_((sel,))
     with pytest.raises(SceneError, match=r"constraints\['n'\].region.*: selectors nested more than 32"):
-        compile_scene(Scene(constraints=(Nailed(region=sel, name="n"),)))
+        compile_scene(Scene(formulation="paper", constraints=(Nailed(region=sel, name="n"),)))
 
 
 def test_scene_file_values_meet_the_same_bounds(tmp_path):

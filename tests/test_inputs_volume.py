@@ -46,7 +46,7 @@ def test_projected_step_keeps_the_volume_of_a_small_flat_body_far_away(level, lo
     edge = np.min(np.linalg.norm(pos[base.edge_vert[:, 0]] - pos[base.edge_vert[:, 1]], axis=1))
     pos = pos + rng.uniform(-0.1, 0.1, pos.shape) * edge
     mesh = Mesh(pos, base.face_vert)
-    sim = Simulation(compile_scene(Scene(mesh=mesh, masses=Masses(total_kg=1.0), constraints=(Volume(),),
+    sim = Simulation(compile_scene(Scene(formulation="paper", mesh=mesh, masses=Masses(total_kg=1.0), constraints=(Volume(),),
                                          dt_s=1e-3)))
     v0 = mesh.volume()
     direction = np.asarray(offset_dir) + 1e-3

@@ -294,7 +294,7 @@ def test_a_streamed_trace_reads_back_as_the_one_in_memory(tmp_path):
 
 
 def _sphere(integrator, forces, dt_s=1e-3, m=0.05):
-    return Scene(mesh=MeshSpec(), masses=Masses(per_vertex_kg=(m,) * 80),
+    return Scene(formulation="paper", mesh=MeshSpec(), masses=Masses(per_vertex_kg=(m,) * 80),
                  regions={"bottom": HalfSpace((0.0, 0.0, -0.1), (0.0, 0.0, -1.0))},
                  forces=forces, constraints=(Nailed("bottom"), Volume()), dt_s=dt_s, integrator=integrator)
 
@@ -340,7 +340,7 @@ def test_free_fall_of_a_small_body_is_not_a_runaway():
     """Item 11: a 1 cm sphere (its bounding box's diagonal 17 mm) falls freely for 2.5 s,
     to 24.5 m/s or 24.5 mm a step: not a divergence (the body's size called it one
     after 1.8 s). Symplectic Euler's discrete fall z_n = -g h^2 n (n + 1) / 2 to rounding."""
-    scene = Scene(mesh=MeshSpec(radius_m=0.005), masses=Masses(total_kg=0.01), forces=(Gravity(),),
+    scene = Scene(formulation="paper", mesh=MeshSpec(radius_m=0.005), masses=Masses(total_kg=0.01), forces=(Gravity(),),
                   constraints=(Volume(),), dt_s=1e-3)
     sim = hybrid.load(scene)
     n = 2500

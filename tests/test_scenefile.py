@@ -111,6 +111,7 @@ def test_breathing_scene_round_trips_through_a_mapping():
 
 def test_every_selector_and_schedule_form(tmp_path):
     text = textwrap.dedent("""\
+        formulation = "paper"
         [mesh]
         generator = "uv_sphere"
         [masses]

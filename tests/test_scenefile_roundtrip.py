@@ -81,7 +81,7 @@ def scenes(draw):
     cs = tuple(c.__class__(**{**c.__dict__, "name": n}) for c, n in zip(cs, names[len(fs):]))
     rigid = draw(st.one_of(st.none(), st.builds(
         Rigid, st.just("trunk"), st.just((RigidLink("all", "rib_left", names[-1]),)), name, st.booleans())))
-    return Scene(mesh=draw(meshes), masses=draw(st.builds(Masses, total_kg=positive)),
+    return Scene(formulation=draw(st.sampled_from(["paper", "continuum"])), mesh=draw(meshes), masses=draw(st.builds(Masses, total_kg=positive)),
                  regions=draw(st.dictionaries(name, selectors(1), max_size=3)), forces=fs, constraints=cs,
                  rigid=rigid, dt_s=draw(positive), integrator=draw(st.sampled_from(["explicit_euler",
                                                                                      "symplectic_euler"])),

@@ -208,6 +208,7 @@ def test_step_frames_refuses_bad_stops(stops, expected):
 
 MEMBRANE_ONLY = textwrap.dedent("""\
     name = "membrane_only"
+    formulation = "paper"
     dt_s = 1e-3
     [mesh]
     generator = "uv_sphere"

@@ -39,7 +39,7 @@ def test_free_fall_matches_the_closed_form(integrator):
     errors = {}
     for h in (1e-3, 5e-4):
         n = int(round(0.5 / h))  # 0.5 s
-        scene = Scene(mesh=MeshSpec(), masses=Masses(total_kg=4.0), forces=(Gravity(),), dt_s=h,
+        scene = Scene(formulation="paper", mesh=MeshSpec(), masses=Masses(total_kg=4.0), forces=(Gravity(),), dt_s=h,
                       integrator=integrator)
         sim = Simulation(compile_scene(scene))
         x0 = np.array(sim.vert_pos)
@@ -124,7 +124,7 @@ def test_divergence_of_a_batch_stops_at_the_failing_step():
 
 def test_non_finite_force_is_detected():
     """A force so large that the kinetic energy overflows: 'non-finite', not NaN positions."""
-    scene = Scene(mesh=MeshSpec(), masses=Masses(total_kg=4.0),
+    scene = Scene(formulation="paper", mesh=MeshSpec(), masses=Masses(total_kg=4.0),
                   forces=(AppliedForce(Indices((5,)), (1e308, 0.0, 0.0)),), dt_s=1e-3)
     sim = Simulation(compile_scene(scene))
     with pytest.raises(SimulationDiverged, match="non-finite") as info:
@@ -138,7 +138,7 @@ def test_python_schedule_returning_nan_is_detected():
     def bad_force(t):
         return (0.0, 0.0, math.nan if t > 0.0095 else 1.0)
 
-    scene = Scene(mesh=MeshSpec(), masses=Masses(total_kg=4.0),
+    scene = Scene(formulation="paper", mesh=MeshSpec(), masses=Masses(total_kg=4.0),
                   forces=(AppliedForce(Indices((3,)), Function(bad_force)),), dt_s=1e-3)
     sim = Simulation(compile_scene(scene))
     with pytest.raises(SimulationDiverged, match="bad_force"):
@@ -162,7 +162,7 @@ def test_runaway_speed_is_detected_and_the_limit_is_a_scene_setting():
     # 1 kg over 80 points, 100 N per point: the lightest point crosses 50 m/s
     # after a few ms, while one step of 1e-4 s moves it a few mm, far less
     # than the 0.24 m body
-    scene = Scene(mesh=MeshSpec(), masses=Masses(total_kg=1.0),
+    scene = Scene(formulation="paper", mesh=MeshSpec(), masses=Masses(total_kg=1.0),
                   forces=(AppliedForce("all", (100.0, 0.0, 0.0)),), dt_s=1e-4)
     model = compile_scene(scene)
     sim = Simulation(model)

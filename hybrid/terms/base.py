@@ -36,7 +36,13 @@ from ..errors import SceneError
 from ..mesh.validate import few
 
 __all__ = ["param", "Rows", "force", "constraint", "order_terms", "Term", "Build", "FORCE_TYPES", "CONSTRAINT_TYPES",
-           "TERM_CLASSES", "FLAGGED", "check_value", "VALUE_KINDS", "claim_points", "POINT_CLAIMS"]
+           "TERM_CLASSES", "FLAGGED", "check_value", "VALUE_KINDS", "claim_points", "POINT_CLAIMS", "FORMULATIONS"]
+
+#: how a scene's membrane parameters are meant (`Scene.formulation`): "continuum", material
+#: parameters (moduli in N/m, tensions in N/m, drag per area) that mean the same on every
+#: mesh, internal forces from an energy or in action-reaction pairs; "paper", the per-point
+#: model of Promayon, Baconnier & Puech (1997), kept exactly
+FORMULATIONS = ("continuum", "paper")
 
 FORCE_TYPES: dict = {}
 CONSTRAINT_TYPES: dict = {}
@@ -51,7 +57,8 @@ VALUE_KINDS = ("positive", "nonneg", "angle_deg", "vec3", "target", "choice", "t
 
 
 def param(kind: str, default=dataclasses.MISSING, **meta):
-    """A term field of `kind` (VALUE_KINDS, "selector", or "schedule" with ncomp=1 or 3)."""
+    """A term field of `kind` (VALUE_KINDS, "selector", or "schedule" with ncomp=1 or 3);
+    formulation="paper" (or "continuum") for a field only that formulation accepts."""
     return dataclasses.field(default=default, metadata={"kind": kind, **meta})
 
 
@@ -139,6 +146,24 @@ class Term:
     arrays: ClassVar[dict] = {}
     #: finish after the other classes (damping reads every point's stiffness)
     finish_last: ClassVar[bool] = False
+    #: the formulations whose scenes may hold this term (FORMULATIONS)
+    formulations: ClassVar[tuple] = FORMULATIONS
+
+    def check_formulation(self, formulation: str, what: str) -> None:
+        """Refuse, in one SceneError line, a term or a field of a formulation other
+        than the scene's (a per-point parameter in a continuum scene, say)."""
+        if formulation not in self.formulations:
+            ok = sorted(c.toml_type for c in TERM_CLASSES if c.section == self.section and formulation in c.formulations)
+            raise SceneError(f"{what}: type {self.toml_type!r} belongs to formulation {self.formulations[0]!r}, "
+                             f"the scene's formulation is {formulation!r}; expected one of {ok}, or "
+                             f"formulation = {self.formulations[0]!r}")
+        for name, f in self.fields().items():
+            only = f.metadata.get("formulation")
+            if only is not None and only != formulation and getattr(self, name) is not None:
+                ok = [n for n, g in self.fields().items() if g.metadata.get("formulation") == formulation]
+                raise SceneError(f"{what}.{name}: a parameter of formulation {only!r}, the scene's formulation "
+                                 f"is {formulation!r}; expected {' or '.join(ok) or 'no such key'}, or "
+                                 f"formulation = {only!r}")
 
     @classmethod
     def fields(cls) -> dict:

@@ -41,8 +41,8 @@ class Damping(Term):
     """
     arrays = {"damp_coef": lambda n: np.zeros(n)}  # (nvert,) N s/m
     finish_last = True
-    coef_n_s_per_m: float = param("nonneg", None)
-    critical_fraction: float = param("nonneg", None, unit="of critical")
+    coef_n_s_per_m: float = param("nonneg", None, formulation="paper")
+    critical_fraction: float = param("nonneg", None, formulation="paper", unit="of critical")
     region: object = param("selector", "all")
 
     def compile(self, b, what):

@@ -25,7 +25,7 @@ def test_prescribed_point_follows_its_schedule_exactly(kind):
     else:
         sched = Function(lambda t: (0.01 * math.sin(2 * math.pi * 5 * t), 0.0, 0.002 * t))
     vert = 7
-    scene = Scene(mesh=MeshSpec(), masses=Masses(total_kg=4.0),
+    scene = Scene(formulation="paper", mesh=MeshSpec(), masses=Masses(total_kg=4.0),
                   regions={"bottom": HalfSpace((0.0, 0.0, -0.1), (0.0, 0.0, -1.0))},
                   forces=(Gravity(), ShapeMemory(3000.0), Damping(critical_fraction=0.3)),
                   constraints=(Nailed("bottom"), Prescribed(Indices((vert,)), sched), Volume()), dt_s=1e-3)
@@ -65,7 +65,7 @@ def test_keep_in_region_keeps_points_inside(shape):
     """No volume constraint here: it projects after keep-in and may nudge a point
     out by its (small) correction; this tests the keep-in projection itself."""
     con, inside = KEEP_IN[shape]
-    scene = Scene(mesh=MeshSpec(), masses=Masses(total_kg=4.0),
+    scene = Scene(formulation="paper", mesh=MeshSpec(), masses=Masses(total_kg=4.0),
                   forces=(Gravity(), ShapeMemory(3000.0), Damping(critical_fraction=0.5)),
                   constraints=(con,), dt_s=1e-3)
     sim = Simulation(compile_scene(scene))
@@ -92,7 +92,7 @@ def test_keep_in_with_the_volume_constraint_keeps_the_volume_exact_and_the_overs
     con = KeepIn("all", "half_space", point_m=(0.0, 0.0, -0.13), normal=(0.0, 0.0, 1.0))
     worst = {}
     for h in (1e-3, 5e-4):
-        scene = Scene(mesh=MeshSpec(), masses=Masses(total_kg=4.0),
+        scene = Scene(formulation="paper", mesh=MeshSpec(), masses=Masses(total_kg=4.0),
                       forces=(Gravity(), ShapeMemory(3000.0), Damping(critical_fraction=0.5)),
                       constraints=(con, Volume()), dt_s=h)
         sim = Simulation(compile_scene(scene))

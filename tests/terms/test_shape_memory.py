@@ -128,7 +128,7 @@ def test_perturbed_sphere_returns_to_its_rest_shape(with_volume):
     about the nail; the rotation itself is checked to be small.
     """
     nail = 79
-    scene = Scene(mesh=MeshSpec(), masses=Masses(total_kg=4.0), regions={"nail": Indices((nail,))},
+    scene = Scene(formulation="paper", mesh=MeshSpec(), masses=Masses(total_kg=4.0), regions={"nail": Indices((nail,))},
                   forces=(ShapeMemory(K), Damping(critical_fraction=0.3)),
                   constraints=(Nailed("nail"),) + ((Volume(),) if with_volume else ()), dt_s=1e-3)
     model = compile_scene(scene)

@@ -36,7 +36,7 @@ def nailed_sphere_scene(mesh: MeshSpec, *, stiffness=3000.0, dt=1e-3, integrator
                         elastic=None) -> Scene:
     """A 4 kg sphere (R = 0.12 m) hanging under gravity from its nailed bottom cap,
     incompressible: the test body of the paper, the trunk's abdomen."""
-    return Scene(
+    return Scene(formulation="paper", 
         mesh=mesh, masses=Masses(total_kg=4.0),
         regions={"bottom": HalfSpace((0.0, 0.0, -0.1), (0.0, 0.0, -1.0))},
         forces=(Gravity(), elastic or ShapeMemory(stiffness), Damping(critical_fraction=0.3)),
@@ -193,7 +193,7 @@ def test_pressure_readout_matches_a_uniform_normal_load():
     loads = tuple(AppliedForce(Indices((i,)), tuple(-p_ext * area[i]), name=f"load{i}")
                   for i in range(mesh.nvert))
     nails = (0, 79, 40)  # north pole, south pole, a point of the equator
-    scene = Scene(mesh=mesh, masses=Masses(total_kg=4.0), regions={"nails": Indices(nails)},
+    scene = Scene(formulation="paper", mesh=mesh, masses=Masses(total_kg=4.0), regions={"nails": Indices(nails)},
                   forces=(ShapeMemory(3000.0), Damping(critical_fraction=1.0)) + loads,
                   constraints=(Nailed("nails"), Volume()), dt_s=1e-3)
     sim = Simulation(compile_scene(scene))
@@ -232,7 +232,7 @@ def test_soft_volume_force_is_the_attraction_to_the_volume_satisfying_points():
     """F_i = k (X_i^target - X_i) = k phi grad_i V, readout p = k phi (Pa), and
     p > 0 (pushing outward) for a compressed body, p < 0 for a dilated one."""
     k = 2e4
-    model = compile_scene(Scene(mesh=MeshSpec(), masses=Masses(total_kg=4.0), forces=(SoftVolume(k),)))
+    model = compile_scene(Scene(formulation="paper", mesh=MeshSpec(), masses=Masses(total_kg=4.0), forces=(SoftVolume(k),)))
     mesh = model.mesh
     rng = np.random.default_rng(7)
     for scale, sign in ((0.99, +1), (1.01, -1)):
@@ -272,7 +272,7 @@ def test_soft_volume_keeps_the_error_bounded_and_reads_the_pressure(p_ext):
     for k in (2e4, 8e4):
         loads = tuple(AppliedForce(Indices((i,)), tuple(-p_ext * area[i]), name=f"load{i}")
                       for i in range(mesh.nvert))
-        scene = Scene(mesh=mesh, masses=Masses(total_kg=4.0),
+        scene = Scene(formulation="paper", mesh=mesh, masses=Masses(total_kg=4.0),
                       forces=(ShapeMemory(3000.0), Damping(critical_fraction=0.5), SoftVolume(k)) + loads)
         sim = Simulation(compile_scene(scene))
         static = abs(p_ext) * grad2 / (k * v0)

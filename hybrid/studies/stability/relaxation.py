@@ -31,7 +31,7 @@ def icosahedron_scene(model: str, k=K_UNIT, kv=KV_UNIT, m=M_UNIT, h=1.0) -> Scen
     elastic force of the unified weight k (k_sm = k, k_ms = 2k/3) and viscosity kv;
     explicit Euler (eq. 4); nothing nailed, no volume, no gravity."""
     force = ShapeMemory(k) if model == "shape_memory" else MassSpring(2.0 * k / 3.0)
-    return Scene(mesh=icosahedron(1.0), masses=Masses(per_vertex_kg=(m,) * 12),
+    return Scene(formulation="paper", mesh=icosahedron(1.0), masses=Masses(per_vertex_kg=(m,) * 12),
                  forces=(force, Damping(coef_n_s_per_m=kv)), dt_s=h, integrator="explicit_euler",
                  name=f"icosahedron_{model}")
 
