@@ -25,7 +25,7 @@ from . import regions as R
 from . import scenefile
 from . import schedule as S
 from .scene import Masses, MeshSpec, Rigid, RigidLink, Scene
-from .terms.base import CONSTRAINT_TYPES, FORCE_TYPES
+from .terms.base import CONSTRAINT_TYPES, FORCE_TYPES, FORMULATIONS
 
 __all__ = ["render", "DOC_PATH", "main"]
 
@@ -132,9 +132,14 @@ def _row(*cells) -> str:
 _HEAD = ["| key | unit | default | valid values |", "| --- | --- | --- | --- |"]
 
 
+def _only(meta: dict) -> str:
+    """The note of a field only one formulation accepts."""
+    return f'; only with formulation = "{meta["formulation"]}"' if meta.get("formulation") else ""
+
+
 def _field_rows(fields) -> list[str]:
     return _HEAD + [_row(f"`{f.name}`", _unit(f.name, f.metadata), _show(f.default),
-                         _valid(f.metadata["kind"], f.metadata)) for f in fields]
+                         _valid(f.metadata["kind"], f.metadata) + _only(f.metadata)) for f in fields]
 
 
 def _doc(cls) -> str:
@@ -162,6 +167,9 @@ def _terms(types: dict, section: str) -> list[str]:
     out = []
     for toml_type, cls in types.items():
         out += [f"### `type = \"{toml_type}\"` ({cls.__name__})", "", _doc(cls), ""]
+        formulations = tuple(getattr(cls, "formulations", FORMULATIONS))
+        if set(formulations) != set(FORMULATIONS):
+            out += ["Only in a scene with " + " or ".join(f'formulation = "{x}"' for x in formulations) + ".", ""]
         out += _field_rows(dataclasses.fields(cls)) + [""]
     return out
 
@@ -234,6 +242,7 @@ def render() -> str:
         "",
         "```toml",
         'name = "my_scene"',
+        'formulation = "paper"',
         "dt_s = 1e-3",
         "[mesh]",
         'generator = "uv_sphere"',
@@ -259,6 +268,12 @@ def render() -> str:
         *_field_rows(top),
         "",
         "Tables: " + ", ".join(f"`{t}`" for t in tables) + " (`mesh` and `masses` *required*).",
+        "",
+        "`formulation` says how the membrane's parameters are meant. \"paper\" is the per-point model of Promayon,",
+        "Baconnier & Puech (1997) kept exactly (its stiffnesses act on points, so their meaning",
+        "changes with the mesh); \"continuum\" takes material parameters that mean the same on",
+        "every mesh. A term or key marked below for one formulation is refused, in one line, in",
+        "a scene of the other.",
         "",
         "## `[mesh]` (MeshSpec)",
         "",

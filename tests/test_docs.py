@@ -197,3 +197,13 @@ def test_the_recording_page_lists_every_channel():
     text = (REPO / "docs" / "recording.md").read_text(encoding="utf-8")
     missing = [t for t in TOPICS if f"`{t}`" not in text and f'"{t}"' not in text]
     assert not missing, f"docs/recording.md does not list {missing}"
+
+
+def test_the_reference_example_is_a_valid_scene():
+    import tomllib
+
+    from hybrid.model import compile_scene
+    from hybrid.scenefile import scene_from_dict
+    example = re.search(r"```toml\n(.*?)```", docgen.render(), re.S)[1]
+    scene = scene_from_dict(tomllib.loads(example), source="docs/scene-file.md")
+    assert compile_scene(scene).nvert == 80

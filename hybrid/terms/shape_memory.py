@@ -29,7 +29,7 @@ __all__ = ["ShapeMemory", "ring_frame", "shape_memory_frame_coef", "shape_memory
 class ShapeMemory(Term):
     """Local shape memory (paper 3.4): each point attracted to its ideal place
     in the frame of its neighbours, stiffness in N/m."""
-    formulations = ("paper",)  # a per-point parameter: its meaning changes with the mesh (FINDINGS.md)
+    formulations = ("paper",)  # a per-point parameter: its meaning changes with the mesh
     # sm_vert (nsm,) int32 sorted; sm_stiff (nsm,) N/m; sm_coef (nsm, 3) m
     arrays = {"sm_vert": Rows(np.int32), "sm_stiff": Rows(float), "sm_coef": Rows(float, 3)}
     stiffness_n_per_m: float = param("positive", hi=checks.MAX_STIFFNESS_N_PER_M)
