@@ -55,6 +55,7 @@ def main(argv=None) -> int:
     a.loglog([h for h, _ in errs], [e for _, e in errs], "o-", label="|m(h) - m(h_min)|")
     if errs and errs[0][1] > 0:
         a.loglog([h for h, _ in errs], [errs[0][1] * h / errs[0][0] for h, _ in errs], "k--", label="first order")
+    a.xaxis.set_minor_formatter(plt.NullFormatter())
     a.set_xlabel("time step h (s)")
     a.set_ylabel(f"error of {args.metric}")
     a.legend()
