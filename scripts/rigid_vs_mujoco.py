@@ -58,6 +58,8 @@ def main(argv=None) -> int:
     a.set_ylabel("joint position (rad)")
     a.legend(fontsize=7)
     b.set_ylabel("|difference| (floor 1e-18)")
+    if diff.max() == 0:
+        b.text(0.5, 0.5, "identical at every step", transform=b.transAxes, ha="center", va="bottom")
     b.set_xlabel("time (s)")
     b.legend(fontsize=7)
     a.set_title(f"{args.scene}: the rigid part against mj_step, {nstep} steps")
