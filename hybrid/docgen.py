@@ -7,9 +7,9 @@ Every term's keys, kinds, defaults and bounds come from its fields (`param(kind,
 default, **meta)`) through the registry (`hybrid.terms.base.TERM_CLASSES`), the
 top level's and `[mesh]`'s from `Scene` and `MeshSpec`: a new term or field
 appears here without an edit. The tables whose fields carry no kind (masses,
-selectors, schedules, the rigid part) are described below, and the description
-is checked against their dataclasses: a field added to one of them without a
-line here stops the generator, naming it.
+selectors, schedules, the rigid part) are described below field by field, in
+the order of their dataclasses' fields; a field added since gets a row from its
+name (its unit), its default and its kind if it has one.
 """
 
 from __future__ import annotations
@@ -122,7 +122,10 @@ def _valid(kind: str, meta: dict) -> str:
     if kind == "schedule":
         return ("a schedule: a number, breathing or table (see Schedules)" if meta.get("ncomp") == 1 else
                 "a schedule: [x, y, z] or a table (see Schedules)")
-    raise ValueError(f"docgen: field kind {kind!r} has no description; add it to hybrid/docgen.py _valid")
+    # a kind added since: its bounds, as far as the field declares them
+    bounds = [f">= {meta['lo']}"] if meta.get("lo") is not None else []
+    bounds += [f"<= {meta['hi']}"] if meta.get("hi") is not None else []
+    return f"a {kind.replace('_', ' ')} value" + (" " + " and ".join(bounds) if bounds else "")
 
 
 def _row(*cells) -> str:
@@ -150,17 +153,24 @@ def _doc(cls) -> str:
     return "\n\n".join(" ".join(block.split()) for block in text.split("\n\n") if block.strip())
 
 
-def _covered(cls, documented, where: str) -> None:
-    """Stop when `cls` has a field this module does not describe (or describes one it lacks)."""
-    have = {f.name for f in dataclasses.fields(cls)}
-    if have != set(documented):
-        raise RuntimeError(f"docgen: {cls.__name__} fields {sorted(have ^ set(documented))} differ from the "
-                           f"description of {where} in hybrid/docgen.py; describe them there")
+def _default(f) -> str:
+    if f.default_factory is not dataclasses.MISSING:
+        return _show(f.default_factory())
+    return _show(f.default)
 
 
-def _hand_rows(cls, table: dict, where: str) -> list[str]:
-    _covered(cls, table, where)
-    return _HEAD + [_row(f"`{k}`", unit, default, valid) for k, (unit, default, valid) in table.items()]
+def _hand_rows(cls, table: dict) -> list[str]:
+    """The rows of `cls`'s fields, in its order: as `table` describes them, or (a field
+    added since) from its name, default and kind alone."""
+    rows = []
+    for f in dataclasses.fields(cls):
+        if f.name in table:
+            unit, default, valid = table[f.name]
+        else:
+            unit, default = _unit(f.name, f.metadata), _default(f)
+            valid = _valid(f.metadata["kind"], f.metadata) if "kind" in f.metadata else f"see {cls.__name__}"
+        rows.append(_row(f"`{f.name}`", unit, default, valid))
+    return _HEAD + rows
 
 
 def _terms(types: dict, section: str) -> list[str]:
@@ -182,10 +192,6 @@ def _selectors() -> list[str]:
     out = ["| selector | fields | what it picks |", "| --- | --- | --- |"]
     for key, cls in _SELECTORS.items():
         fields = dataclasses.fields(cls)
-        missing = [f.name for f in fields if f.name not in _SELECTOR_FIELDS]
-        if missing:
-            raise RuntimeError(f"docgen: selector field(s) {missing} of {cls.__name__} not described in "
-                               f"hybrid/docgen.py _SELECTOR_FIELDS")
         if key == "all":
             spelling = '`"all"` or `"REGION"`'
         elif key == "border":
@@ -194,8 +200,8 @@ def _selectors() -> list[str]:
             spelling = f"`{{ {key} = [...] }}`"
         else:
             spelling = f"`{{ {key} = {{ " + ", ".join(f"{f.name} = ..." for f in fields) + " } }`"
-        described = "; ".join(f"`{f.name}` ({_SELECTOR_FIELDS[f.name][0]}): {_SELECTOR_FIELDS[f.name][1]}"
-                              for f in fields) or "-"
+        described = "; ".join(f"`{f.name}` ({unit}): {valid}" for f in fields
+                              for unit, valid in [_SELECTOR_FIELDS.get(f.name, (_unit(f.name, {}), "-"))]) or "-"
         what = _doc(cls) or {"union": "Vertices in any of the parts.",
                              "intersection": "Vertices in every part."}[key]
         if key == "all":
@@ -208,14 +214,10 @@ def _schedules() -> list[str]:
     out = []
     for key, cls in _SCHEDULES.items():
         fields = dataclasses.fields(cls)
-        missing = [f.name for f in fields if f.name not in _SCHEDULE_FIELDS]
-        if missing:
-            raise RuntimeError(f"docgen: schedule field(s) {missing} of {cls.__name__} not described in "
-                               f"hybrid/docgen.py _SCHEDULE_FIELDS")
         out += [f"`{{ {key} = {{ ... }} }}` ({cls.__name__}): {_doc(cls)}", ""]
         out += _HEAD
         for f in fields:
-            unit, valid = _SCHEDULE_FIELDS[f.name]
+            unit, valid = _SCHEDULE_FIELDS.get(f.name, (_unit(f.name, {}), "-"))
             default = "*required*" if f.name == "peak" else _show(f.default)
             out.append(_row(f"`{f.name}`", unit, default, valid))
         out.append("")
@@ -287,7 +289,7 @@ def render() -> str:
         "",
         "The table is *required*, with exactly one of these keys.",
         "",
-        *_hand_rows(Masses, _MASSES, "[masses]"),
+        *_hand_rows(Masses, _MASSES),
         "",
         "## `[regions]`: selectors",
         "",
@@ -321,13 +323,13 @@ def render() -> str:
         "",
         _doc(Rigid),
         "",
-        *_hand_rows(Rigid, _RIGID, "[rigid]"),
+        *_hand_rows(Rigid, _RIGID),
         "",
         "### `[[rigid.links]]` (RigidLink)",
         "",
         _doc(RigidLink),
         "",
-        *_hand_rows(RigidLink, _LINKS, "[[rigid.links]]"),
+        *_hand_rows(RigidLink, _LINKS),
         "",
         "## Overrides: `--set KEY=VALUE`",
         "",

@@ -100,17 +100,22 @@ def test_a_new_term_appears_without_an_edit_of_the_generator(monkeypatch):
     assert "A soft floor pushing points back up." in section
     assert "| `stiffness_n_per_m` | N/m | *required* | a number > 0 and <= 1e6 |" in section
     assert "| `point_m` | m | [0.0, 0.0, 0.0] | [x, y, z], finite |" in section
+    # a kind of value added since is described by the bounds its field declares
+    assert docgen._valid("young_modulus", {"lo": 0, "hi": 1e9}) == "a young modulus value >= 0 and <= 1000000000.0"
 
 
-def test_a_field_the_generator_does_not_describe_stops_it():
+def test_a_field_added_to_a_table_without_kinds_gets_a_row():
     from hybrid.scene import Masses
 
     @dataclasses.dataclass(frozen=True)
     class MoreMasses(Masses):
-        lumped_kg: float = 0.0
+        lumped_kg: float = 0.5
+        spread: str = param("choice", "area", choices=("area", "volume"))
 
-    with pytest.raises(RuntimeError, match=r"MoreMasses fields \['lumped_kg'\]"):
-        docgen._hand_rows(MoreMasses, docgen._MASSES, "[masses]")
+    rows = docgen._hand_rows(MoreMasses, docgen._MASSES)
+    assert "| `lumped_kg` | kg | 0.5 | see MoreMasses |" in rows
+    assert '| `spread` | - | "area" | one of "area", "volume" |' in rows
+    assert sum(r.startswith("| `total_kg` | kg |") for r in rows) == 1
 
 
 def test_the_check_command_says_when_the_file_is_stale(tmp_path, capsys):
