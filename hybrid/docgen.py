@@ -123,8 +123,8 @@ def _valid(kind: str, meta: dict) -> str:
         return ("a schedule: a number, breathing or table (see Schedules)" if meta.get("ncomp") == 1 else
                 "a schedule: [x, y, z] or a table (see Schedules)")
     # a kind added since: its bounds, as far as the field declares them
-    bounds = [f">= {meta['lo']}"] if meta.get("lo") is not None else []
-    bounds += [f"<= {meta['hi']}"] if meta.get("hi") is not None else []
+    bounds = [f">= {_show(meta['lo'])}"] if meta.get("lo") is not None else []
+    bounds += [f"<= {_show(meta['hi'])}"] if meta.get("hi") is not None else []
     return f"a {kind.replace('_', ' ')} value" + (" " + " and ".join(bounds) if bounds else "")
 
 
