@@ -32,7 +32,8 @@ from .resolve import resolve_scene, scene_names
 # reaches the module). Both modules are light (matplotlib and dask load when used).
 from .run import RunFailed, run
 from .scene import (AppliedForce, Attraction, Damping, Gravity, KeepIn, Masses, MassSpring, MeshSpec, Muscle,
-                    Nailed, Prescribed, Rigid, RigidLink, Scene, ShapeMemory, SoftVolume, Volume)
+                    Nailed, Prescribed, Rigid, RigidLink, Scene, ShapeMemory, SoftVolume, Volume, Membrane)
+from .scene import MuscleFibres, Pressure
 from .schedule import Breathing, Constant, Function, Table
 from .simulation import Simulation
 from .sweep import sweep
@@ -42,8 +43,9 @@ __all__ = [
     "load", "load_scene", "scene_names", "compile_scene", "Model", "Simulation", "run", "read", "sweep",
     # the scene and its terms
     "Scene", "MeshSpec", "Masses",
-    "Gravity", "Damping", "ShapeMemory", "MassSpring", "Muscle", "AppliedForce", "Attraction", "SoftVolume",
+    "Gravity", "Damping", "ShapeMemory", "Membrane", "MassSpring", "Muscle", "AppliedForce", "Attraction", "SoftVolume",
     "Nailed", "KeepIn", "Prescribed", "Volume", "Rigid", "RigidLink",
+    "Pressure", "MuscleFibres",
     # region selectors
     "All", "Border", "Indices", "HalfSpace", "Ball", "Box", "Nearest", "Union_", "Intersection", "Difference",
     # schedules

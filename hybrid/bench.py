@@ -25,11 +25,11 @@ from .model import compile_scene
 from .record import Recorder
 from .regions import HalfSpace
 from .run import run as run_scene
-from .scene import Damping, Gravity, Masses, MeshSpec, Nailed, Scene, ShapeMemory, Volume
+from .scene import Damping, Gravity, Masses, Membrane, MeshSpec, Nailed, Scene, ShapeMemory, Volume
 from .scenefile import builtin_scene, load_scene
 from .simulation import Simulation
 
-__all__ = ["bench_membrane", "bench_membrane_rows", "coupled_row", "recording_row", "flex_rows", "run_bench",
+__all__ = ["bench_membrane", "bench_membrane_rows", "bench_continuum", "formulation_rows", "coupled_row", "recording_row", "flex_rows", "run_bench",
            "format_table"]
 
 # mesh (None = the paper's 80-point sphere, else icosphere subdivisions)
@@ -42,7 +42,7 @@ def bench_membrane(subdivisions: int | None, dt_s: float = 1e-4) -> Scene:
     icosphere; a nailed cap keeps it from falling."""
     mesh = (MeshSpec(generator="uv_sphere", radius_m=RADIUS_M) if subdivisions is None else
             MeshSpec(generator="icosphere", subdivisions=subdivisions, radius_m=RADIUS_M))
-    return Scene(formulation="paper", 
+    return Scene(formulation="paper",
         name="bench_membrane",
         mesh=mesh,
         masses=Masses(total_kg=4.0),
@@ -51,6 +51,39 @@ def bench_membrane(subdivisions: int | None, dt_s: float = 1e-4) -> Scene:
         constraints=(Nailed("pelvis"), Volume()),
         dt_s=dt_s,
     )
+
+
+def bench_continuum(subdivisions: int | None, dt_s: float = 1e-4) -> Scene:
+    """`bench_membrane` in the continuum formulation: the membrane (2D Young's
+    modulus 300 N/m, Poisson 0.3), a drag per area, gravity and the exact volume."""
+    return Scene(name="bench_continuum", mesh=bench_membrane(subdivisions).mesh, masses=Masses(total_kg=4.0),
+                 regions={"pelvis": HalfSpace((0.0, 0.0, -0.1), (0.0, 0.0, -1.0))},
+                 forces=(Gravity(), Membrane(300.0), Damping(drag_n_s_per_m3=500.0)),
+                 constraints=(Nailed("pelvis"), Volume()), dt_s=dt_s)
+
+
+def formulation_rows(meshes=(None, 5), *, repeats: int = 7, work: float = 4e6) -> list[dict]:
+    """The full step of both formulations on one mesh (the paper's 80 points, the
+    10242-point icosphere), timed alternately repeat by repeat at one step (a quarter
+    of the paper model's bound); medians of the times and of the per-repeat ratios."""
+    rows = []
+    for sub in meshes:
+        paper = compile_scene(bench_membrane(sub))
+        h = 0.25 * paper.dt_stable_s
+        sims = {"paper": Simulation(paper.with_dt(h)), "continuum": Simulation(compile_scene(bench_continuum(sub, h)))}
+        nstep = max(20, int(work / paper.nvert))
+        for sim in sims.values():
+            sim.step(max(1, nstep // 10))  # warm-up
+        times = {k: [] for k in sims}
+        for _ in range(repeats):
+            for k, sim in sims.items():
+                t0 = time.perf_counter()
+                sim.step(nstep)
+                times[k].append((time.perf_counter() - t0) / nstep * 1e6)
+        rows.append({"nvert": paper.nvert, **{f"{k}_us_per_step": statistics.median(v) for k, v in times.items()},
+                     "continuum_over_paper": statistics.median(
+                         [c / p for c, p in zip(times["continuum"], times["paper"])])})
+    return rows
 
 
 def _median_us_per_step(sim: Simulation, nstep: int, repeats: int) -> float:
@@ -174,6 +207,8 @@ def run_bench(json_path: Path | None = None, *, quick: bool = False) -> dict:
     meshes = (None, 3) if quick else MEMBRANE_MESHES
     result["membrane"] = bench_membrane_rows(meshes, repeats=3 if quick else 7,
                                              work=2e5 if quick else 4e6)
+    result["formulations"] = formulation_rows((None, 3) if quick else (None, 5), repeats=3 if quick else 7,
+                                              work=2e5 if quick else 4e6)
     if quick:
         result.update(coupled=coupled_row(nstep=500, repeats=3), recording=recording_row(duration_s=1.0, repeats=2))
     else:
@@ -188,6 +223,12 @@ def format_table(result: dict) -> str:
              f"{'nvert':>8} {'us/step':>10} {'ns/vertex-step':>15}"]
     for row in result.get("membrane", []):
         lines.append(f"{row['nvert']:>8} {row['us_per_step']:>10.2f} {row['ns_per_vertex_step']:>15.1f}")
+    if "formulations" in result:
+        lines += ["", "full step of each formulation, same mesh and step; medians, ratio of per-repeat times",
+                  f"{'nvert':>8} {'paper us':>10} {'continuum us':>13} {'ratio':>7}"]
+        for row in result["formulations"]:
+            lines.append(f"{row['nvert']:>8} {row['paper_us_per_step']:>10.2f} "
+                         f"{row['continuum_us_per_step']:>13.2f} {row['continuum_over_paper']:>7.2f}")
     if "coupled" in result:
         c = result["coupled"]
         lines += ["", "coupled breathing step vs bare mj_step of the trunk model; medians",

@@ -24,6 +24,8 @@ MAX_STIFFNESS_N_PER_M = 1e12
 MAX_LENGTH_M = 1e3
 MAX_DT_S = 1e3  # the stability study probes steps of seconds on soft bodies
 MAX_DURATION_S = 1e9
+MAX_MODULUS_PA = 1e12  # a bulk modulus (diamond's is 4.4e11 Pa)
+MAX_DRAG_N_S_PER_M3 = 1e12
 #: the most points a mesh may have, checked before any array is allocated
 MAX_POINTS = 10**7
 

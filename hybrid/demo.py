@@ -17,7 +17,7 @@ def membrane_demo(duration_s: float = 12.0) -> Scene:
     """The paper's abdomen-diaphragm sphere without ribs: 80 points, 4 kg,
     incompressible, the top cap muscular (fibres along the meridians toward
     the apex), the bottom nailed; three quiet breaths at 15 per minute."""
-    return Scene(formulation="paper", 
+    return Scene(formulation="paper",
         name="membrane_demo",
         mesh=MeshSpec(generator="uv_sphere", radius_m=RADIUS_M),
         masses=Masses(total_kg=4.0),

@@ -19,14 +19,16 @@ from typing import Optional
 from . import checks
 from .errors import SceneError
 from .terms.base import FORMULATIONS, param
-from .terms import (AppliedForce, Attraction, Damping, Gravity, KeepIn, MassSpring, Muscle, Nailed,
+from .terms import (AppliedForce, Attraction, Damping, Gravity, KeepIn, MassSpring, Membrane, Muscle, Nailed,
                     Prescribed, ShapeMemory, SoftVolume, Volume)
+from .terms import MuscleFibres, Pressure
 
 __all__ = [
     "MeshSpec", "Masses",
-    "Gravity", "Damping", "ShapeMemory", "MassSpring", "Muscle", "AppliedForce", "Attraction",
+    "Gravity", "Damping", "ShapeMemory", "Membrane", "MassSpring", "Muscle", "AppliedForce", "Attraction",
     "SoftVolume", "Nailed", "KeepIn", "Prescribed", "Volume", "RigidLink", "Rigid", "Scene",
     "INTEGRATORS", "FORMULATIONS",
+    "Pressure", "MuscleFibres",
 ]
 
 INTEGRATORS = ("explicit_euler", "symplectic_euler")

@@ -11,8 +11,9 @@ import math
 
 import numpy as np
 
+from . import readouts
 from .terms.volume import PROJ_NO_GRADIENT, face_volume
-from .errors import ConstraintError, SimulationDiverged
+from .errors import ConstraintError, SceneError, SimulationDiverged
 from .model import TERMS, Model
 from .step import (DIVERGED_NONFINITE, OK, S_MAXDISP, S_PHI, S_PRESSURE, S_TIME, VOLUME_FAILED, Frames,
                    kinetic_energy_of, membrane_advance, membrane_forces, new_state, run_membrane,
@@ -108,6 +109,33 @@ class Simulation:
         included (J). (The step's own figure, used by the divergence check, is
         taken before the projections and so counts velocity they remove.)"""
         return float(kinetic_energy_of(self.model.arrays, self.state))
+
+    @property
+    def elastic_energy(self) -> float | None:
+        """The membrane's elastic energy (J) at the current positions; None in the
+        paper formulation, whose shape memory and muscle derive from no energy."""
+        return readouts.elastic_energy(self.model.arrays, self.state.vert_pos)
+
+    def internal_net(self) -> dict:
+        """Net force (N) and moment about the centroid (N m) of the membrane's internal
+        forces (elasticity, muscle, springs) at the current state, with the sums of |F|
+        and |r x F|: zero to round-off in the continuum formulation, not in the
+        paper's. {"net_force_n": (3,), "net_moment_n_m": (3,), "sum_abs_force_n",
+        "sum_abs_moment_n_m"}."""
+        f = readouts.internal_forces(self.model.arrays, self.state.vert_pos, self.state.sched_val)
+        return readouts.net_internal(self.state.vert_pos, f)
+
+    def swept_volume_m3(self, region: str) -> float:
+        """Volume (m^3) swept by the faces of the named region (those with at least two
+        of their points in it) since rest, positive outward: for the diaphragm, minus
+        its share of the tidal volume. Over every region of a closed surface the
+        swept volumes add up to V - V0."""
+        m = self.model
+        if region not in m.regions:
+            raise SceneError(f"region {region!r}: not a region of scene {m.scene.name!r}; expected one of "
+                             f"{sorted(m.regions)}")
+        faces = readouts.region_faces(m.mesh.face_vert, m.regions[region], m.nvert)
+        return readouts.swept_volume(m.mesh.face_vert[faces], m.arrays.vert_rest, self.state.vert_pos)
 
     @property
     def term_calls(self) -> dict:

@@ -27,14 +27,17 @@ from .kernel import CHUNK_VERTS, chunk_count, kernel, kernel_twin
 
 from .model import MembraneArrays
 from .schedule import KIND_PYTHON, schedule_eval
-from .terms import (TERMS, AppliedForce, Attraction, Damping, Gravity, KeepIn, MassSpring, Muscle, Prescribed,
-                    ShapeMemory, SoftVolume, Volume)
+from .terms import (TERMS, AppliedForce, Attraction, Damping, Gravity, KeepIn, MassSpring, Membrane, Muscle,
+                    Prescribed, ShapeMemory, SoftVolume, Volume)
 from .terms.local import apply_keep_in, apply_prescribed
+from .terms.membrane import add_membrane_serial, membrane_faces_parallel, membrane_gather_parallel
 from .terms.muscle import add_muscle
 from .terms.pointwise import point_forces_parallel, point_forces_serial
 from .terms.shape_memory import shape_memory_frames, shape_memory_frames_parallel
 from .terms.springs import add_applied, add_attraction, add_mass_spring
 from .terms.volume import PROJ_OK, face_volume, project_volume, soft_volume_force
+from .terms.volume import Pressure, add_pressure
+from .terms.fibres import MuscleFibres, add_muscle_fibres
 
 __all__ = ["Scal", "StepStatus", "FrameColumn", "MembraneState", "new_state", "membrane_forces", "membrane_advance", "run_membrane",
            "run_membrane_frames", "capture_frame", "kinetic_energy_of", "Frames"]
@@ -43,6 +46,8 @@ __all__ = ["Scal", "StepStatus", "FrameColumn", "MembraneState", "new_state", "m
 (T_GRAVITY, T_APPLIED, T_ATTRACTION, T_DAMPING, T_SHAPE_MEMORY, T_MASS_SPRING, T_MUSCLE, T_SOFT_VOLUME,
  T_PRESCRIBED, T_KEEP_IN, T_VOLUME) = (Gravity.id, AppliedForce.id, Attraction.id, Damping.id, ShapeMemory.id,
                                        MassSpring.id, Muscle.id, SoftVolume.id, Prescribed.id, KeepIn.id, Volume.id)
+T_MEMBRANE = Membrane.id
+T_PRESSURE, T_MUSCLE_FIBRES = Pressure.id, MuscleFibres.id
 
 
 class Scal(IntEnum):
@@ -69,7 +74,8 @@ OK, DIVERGED_NONFINITE, DIVERGED_RUNAWAY, VOLUME_FAILED = StepStatus
 class MembraneState(NamedTuple):
     """What changes during a run. vert_pos (nvert, 3) m; vert_vel (nvert, 3) m/s;
     vert_force (nvert, 3) N (forces of the last step, before constraints);
-    grad (nvert, 3) m^2 volume gradient at the last projection; sm_sums (nsm, 9),
+    grad (nvert, 3) m^2 volume gradient at the last projection; face_force (nface_m, 6) N:
+    the membrane triangles' forces (parallel build's scratch); sm_sums (nsm, 9),
     dirn, cubic: scratch; vert_acc (chunk_count(nvert), 4): scratch, the sums
     of the per-point passes over each chunk of points (hybrid.kernel);
     sched_val / sched_next (nsched, 3): schedules at t and t + h;
@@ -80,6 +86,7 @@ class MembraneState(NamedTuple):
     vert_vel: np.ndarray
     vert_force: np.ndarray
     grad: np.ndarray
+    face_force: np.ndarray
     sm_sums: np.ndarray
     vert_acc: np.ndarray
     dirn: np.ndarray
@@ -96,7 +103,7 @@ def new_state(arrays: MembraneArrays) -> MembraneState:
     ns = arrays.sched.kind.shape[0]
     return MembraneState(
         vert_pos=arrays.vert_rest.copy(), vert_vel=np.zeros((n, 3)), vert_force=np.zeros((n, 3)),
-        grad=np.zeros((n, 3)), sm_sums=np.zeros((arrays.sm_vert.shape[0], 9)),
+        grad=np.zeros((n, 3)), face_force=np.zeros((arrays.mem_vert.shape[0], 6)), sm_sums=np.zeros((arrays.sm_vert.shape[0], 9)),
         vert_acc=np.zeros((chunk_count(n), 4)), dirn=np.zeros((n, 3)),
         cubic=np.zeros(2),
         sched_val=np.zeros((ns, 3)), sched_next=np.zeros((ns, 3)), scal=np.zeros(8),
@@ -120,6 +127,13 @@ def membrane_forces(m, s, t):
     eval_schedules(m.sched, t, s.sched_val)
     on = m.term_on
     _pointwise_forces(m, s)
+    if on[T_MEMBRANE]:
+        if m.parallel:
+            membrane_faces_parallel(m.mem_vert, m.mem_par, m.kv_on, s.vert_pos, s.vert_vel, s.face_force)
+            membrane_gather_parallel(m.mvf_ptr, m.mvf_slot, s.face_force, s.vert_force)
+        else:
+            add_membrane_serial(m.mem_vert, m.mem_par, m.kv_on, s.vert_pos, s.vert_vel, s.vert_force)
+        s.term_calls[T_MEMBRANE] += 1
     if on[T_APPLIED]:
         add_applied(m.app_vert, m.app_sched, s.sched_val, s.vert_force)
         s.term_calls[T_APPLIED] += 1
@@ -134,9 +148,15 @@ def membrane_forces(m, s, t):
         add_muscle(m.mus_vert, m.mus_nbr, m.mus_sched, s.sched_val, s.vert_pos, s.vert_force)
         s.term_calls[T_MUSCLE] += 1
     if on[T_SOFT_VOLUME]:
-        s.scal[S_PRESSURE] = soft_volume_force(m.ring_ptr, m.ring_vert, m.vol0, m.soft_stiff, s.vert_pos,
-                                               s.grad, s.cubic, s.vert_acc, s.vert_force)
+        s.scal[S_PRESSURE] = soft_volume_force(m.ring_ptr, m.ring_vert, m.vol0, m.soft_stiff, m.soft_bulk,
+                                               s.vert_pos, s.grad, s.cubic, s.vert_acc, s.vert_force)
         s.term_calls[T_SOFT_VOLUME] += 1
+    if on[T_PRESSURE]:
+        add_pressure(m.ring_ptr, m.ring_vert, m.pres_sched, s.sched_val, s.vert_pos, s.vert_force)
+        s.term_calls[T_PRESSURE] += 1
+    if on[T_MUSCLE_FIBRES]:
+        add_muscle_fibres(m.fib_edge, m.fib_share, m.fib_sched, s.sched_val, s.vert_pos, s.vert_force)
+        s.term_calls[T_MUSCLE_FIBRES] += 1
 
 
 def _integrate(vert_free, vert_mass, explicit, h, vert_force, vert_pos, vert_vel, chunk_acc):

@@ -20,7 +20,7 @@ EPS = np.finfo(float).eps
 # ----------------------------------------------------------------- scenes
 
 # the 80-point sphere under gravity, hanging from its nailed bottom cap, incompressible
-BASE = Scene(formulation="paper", 
+BASE = Scene(formulation="paper",
     mesh=MeshSpec(), masses=Masses(total_kg=4.0),
     regions={"bottom": HalfSpace((0.0, 0.0, -0.1), (0.0, 0.0, -1.0)),
              "top": HalfSpace((0.0, 0.0, 0.05), (0.0, 0.0, 1.0))},

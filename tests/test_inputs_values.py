@@ -5,7 +5,7 @@ import pytest
 from hybrid.errors import MeshError, SceneError
 from hybrid.mesh import uv_sphere
 from hybrid.model import compile_scene
-from hybrid.scene import Masses, MeshSpec, Scene, ShapeMemory, SoftVolume
+from hybrid.scene import Damping, Masses, MeshSpec, Pressure, Scene, ShapeMemory, SoftVolume
 from hybrid.scenefile import load_scene
 
 BAD = [
@@ -18,9 +18,27 @@ BAD = [
      r"masses.per_vertex_kg: expected masses > 0 kg and <= 1e\+06 kg \(a physical bound\), received 1e\+300 at vertices \[0, 1,"),
     ("dense", dict(masses=Masses(density_kg_per_m2={"all": 1e300})),
      r"masses.density_kg_per_m2\['all'\]: expected a number > 0 and <= 1e\+06 kg/m\^2"),
-    ("stiff", dict(forces=(ShapeMemory(stiffness_n_per_m=1e300),)),
+    ("stiff", dict(formulation="paper", forces=(ShapeMemory(stiffness_n_per_m=1e300),)),
      r"forces\['shape_memory'\].stiffness_n_per_m: expected a number > 0 and <= 1e\+12 \(a physical bound\), received 1e\+300"),
-    ("stiff gas", dict(forces=(SoftVolume(stiffness_n_per_m=1e300),)), r"stiffness_n_per_m: expected a number > 0 and <= 1e\+12"),
+    ("stiff gas", dict(formulation="paper", forces=(SoftVolume(stiffness_n_per_m=1e300),)),
+     r"stiffness_n_per_m: expected a number > 0 and <= 1e\+12"),
+    ("hard fill", dict(forces=(SoftVolume(bulk_modulus_pa=1e300),)),
+     r"forces\['soft_volume'\].bulk_modulus_pa: expected a number > 0 and <= 1e\+12 \(a physical bound\), received 1e\+300"),
+    ("negative fill", dict(forces=(SoftVolume(bulk_modulus_pa=-5.0),)),
+     r"forces\['soft_volume'\].bulk_modulus_pa: expected a number > 0, received -5"),
+    ("two fills", dict(formulation="paper", forces=(SoftVolume(stiffness_n_per_m=1.0, bulk_modulus_pa=1.0),)),
+     r"forces\['soft_volume'\].bulk_modulus_pa: a parameter of formulation 'continuum'"),
+    ("no fill", dict(forces=(SoftVolume(),)),
+     r"forces\['soft_volume'\]: expected exactly one of bulk_modulus_pa or stiffness_n_per_m, received "
+     r"bulk_modulus_pa=None stiffness_n_per_m=None"),
+    ("negative drag", dict(forces=(Damping(drag_n_s_per_m3=-1.0),)),
+     r"forces\['damping'\].drag_n_s_per_m3: expected a number in \[0, 1e\+12\], received -1.0"),
+    ("huge drag", dict(forces=(Damping(drag_n_s_per_m3=1e300),)),
+     r"forces\['damping'\].drag_n_s_per_m3: expected a number in \[0, 1e\+12\], received 1e\+300"),
+    ("no drag", dict(forces=(Damping(),)),
+     r"forces\['damping'\]: expected exactly one of drag_n_s_per_m3, coef_n_s_per_m or critical_fraction"),
+    ("NaN pressure", dict(forces=(Pressure(float("nan")),)),
+     r"forces\['pressure'\].pressure_pa: expected a number of finite floats, received nan"),
     ("huge body", dict(mesh=MeshSpec(radius_m=1e200)), r"mesh.radius_m: expected a number > 0 and <= 1000 \(a physical bound\), received 1e\+200"),
     ("NUL name", dict(name="breath\x00ing"), r"name: expected text without NUL characters"),
     ("huge sphere", dict(mesh=MeshSpec(segments=10**6, rings=10**6)),

@@ -22,7 +22,7 @@ LAYERS = (
     ("terms", ("terms", "terms.*")),
     ("scene", ("scene", "scenefile", "demo", "resolve")),
     ("model, rigid", ("model", "rigid", "rigid.*")),
-    ("step", ("step",)),
+    ("step", ("step", "readouts")),
     ("coupled step", ("coupling",)),
     ("simulation", ("simulation",)),
     ("observers", ("run", "record", "record.*", "render", "sweep", "outputs")),

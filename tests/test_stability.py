@@ -94,7 +94,7 @@ def test_table1_mass_spring(h, k, kv, m):
     pos = np.array([[0, 0, 0], [-L, 0, 0], [L, 0, 0], [0, L, 0], [0, -L, 0]], float)
     face = np.array([[0, 2, 3], [0, 3, 1], [0, 1, 4], [0, 4, 2]])  # P's closed fan N2, A, N1, B
     mesh = Mesh.from_arrays(pos, face, name="three_points")
-    scene = Scene(formulation="paper", 
+    scene = Scene(formulation="paper",
         mesh=mesh, masses=Masses(per_vertex_kg=(m,) * 5),
         # springs are the mesh edges with both ends in the region: P-N1, P-N2 (and N1-N2? not an edge)
         regions={"springs": Indices((0, 1, 2)), "fixed": Indices((1, 2, 3, 4))},
@@ -117,7 +117,7 @@ def test_table1_mass_spring(h, k, kv, m):
 def test_table1_shape_memory(h, k, kv, m):
     base = icosahedron(0.1)
     mesh = icosahedron(0.1, center=tuple(-base.vert_pos[0]))  # the free apex P at the origin
-    scene = Scene(formulation="paper", 
+    scene = Scene(formulation="paper",
         mesh=mesh, masses=Masses(per_vertex_kg=(m,) * 12),
         regions={"P": Indices((0,)), "others": Difference(All(), Indices((0,)))},
         forces=(ShapeMemory(k, region="P"), Damping(coef_n_s_per_m=kv)),

@@ -5,15 +5,15 @@ seen from outside) with the ordered one-ring fans the force kernels need.
 The package's rooms:
 
 - `surface`: the `Mesh` class (construction, loading, immutability, geometry);
-- `geometry`: volume, its gradient and the row-wise helpers, on plain arrays;
+- `geometry`: volume, its gradient, vertex areas and the row-wise helpers, on plain arrays;
 - `validate`: the checks of a surface and the building of its edges and fans;
-- `spheres`: `uv_sphere` (the paper's 80-point body), `icosahedron`, `icosphere`.
+- `spheres`: `uv_sphere` (the paper's 80-point body), `icosahedron`, `icosphere`, `irregular_sphere`.
 """
 
 from __future__ import annotations
 
-from .geometry import volume, volume_gradient
-from .spheres import ICOSPHERE_MAX_SUBDIVISIONS, icosahedron, icosphere, uv_sphere
+from .geometry import vertex_area, volume, volume_gradient
+from .spheres import ICOSPHERE_MAX_SUBDIVISIONS, icosahedron, icosphere, irregular_sphere, uv_sphere
 from .surface import LOAD_SUFFIXES, Mesh
 
 __all__ = [
@@ -21,8 +21,10 @@ __all__ = [
     "uv_sphere",
     "icosahedron",
     "icosphere",
+    "irregular_sphere",
     "volume",
     "volume_gradient",
+    "vertex_area",
     "LOAD_SUFFIXES",
     "ICOSPHERE_MAX_SUBDIVISIONS",
 ]

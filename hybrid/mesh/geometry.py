@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["volume", "volume_gradient", "cross_rows", "scatter_corners"]
+__all__ = ["volume", "volume_gradient", "vertex_area", "cross_rows", "scatter_corners"]
 
 
 def volume(vert_pos: np.ndarray, face_vert: np.ndarray) -> float:
@@ -48,6 +48,15 @@ def volume_gradient(vert_pos: np.ndarray, face_vert: np.ndarray) -> np.ndarray:
     rel = pos - pos.mean(axis=0)
     a, b, c = rel[face[:, 0]], rel[face[:, 1]], rel[face[:, 2]]
     return scatter_corners(face, cross_rows(b, c), cross_rows(c, a), cross_rows(a, b), len(pos)) / 6.0
+
+
+def vertex_area(vert_pos: np.ndarray, face_vert: np.ndarray) -> np.ndarray:
+    """Each vertex's share of the surface area, a third of its faces' areas, (nvert,) m^2."""
+    pos = np.asarray(vert_pos, dtype=np.float64)
+    face = np.asarray(face_vert)
+    a = pos[face[:, 0]]
+    third = np.linalg.norm(cross_rows(pos[face[:, 1]] - a, pos[face[:, 2]] - a), axis=1) / 6.0
+    return np.bincount(face.T.ravel(), weights=np.tile(third, 3), minlength=len(pos))
 
 
 def cross_rows(u: np.ndarray, v: np.ndarray) -> np.ndarray:

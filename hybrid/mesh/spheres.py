@@ -14,7 +14,7 @@ from hybrid.errors import MeshError
 
 from .surface import Mesh
 
-__all__ = ["uv_sphere", "icosahedron", "icosphere", "ICOSPHERE_MAX_SUBDIVISIONS"]
+__all__ = ["uv_sphere", "icosahedron", "icosphere", "irregular_sphere", "ICOSPHERE_MAX_SUBDIVISIONS"]
 
 
 def _check_sphere_args(radius, center, who: str) -> np.ndarray:
@@ -122,3 +122,29 @@ def icosphere(subdivisions: int, radius: float = 1.0, center=(0.0, 0.0, 0.0)) ->
             np.stack([c, ca, bc], axis=1), np.stack([ab, bc, ca], axis=1),
         ])
     return Mesh(ctr + radius * unit, face, name=f"icosphere{int(subdivisions)}")
+
+
+def irregular_sphere(npoint: int, radius: float = 1.0, seed: int = 0, center=(0.0, 0.0, 0.0)) -> Mesh:
+    """A sphere of `npoint` unevenly spaced points and their convex hull's triangles:
+    the spiral (Fibonacci) points moved at random by up to a third of their spacing,
+    so the valences and angles vary as on a remeshed anatomy surface, without
+    slivers. radius (m), center (3,) m; the same seed gives the same mesh."""
+    from scipy.spatial import ConvexHull
+    ctr = _check_sphere_args(radius, center, "irregular_sphere")
+    if int(npoint) != npoint or not 12 <= npoint <= MAX_POINTS:
+        raise MeshError(f"irregular_sphere: npoint must be an integer in [12, {MAX_POINTS}]; received {npoint!r}")
+    k = np.arange(npoint) + 0.5
+    z = 1.0 - 2.0 * k / npoint
+    phi = np.pi * (1.0 + 5.0 ** 0.5) * k
+    r = np.sqrt(1.0 - z * z)
+    p = np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
+    spacing = np.sqrt(4.0 * np.pi / npoint)
+    jitter = np.random.default_rng(seed).uniform(-1.0, 1.0, p.shape) * spacing / 3.0
+    p = p + jitter - np.einsum("ij,ij->i", jitter, p)[:, None] * p  # tangential moves only
+    p /= np.linalg.norm(p, axis=1)[:, None]
+    faces = ConvexHull(p).simplices.astype(np.int64)
+    # outward: each face's normal along its centroid
+    a, b, c = p[faces[:, 0]], p[faces[:, 1]], p[faces[:, 2]]
+    inward = np.einsum("ij,ij->i", np.cross(b - a, c - a), a + b + c) < 0
+    faces[inward] = faces[inward][:, ::-1]
+    return Mesh.from_arrays(radius * p + ctr, faces, name=f"irregular_sphere_{npoint}")

@@ -4,6 +4,8 @@
     hybrid study extremes  --out DIR [--small] [--scheduler ADDRESS]   # DIR/extremes.json, .md
     hybrid study work-precision --out DIR [--small] [--scheduler ADDRESS]
                                                  # DIR/work_precision.json, .md, .png
+    hybrid study verification --out DIR [--small]  # the continuum formulation's oracles on three
+                                                 # mesh families: DIR/verification.json, .md, .png
 
 Studies with independent runs (work-precision) run them on all local cores,
 or on an existing Dask cluster with `--scheduler tcp://HOST:PORT` (the
@@ -36,7 +38,9 @@ def build_study_parser() -> argparse.ArgumentParser:
     for name, help_ in (("stability", "the paper's stability comparison (6.1) and beyond"),
                         ("extremes", "a catalogue of stiff and extreme cases: stable, diverged or refused"),
                         ("work-precision", "error against run time of both integrators, breathing and "
-                                           "membrane-only scenes")):
+                                           "membrane-only scenes"),
+                        ("verification", "the continuum formulation against closed forms and conservation laws "
+                                         "on three mesh families")):
         s = sub.add_parser(name, help=help_)
         s.add_argument("--out", required=True, metavar="DIR", help="output folder (created)")
         s.add_argument("--small", action="store_true", help="a small version (seconds; for tests)")
@@ -71,6 +75,19 @@ def _work_precision(args) -> None:
           + f"; {len(r['failures'])} failed run(s); {r['runtime_s']:.1f} s -> {args.out}/work_precision.json")
 
 
+def _verification(args) -> None:
+    from . import verification
+    r = verification.run(args.out, small=args.small)
+    worst = {}
+    for row in r["rows"]:
+        if row["rel_error"] is not None and row["oracle"] in ("pressure_sphere", "hanging_sphere"):
+            worst[(row["oracle"], row["mesh_family"])] = row  # the finest level comes last
+    print("verification: " + ", ".join(f"{o} {f} {row['rel_error']:.2%} at {row['nvert']} points"
+                                      for (o, f), row in worst.items())
+          + f"; hanging sphere across families {r['hanging_finest_spread']:.2%}; "
+          f"{r['runtime_s']:.1f} s -> {args.out}/verification.json")
+
+
 def main_study(argv) -> int:
     from ..run import out_folder
 
@@ -78,7 +95,7 @@ def main_study(argv) -> int:
     try:
         out_folder(Path(args.out))
         {"stability": _stability, "extremes": _extremes,
-         "work-precision": _work_precision}[args.study](args)
+         "work-precision": _work_precision, "verification": _verification}[args.study](args)
         return 0
     except HybridError as exc:
         sys.stderr.write(f"hybrid study: error: {' '.join(str(exc).split())}\n")

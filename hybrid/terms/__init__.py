@@ -4,7 +4,7 @@ compiled kernel (`hybrid.terms.base` says how they fit together).
 
 Families: `pointwise` (gravity, damping and the step's fused per-point pass),
 `shape_memory`, `springs` (mass-spring, applied forces, attractive points),
-`muscle`, `volume` (exact and soft volume), `local` (nailed, prescribed,
+`muscle`, `fibres` (muscle fibres that pull both ends), `volume` (exact and soft volume, pressure load), `local` (nailed, prescribed,
 keep-in). `order_terms` below registers them: a new term is its module and
 one entry there.
 """
@@ -12,16 +12,19 @@ one entry there.
 from .base import CONSTRAINT_TYPES, FLAGGED, FORCE_TYPES, TERM_CLASSES, Build, Term, order_terms
 from .pointwise import Damping, Gravity
 from .shape_memory import ShapeMemory
+from .membrane import Membrane
 from .springs import AppliedForce, Attraction, MassSpring
 from .muscle import Muscle
-from .volume import SoftVolume, Volume
+from .volume import Pressure, SoftVolume, Volume
+from .fibres import MuscleFibres
 from .local import KeepIn, Nailed, Prescribed
 
 __all__ = ["Term", "Build", "FORCE_TYPES", "CONSTRAINT_TYPES", "TERM_CLASSES", "FLAGGED", "TERMS",
-           "Gravity", "Damping", "ShapeMemory", "MassSpring", "AppliedForce", "Attraction", "Muscle",
-           "SoftVolume", "Volume", "Nailed", "KeepIn", "Prescribed"]
+           "Gravity", "Damping", "ShapeMemory", "Membrane", "MassSpring", "AppliedForce", "Attraction", "Muscle",
+           "SoftVolume", "Volume", "Nailed", "KeepIn", "Prescribed", "Pressure", "MuscleFibres"]
 
-order_terms((Gravity, AppliedForce, Attraction, Damping, ShapeMemory, MassSpring, Muscle, SoftVolume,
+order_terms((Gravity, AppliedForce, Attraction, Damping, ShapeMemory, MassSpring, Muscle, SoftVolume, Membrane,
+             Pressure, MuscleFibres,
              Nailed, Prescribed, KeepIn, Volume))
 
 #: names of the terms with a flag and a kernel, in id order (MembraneArrays.term_on)

@@ -10,7 +10,9 @@ from __future__ import annotations
 import numpy as np
 from numba import prange
 
+from .. import checks
 from ..errors import SceneError
+from ..mesh.geometry import vertex_area
 from ..kernel import CHUNK_VERTS, kernel, kernel_twin
 from .base import Term, force, param
 from .shape_memory import shape_memory_force
@@ -33,16 +35,20 @@ class Gravity(Term):
 class Damping(Term):
     """Viscous damping F = -c v on the points of `region`.
 
-    Give `coef_n_s_per_m` (c directly) or `critical_fraction` (c = fraction x
-    2 sqrt(k_i m_i) per point, k_i the point's elastic stiffness from shape
-    memory and springs; 0.3 is comfortable; on the breathing membrane the
-    non-conservative shape-memory force excites itself below 0.15, as
-    `hybrid study stability` measures).
+    Give `drag_n_s_per_m3` (formulation "continuum": a drag b per area,
+    c_i = b A_i with A_i the point's share of the surface area, a third of its
+    faces' areas, so the same b damps the same on every mesh), or, in
+    formulation "paper", `coef_n_s_per_m` (c directly) or `critical_fraction`
+    (c = fraction x 2 sqrt(k_i m_i) per point, k_i the point's elastic
+    stiffness from shape memory and springs; 0.3 is comfortable; on the
+    breathing membrane the non-conservative shape-memory force excites itself
+    below 0.15, as `hybrid study stability` measures).
     """
     arrays = {"damp_coef": lambda n: np.zeros(n)}  # (nvert,) N s/m
     finish_last = True
     coef_n_s_per_m: float = param("nonneg", None, formulation="paper")
     critical_fraction: float = param("nonneg", None, formulation="paper", unit="of critical")
+    drag_n_s_per_m3: float = param("nonneg", None, formulation="continuum")
     region: object = param("selector", "all")
 
     def compile(self, b, what):
@@ -53,10 +59,15 @@ class Damping(Term):
     def finish(cls, b):
         damp_coef = np.zeros(b.mesh.nvert)
         for term, idx, what in b.rows["damping"]:
-            if (term.coef_n_s_per_m is None) == (term.critical_fraction is None):
-                raise SceneError(f"{what}: expected exactly one of coef_n_s_per_m or critical_fraction, received "
-                                 f"coef_n_s_per_m={term.coef_n_s_per_m!r} critical_fraction={term.critical_fraction!r}")
-            if term.coef_n_s_per_m is not None:
+            given = {k: getattr(term, k) for k in ("drag_n_s_per_m3", "coef_n_s_per_m", "critical_fraction")}
+            if sum(v is not None for v in given.values()) != 1:
+                raise SceneError(f"{what}: expected exactly one of drag_n_s_per_m3, coef_n_s_per_m or "
+                                 f"critical_fraction, received " + " ".join(f"{k}={v!r}" for k, v in given.items()))
+            if term.drag_n_s_per_m3 is not None:
+                drag = checks.number(f"{what}.drag_n_s_per_m3", term.drag_n_s_per_m3, lo=0, lo_open=False,
+                                     hi=checks.MAX_DRAG_N_S_PER_M3, hi_open=False)
+                damp_coef[idx] = drag * vertex_area(b.mesh.vert_pos, b.mesh.face_vert)[idx]
+            elif term.coef_n_s_per_m is not None:
                 damp_coef[idx] = term.value("coef_n_s_per_m", what)
             else:
                 frac = term.value("critical_fraction", what)

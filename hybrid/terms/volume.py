@@ -1,5 +1,6 @@
-"""The enclosed volume (paper 4): the exact constant-volume projection and the
-soft (compressible) volume of paper 6.2.
+"""The enclosed volume (paper 4): the exact constant-volume projection, the
+soft (compressible) volume of paper 6.2 or of a bulk modulus, and a uniform
+pressure load.
 
 After free integration to X*, X = X* + phi d with d_i = w_i grad_i V(X*), and
 V(X* + phi d) - V0 is a cubic in phi; its real root nearest 0 is found to machine precision;
@@ -23,9 +24,9 @@ from numba import prange
 from ..errors import SceneError
 from .. import checks
 from ..kernel import CHUNK_VERTS, kernel, kernel_twin
-from .base import Term, constraint, force, param
+from .base import Rows, Term, constraint, force, param
 
-__all__ = ["Volume", "SoftVolume", "Projection", "centroid", "face_volume", "ring_cross_sum", "volume_cubic",
+__all__ = ["Volume", "SoftVolume", "Pressure", "add_pressure", "Projection", "centroid", "face_volume", "ring_cross_sum", "volume_cubic",
            "solve_cubic_near_zero", "project_volume", "soft_volume_force", "PROJ_OK", "PROJ_NO_GRADIENT",
            "PROJ_NO_ROOT"]
 
@@ -42,17 +43,53 @@ PROJ_OK, PROJ_NO_GRADIENT, PROJ_NO_ROOT = int(Projection.OK), int(Projection.NO_
 
 @force("soft_volume")
 class SoftVolume(Term):
-    """Compressibility (paper 6.2): each point pulled with stiffness (N/m)
-    toward the position the exact volume projection would give it."""
-    arrays = {"soft_stiff": lambda n: 0.0}  # N/m
-    stiffness_n_per_m: float = param("positive", hi=checks.MAX_STIFFNESS_N_PER_M)
+    """A compressible fill. Give `bulk_modulus_pa` (formulation "continuum"): a
+    fill of bulk modulus K (Pa) at the pressure p = -K (V - V0) / V0, force
+    F_i = p grad_i V, energy K (V - V0)^2 / (2 V0); or `stiffness_n_per_m`
+    (formulation "paper", paper 6.2): each point pulled with that stiffness
+    toward the position the exact volume projection would give it, whose bulk
+    modulus grows with the number of points."""
+    # soft_stiff N/m (paper), soft_bulk Pa (continuum): the one given, the other 0
+    arrays = {"soft_stiff": lambda n: 0.0, "soft_bulk": lambda n: 0.0}
+    stiffness_n_per_m: float = param("positive", None, hi=checks.MAX_STIFFNESS_N_PER_M, formulation="paper")
+    bulk_modulus_pa: float = param("positive", None, hi=checks.MAX_MODULUS_PA, formulation="continuum")
 
     def compile(self, b, what):
         super().compile(b, what)
-        b.out["soft_stiff"] = self.value("stiffness_n_per_m", what)
+        if (self.stiffness_n_per_m is None) == (self.bulk_modulus_pa is None):
+            raise SceneError(f"{what}: expected exactly one of bulk_modulus_pa or stiffness_n_per_m, received "
+                             f"bulk_modulus_pa={self.bulk_modulus_pa!r} stiffness_n_per_m={self.stiffness_n_per_m!r}")
+        if self.stiffness_n_per_m is not None:
+            b.out["soft_stiff"] = self.value("stiffness_n_per_m", what)
+        else:
+            b.out["soft_bulk"] = self.value("bulk_modulus_pa", what)
         b.mesh.require_closed(f"{what} (compressible volume) needs a closed surface")
         b.mesh.require_no_self_crossing(f"{what} (compressible volume) needs a surface bounding one region")
         b.out["vol0"] = float(b.mesh.volume())
+        if self.bulk_modulus_pa is not None:
+            # the energy's Hessian on the diagonal, K/V0 |grad_i V|^2: each point's
+            # stiffness for the stability estimate
+            g = b.mesh.volume_gradient()
+            b.vert_stiffness += b.out["soft_bulk"] / b.out["vol0"] * np.sum(g * g, axis=1)
+
+
+@force("pressure")
+class Pressure(Term):
+    """A uniform pressure load on a closed surface, `pressure_pa` (Pa, positive
+    pushing outward; a number, a `Breathing` waveform, a `Table` or a function
+    of time): F_i = p(t) grad_i V, the work of p on the enclosed volume."""
+    # pres_sched (nterm,) int64: the schedule row of each pressure term (their sum acts)
+    arrays = {"pres_sched": Rows(np.int64)}
+    pressure_pa: object = param("schedule", ncomp=1)
+
+    def compile(self, b, what):
+        super().compile(b, what)
+        b.mesh.require_closed(f"{what} (a pressure on the enclosed volume) needs a closed surface")
+        b.add_rows(pres_sched=[b.schedule(self.pressure_pa, f"{what}.pressure_pa", 1)])
+
+    @classmethod
+    def finish(cls, b):  # rows are schedules, not points: every one kept
+        b.out["pres_sched"] = cls.arrays["pres_sched"].build(b.rows["pres_sched"])
 
 
 @constraint("volume")
@@ -415,13 +452,13 @@ def project_volume(ring_ptr, ring_vert, vol0, vert_weight, h, vert_pos, vert_vel
 
 
 @kernel
-def soft_volume_force(ring_ptr, ring_vert, vol0, stiff, vert_pos, grad, cubic, chunk_acc, vert_force):
-    """Compressibility (paper 6.2): attraction toward the volume-satisfying positions.
-
-    phi solves V(X + phi grad V(X)) = V0; each point is pulled toward its
-    target X_i + phi grad_i with stiffness k: F_i = k phi grad_i V, a uniform
-    pressure p = k phi (Pa). Returns p.
-    # Model: ring_ptr, ring_vert (closed fans), vol0 m^3, stiff N/m
+def soft_volume_force(ring_ptr, ring_vert, vol0, stiff, bulk, vert_pos, grad, cubic, chunk_acc, vert_force):
+    """Compressibility: with a bulk modulus K > 0, the pressure p = -K (V - V0) / V0;
+    otherwise (paper 6.2) the attraction toward the volume-satisfying positions:
+    phi solves V(X + phi grad V(X)) = V0 and each point is pulled toward its
+    target X_i + phi grad_i with stiffness k, a uniform pressure p = k phi (Pa).
+    Either way F_i = p grad_i V. Returns p.
+    # Model: ring_ptr, ring_vert (closed fans), vol0 m^3, stiff N/m, bulk Pa (0: paper 6.2)
     # Data in: vert_pos
     # Data out: vert_force; scratch grad, cubic, chunk_acc (chunk_count(nvert), >= 3)
     """
@@ -438,13 +475,33 @@ def soft_volume_force(ring_ptr, ring_vert, vol0, stiff, vert_pos, grad, cubic, c
         grad[i, 2] = gz
         vol += (vert_pos[i, 0] - ref[0]) * gx + (vert_pos[i, 1] - ref[1]) * gy + (vert_pos[i, 2] - ref[2]) * gz
         c1 += gx * gx + gy * gy + gz * gz
-    volume_cubic(ring_ptr, ring_vert, ref, vert_pos, grad, chunk_acc, cubic, False)
-    phi, status = solve_cubic_near_zero(vol / 3.0 - vol0, c1, cubic[0], cubic[1])
-    if status != PROJ_OK:
-        return np.nan
-    p = stiff * phi
+    if bulk > 0.0:
+        p = -bulk * (vol / 3.0 - vol0) / vol0
+    else:
+        volume_cubic(ring_ptr, ring_vert, ref, vert_pos, grad, chunk_acc, cubic, False)
+        phi, status = solve_cubic_near_zero(vol / 3.0 - vol0, c1, cubic[0], cubic[1])
+        if status != PROJ_OK:
+            return np.nan
+        p = stiff * phi
     for i in range(grad.shape[0]):
         vert_force[i, 0] += p * grad[i, 0]
         vert_force[i, 1] += p * grad[i, 1]
         vert_force[i, 2] += p * grad[i, 2]
     return p
+
+
+@kernel
+def add_pressure(ring_ptr, ring_vert, pres_sched, sched_val, vert_pos, vert_force):
+    """A uniform pressure load: F_i += p(t) grad_i V, p the sum of the terms' schedules (Pa).
+    # Model: ring_ptr, ring_vert (closed fans), pres_sched (nterm,) int64
+    # Data in: sched_val (pressure Pa in column 0), vert_pos   # Data out: vert_force
+    """
+    p = 0.0
+    for k in range(pres_sched.shape[0]):
+        p += sched_val[pres_sched[k], 0]
+    c = p / 6.0
+    for i in range(vert_pos.shape[0]):
+        gx, gy, gz = ring_cross_sum(ring_ptr, ring_vert, vert_pos, i)
+        vert_force[i, 0] += c * gx
+        vert_force[i, 1] += c * gy
+        vert_force[i, 2] += c * gz

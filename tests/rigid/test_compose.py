@@ -168,7 +168,7 @@ def test_membrane_linked_to_a_third_party_humanoid_torso(tmp_path):
     # the abdomen under the humanoid's torso: its top ring rides on the torso
     centre = (0.0, 0.0, 1.12)
     ring = Box((-1, -1, centre[2] + 0.07), (1, 1, centre[2] + 0.08))
-    scene = Scene(formulation="paper", 
+    scene = Scene(formulation="paper",
         mesh=MeshSpec("uv_sphere", radius_m=0.12, center_m=centre), masses=Masses(total_kg=4.0),
         regions={"top": HalfSpace((0, 0, centre[2] + 0.07), (0, 0, 1))},
         forces=(ShapeMemory(3000.0), Damping(critical_fraction=0.3),

@@ -16,7 +16,7 @@ def _muscle_scene(stiffness):
     # damping given as a coefficient (0.3 of critical for k = 3000 N/m, m = 0.05 kg):
     # a critical fraction would count the muscle's peak stiffness, which is
     # known for a table but not for a Python function
-    return Scene(formulation="paper", 
+    return Scene(formulation="paper",
         mesh=MeshSpec(), masses=Masses(total_kg=4.0),
         regions={"bottom": HalfSpace((0.0, 0.0, -0.1), (0.0, 0.0, -1.0)),
                  "top": HalfSpace((0.0, 0.0, 0.05), (0.0, 0.0, 1.0))},

@@ -36,7 +36,7 @@ def nailed_sphere_scene(mesh: MeshSpec, *, stiffness=3000.0, dt=1e-3, integrator
                         elastic=None) -> Scene:
     """A 4 kg sphere (R = 0.12 m) hanging under gravity from its nailed bottom cap,
     incompressible: the test body of the paper, the trunk's abdomen."""
-    return Scene(formulation="paper", 
+    return Scene(formulation="paper",
         mesh=mesh, masses=Masses(total_kg=4.0),
         regions={"bottom": HalfSpace((0.0, 0.0, -0.1), (0.0, 0.0, -1.0))},
         forces=(Gravity(), elastic or ShapeMemory(stiffness), Damping(critical_fraction=0.3)),

@@ -49,14 +49,14 @@ def three_point(model: str, h, k, kv, m) -> tuple[Simulation, float, float]:
         scene = Scene(formulation="paper", mesh=mesh, masses=Masses(per_vertex_kg=(m,) * 5),
                       regions={"springs": Indices((0, 1, 2)), "fixed": Indices((1, 2, 3, 4))},
                       forces=(MassSpring(2.0 * k / 3.0, region="springs"), Damping(coef_n_s_per_m=kv)),
-                      constraints=(Nailed("fixed"),), dt_s=h, integrator="explicit_euler")
+                      constraints=(Nailed("fixed"),), dt_s=h, integrator="explicit_euler", duration_s=max(1.0, h))
         return Simulation(no_runaway_check(compile_scene(scene))), L * 2.0 ** -26, 2.0 ** -10
     base = icosahedron(0.1)
     mesh = icosahedron(0.1, center=tuple(-base.vert_pos[0]))
     scene = Scene(formulation="paper", mesh=mesh, masses=Masses(per_vertex_kg=(m,) * 12),
                   regions={"P": Indices((0,)), "others": Difference(All(), Indices((0,)))},
                   forces=(ShapeMemory(k, region="P"), Damping(coef_n_s_per_m=kv)),
-                  constraints=(Nailed("others"),), dt_s=h, integrator="explicit_euler")
+                  constraints=(Nailed("others"),), dt_s=h, integrator="explicit_euler", duration_s=max(1.0, h))
     return Simulation(no_runaway_check(compile_scene(scene))), 1e-4, 1e-3
 
 
