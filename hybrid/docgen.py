@@ -33,7 +33,7 @@ __all__ = ["render", "DOC_PATH", "main"]
 DOC_PATH = Path(__file__).resolve().parents[1] / "docs" / "scene-file.md"
 
 # a field's unit from its name's suffix (the project's naming rule), longest first
-_SUFFIX_UNITS = (("_n_s_per_m", "N s/m"), ("_n_per_m", "N/m"), ("_kg_per_m2", "kg/m^2"), ("_m_s2", "m/s^2"),
+_SUFFIX_UNITS = (("_n_s_per_m3", "N s/m^3"), ("_n_s_per_m", "N s/m"), ("_n_per_m", "N/m"), ("_kg_per_m2", "kg/m^2"), ("_m_s2", "m/s^2"),
                  ("_m_s", "m/s"), ("_deg", "deg"), ("_pa", "Pa"), ("_kg", "kg"), ("_m", "m"), ("_s", "s"),
                  ("_n", "N"))
 
