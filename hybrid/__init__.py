@@ -25,7 +25,7 @@ from typing import Sequence
 from .errors import (ConstraintError, HybridError, MeshError, RigidError, SceneError,
                      SimulationDiverged)
 from .model import Model, compile_scene
-from .regions import All, Ball, Border, Box, Difference, HalfSpace, Indices, Intersection, Nearest, Union_
+from .regions import All, Ball, Border, Box, Difference, HalfSpace, Indices, Intersection, Nearest, Patch, Union_
 from .resolve import resolve_scene, scene_names
 # `run` and `sweep` are both a module and its function: importing the function here
 # makes `hybrid.run` / `hybrid.sweep` the function (`from hybrid.run import ...` still
@@ -47,7 +47,7 @@ __all__ = [
     "Nailed", "KeepIn", "Prescribed", "Volume", "Rigid", "RigidLink",
     "Pressure", "MuscleFibres",
     # region selectors
-    "All", "Border", "Indices", "HalfSpace", "Ball", "Box", "Nearest", "Union_", "Intersection", "Difference",
+    "All", "Border", "Indices", "HalfSpace", "Ball", "Box", "Nearest", "Patch", "Union_", "Intersection", "Difference",
     # schedules
     "Constant", "Table", "Breathing", "Function",
     # errors

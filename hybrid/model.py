@@ -201,7 +201,8 @@ def _masses(spec: Masses, mesh: Mesh, regions: dict) -> np.ndarray:
     m = np.full(mesh.nvert, np.nan)
     for name, rho in dens.items():
         rho = checks.positive(f"masses.density_kg_per_m2[{name!r}]", rho, checks.MAX_MASS_KG, " kg/m^2")
-        idx = _regions.select(name, mesh.vert_pos, name=f"masses.density_kg_per_m2[{name!r}]", regions=regions)
+        idx = _regions.select(name, mesh.vert_pos, name=f"masses.density_kg_per_m2[{name!r}]", regions=regions,
+                               face_vert=mesh.face_vert)
         m[idx] = rho * area[idx]
     missing = np.nonzero(np.isnan(m))[0]
     if missing.size:
@@ -211,7 +212,8 @@ def _masses(spec: Masses, mesh: Mesh, regions: dict) -> np.ndarray:
 
 
 def _region(sel, mesh, regions, what):
-    return _regions.select(sel, mesh.vert_pos, name=what, regions=regions, border_vert=mesh.border_vert)
+    return _regions.select(sel, mesh.vert_pos, name=what, regions=regions, border_vert=mesh.border_vert,
+                           face_vert=mesh.face_vert)
 
 
 def compile_scene(scene: Scene) -> Model:

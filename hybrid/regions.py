@@ -3,6 +3,8 @@
 A region is a selector evaluated once, on the rest positions, when the model
 is compiled. Selectors combine (`Union`, `Intersection`, `Difference`) so
 that a segmented anatomy mesh can be split without writing indices by hand.
+A `Patch` is a region of physical size: its area on the mesh is checked
+against the area its radius implies.
 """
 
 from __future__ import annotations
@@ -13,8 +15,9 @@ from typing import Union
 import numpy as np
 
 from .errors import SceneError
+from .mesh.geometry import vertex_area
 
-__all__ = ["Indices", "HalfSpace", "Ball", "Box", "Nearest", "All", "Border",
+__all__ = ["Indices", "HalfSpace", "Ball", "Box", "Nearest", "Patch", "All", "Border",
            "Union_", "Intersection", "Difference", "Selector", "select", "contains"]
 
 
@@ -69,6 +72,17 @@ class Nearest:
 
 
 @dataclass(frozen=True)
+class Patch:
+    """A disc of the surface: the points within `radius_m` (m, straight-line distance)
+    of the surface point nearest to `center` (m). Its points' cells (a third of
+    each face's area per point) must cover pi radius_m^2 (the area a ball centred
+    on a sphere cuts from it, exactly, and on any smooth surface to second order)
+    within a rim of one local edge length; otherwise the region is refused."""
+    center: tuple[float, float, float]
+    radius_m: float
+
+
+@dataclass(frozen=True)
 class Union_:
     parts: tuple
 
@@ -85,7 +99,7 @@ class Difference:
     minus: object
 
 
-Selector = Union[All, Border, Indices, HalfSpace, Ball, Box, Nearest, Union_, Intersection,
+Selector = Union[All, Border, Indices, HalfSpace, Ball, Box, Nearest, Patch, Union_, Intersection,
                  Difference, str]
 
 
@@ -101,14 +115,15 @@ def contains(sel, cls) -> bool:
 
 
 def select(sel: Selector, vert_pos: np.ndarray, *, name: str, regions: dict | None = None,
-           border_vert: np.ndarray | None = None) -> np.ndarray:
+           border_vert: np.ndarray | None = None, face_vert: np.ndarray | None = None) -> np.ndarray:
     """Evaluate a selector on rest positions vert_pos (nvert, 3) m.
 
     Returns sorted unique int32 indices. A string names a region already
     defined in `regions`. Raises SceneError, naming the region, when the
-    selector is malformed or selects no vertex.
+    selector is malformed or selects no vertex, or a `Patch` (which needs the
+    faces face_vert) covers an area its radius does not explain.
     """
-    idx = _select(sel, vert_pos, name, regions or {}, border_vert)
+    idx = _select(sel, vert_pos, name, regions or {}, (border_vert, face_vert))
     idx = np.unique(idx).astype(np.int32)
     if idx.size == 0:
         raise SceneError(f"region {name!r}: expected at least one vertex, the selector {sel!r} "
@@ -120,8 +135,9 @@ def select(sel: Selector, vert_pos: np.ndarray, *, name: str, regions: dict | No
 MAX_SELECTOR_DEPTH = 32
 
 
-def _select(sel, vert_pos, name, regions, border_vert, depth=0) -> np.ndarray:
+def _select(sel, vert_pos, name, regions, surface, depth=0) -> np.ndarray:
     nvert = len(vert_pos)
+    border_vert, face_vert = surface
     if depth > MAX_SELECTOR_DEPTH:
         raise SceneError(f"region {name!r}: selectors nested more than {MAX_SELECTOR_DEPTH} levels deep; "
                          f"expected at most {MAX_SELECTOR_DEPTH} (name an inner part as a region instead)")
@@ -166,15 +182,70 @@ def _select(sel, vert_pos, name, regions, border_vert, depth=0) -> np.ndarray:
             raise SceneError(f"region {name!r}.points: expected a list of 3-vectors, received {sel.points!r}")
         d2 = ((vert_pos[None, :, :] - pts[:, None, :]) ** 2).sum(-1)
         return np.argmin(d2, axis=1)
+    if isinstance(sel, Patch):
+        return _patch(sel, vert_pos, face_vert, name)
     if isinstance(sel, (Union_, Intersection)):
-        parts = [set(_select(p, vert_pos, name, regions, border_vert, depth + 1).tolist()) for p in sel.parts]
+        parts = [set(_select(p, vert_pos, name, regions, surface, depth + 1).tolist()) for p in sel.parts]
         if not parts:
             return np.zeros(0, np.int64)
         out = set.union(*parts) if isinstance(sel, Union_) else set.intersection(*parts)
         return np.array(sorted(out), dtype=np.int64)
     if isinstance(sel, Difference):
-        a = _select(sel.base, vert_pos, name, regions, border_vert, depth + 1)
-        b = _select(sel.minus, vert_pos, name, regions, border_vert, depth + 1)
+        a = _select(sel.base, vert_pos, name, regions, surface, depth + 1)
+        b = _select(sel.minus, vert_pos, name, regions, surface, depth + 1)
         return np.setdiff1d(a, b)
-    raise SceneError(f"region {name!r}: expected a selector (indices, half_space, ball, box, nearest, "
+    raise SceneError(f"region {name!r}: expected a selector (indices, half_space, ball, box, nearest, patch, "
                      f"all, border, union, intersection, difference or a region name), received {sel!r}")
+
+
+def _patch(sel: Patch, vert_pos, face_vert, name) -> np.ndarray:
+    """The points of a Patch, its area checked (see `Patch`)."""
+    c = _vec3(sel.center, f"region {name!r}.center")
+    r = sel.radius_m
+    if not (isinstance(r, (int, float)) and not isinstance(r, bool) and 0 < r < np.inf):
+        raise SceneError(f"region {name!r}.radius_m: expected a number > 0 m, received {r!r}")
+    if face_vert is None:
+        raise SceneError(f"region {name!r}: a patch needs the surface's faces; expected select(..., face_vert=...)")
+    pos = np.asarray(vert_pos, float)
+    face = np.asarray(face_vert)
+    q = nearest_surface_point(pos, face, c)
+    idx = np.nonzero(np.linalg.norm(pos - q, axis=1) <= r)[0]
+    if idx.size == 0:
+        return idx  # refused by `select`, naming the region
+    area = float(vertex_area(pos, face)[idx].sum())
+    touched = face[np.isin(face, idx).any(axis=1)]
+    p = pos[touched]
+    h = float(np.linalg.norm(p - np.roll(p, 1, axis=1), axis=2).mean())  # the edge length at the patch
+    want = np.pi * r * r
+    tol = 2 * np.pi * r * h + np.pi * h * h  # a rim of one edge length
+    if abs(area - want) > tol:
+        raise SceneError(f"region {name!r}: a patch of radius_m = {r:g} m covers {area:.4g} m^2 of this mesh, "
+                         f"expected pi r^2 = {want:.4g} m^2 within {tol:.3g} m^2 (a rim of one edge length, "
+                         f"{h:.3g} m); widen the patch or refine the mesh (or the patch leaves the surface)")
+    return idx
+
+
+def nearest_surface_point(vert_pos: np.ndarray, face_vert: np.ndarray, point) -> np.ndarray:
+    """The point of the triangle surface (vert_pos, face_vert) nearest to `point` (3,) m:
+    on each face the projection on its plane when it falls inside, else the nearest
+    point of its edges; the nearest of these."""
+    pos = np.asarray(vert_pos, float)
+    x = np.asarray(point, float)
+    a, b, c = (pos[np.asarray(face_vert)[:, k]] for k in range(3))
+    cand = []
+    for p0, p1 in ((a, b), (b, c), (c, a)):  # the nearest point of each edge segment
+        d = p1 - p0
+        t = np.clip(np.sum((x - p0) * d, axis=1) / np.maximum(np.sum(d * d, axis=1), 1e-300), 0.0, 1.0)
+        cand.append(p0 + t[:, None] * d)
+    n = np.cross(b - a, c - a)
+    nn = np.sum(n * n, axis=1)
+    ok = nn > 0
+    proj = x - (np.sum((x - a) * n, axis=1) / np.where(ok, nn, 1.0))[:, None] * n
+    inside = ok.copy()
+    for p0, p1 in ((a, b), (b, c), (c, a)):  # the projection lies left of every edge
+        inside &= np.sum(np.cross(p1 - p0, proj - p0) * n, axis=1) >= 0
+    cand.append(np.where(inside[:, None], proj, cand[0]))
+    cand = np.stack(cand)  # (4, nface, 3)
+    d2 = np.sum((cand - x) ** 2, axis=2)
+    k, f = np.unravel_index(np.argmin(d2), d2.shape)
+    return cand[k, f]

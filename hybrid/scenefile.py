@@ -23,11 +23,13 @@ The format (SI units; every key optional unless marked *required*)::
     top = { half_space = { point = [0, 0, 0.07], normal = [0, 0, 1] } }
     #  selectors: "all" | "REGION NAME" | { border = true } | { indices = [0, 5] }
     #    | { half_space = { point, normal } } | { ball = { center, radius } } | { box = { lo, hi } }
-    #    | { nearest = [[x, y, z], ...] } | { union = [sel, ...] } | { intersection = [sel, ...] }
+    #    | { nearest = [[x, y, z], ...] } | { patch = { center, radius_m } } (a disc of the surface,
+    #    its area checked) | { union = [sel, ...] } | { intersection = [sel, ...] }
     #    | { difference = { base = sel, minus = sel } }
 
     [[forces]]      # type = gravity | damping | shape_memory | mass_spring | muscle
-    type = "muscle" #        | applied_force | attraction | soft_volume; name defaults to type
+    type = "muscle" #        | applied_force | attraction | soft_volume | pressure | muscle_fibres;
+                    #        name defaults to type
     region = "top"
     stiffness = { breathing = { period_s = 4.0, inspiration_fraction = 0.4, peak = 60.0 } }
     toward_m = [0, 0, 0.12]
@@ -139,7 +141,7 @@ def _join(path, key):
 
 # ------------------------------------------------------------------ selectors and schedules
 
-_SELECTOR_KINDS = ("border", "indices", "half_space", "ball", "box", "nearest", "union",
+_SELECTOR_KINDS = ("border", "indices", "half_space", "ball", "box", "nearest", "patch", "union",
                    "intersection", "difference")
 
 
@@ -180,6 +182,10 @@ def _selector(ctx, path, v, depth=0):
         return R.Box(_vec3(ctx, f"{p}.lo", arg["lo"]), _vec3(ctx, f"{p}.hi", arg["hi"]))
     if kind == "nearest":
         return R.Nearest(_vec3_list(ctx, p, arg))
+    if kind == "patch":
+        _table(ctx, p, arg)
+        _keys(ctx, p, arg, ("center", "radius_m"), ("center", "radius_m"))
+        return R.Patch(_vec3(ctx, f"{p}.center", arg["center"]), _num(ctx, f"{p}.radius_m", arg["radius_m"], lo=0))
     if kind in ("union", "intersection"):
         if not (isinstance(arg, list) and arg):
             ctx.fail(p, f"expected a non-empty list of selectors, received {_show(arg)}")
@@ -386,6 +392,8 @@ def _sel_to(sel):
         return {"box": {"lo": list(sel.lo), "hi": list(sel.hi)}}
     if isinstance(sel, R.Nearest):
         return {"nearest": [list(p) for p in sel.points]}
+    if isinstance(sel, R.Patch):
+        return {"patch": {"center": list(sel.center), "radius_m": sel.radius_m}}
     if isinstance(sel, R.Union_):
         return {"union": [_sel_to(p) for p in sel.parts]}
     if isinstance(sel, R.Intersection):

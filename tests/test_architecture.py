@@ -60,7 +60,8 @@ import numpy as np
 import hybrid
 from hybrid import scenefile
 from hybrid.terms import TERMS
-scene = scenefile.scene_from_dict({"formulation": "paper",
+scene = scenefile.scene_from_dict({
+    "formulation": "paper",
     "mesh": {"generator": "icosphere", "subdivisions": 1, "radius_m": 0.1, "center_m": [0, 0, 0.1]},
     "masses": {"total_kg": 1.0},
     "forces": [{"type": "gravity"}, {"type": "shape_memory", "stiffness_n_per_m": 500.0},

@@ -148,7 +148,7 @@ CASES = [
      lambda: base_scene(forces=(ShapeMemory(3000.0, region="top"), Damping(critical_fraction=0.3))), SceneError,
      r"forces\['damping'\]\.critical_fraction: vertices \[27, 28, .*\] have no elastic stiffness"),
     ("damping_both", lambda: base_scene(forces=(ShapeMemory(3000.0), Damping(coef_n_s_per_m=1.0, critical_fraction=0.3))),
-     SceneError, r"forces\['damping'\]: expected exactly one of coef_n_s_per_m or critical_fraction"),
+     SceneError, r"forces\['damping'\]: expected exactly one of drag_n_s_per_m3, coef_n_s_per_m or critical_fraction"),
     ("damping_neither", lambda: base_scene(forces=(ShapeMemory(3000.0), Damping())), SceneError,
      r"forces\['damping'\]: expected exactly one of .*coef_n_s_per_m=None critical_fraction=None"),
     ("damping_negative", lambda: base_scene(forces=(ShapeMemory(3000.0), Damping(coef_n_s_per_m=-1.0))), SceneError,

@@ -11,7 +11,8 @@ from hypothesis import strategies as st
 from hybrid import regions as R
 from hybrid import scenefile as sf
 from hybrid.scene import (AppliedForce, Attraction, Damping, Gravity, KeepIn, Masses, MassSpring, MeshSpec, Muscle,
-                          Nailed, Prescribed, Rigid, RigidLink, Scene, ShapeMemory, SoftVolume, Volume)
+                          MuscleFibres, Nailed, Prescribed, Pressure, Rigid, RigidLink, Scene, ShapeMemory, SoftVolume,
+                          Volume)
 from hybrid.schedule import Breathing, Constant, Table
 
 finite = st.floats(-1e3, 1e3, allow_nan=False, allow_infinity=False)
@@ -27,7 +28,8 @@ def selectors(depth: int = 2):
         st.just("all"), st.just(R.Border()),
         st.builds(R.Indices, st.lists(st.integers(0, 500), min_size=1, max_size=5).map(tuple)),
         st.builds(R.HalfSpace, vec3, vec3), st.builds(R.Ball, vec3, positive), st.builds(R.Box, vec3, vec3),
-        st.builds(R.Nearest, st.lists(vec3, min_size=1, max_size=3).map(tuple)))
+        st.builds(R.Nearest, st.lists(vec3, min_size=1, max_size=3).map(tuple)),
+        st.builds(R.Patch, vec3, positive))
     if depth == 0:
         return leaf
     inner = selectors(depth - 1)
@@ -58,7 +60,12 @@ forces = st.one_of(
     st.builds(Muscle, selectors(), scalar_schedule, toward_m=vec3),
     st.builds(AppliedForce, selectors(), vector_schedule),
     st.builds(Attraction, selectors(), positive, vector_schedule, st.one_of(st.none(), vec3)),
-    st.builds(SoftVolume, positive))
+    st.builds(SoftVolume, positive),
+    st.builds(SoftVolume, bulk_modulus_pa=positive),
+    st.builds(Damping, drag_n_s_per_m3=st.floats(0, 1e3), region=selectors()),
+    st.builds(Pressure, scalar_schedule),
+    st.builds(MuscleFibres, selectors(), scalar_schedule, axis=vec3),
+    st.builds(MuscleFibres, selectors(), scalar_schedule, toward_m=vec3))
 constraints = st.one_of(
     st.builds(Nailed, selectors()), st.just(Volume()),
     st.builds(Prescribed, selectors(), vector_schedule),

@@ -138,7 +138,7 @@ def build_rigid(scene: Scene, mesh, regions: dict, vert_mass: np.ndarray) -> tup
             raise RigidError(f"{what}.body: no body or site named {link.body!r} in {label}; "
                              f"available bodies: {bodies}; sites: {sites}")
         idx = _regions.select(link.region, mesh.vert_pos, name=f"{what}.region", regions=regions,
-                              border_vert=mesh.border_vert)
+                              border_vert=mesh.border_vert, face_vert=mesh.face_vert)
         twice = [int(i) for i in idx if int(i) in owner]
         if twice:
             raise SceneError(f"{what}.region: vertices {twice[:8]} are already linked by "
@@ -191,7 +191,7 @@ def _check_not_constrained(scene: Scene, mesh, regions: dict, link_vert: np.ndar
         if isinstance(con, (Nailed, Prescribed, KeepIn)):
             what = f"constraints[{con.name!r}].region"
             idx = _regions.select(con.region, mesh.vert_pos, name=what, regions=regions,
-                                  border_vert=mesh.border_vert)
+                                  border_vert=mesh.border_vert, face_vert=mesh.face_vert)
             kind = "keep_in" if isinstance(con, KeepIn) else type(con).__name__.lower()
             claim_points(claims[:1], idx, kind, what)
 

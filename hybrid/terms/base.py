@@ -260,7 +260,7 @@ class Build:
     def region(self, sel, what: str) -> np.ndarray:
         """The sorted vertex indices a selector picks (SceneError naming `what` if none)."""
         return _regions.select(sel, self.mesh.vert_pos, name=what, regions=self.regions,
-                               border_vert=self.mesh.border_vert)
+                               border_vert=self.mesh.border_vert, face_vert=self.mesh.face_vert)
 
     def schedule(self, value, what: str, ncomp: int) -> int:
         """Row of the validated schedule `value` in the model's schedule table."""

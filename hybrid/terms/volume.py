@@ -26,9 +26,9 @@ from .. import checks
 from ..kernel import CHUNK_VERTS, kernel, kernel_twin
 from .base import Rows, Term, constraint, force, param
 
-__all__ = ["Volume", "SoftVolume", "Pressure", "add_pressure", "Projection", "centroid", "face_volume", "ring_cross_sum", "volume_cubic",
-           "solve_cubic_near_zero", "project_volume", "soft_volume_force", "PROJ_OK", "PROJ_NO_GRADIENT",
-           "PROJ_NO_ROOT"]
+__all__ = ["Volume", "SoftVolume", "Pressure", "add_pressure", "Projection", "centroid", "face_volume",
+           "ring_cross_sum", "volume_cubic", "solve_cubic_near_zero", "project_volume", "soft_volume_force",
+           "PROJ_OK", "PROJ_NO_GRADIENT", "PROJ_NO_ROOT"]
 
 
 class Projection(IntEnum):
