@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import inspect
+import re
 import sys
 import typing
 from pathlib import Path
@@ -50,13 +51,11 @@ _RIGID = {"mjcf": ("-", "*required*", "\"trunk\" (the packaged two-rib model), a
 _LINKS = {"region": ("-", "*required*", "a selector (see Regions)"),
           "body": ("-", "*required*", "the name of a body of the MJCF model"),
           "name": ("-", "the body's name", "a string (what --without and --set refer to)")}
-# the selectors as the file spells them, and their fields' units
-_SELECTORS = {"all": R.All, "border": R.Border, "indices": R.Indices, "half_space": R.HalfSpace, "ball": R.Ball,
-              "box": R.Box, "nearest": R.Nearest, "union": R.Union_, "intersection": R.Intersection,
-              "difference": R.Difference}
+# the selectors' fields' units and values (a field not here: its unit from its name)
 _SELECTOR_FIELDS = {"indices": ("-", "[i, j, ...], vertex indices >= 0"),
                     "point": ("m", "[x, y, z]"), "normal": ("-", "[x, y, z], non-zero"),
                     "center": ("m", "[x, y, z]"), "radius": ("m", "a number > 0"),
+                    "radius_m": ("m", "a number > 0"),
                     "lo": ("m", "[x, y, z], lo <= hi"), "hi": ("m", "[x, y, z]"),
                     "points": ("m", "[[x, y, z], ...]"), "parts": ("-", "[selector, ...], not empty"),
                     "base": ("-", "a selector"), "minus": ("-", "a selector")}
@@ -184,13 +183,26 @@ def _terms(types: dict, section: str) -> list[str]:
     return out
 
 
+def _snake(name: str) -> str:
+    return re.sub(r"(?<!^)(?=[A-Z])", "_", name).lower().rstrip("_")
+
+
+def selector_classes() -> dict:
+    """{the scene file's selector key: its `hybrid.regions` class}, "all" first: the
+    file's keys (`hybrid.scenefile`) matched to the classes by name (HalfSpace is
+    half_space, Union_ union)."""
+    classes = {_snake(c.__name__): c for c in typing.get_args(R.Selector) if c is not str}
+    keys = ["all", *scenefile._SELECTOR_KINDS]
+    unmatched = [k for k in keys if k not in classes]
+    if unmatched:
+        raise RuntimeError(f"docgen: selector keys {unmatched} of hybrid.scenefile have no class of that name "
+                           f"in hybrid.regions.Selector")
+    return {k: classes[k] for k in keys}
+
+
 def _selectors() -> list[str]:
-    kinds = set(typing.get_args(R.Selector)) - {str}
-    if kinds != set(_SELECTORS.values()) or set(_SELECTORS) - {"all"} != set(scenefile._SELECTOR_KINDS):
-        raise RuntimeError("docgen: the selectors of hybrid.regions / hybrid.scenefile differ from "
-                           "hybrid/docgen.py _SELECTORS; describe the new one there")
     out = ["| selector | fields | what it picks |", "| --- | --- | --- |"]
-    for key, cls in _SELECTORS.items():
+    for key, cls in selector_classes().items():
         fields = dataclasses.fields(cls)
         if key == "all":
             spelling = '`"all"` or `"REGION"`'
@@ -203,7 +215,7 @@ def _selectors() -> list[str]:
         described = "; ".join(f"`{f.name}` ({unit}): {valid}" for f in fields
                               for unit, valid in [_SELECTOR_FIELDS.get(f.name, (_unit(f.name, {}), "-"))]) or "-"
         what = _doc(cls) or {"union": "Vertices in any of the parts.",
-                             "intersection": "Vertices in every part."}[key]
+                             "intersection": "Vertices in every part."}.get(key, "")
         if key == "all":
             what += " A region's name: the vertices of that region, defined above."
         out.append(_row(spelling, described, what))
