@@ -211,4 +211,4 @@ def test_the_reference_example_is_a_valid_scene():
     from hybrid.scenefile import scene_from_dict
     example = re.search(r"```toml\n(.*?)```", docgen.render(), re.S)[1]
     scene = scene_from_dict(tomllib.loads(example), source="docs/scene-file.md")
-    assert compile_scene(scene).nvert == 80
+    assert compile_scene(scene).nvert == 162 and scene.formulation == "continuum"
