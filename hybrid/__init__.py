@@ -6,7 +6,8 @@ The public API for scripted experiments:
 >>> sim = hybrid.load()                 # the packaged breathing trunk (or a name, a path, a Scene)
 >>> sim.step(1000); sim.time, sim.volume, sim.pressure, sim.vert_pos.shape
 >>> sim.mj_model, sim.mj_data           # MuJoCo's model and data (None for a membrane-only scene)
->>> result = hybrid.run(hybrid.load("membrane_demo"), 4.0)   # a run summarised, its trace
+>>> result = hybrid.run(hybrid.load("membrane_demo"), 4.0)   # {"summary": {...}, "trace": Trace}
+>>> result["summary"]["apex_descent_mm"], result["trace"].arrays()["t_s"].shape
 
 A `Scene` is plain dataclasses (its terms, region selectors and schedules are
 all here): change a field with `dataclasses.replace` and load it again to

@@ -140,11 +140,11 @@ def _interrupted(caught, sim, out: Path) -> int:
 def _cmd_render(args) -> int:
     from .render import render
     from .run import out_folder
-    result = render(args.source, out_folder(_out_arg(args.out)), video=args.video, duration_s=args.duration)
-    rest, peak, end = result["frames"]
+    result = render(args.source, out_folder(_out_arg(args.out)), video=args.video, duration_s=args.duration,
+                    overrides=args.set or (), without=args.without or ())
     extra = f" and {result['video']}" if result["video"] else ""
-    print(f"rest t = {rest:.2f} s, peak inspiration t = {peak:.2f} s, end of expiration t = {end:.2f} s "
-          f"-> {result['figure']}{extra}")
+    frames = ", ".join(f"{name} t = {t:.2f} s" for name, t in zip(result["titles"], result["frames"]))
+    print(f"{frames} -> {result['figure']}{extra}")
     return 0
 
 
@@ -199,6 +199,8 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--out", required=True, help="output folder: figure4.png (and run.mp4)")
     d.add_argument("--video", action="store_true", help="also an MP4 of the run (needs pip install -e .[video])")
     d.add_argument("--duration", type=_positive_float, help="simulated time when running a scene (s)")
+    d.add_argument("--without", action="append", metavar="NAME", help="drop a force term or constraint by name")
+    d.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a scene value, e.g. dt_s=5e-4")
     d.set_defaults(func=_cmd_render)
     v = sub.add_parser("view", help="run a scene live in MuJoCo's viewer (needs a display)")
     v.add_argument("scene", nargs="?", help="a scene TOML file, or a built-in name (default: breathing)")

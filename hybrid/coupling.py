@@ -1,4 +1,4 @@
-"""The membrane coupled to MuJoCo rigid bodies at step time (paper 3.5, DESIGN.md).
+"""The membrane coupled to MuJoCo rigid bodies at step time (paper 3.5; docs/architecture.md).
 
 The rigid part is built at model time (`hybrid.rigid.build_rigid`, called by
 `compile_scene`: the scene's MJCF with one attachment site per linked point and the

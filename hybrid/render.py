@@ -4,7 +4,12 @@ expiration side by side) as a PNG, and an MP4 of the whole run.
 `hybrid view SCENE` runs a scene live in MuJoCo's viewer where a display exists.
 
 `hybrid render RUN.mcap|SCENE --out DIR` draws from a recording (`hybrid.record`) or
-runs a scene first. Drawing is matplotlib's Agg backend with `mpl_toolkits.mplot3d`:
+runs a scene first (with `--set` and `--without` as `hybrid run`). Each panel has the
+3D view and, below it, the mid-sagittal section (the plane y = the rest centroid's y:
+x anterior, z cranial in the packaged scenes) of the deformed membrane, coloured by
+region, over the rest outline (dashed, also drawn on the 3D view), with a scale bar;
+one legend names the region colours. The panels are called rest, peak inspiration and
+end of expiration only where the scene breathes (its muscle's stiffness varies). Drawing is matplotlib's Agg backend with `mpl_toolkits.mplot3d`:
 no GPU, no display, no system package beyond what the wheels bring. The membrane is a
 shaded triangle mesh coloured by region (Lambert shading from a fixed light); the
 MuJoCo geoms (ribs, spine: capsules and cylinders as thick segments, spheres as
@@ -23,10 +28,15 @@ import numpy as np
 
 from .errors import HybridError
 
-__all__ = ["Frames", "frames_from_recording", "frames_from_scene", "key_frames", "draw_figure",
-           "render", "write_video", "view", "has_display", "membrane_edges", "draw_membrane"]
+__all__ = ["Frames", "frames_from_recording", "frames_from_scene", "key_frames", "breathes", "panel_titles",
+           "sagittal_section", "build_figure", "draw_figure", "render", "write_video", "view", "has_display",
+           "membrane_edges", "draw_membrane"]
 
 PANEL_TITLES = ("a. rest", "b. peak inspiration", "c. end of expiration")
+#: the same key frames of a scene that does not breathe
+STILL_TITLES = ("a. rest", "b. largest displacement", "c. last frame")
+#: how the rest outline is drawn (dashed), in the section and on the 3D view
+REST_STYLE = dict(colors="black", linestyles=(0, (3, 2)), linewidths=1.0)
 _LIGHT = np.array([0.45, -0.35, 0.82]) / np.linalg.norm([0.45, -0.35, 0.82])
 
 
@@ -35,7 +45,8 @@ class Frames:
     """What the pictures need, one row a frame. t (n,) s; pos (n, nvert, 3) m;
     face_vert (nface, 3); vert_rgba (nvert, 4); body_pos (n, nbody, 3), body_quat
     (n, nbody, 4) (w, x, y, z) for `bodies`; geoms: dicts (body, type, size, pos,
-    quat, rgba) in body frames; apex_descent, muscle (n,) for choosing the key frames."""
+    quat, rgba) in body frames; apex_descent, muscle, rib_lift (n,) for choosing the key frames and the labels;
+    regions: the region names, vert_label (nvert,) each point's index in them (-1: none)."""
     scene: str
     t: np.ndarray
     pos: np.ndarray
@@ -47,6 +58,9 @@ class Frames:
     geoms: list = field(default_factory=list)
     apex_descent: np.ndarray | None = None
     muscle: np.ndarray | None = None
+    rib_lift: np.ndarray | None = None
+    regions: list = field(default_factory=list)
+    vert_label: np.ndarray | None = None
 
 
 def frames_from_recording(path: str | Path) -> Frames:
@@ -85,21 +99,23 @@ def frames_from_recording(path: str | Path) -> Frames:
     return Frames(scene=meta.get("scene", path.stem), t=pts["t"][:n], pos=pts["pos"][:n].astype(float),
                   face_vert=meta["face_vert"], vert_rgba=meta["vert_rgba"], bodies=bodies,
                   body_pos=body_pos, body_quat=body_quat, geoms=meta.get("geoms", []),
-                  apex_descent=series("/apex_descent"), muscle=series("/muscle_stiffness"))
+                  apex_descent=series("/apex_descent"), muscle=series("/muscle_stiffness"),
+                  rib_lift=series("/rib_elevation"), regions=list(meta.get("regions", [])),
+                  vert_label=meta.get("vert_label"))
 
 
 def frames_from_scene(scene_arg: str | None, duration_s: float | None = None, *, full: bool = False,
-                      every_s: float = 0.01) -> Frames:
-    """Run a scene (a TOML file or a built-in name) and keep its frames in memory.
-    Without `duration_s`: the scene's duration if `full`, else up to the end of the
-    first breath."""
+                      every_s: float = 0.01, overrides=(), without=()) -> Frames:
+    """Run a scene (a TOML file or a built-in name, with "KEY=VALUE" `overrides` and
+    the terms named in `without` removed) and keep its frames in memory. Without
+    `duration_s`: the scene's duration if `full`, else up to the end of the first breath."""
     from .model import compile_scene
     from .record import body_geoms, region_colours
     from .resolve import resolve_scene
     from .run import RunFailed, _breathing, run
     from .simulation import Simulation
 
-    scene = resolve_scene(scene_arg)
+    scene = resolve_scene(scene_arg, overrides=overrides, without=without)
     sim = Simulation(compile_scene(scene))
     if duration_s is None:
         duration_s = scene.duration_s
@@ -127,13 +143,14 @@ def frames_from_scene(scene_arg: str | None, duration_s: float | None = None, *,
     tr = result["trace"].arrays()
     n = len(keep["t"])
     idx = np.searchsorted(tr["t_s"], np.asarray(keep["t"]) - 1e-12)
-    _, _, colours = region_colours(sim.model)
+    names, label, colours = region_colours(sim.model)
     return Frames(scene=scene.name, t=np.asarray(keep["t"]), pos=np.asarray(keep["pos"]),
                   face_vert=np.asarray(sim.model.mesh.face_vert), vert_rgba=colours, bodies=bodies,
                   body_pos=np.asarray(keep["bpos"]) if bodies else None,
                   body_quat=np.asarray(keep["bquat"]) if bodies else None,
                   geoms=body_geoms(sim.mj_model) if sim.mj_model is not None else [],
-                  apex_descent=tr["apex_descent_mm"][idx][:n], muscle=tr["muscle_n_per_m"][idx][:n])
+                  apex_descent=tr["apex_descent_mm"][idx][:n], muscle=tr["muscle_n_per_m"][idx][:n],
+                  rib_lift=tr["rib_lift_mm"][idx][:n], regions=names, vert_label=label)
 
 
 def key_frames(fr: Frames) -> tuple[int, int, int]:
@@ -212,7 +229,8 @@ def _bounds(fr: Frames, frames) -> tuple[np.ndarray, float]:
     return 0.5 * (lo + hi), 0.5 * float((hi - lo).max()) * 1.05
 
 
-def _draw_panel(ax, fr: Frames, k: int, centre, half, *, membrane: bool, title: str, px_per_m: float):
+def _draw_panel(ax, fr: Frames, k: int, centre, half, *, membrane: bool, title: str, px_per_m: float,
+                rest_cut=None):
     from mpl_toolkits.mplot3d.art3d import Line3DCollection, Poly3DCollection
 
     ax.set_xlim(centre[0] - half, centre[0] + half)
@@ -243,25 +261,163 @@ def _draw_panel(ax, fr: Frames, k: int, centre, half, *, membrane: bool, title: 
         p = np.asarray(pts)
         ax.scatter(p[:, 0], p[:, 1], p[:, 2], s=(np.asarray(psize) * 2 * px_per_m * 0.72) ** 2,
                    c=np.clip(np.asarray(pcols), 0, 1), zorder=3)
+    if rest_cut is not None:  # the rest outline (its mid-sagittal cut), over everything
+        cut, y0 = rest_cut
+        lines = np.stack([cut[:, :, 0], np.full(cut.shape[:2], y0), cut[:, :, 1]], axis=-1)
+        ax.add_collection3d(Line3DCollection(lines, zorder=4, **REST_STYLE))
 
 
-def draw_figure(fr: Frames, path: str | Path, frames=None, *, membrane: bool = True, dpi: int = 100) -> list:
-    """The three panels side by side (`frames`: default `key_frames(fr)`) into a PNG.
-    Returns the frame indices drawn."""
+def breathes(fr: Frames) -> bool:
+    """Whether the scene breathes: its muscle's stiffness varies over the frames."""
+    return fr.muscle is not None and len(fr.muscle) > 1 and float(np.ptp(fr.muscle)) > 0
+
+
+def panel_titles(fr: Frames) -> tuple:
+    """The key frames' names: rest, peak inspiration, end of expiration where the scene
+    breathes; rest, largest displacement, last frame where it does not."""
+    return PANEL_TITLES if breathes(fr) else STILL_TITLES
+
+
+def sagittal_section(pos: np.ndarray, face_vert: np.ndarray, y0: float) -> tuple[np.ndarray, np.ndarray]:
+    """The membrane cut by the plane y = y0: segments (nseg, 2, 2) as (x, z) in m, and
+    the face each comes from (nseg,). A point on the plane counts as above it, so that
+    the segments join into closed outlines."""
+    tri = pos[face_vert]
+    d = tri[:, :, 1] - y0
+    above = d >= 0
+    ends = np.full((len(tri), 3, 2), np.nan)
+    for e, (a, b) in enumerate(((0, 1), (1, 2), (2, 0))):
+        cross = above[:, a] != above[:, b]
+        w = d[cross, a] / (d[cross, a] - d[cross, b])  # signs differ: never 0 / 0
+        p = tri[cross, a] + w[:, None] * (tri[cross, b] - tri[cross, a])
+        ends[cross, e] = p[:, [0, 2]]
+    hit = np.isfinite(ends[:, :, 0])
+    keep = np.nonzero(hit.sum(axis=1) == 2)[0]
+    segs = ends[keep][hit[keep]].reshape(-1, 2, 2)
+    # a face touching the plane at one point only gives a segment of no length: left out
+    real = np.any(segs[:, 0] != segs[:, 1], axis=1)
+    return segs[real], keep[real]
+
+
+def _nice_length(span_m: float) -> float:
+    """A round length (1, 2 or 5 times a power of ten) of about a quarter of span_m."""
+    target = 0.25 * span_m
+    power = 10.0 ** np.floor(np.log10(target))
+    return float(max(m * power for m in (1, 2, 5) if m * power <= target))
+
+
+def _length_text(length_m: float) -> str:
+    if length_m >= 1:
+        return f"{length_m:g} m"
+    return f"{length_m * 100:g} cm" if length_m >= 0.01 else f"{length_m * 1000:g} mm"
+
+
+def _mm(value: float) -> str:
+    text = f"{value:.1f}"
+    return ("0.0" if text == "-0.0" else text) + " mm"
+
+
+def _draw_section(ax, fr: Frames, k: int, y0: float, box, *, membrane: bool):
+    """The mid-sagittal section of frame k over the rest outline, a scale bar, and the
+    key figures (apex descent, rib lift) of the frame."""
+    from matplotlib.collections import LineCollection
+
+    (x_lo, x_hi), (z_lo, z_hi) = box
+    ax.set_xlim(x_lo, x_hi)
+    ax.set_ylim(z_lo, z_hi)
+    ax.set_aspect("equal")
+    ax.set_axis_off()
+    segs, _ = _geom_segments(fr, k)[:2]
+    if segs:  # the bones seen from the side, faint, behind the membrane
+        bones = np.asarray(segs)[:, :, [0, 2]]
+        ax.add_collection(LineCollection(bones, colors=(0.55, 0.5, 0.42, 0.35), linewidths=3, zorder=1))
+    if membrane:
+        cut, faces = sagittal_section(fr.pos[k], fr.face_vert, y0)
+        colours = np.clip(fr.vert_rgba[fr.face_vert[faces]].mean(axis=1), 0, 1)
+        colours[:, 3] = 1.0
+        ax.add_collection(LineCollection(cut, colors=colours, linewidths=2.4, zorder=2, label="deformed"))
+        rest, _ = sagittal_section(fr.pos[0], fr.face_vert, y0)
+        ax.add_collection(LineCollection(rest, zorder=3, label="rest", **REST_STYLE))
+    length = _nice_length(x_hi - x_lo)
+    x0, z0 = x_lo + 0.05 * (x_hi - x_lo), z_lo + 0.06 * (z_hi - z_lo)
+    ax.plot([x0, x0 + length], [z0, z0], color="black", linewidth=2.5, solid_capstyle="butt", label="scale bar")
+    ax.text(x0 + 0.5 * length, z0 + 0.015 * (z_hi - z_lo), _length_text(length), ha="center", va="bottom",
+            fontsize=8)
+    figures = []
+    if fr.apex_descent is not None:
+        figures.append(f"apex descent {_mm(fr.apex_descent[k])}")
+    if fr.rib_lift is not None and fr.bodies:
+        figures.append(f"rib lift {_mm(fr.rib_lift[k])}")
+    if figures:
+        ax.text(x_hi - 0.02 * (x_hi - x_lo), z0, "\n".join(figures), ha="right", va="bottom", fontsize=8)
+
+
+def _section_box(fr: Frames, frames, y0: float):
+    """The (x, z) limits every section shares: the membrane's cuts (the bones beyond them
+    are cut off), square, with room below for the scale bar and the figures."""
+    pts = np.concatenate([sagittal_section(fr.pos[k], fr.face_vert, y0)[0].reshape(-1, 2) for k in [0, *frames]])
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    mid, half = 0.5 * (lo + hi), 0.5 * float((hi - lo).max()) * 1.12
+    return (mid[0] - half, mid[0] + half), (mid[1] - 1.3 * half, mid[1] + half)
+
+
+def _legend(fig, fr: Frames, membrane: bool):
+    """One legend under the panels: the regions' colours, the rest outline, the section."""
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+
+    handles = []
+    if membrane and fr.vert_label is not None:
+        label = np.asarray(fr.vert_label)
+        for i, name in enumerate(fr.regions):
+            where = np.nonzero(label == i)[0]
+            if where.size:
+                handles.append(Patch(facecolor=np.clip(fr.vert_rgba[where[0]], 0, 1), label=name))
+        if (label < 0).any():
+            handles.append(Patch(facecolor=np.clip(fr.vert_rgba[np.nonzero(label < 0)[0][0]], 0, 1),
+                                 label="no region"))
+    if membrane:
+        handles.append(Line2D([], [], color="black", linestyle=(0, (3, 2)), linewidth=1.0, label="rest outline"))
+    if fr.body_pos is not None and fr.geoms:
+        handles.append(Line2D([], [], color=(0.55, 0.5, 0.42), linewidth=3, label="ribs and spine"))
+    if handles:
+        fig.legend(handles=handles, loc="lower center", ncol=min(len(handles), 7), fontsize=8, frameon=False)
+
+
+def build_figure(fr: Frames, frames=None, *, membrane: bool = True, dpi: int = 100):
+    """The figure: a 3D view over the mid-sagittal section for each of `frames`
+    (default `key_frames(fr)`), and the legend. Returns (matplotlib Figure, frames)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     frames = list(key_frames(fr) if frames is None else frames)
     centre, half = _bounds(fr, frames)
-    fig = plt.figure(figsize=(4.2 * len(frames), 4.6), dpi=dpi)
+    y0 = float(fr.pos[0][:, 1].mean())
+    box = _section_box(fr, frames, y0)
+    titles = panel_titles(fr)
+    width = 4.2 * len(frames)
+    fig = plt.figure(figsize=(width, 8.0), dpi=dpi)
+    grid = fig.add_gridspec(2, len(frames), height_ratios=(4.2, 3.4), left=0, right=1, bottom=0.07, top=0.93,
+                            wspace=0, hspace=0.0)
     px_per_m = 4.2 * dpi * 0.75 / (2 * half)  # roughly: the panel's width spans the box
+    rest_cut = sagittal_section(fr.pos[0], fr.face_vert, y0)[0] if membrane else None
     for i, k in enumerate(frames):
-        ax = fig.add_subplot(1, len(frames), i + 1, projection="3d")
-        _draw_panel(ax, fr, k, centre, half, membrane=membrane,
-                    title=PANEL_TITLES[i] if i < len(PANEL_TITLES) else "", px_per_m=px_per_m)
-    fig.suptitle(fr.scene, fontsize=11)
-    fig.subplots_adjust(left=0, right=1, bottom=0, top=0.9, wspace=0)
+        ax = fig.add_subplot(grid[0, i], projection="3d")
+        _draw_panel(ax, fr, k, centre, half, membrane=membrane, title=titles[i] if i < len(titles) else "",
+                    px_per_m=px_per_m, rest_cut=(rest_cut, y0) if membrane else None)
+        _draw_section(fig.add_subplot(grid[1, i]), fr, k, y0, box, membrane=membrane)
+    fig.suptitle(f"{fr.scene}: each view above its mid-sagittal section (the plane y = {y0 + 0.0:.3f} m)",
+                 fontsize=11)
+    _legend(fig, fr, membrane)
+    return fig, frames
+
+
+def draw_figure(fr: Frames, path: str | Path, frames=None, *, membrane: bool = True, dpi: int = 100) -> list:
+    """`build_figure` into a PNG. Returns the frame indices drawn."""
+    import matplotlib.pyplot as plt
+
+    fig, frames = build_figure(fr, frames, membrane=membrane, dpi=dpi)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=dpi)
@@ -306,19 +462,27 @@ def write_video(fr: Frames, path: str | Path, *, fps: int = 25, every_s: float |
     return len(picks)
 
 
-def render(source: str | None, out_dir: str | Path, *, video: bool = False, duration_s: float | None = None) -> dict:
-    """Draw `source` (a run.mcap, or a scene to run) into out_dir: figure4.png, and
-    run.mp4 with `video`. Returns {"figure": path, "frames": (rest, peak, end) times, "video": path|None}."""
+def render(source: str | None, out_dir: str | Path, *, video: bool = False, duration_s: float | None = None,
+           overrides=(), without=()) -> dict:
+    """Draw `source` (a run.mcap, or a scene to run with "KEY=VALUE" `overrides` and the
+    terms named in `without` removed) into out_dir: figure4.png, and run.mp4 with
+    `video`. Returns {"figure": path, "frames": the key frames' times (s), "titles":
+    their names (`panel_titles`), "video": path|None}."""
     out = Path(out_dir)
     if source is not None and source.endswith(".mcap"):
+        given = "--set" if overrides else "--without" if without else None
+        if given:
+            raise HybridError(f"{given}: changes a scene before it runs; expected a scene, received the recording "
+                              f"{source!r} (run the scene again with {given}, or render the scene itself)")
         fr = frames_from_recording(source)
     else:
-        fr = frames_from_scene(source, duration_s, full=video)
+        fr = frames_from_scene(source, duration_s, full=video, overrides=overrides, without=without)
     if len(fr.t) < 2:
         raise HybridError(f"{source}: fewer than two frames to draw")
     fig_path = out / "figure4.png"
     picked = draw_figure(fr, fig_path)
-    result = {"figure": fig_path, "frames": [float(fr.t[k]) for k in picked], "video": None}
+    result = {"figure": fig_path, "frames": [float(fr.t[k]) for k in picked],
+              "titles": [t.split(". ", 1)[-1] for t in panel_titles(fr)], "video": None}
     if video:
         result["video"] = out / "run.mp4"
         write_video(fr, result["video"])

@@ -239,7 +239,9 @@ def _count_stops(nstep: int, periods, extra) -> int:
 
 def run(sim: Simulation, duration_s: float, *, frame_dt_s: float = 0.01, progress: bool = False,
         observers=(), trace_spill=None, stop=None) -> dict:
-    """Run `sim` for `duration_s` and return the summary (see `summary keys`).
+    """Run `sim` for `duration_s`; returns `{"summary": dict, "trace": Trace}`, the
+    summary one level down: `run(sim, 4.0)["summary"]["apex_descent_mm"]`
+    (docs/metrics.md defines every key of both).
 
     `observers`: called at each frame after the trace has its values (e.g.
     `hybrid.record.Recorder`); they must not change the state. An observer with a
@@ -254,8 +256,7 @@ def run(sim: Simulation, duration_s: float, *, frame_dt_s: float = 0.01, progres
     compiled call; when it returns true the run stops there as on Ctrl-C (a signal
     handler can set it without breaking a call in the middle).
 
-    Returns a dict with the summary and the trace under "trace". On a
-    HybridError the summary holds "status": "failed" and "error", and the
+    On a HybridError the summary holds "status": "failed" and "error", and the
     error is re-raised as `RunFailed` carrying the partial result; on a
     KeyboardInterrupt, "status": "interrupted", re-raised as `RunInterrupted`.
     """

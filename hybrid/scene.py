@@ -55,7 +55,7 @@ class MeshSpec:
     rings: int = param("integer", 7, lo=2)
     subdivisions: int = param("integer", 3, lo=0, hi=7)
     center_m: tuple[float, float, float] = param("vec3", (0.0, 0.0, 0.0))
-    unit_scale: float = param("positive", 1.0, hi=checks.MAX_LENGTH_M)
+    unit_scale: float = param("positive", 1.0, hi=checks.MAX_LENGTH_M, unit="m per file unit")
 
 
 @dataclass(frozen=True)

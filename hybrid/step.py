@@ -1,4 +1,4 @@
-"""The membrane's compiled step and its state (paper 3.5 and 4; DESIGN.md).
+"""The membrane's compiled step and its state (paper 3.5 and 4).
 
 One step, membrane only:
 1. forces at time t (only the terms the model has);

@@ -10,7 +10,8 @@ import pytest
 import hybrid
 from hybrid.cli import main
 from hybrid.record import Recorder
-from hybrid.render import draw_figure, frames_from_recording, key_frames, write_video
+from hybrid.render import (STILL_TITLES, build_figure, draw_figure, frames_from_recording, frames_from_scene,
+                           key_frames, sagittal_section, write_video)
 from hybrid.run import run
 
 
@@ -18,7 +19,7 @@ def _image(path):
     import matplotlib.image as mpimg
     img = mpimg.imread(path)[..., :3]
     h = img.shape[0]
-    return img[int(0.12 * h):]  # below the titles
+    return img[int(0.12 * h):int(0.92 * h)]  # below the titles, above the legend (which spans the panels)
 
 
 def _panels(img):
@@ -66,6 +67,85 @@ def test_render_a_scene_runs_it_first(tmp_path, capsys):
     assert "peak inspiration t = 1.60 s, end of expiration t = 4.00 s" in capsys.readouterr().out
     a, b, c = _panels(_image(out / "figure4.png"))
     assert np.abs(a - b).sum() > 50.0 and np.abs(b - c).sum() > 50.0
+
+
+def _dashed(collection) -> bool:
+    return any(offset is not None and dashes for offset, dashes in collection.get_linestyle())
+
+
+def test_the_figure_overlays_the_rest_outline_and_has_a_scale_and_a_legend(recording):
+    from matplotlib.collections import LineCollection
+    from mpl_toolkits.mplot3d.art3d import Line3DCollection
+
+    fr = frames_from_recording(recording)
+    fig, frames = build_figure(fr)
+    try:
+        views = [ax for ax in fig.axes if ax.name == "3d"]
+        sections = [ax for ax in fig.axes if ax.name != "3d"]
+        assert len(views) == len(sections) == 3
+        y0 = fr.pos[0][:, 1].mean()
+        rest_cut, _ = sagittal_section(fr.pos[0], fr.face_vert, y0)
+        for view, section, k in zip(views, sections, frames):
+            # the rest outline: dashed, on the 3D view and in the section, where the rest shape is cut
+            assert any(_dashed(c) for c in view.collections if isinstance(c, Line3DCollection))
+            rest = [c for c in section.collections if isinstance(c, LineCollection) and _dashed(c)]
+            assert len(rest) == 1
+            np.testing.assert_allclose(np.asarray(rest[0].get_segments()), rest_cut)
+            # the deformed section: the frame's own cut
+            deformed = [c for c in section.collections if c.get_label() == "deformed"]
+            np.testing.assert_allclose(np.asarray(deformed[0].get_segments()),
+                                       sagittal_section(fr.pos[k], fr.face_vert, y0)[0])
+            # a scale bar of the length it says, on an equal-aspect section
+            bar = [line for line in section.lines if line.get_label() == "scale bar"][0]
+            assert section.get_aspect() == 1.0
+            assert np.ptp(bar.get_xdata()) == pytest.approx(0.05) and "5 cm" in [t.get_text() for t in section.texts]
+        # the peak's section lies below the rest outline at the apex: the dome descended
+        peak_cut = sagittal_section(fr.pos[frames[1]], fr.face_vert, y0)[0]
+        assert rest_cut[:, :, 1].max() - peak_cut[:, :, 1].max() > 0.01
+        legend = [t.get_text() for t in fig.legends[0].get_texts()]
+        assert set(fr.regions) <= set(legend) and "rest outline" in legend and "ribs and spine" in legend
+        assert [ax.get_title().split("  ")[0] for ax in views] == ["a. rest", "b. peak inspiration",
+                                                                    "c. end of expiration"]
+    finally:
+        import matplotlib.pyplot as plt
+        plt.close(fig)
+
+
+def test_a_sagittal_section_of_the_sphere_is_a_closed_polygon_inside_it():
+    sim = hybrid.load("membrane_demo")
+    pos, face = np.asarray(sim.vert_pos), np.asarray(sim.model.mesh.face_vert)
+    segs, faces = sagittal_section(pos, face, 0.0)
+    r = np.linalg.norm(segs, axis=2)
+    assert len(segs) >= 13 and np.all(r <= 0.12 + 1e-12) and np.all(r > 0.12 * np.cos(np.pi / 7))
+    ends, count = np.unique(np.round(segs.reshape(-1, 2), 12), axis=0, return_counts=True)
+    assert np.all(count == 2)  # every end shared by two segments: one closed outline
+
+
+def test_render_takes_set_and_without_like_run(tmp_path, capsys):
+    out = tmp_path / "fig"
+    # no muscle: the scene does not breathe, and the panels are not called inspiration and expiration
+    args = ["render", "membrane_demo", "--without", "muscle", "--set", "forces.gravity.accel_m_s2=[0, 0, -30]",
+            "--duration", "0.3", "--out", str(out)]
+    assert main(args) == 0
+    said = capsys.readouterr().out
+    assert "largest displacement t =" in said and "last frame" in said and "inspiration" not in said
+    assert (out / "figure4.png").is_file()
+    heavy = frames_from_scene("membrane_demo", 0.3, without=["muscle"], overrides=["forces.gravity.accel_m_s2=[0, 0, -30]"])
+    plain = frames_from_scene("membrane_demo", 0.3, without=["muscle"])
+    assert not np.any(heavy.muscle) and heavy.apex_descent[-1] > 2 * plain.apex_descent[-1] > 0
+    fig, _ = build_figure(heavy)
+    assert [ax.get_title().split("  ")[0] for ax in fig.axes if ax.name == "3d"] == list(STILL_TITLES)
+    import matplotlib.pyplot as plt
+    plt.close(fig)
+
+
+def test_render_refuses_set_and_without_for_a_recording_and_unknown_names(recording, tmp_path, capsys):
+    assert main(["render", str(recording), "--set", "dt_s=5e-4", "--out", str(tmp_path / "a")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--set" in err and "recording" in err
+    assert main(["render", "membrane_demo", "--without", "nothing", "--out", str(tmp_path / "b")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "'nothing'" in err
 
 
 def test_render_reports_a_missing_recording(tmp_path, capsys):

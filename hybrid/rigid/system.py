@@ -1,7 +1,7 @@
 """The compiled rigid system: a MuJoCo model and its data, driven by point forces at
 attachment sites, and the compiled site kernels the coupled step shares with it.
 
-The coupling (paper section 3.5, DESIGN.md) goes through *attachment sites*: each
+The coupling (paper section 3.5; docs/architecture.md) goes through *attachment sites*: each
 linked membrane point i has a site on its rigid body at the point's rest position
 (`hybrid.rigid.compose`). Every step, `RigidSystem.apply_point_forces` turns the
 points' forces into one wrench per body, applied at the body's centre of mass

@@ -22,11 +22,11 @@ class Muscle(Term):
     with stiffness k_muscle(t) (N/m) from `stiffness` (a number, a
     `Breathing` waveform, a `Table` or a function of time). Fibres run
     toward the point `toward_m`, or along `axis`."""
-    formulations = ("paper",)  # a per-point parameter: its meaning changes with the mesh (FINDINGS.md)
+    formulations = ("paper",)  # a per-point parameter: its meaning changes with the mesh
     # mus_vert, mus_nbr (npair,) int32: each contraction pair; mus_sched (npair,) int64
     arrays = {"mus_vert": Rows(np.int32), "mus_nbr": Rows(np.int32), "mus_sched": Rows(np.int64)}
     region: object = param("selector")
-    stiffness: object = param("schedule", ncomp=1)
+    stiffness: object = param("schedule", ncomp=1, unit="N/m")
     toward_m: tuple = param("vec3", None)
     axis: tuple = param("vec3", None)
     max_angle_deg: float = param("angle_deg", 30.0)

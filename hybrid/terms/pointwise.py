@@ -47,7 +47,7 @@ class Damping(Term):
     arrays = {"damp_coef": lambda n: np.zeros(n)}  # (nvert,) N s/m
     finish_last = True
     coef_n_s_per_m: float = param("nonneg", None, formulation="paper")
-    critical_fraction: float = param("nonneg", None, formulation="paper")
+    critical_fraction: float = param("nonneg", None, formulation="paper", unit="of critical")
     drag_n_s_per_m3: float = param("nonneg", None, formulation="continuum")
     region: object = param("selector", "all")
 

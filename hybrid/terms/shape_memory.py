@@ -1,9 +1,11 @@
 """Local shape memory (paper 3.4): each point attracted to its ideal place in
 the frame of its neighbour ring, F_i = k_i (P_ideal - P_i).
 
-The frame is built from the ring only (DESIGN.md), so the force vanishes at
-rest and turns with any rigid motion of the surface. It has no reaction on the
-neighbours: the force is not conservative (FINDINGS.md). Rest data: each
+The frame is built from the ring N_1..N_eta only (G their mean, n the normalised
+sum of (N_j - G) x (N_j+1 - G), t1 the tangential part of N_1 - G, t2 = n x t1),
+so the force vanishes at rest and turns with any rigid motion of the surface. It
+has no reaction on the neighbours: the force is not conservative (with too little
+damping it excites itself, as `hybrid study stability` measures). Rest data: each
 point's (alpha, beta, gamma) in its rest frame (`shape_memory_frame_coef`).
 """
 
@@ -27,7 +29,7 @@ __all__ = ["ShapeMemory", "ring_frame", "shape_memory_frame_coef", "shape_memory
 class ShapeMemory(Term):
     """Local shape memory (paper 3.4): each point attracted to its ideal place
     in the frame of its neighbours, stiffness in N/m."""
-    formulations = ("paper",)  # a per-point parameter: its meaning changes with the mesh (FINDINGS.md)
+    formulations = ("paper",)  # a per-point parameter: its meaning changes with the mesh
     # sm_vert (nsm,) int32 sorted; sm_stiff (nsm,) N/m; sm_coef (nsm, 3) m
     arrays = {"sm_vert": Rows(np.int32), "sm_stiff": Rows(float), "sm_coef": Rows(float, 3)}
     stiffness_n_per_m: float = param("positive", hi=checks.MAX_STIFFNESS_N_PER_M)
@@ -56,7 +58,7 @@ class ShapeMemory(Term):
 
 @kernel(inline="always")
 def ring_sums(vert_pos, ring_ptr, ring_vert, ring_closed, i):
-    """First half of the local frame of vertex i (DESIGN.md), one pass over its ring:
+    """First half of the local frame of vertex i (module docstring), one pass over its ring:
     G, the mean of the neighbours N_1..N_eta (m), the unnormalised normal,
     the sum of (N_j - G) x (N_j+1 - G) over the fan's consecutive pairs (m^2),
     and N_1 - G (m), which the second half needs.

@@ -18,7 +18,7 @@ __all__ = ["MassSpring", "AppliedForce", "Attraction", "add_mass_spring", "add_a
 @force("mass_spring")
 class MassSpring(Term):
     """Springs along the mesh edges within `region` (the paper's comparison model)."""
-    formulations = ("paper",)  # a per-point parameter: its meaning changes with the mesh (FINDINGS.md)
+    formulations = ("paper",)  # a per-point parameter: its meaning changes with the mesh
     # spring_vert (ns, 2) int32; spring_stiff (ns,) N/m; spring_rest (ns,) m
     arrays = {"spring_vert": Rows(np.int32, 2), "spring_stiff": Rows(float), "spring_rest": Rows(float)}
     stiffness_n_per_m: float = param("positive", hi=checks.MAX_STIFFNESS_N_PER_M)
@@ -51,7 +51,7 @@ class MassSpring(Term):
 @force("applied_force")
 class AppliedForce(Term):
     """A force (N) on each point of `region`: a 3-vector, a `Table` or a function of time."""
-    formulations = ("paper",)  # a per-point parameter: its meaning changes with the mesh (FINDINGS.md)
+    formulations = ("paper",)  # a per-point parameter: its meaning changes with the mesh
     # app_vert (n,) int32; app_sched (n,) int64: each point's schedule row
     arrays = {"app_vert": Rows(np.int32), "app_sched": Rows(np.int64)}
     region: object = param("selector")
@@ -68,7 +68,7 @@ class Attraction(Term):
     """Attractive points (paper 3.3): a spring (N/m) from each point of
     `region` to its ideal position = rest position (or `target_m`) plus
     `offset_m` (a 3-vector, `Table` or function of time, for moving targets)."""
-    formulations = ("paper",)  # a per-point parameter: its meaning changes with the mesh (FINDINGS.md)
+    formulations = ("paper",)  # a per-point parameter: its meaning changes with the mesh
     # att_vert (n,) int32; att_stiff (n,) N/m; att_target (n, 3) m; att_sched (n,) int64 (offsets)
     arrays = {"att_vert": Rows(np.int32), "att_stiff": Rows(float), "att_target": Rows(float, 3),
               "att_sched": Rows(np.int64)}

@@ -3,7 +3,7 @@ soft (compressible) volume of paper 6.2 or of a bulk modulus, and a uniform
 pressure load.
 
 After free integration to X*, X = X* + phi d with d_i = w_i grad_i V(X*), and
-V(X* + phi d) - V0 is a cubic in phi solved to machine precision (DESIGN.md);
+V(X* + phi d) - V0 is a cubic in phi; its real root nearest 0 is found to machine precision;
 the velocities are adjusted by phi d / h, and p = phi / h^2 is the gauge
 pressure inside the body. The same cubic gives the soft volume's force.
 
@@ -222,7 +222,7 @@ def volume_cubic(ring_ptr, ring_vert, ref, vert_pos, dirn, chunk_acc, out, paral
     and c3 = T(D, D, D) = V(D) = D . grad V(D) / 3, with grad_i V(D) gathered
     from the closed fan of i like the gradient itself (a surface needs to be
     closed to have a volume constraint). This equals the per-face expansion
-    of (a + phi da).((b + phi db) x (c + phi dc)) in DESIGN.md, without its
+    of (a + phi da).((b + phi db) x (c + phi dc)) summed over the faces, without its
     six gathers per face; c1 = D . grad V(X) is left to the caller.
     # Model: ring_ptr, ring_vert   # Data in: ref (x, y, z) m, the origin of the sums
     # Data in: vert_pos (m), dirn (nvert, 3) (projection direction D)
@@ -404,7 +404,7 @@ _volume_update_serial, _volume_update_parallel = kernel_twin(_volume_update)
 @kernel
 def project_volume(ring_ptr, ring_vert, vol0, vert_weight, h, vert_pos, vert_vel, grad, dirn, cubic,
                    chunk_acc, parallel):
-    """Exact constant-volume projection (paper 4.2-4.3, DESIGN.md).
+    """Exact constant-volume projection (paper 4.2-4.3).
 
     X = X* + phi D, D_i = w_i grad_i V(X*), w_i = 1/m_i (0 for points that are
     not integrated), phi the root nearest 0 of the cubic V(X* + phi D) = V0;

@@ -1,4 +1,4 @@
-"""Acceptance tests of the local shape memory force (paper 3.4; frame in DESIGN.md).
+"""Acceptance tests of the local shape memory force (paper 3.4; its frame in hybrid/terms/shape_memory.py).
 
 The force is F_i = k (P_ideal - P_i), P_ideal = G + alpha t1 + beta t2 + gamma n
 in a frame built from the neighbour ring alone. It is evaluated here with the
