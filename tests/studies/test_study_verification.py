@@ -29,6 +29,10 @@ def test_small_verification_study(tmp_path, capsys):
         assert fr[-1]["rel_error"] < 0.01, fr[-1]
         assert all(a["rel_error"] > b["rel_error"] for a, b in zip(fr, fr[1:])), fr
         assert data["order"][fam] > 1.5, data["order"]
+    # the hanging balloon on three families at about 600-1300 points: they agree within
+    # the discretisation error measured there (2.6%; the full study's 2500-point meshes
+    # agree within 3%, as the command shows)
+    assert data["hanging_finest_spread"] < 0.05, data["hanging_finest"]
     # exact oracles: round-off only
     assert max(r["measured"] for r in by["patch_test"]) < 1e-12
     for oracle in ("free_body_net_force", "free_body_net_moment", "free_body_momentum", "paper_table1"):
