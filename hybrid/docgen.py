@@ -100,7 +100,7 @@ def _valid(kind: str, meta: dict) -> str:
     if kind == "positive":
         return "a number > 0" + (f" and <= {_show(float(meta['hi']))}" if meta.get("hi") is not None else "")
     if kind == "nonneg":
-        return "a number >= 0"
+        return "a number >= 0" + (f" and <= {_show(float(meta['hi']))}" if meta.get("hi") is not None else "")
     if kind == "angle_deg":
         return "a number in (0, 90)"
     if kind == "integer":

@@ -82,7 +82,7 @@ def check_value(where: str, kind: str, value, meta: dict | None = None):
     if kind == "positive":
         return checks.number(where, value, lo=0) if meta.get("hi") is None else checks.positive(where, value, meta["hi"])
     if kind == "nonneg":
-        return checks.number(where, value, lo=0, lo_open=False)
+        return checks.number(where, value, lo=0, lo_open=False, hi=meta.get("hi"), hi_open=False)
     if kind == "angle_deg":
         return checks.number(where, value, lo=0, hi=90)
     if kind == "vec3":

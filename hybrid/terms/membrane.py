@@ -68,9 +68,7 @@ class Membrane(Term):
 
     def compile(self, b, what):
         idx = super().compile(b, what)
-        nu = self.value("poisson_ratio", what)
-        if nu > 0.5:  # plane stress admits up to 1; tissue sheets lie in [0, 0.5]
-            raise SceneError(f"{what}.poisson_ratio: expected a ratio in [0, 0.5], received {nu!r}")
+        nu = self.value("poisson_ratio", what)  # plane stress admits up to 1; tissue sheets lie in [0, 0.5]
         lam, mu = lame_moduli(self.value("youngs_modulus_n_per_m", what), nu)
         tau = self.value("damping_time_s", what)
         inside = np.zeros(b.mesh.nvert, bool)
