@@ -41,7 +41,8 @@ def test_small_verification_study(tmp_path, capsys):
     # halving the step halves it
     ratios = by["free_body_angular_momentum"][0]["drift_ratio_half_step"]
     assert all(0.4 < q < 0.6 for q in ratios), ratios
-    # symplectic Euler keeps the energy of the free, undamped body bounded: no growth beyond
-    # its O(h) oscillation (the spread) between the first and last tenth of the run
+    # the free, undamped body's energy over 10^5 steps: what changes between the first and
+    # the last quarter is the integrator's error, second order here (a quarter per halving)
     e = by["free_body_energy"][0]
-    assert abs(e["measured"]) < 0.1 * e["energy_spread"] + 1e-3, e
+    assert abs(e["measured"]) < 0.2, e
+    assert 0.1 < e["change_ratio_half_step"] < 0.4, e
