@@ -51,3 +51,61 @@ def test_dask_local_cluster_same_results(dask_cluster):
     assert len({r["pid"] for r in res} - {os.getpid()}) >= 1
     out = sweep(_task, [{"a": 2}, {"a": -5}], scheduler=dask_cluster.scheduler_address, on_error="return")
     assert out[0]["ab"] == 20 and isinstance(out[1], SimulationDiverged) and out[1].step == 7
+
+
+# ---------------------------------------------------------------- sweeps that survive
+import json
+import signal
+import time
+
+import hybrid
+from hybrid.run import RunFailed, run
+from hybrid.sweep import TABLE_NAME
+
+
+def test_run_sweep_returns_every_result_beside_a_diverged_one(tmp_path):
+    ok = hybrid.load("membrane_demo")
+    bad = hybrid.load("membrane_demo", overrides=["dt_s=0.05"])   # diverges within a few steps
+    params = [{"sim": ok, "duration_s": 0.1}, {"sim": bad, "duration_s": 1.0}, {"sim": ok, "duration_s": 0.2}]
+    res = sweep(run, params, workers=2, on_error="return", out=tmp_path)
+    assert [r["summary"]["status"] for r in (res[0], res[2])] == ["ok", "ok"]
+    assert res[2]["summary"]["duration_s"] > res[0]["summary"]["duration_s"]
+    assert isinstance(res[1], RunFailed) and isinstance(res[1].error, SimulationDiverged)
+    assert res[1].error.dt_suggested_s < 0.05 and res[1].result["summary"]["status"] == "failed"
+    assert res[1].sweep_params["duration_s"] == 1.0
+    rows = [json.loads(line) for line in (tmp_path / TABLE_NAME).read_text().splitlines()]
+    assert sorted(r["status"] for r in rows) == ["failed", "ok", "ok"]
+    failed = next(r for r in rows if r["status"] == "failed")
+    assert failed["error_type"] == "hybrid.run.RunFailed" and "diverged" in failed["error"]
+
+
+CALLS = []
+
+
+def _kill_last(a, table):
+    """a task; a == "kill" dies (SIGKILL) once the other three rows are in the table."""
+    if a == "kill" and not os.environ.get("HYBRID_TEST_NO_KILL"):
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:
+            if os.path.exists(table) and len(open(table).read().splitlines()) >= 3:
+                os.kill(os.getpid(), signal.SIGKILL)
+            time.sleep(0.05)
+    CALLS.append(a)
+    return {"a": a}
+
+
+def test_a_killed_worker_keeps_the_finished_rows_and_a_rerun_skips_them(tmp_path, monkeypatch):
+    table = str(tmp_path / TABLE_NAME)
+    params = [{"a": 1, "table": table}, {"a": 2, "table": table}, {"a": "kill", "table": table},
+              {"a": 3, "table": table}]
+    res = sweep(_kill_last, params, workers=2, on_error="return", out=tmp_path)
+    assert [r["a"] for r in (res[0], res[1], res[3])] == [1, 2, 3]
+    assert isinstance(res[2], Exception) and res[2].sweep_params["a"] == "kill"   # BrokenProcessPool
+    rows = [json.loads(line) for line in open(table).read().splitlines()]
+    assert sorted(r["params"]["a"] for r in rows) == [1, 2, 3] and {r["status"] for r in rows} == {"ok"}
+    # the rerun runs only the task that was lost
+    monkeypatch.setenv("HYBRID_TEST_NO_KILL", "1")
+    CALLS.clear()
+    again = sweep(_kill_last, params, workers=1, out=tmp_path)
+    assert CALLS == ["kill"] and [r["a"] for r in again] == [1, 2, "kill", 3]
+    assert len(open(table).read().splitlines()) == 4
