@@ -24,7 +24,7 @@ LAYERS = (
     ("model, rigid", ("model", "rigid", "rigid.*")),
     ("step", ("step",)),
     ("coupled step", ("coupling",)),
-    ("simulation", ("simulation",)),
+    ("simulation", ("simulation", "builds")),
     ("observers", ("run", "record", "record.*", "render", "sweep", "grid", "outputs")),
     ("public API", ("",)),  # hybrid/__init__.py
     ("bench, command line, studies", ("bench", "bench.*", "bench_rigid", "cli", "__main__", "studies",
