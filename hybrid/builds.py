@@ -14,7 +14,6 @@ run's own steps and runs the faster.
 from __future__ import annotations
 
 import math
-import time
 
 from .kernel import limit_threads, usable_threads
 
@@ -36,7 +35,9 @@ class BuildChoice:
     not the fastest piece: under load the parallel build's pieces vary most, and
     a lucky one says nothing of the run). The pieces
     are the run's own steps (the builds agree to the bit), so a probe costs only
-    the time its slower pieces lose. Probes come again after `PROBE_EVERY_S`,
+    the time its slower pieces lose. Time here is the time spent stepping (what
+    the pieces took), not the wall clock: pauses between calls count for
+    nothing. Probes come again after `PROBE_EVERY_S`,
     doubling while the choice holds up to `PROBE_MAX_S`, and early when the
     running build gets `SLOWDOWN` times slower than when chosen (another program
     took a core); never so often that their loss exceeds `PROBE_BUDGET` of the
@@ -66,7 +67,8 @@ class BuildChoice:
         self.probes = 0
         self._probe: list[bool] = []       # the builds of the probe's pieces to come
         self._spent = {False: [0.0, 0], True: [0.0, 0]}   # the probe's seconds and steps per build
-        self._next_probe = 0.0             # perf_counter time of the next probe: at the start
+        self._clock = 0.0                  # s spent stepping (the pieces recorded): the probes' clock
+        self._next_probe = 0.0             # _clock of the next probe: at the start
         self._every = self.PROBE_EVERY_S
         self._last_probe = 0.0
         self._budget_wait = 0.0            # s after a probe that keep its loss within PROBE_BUDGET
@@ -77,7 +79,7 @@ class BuildChoice:
         if not self.active or remaining < 2:
             return self.parallel, remaining
         if not self._probe:
-            if time.perf_counter() < self._next_probe:
+            if self._clock < self._next_probe:
                 return self.parallel, remaining
             self._probe = [self.parallel, not self.parallel] * self.PROBE_PAIRS
             self._spent = {False: [0.0, 0], True: [0.0, 0]}
@@ -90,6 +92,7 @@ class BuildChoice:
         self.steps[parallel] += steps
         if not self.active or steps <= 0:
             return
+        self._clock += seconds
         us = seconds * 1e6 / steps
         self.us_per_step[parallel] = us
         if self._probe and self._probe[0] == parallel:
@@ -113,7 +116,7 @@ class BuildChoice:
         self.parallel = parallel
         self._chosen_us = won_s * 1e6 / won_n
         self.probes += 1
-        self._last_probe = time.perf_counter()
+        self._last_probe = self._clock
         self._budget_wait = loss / self.PROBE_BUDGET
         self._next_probe = self._last_probe + max(self._every, self._budget_wait)
 

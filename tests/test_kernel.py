@@ -183,12 +183,20 @@ def _drive(choice, us_of, nstep=10_000, calls=3):
 @pytest.mark.parametrize("par_us, want_parallel", [(500.0, False), (40.0, True)])
 def test_auto_runs_the_build_that_is_faster_here(monkeypatch, par_us, want_parallel):
     choice = _choice(monkeypatch)
-    _drive(choice, lambda par: par_us if par else 100.0)
+    _drive(choice, lambda par: par_us if par else 100.0, nstep=1000)   # 0.3 s of steps: one probe
     assert choice.parallel is want_parallel and choice.probes == 1
     slow = not want_parallel
     # the probe ran the slower build for a few short pieces only: its loss is the probe's
     assert 0 < choice.steps[slow] <= choice.PROBE_PAIRS * max(2, math.ceil(choice.PROBE_S * 1e6 / 100.0))
     assert choice.summary()["parallel_to_serial"] == pytest.approx(par_us / 100.0)
+
+
+def test_auto_probes_again_within_its_budget(monkeypatch):
+    choice = _choice(monkeypatch)
+    _drive(choice, lambda par: 500.0 if par else 100.0, nstep=10_000, calls=200)   # 200 s of steps
+    assert not choice.parallel and choice.probes > 5   # timed again now and then ...
+    lost_s = choice.steps[True] * (500.0 - 100.0) * 1e-6
+    assert lost_s < choice.PROBE_BUDGET * 200.0   # ... losing less than the budget
 
 
 def test_auto_times_both_again_when_the_running_build_slows_down(monkeypatch):
