@@ -33,7 +33,8 @@ class BuildChoice:
     parallel in turn, each of about `PROBE_S` of wall time (at least a step); the
     build with the smaller mean time per step over its pieces runs on (the mean,
     not the fastest piece: under load the parallel build's pieces vary most, and
-    a lucky one says nothing of the run). The pieces
+    a lucky one says nothing of the run); a probe stops after its first pair when
+    one build is `PROBE_CLEAR` times faster. The pieces
     are the run's own steps (the builds agree to the bit), so a probe costs only
     the time its slower pieces lose. Time here is the time spent stepping (what
     the pieces took), not the wall clock: pauses between calls count for
@@ -52,6 +53,7 @@ class BuildChoice:
     PROBE_EVERY_S = 0.5
     PROBE_MAX_S = 8.0
     PROBE_BUDGET = 0.02
+    PROBE_CLEAR = 3.0
     SLOWDOWN = 1.5
 
     def __init__(self, may_parallel: bool, build: str = "auto"):
@@ -78,13 +80,15 @@ class BuildChoice:
         """(parallel, steps) of the next piece of `remaining` steps."""
         if not self.active or remaining < 2:
             return self.parallel, remaining
+        if self._clock == 0.0:  # the first call loads the compiled code: not a piece to time
+            return self.parallel, 1
         if not self._probe:
             if self._clock < self._next_probe:
                 return self.parallel, remaining
             self._probe = [self.parallel, not self.parallel] * self.PROBE_PAIRS
             self._spent = {False: [0.0, 0], True: [0.0, 0]}
         us = self.us_per_step[self._probe[0]]
-        size = max(1, int(self.PROBE_S * 1e6 / us)) if us > 0 else 2
+        size = max(1, int(self.PROBE_S * 1e6 / us)) if us > 0 else 1
         return self._probe[0], min(size, remaining)
 
     def record(self, parallel: bool, steps: int, seconds: float) -> None:
@@ -99,6 +103,9 @@ class BuildChoice:
             self._probe.pop(0)
             self._spent[parallel][0] += seconds
             self._spent[parallel][1] += steps
+            (ser_s, ser_n), (par_s, par_n) = self._spent[False], self._spent[True]
+            if ser_n and par_n and not 1 / self.PROBE_CLEAR < par_s * ser_n / (ser_s * par_n) < self.PROBE_CLEAR:
+                self._probe = []  # one build is clearly the faster: no more pieces of the slower
             if not self._probe:
                 self._decide()
         elif not self._probe and us > self.SLOWDOWN * self._chosen_us and seconds > 0.5 * self.PROBE_S:
