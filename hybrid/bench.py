@@ -86,30 +86,43 @@ def formulation_rows(meshes=(None, 5), *, repeats: int = 7, work: float = 4e6) -
     return rows
 
 
-def _median_us_per_step(sim: Simulation, nstep: int, repeats: int) -> float:
-    sim.step(max(1, nstep // 10))  # warm-up: compiled code loaded, caches filled
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        sim.step(nstep)
-        times.append((time.perf_counter() - t0) / nstep)
-    return statistics.median(times) * 1e6
-
-
 def bench_membrane_rows(meshes=MEMBRANE_MESHES, *, repeats: int = 7, work: float = 4e6) -> list[dict]:
-    """Full membrane step (shape memory, damping, gravity, exact volume) per mesh size.
+    """Full membrane step (shape memory, damping, gravity, exact volume) per mesh
+    size, with the serial build, the parallel build and the default (`build="auto"`:
+    the simulation times both as it runs and runs the faster, `hybrid.builds`).
 
-    Each repeat runs about `work` vertex-steps; the step is a quarter of
-    the model's stability bound so the run stays smooth.
+    The three are timed in turn, repeat by repeat (the order rotating), each repeat
+    about `work` vertex-steps; the step is a quarter of the model's stability bound
+    so the run stays smooth. Medians of the times, and of the per-repeat ratio of
+    the default to the faster of the two builds.
     """
     rows = []
     for sub in meshes:
         model = compile_scene(bench_membrane(sub))
         model = model.with_dt(0.25 * model.dt_stable_s)
-        sim = Simulation(model)
+        sims = {build: Simulation(model, build=build) for build in ("serial", "parallel", "auto")}
         nstep = max(20, int(work / model.nvert))
-        us = _median_us_per_step(sim, nstep, repeats)
-        rows.append({"nvert": model.nvert, "us_per_step": us, "ns_per_vertex_step": us * 1e3 / model.nvert})
+        for sim in sims.values():  # warm-up: compiled code loaded, caches filled, the default's first probe
+            sim.step(max(1, nstep // 10))
+        times: dict[str, list] = {build: [] for build in sims}
+        for rep in range(repeats):
+            order = list(sims)[rep % 3:] + list(sims)[:rep % 3]
+            for build in order:
+                t0 = time.perf_counter()
+                sims[build].step(nstep)
+                times[build].append((time.perf_counter() - t0) / nstep * 1e6)
+        med = {build: statistics.median(t) for build, t in times.items()}
+        chosen = sims["auto"].builds.summary()
+        rows.append({"nvert": model.nvert, "us_per_step": med["auto"],
+                     "ns_per_vertex_step": med["auto"] * 1e3 / model.nvert,
+                     "serial_us_per_step": med["serial"], "parallel_us_per_step": med["parallel"],
+                     "parallel_to_serial": statistics.median(
+                         [p / s for p, s in zip(times["parallel"], times["serial"])]),
+                     "default_to_faster": statistics.median(
+                         [a / min(s, p) for a, s, p in zip(times["auto"], times["serial"], times["parallel"])]),
+                     "default_build": "parallel" if chosen["parallel_now"] else "serial",
+                     "default_parallel_steps": chosen["parallel_steps"],
+                     "default_serial_steps": chosen["serial_steps"], "threads": chosen["threads"]})
     return rows
 
 
@@ -219,10 +232,14 @@ def run_bench(json_path: Path | None = None, *, quick: bool = False) -> dict:
 
 
 def format_table(result: dict) -> str:
-    lines = ["membrane step (shape memory, damping, gravity, exact volume); medians",
-             f"{'nvert':>8} {'us/step':>10} {'ns/vertex-step':>15}"]
+    lines = ["membrane step (shape memory, damping, gravity, exact volume); medians, us per step",
+             f"{'nvert':>8} {'serial':>10} {'parallel':>10} {'default':>10} {'ns/vertex-step':>15} "
+             f"{'par/ser':>8} {'default/faster':>15}  default runs"]
     for row in result.get("membrane", []):
-        lines.append(f"{row['nvert']:>8} {row['us_per_step']:>10.2f} {row['ns_per_vertex_step']:>15.1f}")
+        lines.append(f"{row['nvert']:>8} {row['serial_us_per_step']:>10.2f} {row['parallel_us_per_step']:>10.2f} "
+                     f"{row['us_per_step']:>10.2f} {row['ns_per_vertex_step']:>15.1f} "
+                     f"{row['parallel_to_serial']:>8.2f} {row['default_to_faster']:>15.2f}  "
+                     f"{row['default_build']} ({row['threads']} threads)")
     if "formulations" in result:
         lines += ["", "full step of each formulation, same mesh and step; medians, ratio of per-repeat times",
                   f"{'nvert':>8} {'paper us':>10} {'continuum us':>13} {'ratio':>7}"]

@@ -1,4 +1,4 @@
-"""The command line: `hybrid run`, `hybrid bench`, `hybrid render`, `hybrid view`.
+"""The command line: `hybrid run`, `hybrid sweep`, `hybrid bench`, `hybrid render`, `hybrid view`.
 
 Bad input prints one line naming the culprit on stderr and exits with
 status 2, without a traceback; a run that fails still writes what it
@@ -163,6 +163,14 @@ def _cmd_bench(args) -> int:
     return 0
 
 
+def _cmd_sweep(args) -> int:
+    from .grid import run_grid
+    done = run_grid(args.scene, args.set or (), without=args.without or (), duration_s=args.duration,
+                    out=_out_arg(args.out), metric=args.metric, workers=args.workers)
+    print(f"{len(done['rows'])} runs, {done['failed']} failed -> {done['csv']}, {done['plot']} ({done['metric']})")
+    return 1 if done["failed"] else 0
+
+
 def _positive_float(text: str) -> float:
     try:
         value = float(text)
@@ -206,6 +214,15 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("scene", nargs="?", help="a scene TOML file, or a built-in name (default: breathing)")
     v.add_argument("--duration", type=_positive_float, help="simulated time (s); default: the scene's")
     v.set_defaults(func=_cmd_view)
+    w = sub.add_parser("sweep", help="run a scene over a grid of --set values in parallel: a table and a plot")
+    w.add_argument("scene", nargs="?", help="a scene TOML file, or a built-in name (default: breathing)")
+    w.add_argument("--set", action="append", metavar="KEY=V1,V2,...", help="a swept key and its values")
+    w.add_argument("--without", action="append", metavar="NAME", help="drop a force term or constraint by name")
+    w.add_argument("--duration", type=_positive_float, help="simulated time of each run (s); default: the scene's")
+    w.add_argument("--out", required=True, help="the sweep's folder: sweep.jsonl, sweep.csv, sweep.png")
+    w.add_argument("--metric", help="the summary metric plotted (default: apex_descent_mm, or the first reported)")
+    w.add_argument("--workers", type=int, help="processes (default: every core this process may use)")
+    w.set_defaults(func=_cmd_sweep)
     b = sub.add_parser("bench", help="time the full step; medians of repeated runs")
     b.add_argument("--json", metavar="FILE", help="also write the figures as JSON")
     b.add_argument("--quick", action="store_true", help="small sizes only (a smoke test)")

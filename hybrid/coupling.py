@@ -276,23 +276,24 @@ class Coupling:
         state.vert_pos[self.link_vert] = sys.site_pos()
         state.vert_vel[self.link_vert] = sys.site_vel()
 
-    def step(self, state: MembraneState, t: float, step_index: int) -> int:
+    def step(self, state: MembraneState, t: float, step_index: int, arrays=None) -> int:
         """One coupled step from time t; returns 0 or the simulation's status code."""
-        done = self.run(state, 1, step_index)
+        done = self.run(state, 1, step_index, arrays)
         return OK if done == 1 else int(state.status[0])
 
     def _rk4(self) -> bool:
         """Whether MuJoCo integrates with RK4 (read at every call: `mj_model` may change)."""
         return int(self.system.model.opt.integrator) == _RK4
 
-    def run(self, state: MembraneState, nstep: int, step0: int) -> int:
-        """nstep coupled steps in one compiled call; returns the steps done."""
+    def run(self, state: MembraneState, nstep: int, step0: int, arrays=None) -> int:
+        """nstep coupled steps in one compiled call; returns the steps done. `arrays`:
+        the model's arrays with the build to run (`Simulation` chooses), by default the model's."""
         mjm = self.system.model
         record = bool(self.record_wrenches)
         hist = (WrenchHistory(np.empty((nstep, mjm.nbody, 6)), np.empty((nstep, mjm.nq))) if record
                 else self._no_hist)
         mj_time = self.system.data.time
-        done = run_coupled(self.model.arrays, state, self._links, self._mj, self._rk4(), int(nstep), int(step0),
+        done = run_coupled(self.model.arrays if arrays is None else arrays, state, self._links, self._mj, self._rk4(), int(nstep), int(step0),
                            record, hist)
         if record:
             self._xfrc_hist.append(hist.xfrc[:done])
@@ -313,11 +314,11 @@ class Coupling:
                 step=int(step0 + done), vert=int(self.link_vert[0]) if self.link_vert.size else 0,
                 dt_suggested_s=0.5 * float(self.model.arrays.dt))
 
-    def run_frames(self, state: MembraneState, stops: np.ndarray, step0: int, frames: Frames) -> int:
+    def run_frames(self, state: MembraneState, stops: np.ndarray, step0: int, frames: Frames, arrays=None) -> int:
         """`run` to each step index of stops in one compiled call, capturing a frame at
         each into frames; returns the frames captured. (Without wrench recording.)"""
         mj_time = self.system.data.time
-        count = run_coupled_frames(self.model.arrays, state, self._links, self._mj, self._rk4(), stops, int(step0),
+        count = run_coupled_frames(self.model.arrays if arrays is None else arrays, state, self._links, self._mj, self._rk4(), stops, int(step0),
                                    self._no_hist, frames.pos, frames.scal, frames.body_pos, frames.body_quat)
         # a reset anywhere in these frames makes none of them trustworthy (frames.count stays 0)
         self._check_not_reset(state, mj_time, step0, (int(stops[count - 1]) if count else int(step0)) - int(step0))

@@ -3,6 +3,11 @@
 Every message names the argument or element at fault, what was expected and
 what was received, so that a user can fix the input without reading code.
 The command line prints the message on one line and exits with status 2.
+
+Every exception of the package pickles to an equal one (class, arguments,
+attributes, notes), whatever its constructor takes: a failure in a worker of
+`hybrid.sweep` comes back whole instead of breaking the pool. A class with its
+own `__init__` outside this hierarchy takes `__reduce__ = reduce_exception`.
 """
 
 from __future__ import annotations
@@ -14,11 +19,29 @@ __all__ = [
     "ConstraintError",
     "RigidError",
     "SimulationDiverged",
+    "reduce_exception",
 ]
+
+
+def _rebuild(cls, args: tuple, state: dict) -> BaseException:
+    """An exception of class cls with these args and attributes, its __init__ not called."""
+    exc = cls.__new__(cls, *args)
+    exc.args = args
+    exc.__dict__.update(state)
+    return exc
+
+
+def reduce_exception(exc: BaseException) -> tuple:
+    """`__reduce__` for exceptions whose __init__ takes other arguments than
+    `args` (keyword-only ones, say), which pickle's default cannot call again:
+    rebuilt from class, args and attributes."""
+    return (_rebuild, (type(exc), exc.args, dict(vars(exc))))
 
 
 class HybridError(Exception):
     """Base class of every error `hybrid` raises on purpose."""
+
+    __reduce__ = reduce_exception
 
 
 class MeshError(HybridError, ValueError):

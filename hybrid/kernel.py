@@ -6,8 +6,12 @@ the step allocates nothing, and the atomic reference counts numba would
 otherwise add around each call cost about 0.5 us per call. The per-point
 passes that dominate large meshes are also compiled a second time from the
 same source with `parallel=True` (their `prange` loops then run on all
-cores); the model picks that build when the mesh has at least
-`PARALLEL_MIN_VERTS` points, below which the threads cost more than they save.
+cores). Which build runs is decided while the simulation runs (`BuildChoice`):
+from `PARALLEL_MIN_VERTS` points up, with more than one usable thread, the two
+builds are timed against each other in short alternating pieces of the run,
+and the faster runs (`hybrid.builds.BuildChoice`): on a machine whose cores
+other programs take, threads waiting for each other can make the parallel
+build many times slower than one thread.
 Passes that also sum over the points take them in chunks of `CHUNK_VERTS`
 consecutive points, then add the chunks' sums in order, in both builds: the
 two agree to the last bit, whatever the number of threads.
@@ -39,14 +43,16 @@ import numba
 from numba import njit
 
 __all__ = ["CACHE_DIR", "FAST", "FLAGS", "jit", "kernel", "kernel_twin", "CHUNK_VERTS", "PARALLEL_MIN_VERTS",
-           "use_parallel", "chunk_count", "kernel_sources", "prune_old_caches"]
+           "use_parallel", "usable_threads", "limit_threads", "chunk_count", "kernel_sources",
+           "prune_old_caches"]
 
 # Fast-math without the flags that assume no NaN or infinity: fused
 # multiply-adds and reciprocals, but the divergence check still sees NaN.
 FAST = {"contract", "arcp", "nsz", "afn"}
 # nogil: a compiled step lets other Python threads (the recorder) run meanwhile
 FLAGS = dict(cache=True, error_model="numpy", _nrt=False, fastmath=FAST, nogil=True)
-PARALLEL_MIN_VERTS = 2000
+# below this, a step is too short for threads to pay (their wake-up is microseconds)
+PARALLEL_MIN_VERTS = 500
 # points per chunk of the passes that sum over the points: long enough to
 # cost nothing per chunk, short enough that the threads share evenly
 CHUNK_VERTS = 64
@@ -242,6 +248,25 @@ def chunk_count(nvert: int) -> int:
     return (nvert + CHUNK_VERTS - 1) // CHUNK_VERTS
 
 
+def usable_threads() -> int:
+    """The threads a parallel kernel may use here: numba's (NUMBA_NUM_THREADS, or
+    `numba.set_num_threads`), at most the CPUs this process may run on (its
+    affinity, `taskset`, may have changed since numba read it)."""
+    n = numba.get_num_threads()
+    try:
+        n = min(n, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):  # no affinity on this platform
+        pass
+    return max(1, n)
+
+
+def limit_threads(n: int) -> None:
+    """numba's threads for this thread's parallel calls: at most n (never raised)."""
+    if n < numba.get_num_threads():
+        numba.set_num_threads(max(1, n))
+
+
 def use_parallel(nvert: int) -> bool:
-    """Whether a mesh of nvert points runs the parallel build."""
-    return nvert >= PARALLEL_MIN_VERTS and numba.get_num_threads() > 1
+    """Whether a mesh of nvert points may run the parallel build (then timed
+    against the serial one as it runs, `hybrid.builds.BuildChoice`)."""
+    return nvert >= PARALLEL_MIN_VERTS and usable_threads() > 1

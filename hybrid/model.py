@@ -50,7 +50,8 @@ _CORE_AFTER = {
     "dt": "s",
     "integrator": "0 explicit Euler, 1 symplectic Euler",
     "max_speed": "m/s: a point faster than this has run away",
-    "parallel": "bool: the per-point passes run their multi-core build (hybrid.kernel)",
+    "parallel": "bool: the per-point passes run their multi-core build (hybrid.kernel); in a model, that "
+                "they may: the simulation times both builds as it runs (hybrid.builds)",
 }
 _TERM_ARRAYS = {name: default for cls in TERM_CLASSES for name, default in cls.arrays.items()}
 

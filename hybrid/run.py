@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from . import checks
-from .errors import HybridError
+from .errors import HybridError, reduce_exception
 from .model import Model
 from .schedule import Breathing, schedule_eval, stack_schedules
 from .scene import Muscle
@@ -405,6 +405,8 @@ class RunFailed(HybridError):
 class RunInterrupted(KeyboardInterrupt):
     """A run stopped by Ctrl-C (or a signal taken as one); `.result` holds what was
     recorded before it, its summary's "status" "interrupted"."""
+
+    __reduce__ = reduce_exception
 
     def __init__(self, result: dict):
         super().__init__(f"interrupted at t = {result['summary']['duration_s']:.6g} s")

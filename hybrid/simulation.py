@@ -7,11 +7,14 @@ unless the scene has Python schedules (evaluated between steps).
 
 from __future__ import annotations
 
+import copy
 import math
+import time
 
 import numpy as np
 
 from . import readouts
+from .builds import BuildChoice
 from .terms.volume import PROJ_NO_GRADIENT, face_volume
 from .errors import ConstraintError, SceneError, SimulationDiverged
 from .model import TERMS, Model
@@ -36,10 +39,18 @@ class Simulation:
     """A run of a model: `step(n)`, and the state as read-only views.
 
     >>> sim = Simulation(compile_scene(scene)); sim.step(1000); sim.pressure
+
+    `build`: "auto" times the serial and the parallel build of the step against
+    each other as the run goes and runs the faster (`hybrid.builds.BuildChoice`,
+    for models that may run in parallel); "serial" or "parallel" fixes it. The
+    two agree to the bit. `sim.builds.summary()` says what ran.
     """
 
-    def __init__(self, model: Model):
+    def __init__(self, model: Model, build: str = "auto"):
         self.model = model
+        self.builds = BuildChoice(model.arrays.parallel, build)
+        # the model's arrays with each build's flag: what the compiled calls take
+        self._arrays = {p: model.arrays._replace(parallel=p) for p in (False, True)}
         self.rigid = None
         if model.rigid is not None:
             from .coupling import Coupling  # imports mujoco only for rigid scenes
@@ -150,16 +161,22 @@ class Simulation:
             raise self.failed
         if not (isinstance(n, (int, np.integer)) and n >= 0):
             raise ValueError(f"n: expected an integer >= 0, received {n!r}")
-        m, s = self.model.arrays, self.state
+        s = self.state
         if not self.model.python_schedules:
-            if self.rigid is None:
-                done = run_membrane(m, s, int(n), self.steps_done)
-            else:  # the whole coupled loop in one compiled call (hybrid.coupling)
-                done = self.rigid.run(s, int(n), self.steps_done)
-            self.steps_done += done
-            if done < n:
-                self._raise()
-            return
+            left = int(n)
+            while True:  # one compiled call, or pieces timed for the choice of build
+                par, k = self.builds.chunk(left)
+                t0 = time.perf_counter()
+                done = self._run(self._arrays[par], k)
+                self.builds.record(par, done, time.perf_counter() - t0)
+                self.steps_done += done
+                left -= done
+                if done < k:
+                    self._raise()
+                if left <= 0:
+                    return
+        par = self.builds.parallel
+        m = self._arrays[par]
         for _ in range(int(n)):
             t = float(s.scal[S_TIME])
             self._python_schedules(t)
@@ -167,11 +184,19 @@ class Simulation:
                 membrane_forces(m, s, t)
                 code = membrane_advance(m, s, t, self.steps_done)
             else:
-                code = self.rigid.step(s, t, self.steps_done)
+                code = self.rigid.step(s, t, self.steps_done, m)
             if code != OK:
                 self._raise()
             s.scal[S_TIME] = t + m.dt
             self.steps_done += 1
+            self.builds.steps[par] += 1
+
+    def _run(self, arrays, nstep: int) -> int:
+        """nstep steps in one compiled call with these arrays (the build their flag
+        says); the steps done."""
+        if self.rigid is None:
+            return run_membrane(arrays, self.state, nstep, self.steps_done)
+        return self.rigid.run(self.state, nstep, self.steps_done, arrays)  # the whole coupled loop (hybrid.coupling)
 
     @property
     def can_step_frames(self) -> bool:
@@ -202,16 +227,37 @@ class Simulation:
         if len(stops) and (stops[0] < self.steps_done or np.any(np.diff(stops) < 0)):
             raise ValueError(f"stops: expected increasing step indices from {self.steps_done}, "
                              f"received {stops[:3].tolist()}...")
-        m, s = self.model.arrays, self.state
+        i, s = 0, self.state
+        while i < len(stops):  # one compiled call, or pieces timed for the choice of build
+            par, k = self.builds.chunk(int(stops[-1]) - self.steps_done)
+            t0 = time.perf_counter()
+            if k < int(stops[i]) - self.steps_done:  # a piece short of the next frame
+                done = self._run(self._arrays[par], k)
+                self.builds.record(par, done, time.perf_counter() - t0)
+                self.steps_done += done
+                if done < k:
+                    self._raise()
+                continue
+            j = max(i + 1, int(np.searchsorted(stops, self.steps_done + k, side="right")))
+            count = self._run_frames(self._arrays[par], stops[i:j], frames, i)
+            frames.count = i + count
+            if count < j - i:
+                self.steps_done = int(s.status[1])
+                self._raise()
+            self.builds.record(par, int(stops[j - 1]) - self.steps_done, time.perf_counter() - t0)
+            self.steps_done = int(stops[j - 1])
+            i = j
+
+    def _run_frames(self, arrays, stops: np.ndarray, frames: Frames, first: int) -> int:
+        """Step to each of stops in one compiled call, capturing into frames from
+        index `first` on; the frames captured."""
+        if first:
+            frames = copy.copy(frames)
+            frames.pos, frames.scal = frames.pos[first:], frames.scal[first:]
+            frames.body_pos, frames.body_quat = frames.body_pos[first:], frames.body_quat[first:]
         if self.rigid is None:
-            count = run_membrane_frames(m, s, stops, self.steps_done, frames.pos, frames.scal)
-        else:
-            count = self.rigid.run_frames(s, stops, self.steps_done, frames)
-        frames.count = int(count)
-        if count < len(stops):
-            self.steps_done = int(s.status[1])
-            self._raise()
-        self.steps_done = int(stops[-1]) if len(stops) else self.steps_done
+            return run_membrane_frames(arrays, self.state, stops, self.steps_done, frames.pos, frames.scal)
+        return self.rigid.run_frames(self.state, stops, self.steps_done, frames, arrays)
 
     def _python_schedules(self, t: float) -> None:
         h = self.model.arrays.dt

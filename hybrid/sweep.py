@@ -24,12 +24,23 @@ The workers must be able to import `hybrid` and the module of `fn`.
 
 Errors. `on_error="raise"` (the default) re-raises the first failure, in the
 order of `params`, in the calling process (the exception object of the task,
-with the worker's traceback as a note) and cancels the tasks not yet started.
-`on_error="return"` puts the exception object in place of the result and
-carries on: the friendlier choice for studies, where one diverged case is a
-result (`isinstance(r, Exception)`, e.g. `hybrid.SimulationDiverged` with its
-`dt_suggested_s`). Exceptions come back with their class and attributes even
-when their constructor takes keyword-only arguments.
+with the worker's traceback as a note), once the tasks already running have
+finished; the tasks not yet started are cancelled. `on_error="return"` puts
+the exception object in place of the result and carries on: the friendlier
+choice for studies, where one diverged case is a result (`isinstance(r,
+Exception)`, e.g. `hybrid.SimulationDiverged` with its `dt_suggested_s`); the
+exception's `sweep_params` is the task's parameter set. Exceptions come back
+with their class and attributes even when their constructor takes keyword-only
+arguments. A worker that dies (killed, out of memory) fails its task and the
+ones not yet finished with `BrokenProcessPool`; the results already in stay.
+
+The table. With `out=DIR`, each finished task is appended to `DIR/sweep.jsonl`
+as it comes in (one JSON object a line: "params", "status" "ok" with "result",
+or "failed" with "error", the exception's class and its number and string
+attributes), so a sweep that is interrupted or loses a worker keeps what it
+finished. A rerun into the same folder skips the parameter sets already "ok"
+there, returning their results as the table holds them (JSON: lists for
+arrays, the `repr` of anything JSON cannot hold), and runs the others again.
 
 `workers=1` runs the tasks one after the other in this process (no pickling;
 for debugging).
@@ -37,12 +48,20 @@ for debugging).
 
 from __future__ import annotations
 
+import json
+import math
+import operator
 import os
+import pickle
 import sys
 import traceback
+from pathlib import Path
 from typing import Any, Callable, Sequence
 
-__all__ = ["sweep", "local_workers"]
+__all__ = ["sweep", "local_workers", "TABLE_NAME"]
+
+#: the table of finished tasks in a sweep's folder (`out`), one JSON object a line
+TABLE_NAME = "sweep.jsonl"
 
 
 def local_workers() -> int:
@@ -71,7 +90,7 @@ def _numba_one_thread() -> None:
 def _pack_error(exc: BaseException) -> tuple:
     """An exception as (class, args, attributes, traceback text): rebuilt without
     calling its constructor, which may take keyword-only arguments that
-    `pickle` does not pass (e.g. SimulationDiverged)."""
+    `pickle` does not pass."""
     tb = "".join(traceback.format_exception(type(exc), exc, exc.__traceback__))
     attrs = {k: v for k, v in vars(exc).items() if k != "__notes__"}
     return (type(exc), exc.args, attrs, tb)
@@ -87,34 +106,112 @@ def _unpack_error(packed: tuple) -> BaseException:
     return exc
 
 
-def _call(fn: Callable, p: Any) -> tuple:
-    """Run one task in a worker: ("ok", result) or ("error", packed exception)."""
+def _call(fn: Callable, p: Any, pickled: bool = True) -> tuple:
+    """Run one task: ("ok", result) or ("error", packed exception). In a worker
+    (`pickled`) the result comes as pickle's bytes, so that one that cannot be
+    rebuilt in the caller fails its task rather than the pool."""
     _numba_one_thread()
     try:
-        return ("ok", fn(**p) if isinstance(p, dict) else fn(p))
+        result = fn(**p) if isinstance(p, dict) else fn(p)
     except Exception as exc:  # noqa: BLE001 - every task failure is reported
         try:
-            import pickle
             packed = _pack_error(exc)
-            pickle.dumps(packed)
-        except Exception:  # an unpicklable attribute: keep class name and message
+            if pickled:  # the caller must be able to rebuild it, or the pool breaks
+                pickle.loads(pickle.dumps(packed))
+        except Exception:  # an attribute that does not survive pickle: keep class name and message
             packed = (RuntimeError, (f"{type(exc).__name__}: {exc}",), {},
                       "".join(traceback.format_exception(type(exc), exc, exc.__traceback__)))
         return ("error", packed)
+    return ("ok", pickle.dumps(result) if pickled else result)
 
 
-def _resolve(outcome: tuple, on_error: str):
+def _outcome_value(outcome: tuple, p: Any, pickled: bool):
+    """The task's result, or its exception (with `sweep_params`)."""
     kind, value = outcome
     if kind == "ok":
-        return value
-    exc = _unpack_error(value)
-    if on_error == "raise":
-        raise exc
-    return exc
+        if not pickled:
+            return value
+        try:
+            return pickle.loads(value)
+        except Exception as exc:  # noqa: BLE001
+            err: BaseException = RuntimeError(f"sweep: the result of the task with parameters {p!r} cannot be "
+                                              f"rebuilt in this process: {type(exc).__name__}: {exc}")
+    elif kind == "error":
+        err = _unpack_error(value)
+    else:  # "lost": the worker died; value is the pool's exception
+        err = value
+        if hasattr(err, "add_note"):
+            err.add_note("the worker process running this task, or another one, died (killed, out of memory)")
+    try:
+        err.sweep_params = p
+    except AttributeError:  # an exception class with __slots__
+        pass
+    return err
+
+
+def _jsonable(obj):
+    """obj in JSON's types: numpy arrays and numbers as lists and numbers, the
+    repr of anything else JSON cannot hold."""
+    if obj is None or isinstance(obj, (bool, str)):
+        return obj
+    if isinstance(obj, (int, float)):
+        return obj if not isinstance(obj, float) or math.isfinite(obj) else str(obj)
+    if isinstance(obj, dict):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_jsonable(v) for v in obj]
+    if hasattr(obj, "tolist") and hasattr(obj, "dtype"):  # numpy arrays and scalars
+        return _jsonable(obj.tolist())
+    return repr(obj)
+
+
+def _key(p) -> str:
+    return json.dumps(_jsonable(p), sort_keys=True)
+
+
+class _Table:
+    """DIR/sweep.jsonl: a row per finished task, appended and flushed as it comes."""
+
+    def __init__(self, folder):
+        folder = Path(folder)
+        folder.mkdir(parents=True, exist_ok=True)
+        self.path = folder / TABLE_NAME
+        self.done: dict[str, Any] = {}
+        if self.path.exists():
+            text = self.path.read_text(encoding="utf-8")
+            for line in text.splitlines():
+                try:
+                    row = json.loads(line)
+                except ValueError:  # a line cut short by a killed sweep
+                    continue
+                if isinstance(row, dict) and row.get("status") == "ok" and "params" in row:
+                    self.done[_key(row["params"])] = row.get("result")
+            self._file = open(self.path, "a", encoding="utf-8")
+            if text and not text.endswith("\n"):
+                self._file.write("\n")
+        else:
+            self._file = open(self.path, "a", encoding="utf-8")
+
+    def write(self, p, value) -> None:
+        row: dict = {"params": _jsonable(p)}
+        if isinstance(value, BaseException):
+            attrs = {k: v for k, v in vars(value).items()
+                     if isinstance(v, (int, float, str)) and k != "sweep_params"}
+            row.update(status="failed", error=" ".join(str(value).split()),
+                       error_type=f"{type(value).__module__}.{type(value).__qualname__}",
+                       error_attrs=_jsonable(attrs))
+        else:
+            row.update(status="ok", result=_jsonable(value))
+        self._file.write(json.dumps(row) + "\n")
+        self._file.flush()
+        os.fsync(self._file.fileno())
+
+    def close(self) -> None:
+        self._file.close()
 
 
 def sweep(fn: Callable, params: Sequence, *, scheduler: str | None = None, workers: int | None = None,
-          on_error: str = "raise") -> list:
+          on_error: str = "raise", out=None) -> list:
     """`fn(**p)` (dict `p`) or `fn(p)` for every `p` in `params`, in parallel;
     the results in the order of `params`.
 
@@ -122,24 +219,62 @@ def sweep(fn: Callable, params: Sequence, *, scheduler: str | None = None, worke
     workers    local processes (default: every core this process may use);
                1 runs in this process. Ignored with a scheduler.
     on_error   "raise": re-raise the first failure (in the order of params);
-               "return": the exception object in place of that result.
+               "return": the exception object in place of that result, its
+               `sweep_params` the task's parameters.
+    out        a folder: each finished task is appended to out/sweep.jsonl as it
+               comes in; the parameter sets already "ok" there are not run again.
     """
     if on_error not in ("raise", "return"):
         raise ValueError(f"on_error: expected 'raise' or 'return', received {on_error!r}")
     params = list(params)
     if not params:
         return []
-    if scheduler is not None:
-        return _sweep_dask(fn, params, str(scheduler), on_error)
-    n = local_workers() if workers is None else int(workers)
-    if n < 1:
+    try:
+        n = local_workers() if workers is None else operator.index(workers)
+    except TypeError:
+        n = 0
+    if scheduler is None and n < 1:
         raise ValueError(f"workers: expected an integer >= 1, received {workers!r}")
-    n = min(n, len(params))
-    if n == 1:
-        return [_resolve(_call(fn, p), on_error) for p in params]
+    table = _Table(out) if out is not None else None
+    results: list = [None] * len(params)
+    todo = []
+    for i, p in enumerate(params):
+        if table is not None and _key(p) in table.done:
+            results[i] = table.done[_key(p)]
+        else:
+            todo.append(i)
+    failed: list[int] = []
 
+    def finish(i: int, outcome: tuple, pickled: bool = True) -> None:
+        results[i] = _outcome_value(outcome, params[i], pickled)
+        if isinstance(results[i], BaseException):
+            failed.append(i)
+        if table is not None and outcome[0] != "lost":
+            table.write(params[i], results[i])
+
+    try:
+        if not todo:
+            pass
+        elif scheduler is not None:
+            _sweep_dask(fn, params, todo, str(scheduler), finish, on_error)
+        elif min(n, len(todo)) == 1:
+            for i in todo:
+                finish(i, _call(fn, params[i], pickled=False), pickled=False)
+                if failed and on_error == "raise":
+                    break
+        else:
+            _sweep_local(fn, params, todo, min(n, len(todo)), finish, on_error, failed)
+    finally:
+        if table is not None:
+            table.close()
+    if failed and on_error == "raise":
+        raise results[min(failed)]
+    return results
+
+
+def _sweep_local(fn, params, todo, n, finish, on_error, failed) -> None:
     import multiprocessing as mp
-    from concurrent.futures import ProcessPoolExecutor
+    from concurrent.futures import ProcessPoolExecutor, as_completed
 
     # children inherit the environment at start: numba on one thread from import on
     saved = os.environ.get("NUMBA_NUM_THREADS")
@@ -147,27 +282,41 @@ def sweep(fn: Callable, params: Sequence, *, scheduler: str | None = None, worke
     try:
         pool = ProcessPoolExecutor(max_workers=n, mp_context=mp.get_context("spawn"),
                                    initializer=_worker_init)
-        futures = [pool.submit(_call, fn, p) for p in params]
+        futures = {pool.submit(_call, fn, params[i]): i for i in todo}
     finally:
         if saved is None:
             os.environ.pop("NUMBA_NUM_THREADS", None)
         else:
             os.environ["NUMBA_NUM_THREADS"] = saved
+    taken = set()
     try:
-        return [_resolve(f.result(), on_error) for f in futures]
-    finally:  # on a failure (or Ctrl-C): drop the tasks not yet started
+        for f in as_completed(futures):
+            if f.cancelled():
+                continue
+            taken.add(f)
+            exc = f.exception()
+            finish(futures[f], ("lost", exc) if exc is not None else f.result())
+            if failed and on_error == "raise":
+                for g in futures:  # those not yet started
+                    g.cancel()
+    finally:  # on a failure (or Ctrl-C): drop the tasks not yet started, keep those that finish
         pool.shutdown(wait=True, cancel_futures=True)
+    for f, i in futures.items():
+        if f not in taken and f.done() and not f.cancelled():
+            exc = f.exception()
+            finish(i, ("lost", exc) if exc is not None else f.result())
 
 
-def _sweep_dask(fn: Callable, params: list, address: str, on_error: str) -> list:
+def _sweep_dask(fn: Callable, params: list, todo: list, address: str, finish, on_error: str) -> None:
     try:
-        from dask.distributed import Client
+        from dask.distributed import Client, as_completed
     except ImportError as exc:  # the optional extra
         raise ImportError("sweep(scheduler=...) needs dask.distributed: pip install 'hybrid[dask]'") from exc
     with Client(address, set_as_default=False) as client:
-        futures = client.map(_call, [fn] * len(params), params, pure=False)
+        futures = client.map(_call, [fn] * len(todo), [params[i] for i in todo], pure=False)
+        index = {f.key: i for f, i in zip(futures, todo)}
         try:
-            outcomes = client.gather(futures)
-            return [_resolve(o, on_error) for o in outcomes]
+            for f in as_completed(futures, loop=client.loop):
+                finish(index[f.key], f.result())
         finally:
             client.cancel(futures)

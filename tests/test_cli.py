@@ -87,6 +87,10 @@ def test_bench_quick_writes_json(tmp_path):
     for r in rows:
         assert r["us_per_step"] > 0
         assert r["ns_per_vertex_step"] == pytest.approx(r["us_per_step"] * 1e3 / r["nvert"])
+        assert r["serial_us_per_step"] > 0 and r["parallel_us_per_step"] > 0   # both builds, every size
+        assert r["default_build"] in ("serial", "parallel")
+        assert r["default_serial_steps"] + r["default_parallel_steps"] > 0
+    assert rows[0]["default_build"] == "serial" and rows[0]["default_parallel_steps"] == 0   # 80 points: never tried
     coupled = data["coupled"]
     # the median of per-repeat ratios lies between the extremes of the two medians' ratio
     assert 0.3 < coupled["ratio"] / (coupled["us_per_step"] / coupled["mj_step_us"]) < 3

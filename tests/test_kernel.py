@@ -141,10 +141,127 @@ def test_parallel_build_matches_the_serial_build():
     model = model.with_dt(0.25 * model.dt_stable_s)
     runs = {}
     for parallel in (False, True):
-        m = dataclasses.replace(model, arrays=model.arrays._replace(parallel=parallel))
-        sim = Simulation(m)
+        sim = Simulation(model, build="parallel" if parallel else "serial")
         sim.step(200)
+        assert sim.builds.steps[parallel] == 200
         runs[parallel] = (sim.vert_pos.copy(), sim.pressure)
     assert np.max(np.abs(runs[True][0] - runs[False][0])) <= 1e-15
     assert runs[True][1] == pytest.approx(runs[False][1], rel=1e-13)
     assert runs[True][1] != 0.0
+
+
+# ---------------------------------------------------------------- the build chosen as it runs
+import math
+import os
+
+import numba
+
+from hybrid import builds as builds_mod
+from hybrid.builds import BuildChoice
+from hybrid.kernel import usable_threads
+
+
+def _choice(monkeypatch, **attrs) -> BuildChoice:
+    """An auto choice as on a machine with 4 usable threads; class settings overridden."""
+    monkeypatch.setattr(builds_mod, "usable_threads", lambda: 4)
+    monkeypatch.setattr(builds_mod, "limit_threads", lambda n: None)
+    for k, v in attrs.items():
+        monkeypatch.setattr(BuildChoice, k, v)
+    return BuildChoice(True, "auto")
+
+
+def _drive(choice, us_of, nstep=10_000, calls=3):
+    """Calls of nstep steps, each piece taking us_of(parallel) microseconds a step."""
+    for _ in range(calls):
+        left = nstep
+        while left:
+            par, k = choice.chunk(left)
+            choice.record(par, k, k * us_of(par) * 1e-6)
+            left -= k
+
+
+@pytest.mark.parametrize("par_us, want_parallel", [(500.0, False), (40.0, True)])
+def test_auto_runs_the_build_that_is_faster_here(monkeypatch, par_us, want_parallel):
+    choice = _choice(monkeypatch)
+    _drive(choice, lambda par: par_us if par else 100.0, nstep=1000)   # 0.3 s of steps: one probe
+    assert choice.parallel is want_parallel and choice.probes == 1
+    slow = not want_parallel
+    # the probe ran the slower build for a few short pieces only: its loss is the probe's
+    # (and the first step, serial, which loads the compiled code)
+    assert 0 < choice.steps[slow] <= 1 + choice.PROBE_PAIRS * math.ceil(choice.PROBE_S * 1e6 / 100.0)
+    assert choice.summary()["parallel_to_serial"] == pytest.approx(par_us / 100.0)
+
+
+def test_auto_probes_again_within_its_budget(monkeypatch):
+    choice = _choice(monkeypatch)
+    _drive(choice, lambda par: 500.0 if par else 100.0, nstep=10_000, calls=200)   # 200 s of steps
+    assert not choice.parallel and choice.probes > 5   # timed again now and then ...
+    lost_s = choice.steps[True] * (500.0 - 100.0) * 1e-6
+    assert lost_s < choice.PROBE_BUDGET * 200.0   # ... losing less than the budget
+
+
+def test_auto_times_both_again_when_the_running_build_slows_down(monkeypatch):
+    choice = _choice(monkeypatch, PROBE_EVERY_S=3600.0, PROBE_BUDGET=math.inf)
+    _drive(choice, lambda par: 40.0 if par else 100.0, calls=1)
+    assert choice.parallel and choice.probes == 1
+    _drive(choice, lambda par: 40.0 if par else 100.0, calls=2)
+    assert choice.probes == 1  # no new probe before PROBE_EVERY_S while nothing changes
+    _drive(choice, lambda par: 900.0 if par else 100.0, calls=2)  # another program took a core
+    assert not choice.parallel and choice.probes == 2
+
+
+def test_fixed_builds_and_one_thread_never_probe(monkeypatch):
+    for build, parallel in (("serial", False), ("parallel", True)):
+        choice = BuildChoice(True, build)
+        assert not choice.active and choice.chunk(1000) == (parallel, 1000)
+    assert not BuildChoice(False, "auto").active  # a mesh below PARALLEL_MIN_VERTS
+    with pytest.raises(ValueError, match="build"):
+        BuildChoice(True, "fast")
+
+
+def test_threads_respect_numba_threads_and_cpu_affinity(monkeypatch):
+    threads = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)  # NUMBA_NUM_THREADS=1, or set at run time
+        assert usable_threads() == 1 and not BuildChoice(True, "auto").active
+    finally:
+        numba.set_num_threads(threads)
+    if hasattr(os, "sched_getaffinity") and threads > 1:
+        monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0})   # e.g. taskset -c 0
+        try:
+            choice = BuildChoice(True, "auto")
+            assert usable_threads() == 1 and not choice.active
+            assert numba.get_num_threads() == 1   # no more threads than CPUs to run them
+        finally:
+            numba.set_num_threads(threads)
+
+
+def test_auto_switching_builds_mid_run_changes_no_bit(monkeypatch):
+    """Probing at every call, the auto run alternates builds within calls and within
+    the frames of a run; its positions and trace equal the serial run's to the bit."""
+    import dataclasses
+
+    from hybrid.bench import bench_membrane
+    from hybrid.run import run
+    from hybrid.simulation import Simulation
+
+    model = compile_scene(bench_membrane(4))
+    model = model.with_dt(0.25 * model.dt_stable_s)
+    if not Simulation(model).builds.active:
+        pytest.skip("one usable thread: nothing to choose")
+    for k, v in (("PROBE_EVERY_S", 0.0), ("PROBE_BUDGET", math.inf), ("PROBE_S", 1e-9)):
+        monkeypatch.setattr(BuildChoice, k, v)   # a probe at every call, pieces of one step
+    traces = {}
+    for build in ("serial", "auto"):
+        sim = Simulation(model, build=build)
+        trace = run(sim, 40 * model.dt_s, frame_dt_s=3 * model.dt_s)["trace"].arrays()
+        sim.step(7)
+        traces[build] = (trace, sim.vert_pos.copy())
+        if build == "auto":
+            assert sim.builds.steps[True] > 0 and sim.builds.steps[False] > 0 and sim.builds.probes > 3
+    for key, series in traces["serial"][0].items():
+        if key == "t_s":  # t0 + k h is summed per compiled call: a cut call may move its last bits
+            np.testing.assert_allclose(series, traces["auto"][0][key], rtol=1e-14, atol=0)
+        else:
+            assert np.array_equal(series, traces["auto"][0][key]), key
+    assert np.array_equal(traces["serial"][1], traces["auto"][1])

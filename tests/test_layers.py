@@ -24,8 +24,8 @@ LAYERS = (
     ("model, rigid", ("model", "rigid", "rigid.*")),
     ("step", ("step", "readouts")),
     ("coupled step", ("coupling",)),
-    ("simulation", ("simulation",)),
-    ("observers", ("run", "record", "record.*", "render", "sweep", "outputs")),
+    ("simulation", ("simulation", "builds")),
+    ("observers", ("run", "record", "record.*", "render", "sweep", "grid", "outputs")),
     ("public API", ("",)),  # hybrid/__init__.py
     ("bench, command line, studies", ("bench", "bench.*", "bench_rigid", "cli", "__main__", "docgen", "studies",
                                       "studies.*")),
