@@ -25,7 +25,7 @@ LAYERS = (
     ("step", ("step",)),
     ("coupled step", ("coupling",)),
     ("simulation", ("simulation",)),
-    ("observers", ("run", "record", "record.*", "render", "sweep", "outputs")),
+    ("observers", ("run", "record", "record.*", "render", "sweep", "outputs", "provenance")),
     ("public API", ("",)),  # hybrid/__init__.py
     ("bench, command line, studies", ("bench", "bench.*", "bench_rigid", "cli", "__main__", "studies",
                                       "studies.*")),
