@@ -193,9 +193,12 @@ def run_coupled_frames(m, s, links, mj, rk4, stops, step0, no_hist, frame_pos, f
     # Scratch:  links.force, links.vel; no_hist, an empty WrenchHistory (not recorded)
     """
     done = step0
+    # False (the history is empty), but typed as a run-time bool as `Coupling.run` passes it:
+    # a literal False would compile run_coupled a second time, for its own signature
+    record = no_hist.xfrc.shape[0] > 0
     for i in range(stops.shape[0]):
         n = stops[i] - done
-        k = run_coupled(m, s, links, mj, rk4, n, done, False, no_hist)
+        k = run_coupled(m, s, links, mj, rk4, n, done, record, no_hist)
         done += k
         if k < n:
             return i

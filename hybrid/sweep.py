@@ -33,6 +33,12 @@ when their constructor takes keyword-only arguments.
 
 `workers=1` runs the tasks one after the other in this process (no pickling;
 for debugging).
+
+Compiling once: the workers share the on-disk compile cache, but on a first run
+each would compile the same kernels at once, each taking as long as one alone
+would on the whole machine. So the first task runs alone in a worker (`_first_alone`), compiling and
+caching what it needs, before the others fan out and load it: at most one round
+of tasks longer when the cache is warm.
 """
 
 from __future__ import annotations
@@ -147,7 +153,7 @@ def sweep(fn: Callable, params: Sequence, *, scheduler: str | None = None, worke
     try:
         pool = ProcessPoolExecutor(max_workers=n, mp_context=mp.get_context("spawn"),
                                    initializer=_worker_init)
-        futures = [pool.submit(_call, fn, p) for p in params]
+        futures = [_first_alone(pool, fn, params[0])] + [pool.submit(_call, fn, p) for p in params[1:]]
     finally:
         if saved is None:
             os.environ.pop("NUMBA_NUM_THREADS", None)
@@ -157,6 +163,20 @@ def sweep(fn: Callable, params: Sequence, *, scheduler: str | None = None, worke
         return [_resolve(f.result(), on_error) for f in futures]
     finally:  # on a failure (or Ctrl-C): drop the tasks not yet started
         pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _first_alone(pool, fn: Callable, p: Any):
+    """The first task's future, once it has finished alone in a worker: the kernels
+    it compiled are then in the disk cache, where the other workers load them."""
+    from concurrent.futures import wait
+
+    future = pool.submit(_call, fn, p)
+    try:
+        wait([future])
+    except BaseException:  # Ctrl-C: the pool goes with it
+        pool.shutdown(wait=False, cancel_futures=True)
+        raise
+    return future
 
 
 def _sweep_dask(fn: Callable, params: list, address: str, on_error: str) -> list:
