@@ -161,7 +161,8 @@ PLOT_BINS = 2000
 
 # the panels a plot may have, in order: (series, label, log scale)
 _PANELS = (("rib_lift_mm", "rib lift (mm)", False), ("apex_descent_mm", "apex descent (mm)", False),
-           ("volume_rel_error", "|V - V0| / V0", True), ("volume_rel_change", "|V - V0| / V0", False),
+           ("volume_rel_error", "volume error |V - V0| / V0", True),
+           ("volume_rel_change", "volume change |V - V0| / V0", False),
            ("pressure_pa", "pressure (Pa)", False), ("muscle_n_per_m", "muscle stiffness (N/m)", False))
 
 

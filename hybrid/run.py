@@ -1,4 +1,4 @@
-"""Run a scene to the end and summarise it: `summary.json` and `breathing.png`.
+"""Run a scene to the end and summarise it: the summary, its metrics and the trace.
 
 The runner is an observer: it never changes the state. A frame is taken every
 `frame_dt_s` of simulated time (and at least every `MAX_STEPS_PER_CALL` steps, and
