@@ -44,7 +44,7 @@ def _cmd_run(args) -> int:
 
 
 #: what a first run's compile takes on a 2-core machine (s), membrane only or with a rigid part
-COMPILE_ESTIMATE_S = {"membrane": 20, "rigid": 40}
+COMPILE_ESTIMATE_S = {"membrane": 20, "rigid": 25}
 
 
 def _load_and_run(args, scene) -> int:

@@ -16,7 +16,7 @@ from .errors import ConstraintError, SimulationDiverged
 from .model import TERMS, Model
 from .step import (DIVERGED_NONFINITE, OK, S_MAXDISP, S_PHI, S_PRESSURE, S_TIME, VOLUME_FAILED, Frames,
                    kinetic_energy_of, membrane_advance, membrane_forces, new_state, run_membrane,
-                   run_membrane_frames)
+                   run_membrane_frames, step_par)
 
 __all__ = ["Simulation"]
 
@@ -125,7 +125,7 @@ class Simulation:
         m, s = self.model.arrays, self.state
         if not self.model.python_schedules:
             if self.rigid is None:
-                done = run_membrane(m, s, int(n), self.steps_done)
+                done = run_membrane(m, s, int(n), self.steps_done, step_par(m))
             else:  # the whole coupled loop in one compiled call (hybrid.coupling)
                 done = self.rigid.run(s, int(n), self.steps_done)
             self.steps_done += done
@@ -136,8 +136,8 @@ class Simulation:
             t = float(s.scal[S_TIME])
             self._python_schedules(t)
             if self.rigid is None:
-                membrane_forces(m, s, t)
-                code = membrane_advance(m, s, t, self.steps_done)
+                membrane_forces(m, s, t, step_par(m))
+                code = membrane_advance(m, s, t, self.steps_done, step_par(m))
             else:
                 code = self.rigid.step(s, t, self.steps_done)
             if code != OK:
@@ -176,7 +176,7 @@ class Simulation:
                              f"received {stops[:3].tolist()}...")
         m, s = self.model.arrays, self.state
         if self.rigid is None:
-            count = run_membrane_frames(m, s, stops, self.steps_done, frames.pos, frames.scal)
+            count = run_membrane_frames(m, s, stops, self.steps_done, frames.pos, frames.scal, step_par(m))
         else:
             count = self.rigid.run_frames(s, stops, self.steps_done, frames)
         frames.count = int(count)

@@ -5,6 +5,7 @@ nothing. A sweep runs its first task alone, so that the others load what it comp
 from __future__ import annotations
 
 import os
+import re
 import subprocess
 import sys
 import time
@@ -27,7 +28,8 @@ def test_a_first_run_says_it_compiles_and_a_second_does_not(tmp_path):
     cold = _run(cache, tmp_path / "a")
     assert cold.returncode == 0, cold.stderr
     lines = cold.stderr.splitlines()
-    assert lines[0] == "hybrid: compiling kernels for this scene, first run only, about 20 s", cold.stderr
+    assert re.fullmatch(r"hybrid: compiling kernels for this scene, first run only, about \d+ s", lines[0]), \
+        cold.stderr
     assert lines[-1].startswith("hybrid: compiled in ") and str(cache) in lines[-1]
     assert "Traceback" not in cold.stderr
     warm = _run(cache, tmp_path / "b")
