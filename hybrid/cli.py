@@ -13,7 +13,7 @@ import sys
 from pathlib import Path
 
 from .errors import HybridError
-from .kernel import prune_old_caches
+from .kernel import compile_notice, prune_old_caches
 
 __all__ = ["main"]
 
@@ -32,15 +32,27 @@ def _out_arg(text: str) -> Path:
 
 
 def _cmd_run(args) -> int:
-    from .model import compile_scene
     from .resolve import resolve_scene
-    from .run import FolderLock, default_out, out_folder, run_steps
-    from .simulation import Simulation
 
     # everything that can be refused is, before the output folder is touched
     scene = resolve_scene(args.scene, overrides=args.set or (), without=args.without or ())
     if args.dt is not None:
         scene = dataclasses.replace(scene, dt_s=args.dt)
+    # a first run (nothing in the compile cache) says so before it compiles
+    with compile_notice(COMPILE_ESTIMATE_S["rigid" if scene.rigid is not None else "membrane"]):
+        return _load_and_run(args, scene)
+
+
+#: what a first run's compile takes on a 2-core machine (s), membrane only or with a rigid part
+COMPILE_ESTIMATE_S = {"membrane": 20, "rigid": 25}
+
+
+def _load_and_run(args, scene) -> int:
+    from .model import compile_scene
+    from .provenance import run_provenance
+    from .run import claim_folder, default_out, run_steps
+    from .simulation import Simulation
+
     duration = scene.duration_s if args.duration is None else args.duration
     out = _out_arg(args.out) if args.out is not None else default_out(scene.name)
     sim = Simulation(compile_scene(scene))
@@ -48,21 +60,19 @@ def _cmd_run(args) -> int:
     if not args.no_record:
         from .record import record_steps
         record_steps(args.record_every, sim.model.dt_s, name="--record-every")
-    created = not out.exists()
-    out = out_folder(out)
+    chosen, lock = claim_folder(out, explicit=args.out is not None, overwrite=args.overwrite)
+    if chosen != out:
+        sys.stderr.write(f"hybrid: {out} holds an earlier run; this one goes to {chosen} "
+                         f"(--overwrite replaces it)\n")
+    provenance = run_provenance(sim, command=["hybrid", *args.argv], overrides=args.set or [],
+                                without=args.without or [])
     try:
-        lock = FolderLock(out)
-    except HybridError:
-        if created:
-            out.rmdir()
-        raise
-    try:
-        return _run_into(args, sim, duration, out)
+        return _run_into(args, sim, duration, chosen, provenance)
     finally:
         lock.release()
 
 
-def _run_into(args, sim, duration: float, out: Path) -> int:
+def _run_into(args, sim, duration: float, out: Path, provenance: dict) -> int:
     """The run, its folder locked. summary.json says "running" from the start, then
     "ok", "failed" or "interrupted": never an earlier run's. SIGINT (Ctrl-C), SIGTERM
     and SIGHUP stop the run after its current compiled call (a second one at once);
@@ -74,7 +84,8 @@ def _run_into(args, sim, duration: float, out: Path) -> int:
     from .run import RunFailed, RunInterrupted, run, write_outputs, write_summary
 
     model = sim.model
-    base = {"scene": model.scene.name, "dt": model.dt_s, "duration_requested_s": duration}
+    base = {"scene": model.scene.name, "dt": model.dt_s, "duration_requested_s": duration,
+            "provenance": provenance}
     write_summary({**base, "status": "running", "pid": os.getpid()}, out)
     caught = []
 
@@ -92,10 +103,10 @@ def _run_into(args, sim, duration: float, out: Path) -> int:
             try:
                 if not args.no_record:
                     from .record import Recorder
-                    recorder = Recorder(out / "run.mcap", sim, every_s=args.record_every)
+                    recorder = Recorder(out / "run.mcap", sim, every_s=args.record_every, provenance=provenance)
                 try:
                     result = run(sim, duration, progress=True, observers=[recorder] if recorder else [],
-                                 trace_spill=spill, stop=lambda: bool(caught))
+                                 trace_spill=spill, stop=lambda: bool(caught), provenance=provenance)
                 except RunFailed as failed:
                     result, failure = failed.result, failed.error
                 except RunInterrupted as interrupted:
@@ -122,10 +133,26 @@ def _run_into(args, sim, duration: float, out: Path) -> int:
     if s["status"] == "interrupted":
         return _interrupted(caught, sim, out)
     print(f"{s['scene']}: {s['steps']} steps of {s['dt']:g} s in {s['wall_s']:.2f} s "
-          f"({s['us_per_step']:.1f} us/step); volume error max {s['volume_rel_error_max']:.1e}; "
-          f"rib lift {s['rib_lift_mm']:.2f} mm; apex descent {s['apex_descent_mm']:.2f} mm; "
-          f"pressure {s['pressure_min_pa']:.0f} to {s['pressure_max_pa']:.0f} Pa -> {out}")
+          f"({s['us_per_step']:.1f} us/step); {_metrics_line(s)} -> {out}")
     return 0
+
+
+def _metrics_line(s: dict) -> str:
+    """The summary's metrics in words, only those of the parts the scene has."""
+    m = s["metrics"]
+    words = []
+    if s["volume_rel_error_max"] is not None:
+        words.append(f"volume error max {s['volume_rel_error_max']:.1e}")
+    elif "volume_rel_change" in m:
+        words.append(f"volume change max {m['volume_rel_change']['max']:.1e}")
+    if "rib_lift_mm" in m:
+        r = m["rib_lift_mm"]
+        words.append(f"rib lift {r['min']:.2f} to {r['max']:.2f} mm")
+    a = m["apex_descent_mm"]
+    words.append(f"apex descent {a['min']:.2f} to {a['max']:.2f} mm")
+    if "pressure_pa" in m:
+        words.append(f"pressure {m['pressure_pa']['min']:.0f} to {m['pressure_pa']['max']:.0f} Pa")
+    return "; ".join(words)
 
 
 def _interrupted(caught, sim, out: Path) -> int:
@@ -193,7 +220,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("scene", nargs="?", help="a scene TOML file, or a built-in name: breathing, membrane_demo")
     r.add_argument("--duration", type=float, help="simulated time (s); default: the scene's")
     r.add_argument("--dt", type=float, help="time step (s); default: the scene's")
-    r.add_argument("--out", help="output folder (default runs/SCENE, SCENE the scene's name)")
+    r.add_argument("--out", help="output folder (default runs/SCENE, or runs/SCENE-2, -3, ... when it holds a run)")
+    r.add_argument("--overwrite", action="store_true",
+                   help="write into the output folder even if it holds an earlier run")
     r.add_argument("--yes", action="store_true", help="run even more than 1e8 steps")
     r.add_argument("--without", action="append", metavar="NAME", help="drop a force term or constraint by name")
     r.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a scene value, e.g. dt_s=5e-4")
@@ -235,7 +264,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     prune_old_caches()
+    argv = sys.argv[1:] if argv is None else list(argv)
     args = build_parser().parse_args(argv)
+    args.argv = argv  # the command line, for the run's provenance
     try:
         return args.func(args)
     except HybridError as exc:

@@ -45,7 +45,7 @@ from .errors import RigidError, SimulationDiverged
 from .kernel import kernel
 from .rigid import CoupledRigid, mj_step_ctypes, point_wrench_kernel, site_vel_kernel
 from .step import (OK, S_PRESSURE, S_TIME, T_GRAVITY, Frames, MembraneState, capture_frame, membrane_advance,
-                   membrane_forces)
+                   membrane_forces, step_par)
 
 __all__ = ["LinkArrays", "MjViews", "WrenchHistory", "Coupling", "run_coupled", "run_coupled_frames"]
 
@@ -126,7 +126,7 @@ class WrenchHistory(NamedTuple):
 # ----------------------------------------------------------------- the coupled step
 
 @kernel
-def run_coupled(m, s, links, mj, rk4, nstep, step0, record, hist):
+def run_coupled(m, s, links, mj, rk4, nstep, step0, record, hist, par=True):
     """nstep coupled steps (module docstring, steps 1-5). Returns the steps done
     (< nstep when the membrane fails; its status is in s.status).
 
@@ -136,6 +136,7 @@ def run_coupled(m, s, links, mj, rk4, nstep, step0, record, hist):
     # Data out: s and MuJoCo's state (through mj.data_ptr) after the steps done;
     #           mj.xfrc_applied; hist.xfrc[k], hist.qpos[k] when record
     # Scratch:  links.force, links.vel
+    # par:      None: the membrane's serial passes only (`hybrid.step.step_par`)
     """
     h = m.dt
     t0 = s.scal[S_TIME]
@@ -145,7 +146,7 @@ def run_coupled(m, s, links, mj, rk4, nstep, step0, record, hist):
     n = link_vert.shape[0]
     for k in range(nstep):
         t = t0 + k * h
-        membrane_forces(m, s, t)
+        membrane_forces(m, s, t, par)
         p = s.scal[S_PRESSURE]
         for j in range(n):
             i = link_vert[j]
@@ -172,7 +173,7 @@ def run_coupled(m, s, links, mj, rk4, nstep, step0, record, hist):
             for a in range(3):
                 pos[i, a] = mj.site_xpos[sid, a]
                 vel[i, a] = link_vel[j, a]
-        if membrane_advance(m, s, t, step0 + k) != OK:
+        if membrane_advance(m, s, t, step0 + k, par) != OK:
             return k
         s.scal[S_TIME] = t0 + (k + 1) * h
     return nstep
@@ -180,7 +181,7 @@ def run_coupled(m, s, links, mj, rk4, nstep, step0, record, hist):
 
 @kernel
 def run_coupled_frames(m, s, links, mj, rk4, stops, step0, no_hist, frame_pos, frame_scal, frame_body_pos,
-                       frame_body_quat):
+                       frame_body_quat, par=True):
     """`run_coupled` to each step index of stops, capturing a frame at each; returns
     the frames captured (fewer than stops when a step fails).
 
@@ -193,9 +194,12 @@ def run_coupled_frames(m, s, links, mj, rk4, stops, step0, no_hist, frame_pos, f
     # Scratch:  links.force, links.vel; no_hist, an empty WrenchHistory (not recorded)
     """
     done = step0
+    # False (the history is empty), but typed as a run-time bool as `Coupling.run` passes it:
+    # a literal False would compile run_coupled a second time, for its own signature
+    record = no_hist.xfrc.shape[0] > 0
     for i in range(stops.shape[0]):
         n = stops[i] - done
-        k = run_coupled(m, s, links, mj, rk4, n, done, False, no_hist)
+        k = run_coupled(m, s, links, mj, rk4, n, done, record, no_hist, par)
         done += k
         if k < n:
             return i
@@ -293,8 +297,9 @@ class Coupling:
         hist = (WrenchHistory(np.empty((nstep, mjm.nbody, 6)), np.empty((nstep, mjm.nq))) if record
                 else self._no_hist)
         mj_time = self.system.data.time
-        done = run_coupled(self.model.arrays if arrays is None else arrays, state, self._links, self._mj, self._rk4(), int(nstep), int(step0),
-                           record, hist)
+        a = self.model.arrays if arrays is None else arrays
+        done = run_coupled(a, state, self._links, self._mj, self._rk4(), int(nstep), int(step0), record, hist,
+                           step_par(a))
         if record:
             self._xfrc_hist.append(hist.xfrc[:done])
             self._qpos_hist.append(hist.qpos[:done])
@@ -318,8 +323,10 @@ class Coupling:
         """`run` to each step index of stops in one compiled call, capturing a frame at
         each into frames; returns the frames captured. (Without wrench recording.)"""
         mj_time = self.system.data.time
-        count = run_coupled_frames(self.model.arrays if arrays is None else arrays, state, self._links, self._mj, self._rk4(), stops, int(step0),
-                                   self._no_hist, frames.pos, frames.scal, frames.body_pos, frames.body_quat)
+        a = self.model.arrays if arrays is None else arrays
+        count = run_coupled_frames(a, state, self._links, self._mj, self._rk4(), stops, int(step0),
+                                   self._no_hist, frames.pos, frames.scal, frames.body_pos, frames.body_quat,
+                                   step_par(a))
         # a reset anywhere in these frames makes none of them trustworthy (frames.count stays 0)
         self._check_not_reset(state, mj_time, step0, (int(stops[count - 1]) if count else int(step0)) - int(step0))
         return count

@@ -44,7 +44,7 @@ from numba import njit
 
 __all__ = ["CACHE_DIR", "FAST", "FLAGS", "jit", "kernel", "kernel_twin", "CHUNK_VERTS", "PARALLEL_MIN_VERTS",
            "use_parallel", "usable_threads", "limit_threads", "chunk_count", "kernel_sources",
-           "prune_old_caches"]
+           "prune_old_caches", "compile_notice", "numba_info"]
 
 # Fast-math without the flags that assume no NaN or infinity: fused
 # multiply-adds and reciprocals, but the divergence check still sees NaN.
@@ -270,3 +270,78 @@ def use_parallel(nvert: int) -> bool:
     """Whether a mesh of nvert points may run the parallel build (then timed
     against the serial one as it runs, `hybrid.builds.BuildChoice`)."""
     return nvert >= PARALLEL_MIN_VERTS and usable_threads() > 1
+
+
+def numba_info() -> dict:
+    """numba's version and the threads its parallel builds run on (for a run's provenance)."""
+    return {"numba": numba.__version__, "numba_threads": numba.get_num_threads()}
+
+
+@contextlib.contextmanager
+def compile_notice(estimate_s: float, stream=None, *, tick_s: float = 1.0):
+    """Say when kernels compile within the block: at the first compile (numba's
+    "numba:compile" event fires only when no build is cached, before compiling), one
+    line "compiling kernels for this scene, first run only, about N s" on `stream`
+    (stderr); then, while compiling, the seconds so far against the estimate (a
+    bar redrawn on a terminal, else a line every 10 s); at the end of the block
+    the time it took. Nothing at all when every kernel came from the cache."""
+    import sys
+    import threading
+
+    from numba.core import event
+
+    stream = sys.stderr if stream is None else stream
+    tty = hasattr(stream, "isatty") and stream.isatty()
+    state = {"depth": 0, "t0": None, "spent": 0.0, "since": None, "shown": -1}
+    lock = threading.Lock()
+    done = threading.Event()
+
+    def write(text: str) -> None:
+        try:
+            stream.write(text)
+            stream.flush()
+        except (OSError, ValueError):  # a closed or broken stream: the run goes on
+            pass
+
+    def progress() -> None:
+        while not done.wait(tick_s):
+            with lock:
+                if state["since"] is None:
+                    continue
+                el = state["spent"] + time.perf_counter() - state["since"]
+            if tty:
+                n = min(int(30 * el / estimate_s), 30)
+                write(f"\r[{'#' * n}{'.' * (30 - n)}] compiling, {el:4.0f} s of about {estimate_s:.0f} s")
+            elif int(el // 10) > state["shown"] and el >= 10:
+                state["shown"] = int(el // 10)
+                write(f"hybrid: compiling, {10 * state['shown']} s\n")
+
+    class Notice(event.Listener):
+        def on_start(self, ev):
+            with lock:
+                state["depth"] += 1
+                if state["depth"] > 1:
+                    return
+                if state["t0"] is None:
+                    state["t0"] = time.perf_counter()
+                    write(f"hybrid: compiling kernels for this scene, first run only, about {estimate_s:.0f} s\n")
+                    threading.Thread(target=progress, name="hybrid-compile-notice", daemon=True).start()
+                state["since"] = time.perf_counter()
+
+        def on_end(self, ev):
+            with lock:
+                state["depth"] -= 1
+                if state["depth"] == 0 and state["since"] is not None:
+                    state["spent"] += time.perf_counter() - state["since"]
+                    state["since"] = None
+
+    listener = Notice()
+    event.register("numba:compile", listener)
+    try:
+        yield
+    finally:
+        event.unregister("numba:compile", listener)
+        done.set()
+        if state["t0"] is not None:
+            write(("\n" if tty else "") + f"hybrid: compiled in {state['spent']:.1f} s; "
+                  f"later runs load the kernels from {CACHE_DIR}\n")

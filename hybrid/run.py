@@ -1,4 +1,4 @@
-"""Run a scene to the end and summarise it: `summary.json` and `breathing.png`.
+"""Run a scene to the end and summarise it: the summary, its metrics and the trace.
 
 The runner is an observer: it never changes the state. A frame is taken every
 `frame_dt_s` of simulated time (and at least every `MAX_STEPS_PER_CALL` steps, and
@@ -27,25 +27,33 @@ from . import checks
 from .errors import HybridError, reduce_exception
 from .model import Model
 from .schedule import Breathing, schedule_eval, stack_schedules
-from .scene import Muscle
+from .outputs import (LOCK_NAME, FolderLock, claim_folder, default_out, holds_run, out_folder, plot_trace,
+                      write_outputs, write_summary)
+from .provenance import run_provenance
+from .scene import Muscle, SoftVolume, Volume
 from .simulation import Simulation
 from .step import F_KE, F_PRESSURE, F_TIME, F_VOLUME, capture_frame
+from .terms.volume import face_volume
 
-__all__ = ["TRACE_KEYS", "Trace", "run", "RunFailed", "RunInterrupted", "FolderLock", "default_out", "run_steps",
-           "out_folder", "write_summary", "write_outputs"]
+__all__ = ["TRACE_KEYS", "METRIC_KEYS", "Trace", "scene_parts", "metric_table", "run", "RunFailed", "RunInterrupted", "FolderLock", "default_out", "run_steps",
+           "out_folder", "claim_folder", "holds_run", "write_summary", "write_outputs", "plot_trace"]
 
 
-#: the trace's series, one column each (SI units unless the name says mm)
+#: the trace's series, one column each (SI units unless the name says mm); a series
+#: of a part the scene lacks is NaN throughout (README, "Metrics")
 TRACE_KEYS = (
     "t_s",
-    "volume_m3",
-    "rib_lift_mm",        # cranial (+z) displacement of the linked points' centroid
+    "volume_m3",          # enclosed volume (closed surfaces)
+    "rib_lift_mm",        # cranial (+z) displacement of the linked points' centroid (scenes with ribs)
     "apex_descent_mm",    # caudal (-z) displacement of the apex
-    "volume_rel_error",
-    "pressure_pa",
-    "muscle_n_per_m",
+    "volume_rel_error",   # |V - V0| / V0 under the exact volume constraint
+    "pressure_pa",        # gauge pressure (scenes with a volume term)
+    "muscle_n_per_m",     # the first muscle's stiffness (scenes with a muscle)
     "kinetic_energy_j",
+    "volume_rel_change",  # |V - V0| / V0 whatever keeps the volume (closed surfaces)
 )
+#: the series a summary gives min, max and their times of (all but the time)
+METRIC_KEYS = TRACE_KEYS[1:]
 _COL = {key: i for i, key in enumerate(TRACE_KEYS)}
 
 #: rows a streamed trace holds in memory before it writes them to its file
@@ -59,7 +67,8 @@ class Trace:
     array then doubles). `spill`: a binary file (e.g. an unlinked temporary file)
     to stream the rows to, `SPILL_ROWS` at a time, so that memory does not grow
     with the run; `arrays()` then reads them back. The running minima and maxima
-    of each series (`lowest`, `highest`) are kept as rows come."""
+    of each series (`lowest`, `highest`) and their times (`t_lowest`, `t_highest`: the
+    first frame reaching them) are kept as rows come."""
 
     def __init__(self, capacity: int = 1024, spill=None):
         self._spill = spill
@@ -69,6 +78,8 @@ class Trace:
         self._written = 0   # rows in the spill file
         self.lowest = np.full(len(TRACE_KEYS), np.inf)
         self.highest = np.full(len(TRACE_KEYS), -np.inf)
+        self.t_lowest = np.full(len(TRACE_KEYS), np.nan)
+        self.t_highest = np.full(len(TRACE_KEYS), np.nan)
 
     def __len__(self) -> int:
         return self._written + self._held
@@ -89,8 +100,15 @@ class Trace:
 
     def commit(self, k: int) -> None:
         rows = self._buf[self._held:self._held + k]
-        np.minimum(self.lowest, rows.min(axis=0, initial=np.inf), out=self.lowest)
-        np.maximum(self.highest, rows.max(axis=0, initial=-np.inf), out=self.highest)
+        if k:
+            cols = np.arange(len(TRACE_KEYS))
+            for pick, best, when, better in ((rows.argmin(axis=0), self.lowest, self.t_lowest, np.less),
+                                             (rows.argmax(axis=0), self.highest, self.t_highest, np.greater)):
+                value = rows[pick, cols]
+                # a series of NaN (a part the scene lacks) stays NaN
+                new = better(value, best) | (np.isnan(value) & ~np.isnan(best))
+                best[new] = value[new]
+                when[new] = rows[pick[new], 0]
         self._held += k
 
     def last(self, k: int) -> np.ndarray:
@@ -152,6 +170,45 @@ class Trace:
             reduce(self._buf[:self._held])
         table = np.concatenate(parts)
         return {key: table[:, i] for i, key in enumerate(TRACE_KEYS)}
+
+
+def scene_parts(model: Model) -> frozenset:
+    """What the scene has that some metrics need: "ribs" (points linked to rigid
+    bodies), "closed surface", "volume constraint" (the exact one), "pressure" (a
+    volume term, exact or soft) and "muscle"."""
+    on = model.arrays.term_on
+    parts = {"ribs": model.link_vert.size > 0, "closed surface": model.mesh.closed,
+             "volume constraint": bool(on[Volume.id]), "pressure": bool(on[Volume.id] or on[SoftVolume.id]),
+             "muscle": _breathing(model)[0] is not None}
+    return frozenset(name for name, has in parts.items() if has)
+
+
+def metric_table(trace: Trace) -> dict:
+    """{series: {"min", "max", "t_min_s", "t_max_s"}} for each series of `METRIC_KEYS`
+    the scene has (a series of NaN, a part it lacks, is left out)."""
+    table = {}
+    for key in METRIC_KEYS:
+        i = _COL[key]
+        if np.isfinite(trace.highest[i]):
+            table[key] = {"min": float(trace.lowest[i]), "max": float(trace.highest[i]),
+                          "t_min_s": float(trace.t_lowest[i]), "t_max_s": float(trace.t_highest[i])}
+    return table
+
+
+def _headline(trace: Trace) -> dict:
+    """The summary's top-level metrics (kept for earlier scripts; README "Metrics"):
+    only those of the parts the scene has, but `volume_rel_error_max`, null without
+    the exact volume constraint."""
+    table = metric_table(trace)
+    head = {"volume_rel_error_max": table["volume_rel_error"]["max"] if "volume_rel_error" in table else None}
+    if "volume_rel_change" in table:
+        head["volume_rel_change_max"] = table["volume_rel_change"]["max"]
+    if "pressure_pa" in table:
+        head["pressure_min_pa"], head["pressure_max_pa"] = table["pressure_pa"]["min"], table["pressure_pa"]["max"]
+    if "rib_lift_mm" in table:
+        head["rib_lift_mm"] = table["rib_lift_mm"]["max"]
+    head["apex_descent_mm"] = table["apex_descent_mm"]["max"]
+    return head
 
 
 def _apex_vertex(model: Model) -> int:
@@ -238,7 +295,7 @@ def _count_stops(nstep: int, periods, extra) -> int:
 
 
 def run(sim: Simulation, duration_s: float, *, frame_dt_s: float = 0.01, progress: bool = False,
-        observers=(), trace_spill=None, stop=None) -> dict:
+        observers=(), trace_spill=None, stop=None, provenance: dict | None = None) -> dict:
     """Run `sim` for `duration_s`; returns `{"summary": dict, "trace": Trace}`, the
     summary one level down: `run(sim, 4.0)["summary"]["apex_descent_mm"]`
     (docs/metrics.md defines every key of both).
@@ -254,7 +311,9 @@ def run(sim: Simulation, duration_s: float, *, frame_dt_s: float = 0.01, progres
     run's memory does not grow with its length; by default the trace is held in
     memory (64 bytes a frame). `stop`: a function of no argument, asked after each
     compiled call; when it returns true the run stops there as on Ctrl-C (a signal
-    handler can set it without breaking a call in the middle).
+    handler can set it without breaking a call in the middle). `provenance`: the
+    summary's "provenance" table (`hybrid.provenance.run_provenance`; by default
+    made here, without the command line's overrides and removed terms).
 
     On a HybridError the summary holds "status": "failed" and "error", and the
     error is re-raised as `RunFailed` carrying the partial result; on a
@@ -271,7 +330,9 @@ def run(sim: Simulation, duration_s: float, *, frame_dt_s: float = 0.01, progres
     rest = model.mesh.vert_pos
     apex_z0 = rest[apex, 2]
     rib_z0 = rest[link, 2].mean() if link.size else 0.0
-    v0 = model.arrays.vol0
+    parts = scene_parts(model)
+    # the rest volume: the volume terms' own, else the closed surface's (nothing for an open one)
+    v0 = model.arrays.vol0 or (float(face_volume(model.arrays.face_vert, rest)) if model.mesh.closed else 0.0)
     muscle_sched, breath = _breathing(model)
     # the muscle stiffness at each frame: its table stacked once, evaluated compiled
     muscle_table, muscle_fns = stack_schedules([muscle_sched]) if muscle_sched is not None else (None, [])
@@ -309,15 +370,21 @@ def run(sim: Simulation, duration_s: float, *, frame_dt_s: float = 0.01, progres
         pos, scal = frames.pos[:k], frames.scal[:k]
         rows = trace.reserve(k)
         rows[:, _COL["t_s"]] = scal[:, F_TIME]
-        rows[:, _COL["apex_descent_mm"]] = -(pos[:, apex, 2] - apex_z0) * 1e3
-        rows[:, _COL["rib_lift_mm"]] = (_mean_z(pos, link) - rib_z0) * 1e3 if link.size else 0.0
+        rows[:, _COL["apex_descent_mm"]] = (apex_z0 - pos[:, apex, 2]) * 1e3
+        rows[:, _COL["rib_lift_mm"]] = (_mean_z(pos, link) - rib_z0) * 1e3 if "ribs" in parts else np.nan
         vol = scal[:, F_VOLUME]
-        rows[:, _COL["volume_m3"]] = vol
-        rows[:, _COL["volume_rel_error"]] = np.abs(vol - v0) / v0 if v0 else 0.0
-        rows[:, _COL["pressure_pa"]] = scal[:, F_PRESSURE]
+        closed = "closed surface" in parts
+        rows[:, _COL["volume_m3"]] = vol if closed else np.nan
+        rows[:, _COL["volume_rel_change"]] = np.abs(vol - v0) / v0 if closed else np.nan
+        rows[:, _COL["volume_rel_error"]] = rows[:, _COL["volume_rel_change"]] if "volume constraint" in parts \
+            else np.nan
+        rows[:, _COL["pressure_pa"]] = scal[:, F_PRESSURE] if "pressure" in parts else np.nan
         rows[:, _COL["kinetic_energy_j"]] = scal[:, F_KE]
-        for j, t in enumerate(scal[:, F_TIME].tolist()):
-            rows[j, _COL["muscle_n_per_m"]] = muscle_at(t)
+        if "muscle" in parts:
+            for j, t in enumerate(scal[:, F_TIME].tolist()):
+                rows[j, _COL["muscle_n_per_m"]] = muscle_at(t)
+        else:
+            rows[:, _COL["muscle_n_per_m"]] = np.nan
         trace.commit(k)
         for obs in batch_observers:
             obs.frames(sim, frames, trace)
@@ -365,7 +432,6 @@ def run(sim: Simulation, duration_s: float, *, frame_dt_s: float = 0.01, progres
         if bar:
             bar.close()
     wall = time.perf_counter() - wall0
-    lo, hi = trace.lowest, trace.highest
     summary = {
         "scene": model.scene.name,
         "status": "ok" if error is None and interrupted is None else "failed" if error else "interrupted",
@@ -374,17 +440,15 @@ def run(sim: Simulation, duration_s: float, *, frame_dt_s: float = 0.01, progres
         "duration_s": sim.time,
         "wall_s": wall,
         "us_per_step": wall / max(sim.steps_done, 1) * 1e6,
-        "volume_rel_error_max": float(hi[_COL["volume_rel_error"]]),
-        "pressure_min_pa": float(lo[_COL["pressure_pa"]]),
-        "pressure_max_pa": float(hi[_COL["pressure_pa"]]),
-        "rib_lift_mm": float(hi[_COL["rib_lift_mm"]]),
-        "apex_descent_mm": float(hi[_COL["apex_descent_mm"]]),
+        **_headline(trace),
         "rest_return_mm": rest_return_mm,
+        "metrics": metric_table(trace),
     }
     if error is not None:
         summary["error"] = str(error)
     if interrupted is not None:
         summary["duration_requested_s"] = nstep * h
+    summary["provenance"] = provenance if provenance is not None else run_provenance(sim)
     result = {"summary": summary, "trace": trace}
     if error is not None:
         raise RunFailed(error, result) from error
@@ -411,107 +475,6 @@ class RunInterrupted(KeyboardInterrupt):
     def __init__(self, result: dict):
         super().__init__(f"interrupted at t = {result['summary']['duration_s']:.6g} s")
         self.result = result
-
-
-def out_folder(out: Path) -> Path:
-    """The output folder `out`, created now: a folder that cannot be written fails
-    before the run (a HybridError naming --out)."""
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryFile(dir=out):
-            pass
-    except OSError as exc:
-        raise HybridError(f"--out: expected a folder that can be created and written, received {str(out)!r} "
-                          f"({exc.strerror or exc})") from None
-    return out
-
-
-def default_out(scene_name: str) -> Path:
-    """runs/<scene name>, the folder of a run without --out. The name is a name:
-    one that could lead elsewhere (a path separator, '..', a NUL) or none at all
-    is refused, so that only --out chooses where a run writes."""
-    checks.plain_name("scene name", scene_name)
-    return Path("runs") / scene_name
-
-
-#: the lock file a run holds in its output folder, with the process id inside
-LOCK_NAME = ".hybrid-run.lock"
-
-
-class FolderLock:
-    """An exclusive lock on an output folder (fcntl.flock on `LOCK_NAME` inside it)
-    for as long as a run writes there: a second run into the same folder is refused
-    with a HybridError naming the first's process id. The lock goes with the process,
-    however it ends; the file stays."""
-
-    def __init__(self, folder: Path):
-        import fcntl
-        import os
-
-        path = folder / LOCK_NAME
-        self._fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
-        try:
-            fcntl.flock(self._fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            holder = os.pread(self._fd, 32, 0).decode(errors="replace").strip() or "unknown"
-            os.close(self._fd)
-            raise HybridError(f"--out: expected a folder no other run is writing, received {str(folder)!r}, "
-                              f"in use by hybrid run process {holder}; wait for it or choose another --out") from None
-        os.ftruncate(self._fd, 0)
-        os.pwrite(self._fd, f"{os.getpid()}\n".encode(), 0)
-
-    def release(self) -> None:
-        import os
-        if self._fd is not None:
-            os.close(self._fd)  # closing the descriptor releases the flock
-            self._fd = None
-
-
-def write_summary(summary: dict, out_dir: Path) -> None:
-    """summary.json in out_dir, replaced whole (written aside, then renamed)."""
-    tmp = out_dir / "summary.json.part"
-    tmp.write_text(json.dumps(summary, indent=2) + "\n")
-    tmp.replace(out_dir / "summary.json")
-
-
-def write_outputs(result: dict, out_dir: Path, *, plot: bool = True) -> None:
-    """Write summary.json (and breathing.png) into out_dir."""
-    out_dir.mkdir(parents=True, exist_ok=True)
-    write_summary(result["summary"], out_dir)
-    if plot:
-        plot_trace(result["trace"], out_dir / "breathing.png", title=result["summary"]["scene"])
-
-
-#: a plot draws each series' lowest and highest value in this many runs of frames
-PLOT_BINS = 2000
-
-
-def plot_trace(trace: Trace, path: Path, *, title: str = "") -> None:
-    """Five time series, one panel each: rib elevation, apex descent, volume
-    error, pressure and muscle stiffness."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    a = trace.envelope(PLOT_BINS)
-    panels = [("rib_lift_mm", "rib elevation (mm)"), ("apex_descent_mm", "apex descent (mm)"),
-              ("volume_rel_error", "|V - V0| / V0"), ("pressure_pa", "pressure (Pa)"),
-              ("muscle_n_per_m", "muscle stiffness (N/m)")]
-    # fixed margins: tight_layout took half a second of every run
-    fig, axes = plt.subplots(len(panels), 1, figsize=(7, 9), sharex=True,
-                             gridspec_kw=dict(left=0.13, right=0.97, top=0.95, bottom=0.06, hspace=0.12))
-    for ax, (key, label) in zip(axes, panels):
-        y = a[key]
-        if key == "volume_rel_error":
-            ax.semilogy(a["t_s"], np.maximum(y, 1e-17))
-        else:
-            ax.plot(a["t_s"], y)
-        ax.set_ylabel(label, fontsize=8)
-        ax.grid(alpha=0.3)
-    axes[-1].set_xlabel("time (s)")
-    axes[0].set_title(title)
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
 
 
 class _Progress:

@@ -20,7 +20,7 @@ from .errors import ConstraintError, SceneError, SimulationDiverged
 from .model import TERMS, Model
 from .step import (DIVERGED_NONFINITE, OK, S_MAXDISP, S_PHI, S_PRESSURE, S_TIME, VOLUME_FAILED, Frames,
                    kinetic_energy_of, membrane_advance, membrane_forces, new_state, run_membrane,
-                   run_membrane_frames)
+                   run_membrane_frames, step_par)
 
 __all__ = ["Simulation"]
 
@@ -181,8 +181,8 @@ class Simulation:
             t = float(s.scal[S_TIME])
             self._python_schedules(t)
             if self.rigid is None:
-                membrane_forces(m, s, t)
-                code = membrane_advance(m, s, t, self.steps_done)
+                membrane_forces(m, s, t, step_par(m))
+                code = membrane_advance(m, s, t, self.steps_done, step_par(m))
             else:
                 code = self.rigid.step(s, t, self.steps_done, m)
             if code != OK:
@@ -195,7 +195,7 @@ class Simulation:
         """nstep steps in one compiled call with these arrays (the build their flag
         says); the steps done."""
         if self.rigid is None:
-            return run_membrane(arrays, self.state, nstep, self.steps_done)
+            return run_membrane(arrays, self.state, nstep, self.steps_done, step_par(arrays))
         return self.rigid.run(self.state, nstep, self.steps_done, arrays)  # the whole coupled loop (hybrid.coupling)
 
     @property
@@ -256,7 +256,8 @@ class Simulation:
             frames.pos, frames.scal = frames.pos[first:], frames.scal[first:]
             frames.body_pos, frames.body_quat = frames.body_pos[first:], frames.body_quat[first:]
         if self.rigid is None:
-            return run_membrane_frames(arrays, self.state, stops, self.steps_done, frames.pos, frames.scal)
+            return run_membrane_frames(arrays, self.state, stops, self.steps_done, frames.pos, frames.scal,
+                                       step_par(arrays))
         return self.rigid.run_frames(self.state, stops, self.steps_done, frames, arrays)
 
     def _python_schedules(self, t: float) -> None:

@@ -40,7 +40,7 @@ from .terms.volume import Pressure, add_pressure
 from .terms.fibres import MuscleFibres, add_muscle_fibres
 
 __all__ = ["Scal", "StepStatus", "FrameColumn", "MembraneState", "new_state", "membrane_forces", "membrane_advance", "run_membrane",
-           "run_membrane_frames", "capture_frame", "kinetic_energy_of", "Frames"]
+           "run_membrane_frames", "capture_frame", "kinetic_energy_of", "Frames", "step_par"]
 
 # each term's flag in MembraneArrays.term_on and its call counter
 (T_GRAVITY, T_APPLIED, T_ATTRACTION, T_DAMPING, T_SHAPE_MEMORY, T_MASS_SPRING, T_MUSCLE, T_SOFT_VOLUME,
@@ -110,6 +110,14 @@ def new_state(arrays: MembraneArrays) -> MembraneState:
         status=np.zeros(4, np.int64), term_calls=np.zeros(len(TERMS), np.int64))
 
 
+def step_par(arrays: MembraneArrays):
+    """The step kernels' `par` argument for a model: None when it never runs the
+    multi-core build (`arrays.parallel` false): a None argument prunes that branch
+    when the kernel compiles, so a first run compiles the serial passes only; else
+    True, both builds compiled and `arrays.parallel` choosing."""
+    return True if arrays.parallel else None
+
+
 @kernel
 def eval_schedules(sched, t, out):
     """All compiled schedules at time t into out (nsched, 3); Python ones are set by the caller."""
@@ -119,16 +127,18 @@ def eval_schedules(sched, t, out):
 
 
 @kernel(inline="always")
-def membrane_forces(m, s, t):
-    """Step phase 1: the force of every term the model has, at time t.
+def membrane_forces(m, s, t, par=True):
+    """Step phase 1: the force of every term the model has, at time t. `par`: None
+    when the model never runs the multi-core build (`serial_only`), which is then
+    not even compiled; else m.parallel chooses at run time.
     # Model: m (MembraneArrays)   # Data in: s.vert_pos, s.vert_vel
     # Data out: s.vert_force, s.sched_val, s.term_calls (and pressure for soft volume)
     """
     eval_schedules(m.sched, t, s.sched_val)
     on = m.term_on
-    _pointwise_forces(m, s)
+    _pointwise_forces(m, s, par)
     if on[T_MEMBRANE]:
-        if m.parallel:
+        if par is not None and m.parallel:
             membrane_faces_parallel(m.mem_vert, m.mem_par, m.kv_on, s.vert_pos, s.vert_vel, s.face_force)
             membrane_gather_parallel(m.mvf_ptr, m.mvf_slot, s.face_force, s.vert_force)
         else:
@@ -203,14 +213,14 @@ _integrate_serial, _integrate_parallel = kernel_twin(_integrate)
 
 
 @kernel(inline="always")
-def _pointwise_forces(m, s):
+def _pointwise_forces(m, s, par):
     """Step phase 1 for gravity, damping and shape memory: the shape memory's
     ring gathers, then the fused pass `hybrid.terms.pointwise.point_forces`
     (serial or parallel build)."""
     on = m.term_on
     sm = on[T_SHAPE_MEMORY] != 0
     grav, damp = on[T_GRAVITY] != 0, on[T_DAMPING] != 0
-    if m.parallel:
+    if par is not None and m.parallel:
         if sm:
             shape_memory_frames_parallel(m.sm_vert, m.ring_ptr, m.ring_vert, m.ring_closed, s.vert_pos, s.sm_sums)
         point_forces_parallel(m.vert_free, m.vert_mass, m.accel, grav, m.damp_coef, damp, m.sm_vert, m.sm_stiff,
@@ -226,20 +236,21 @@ def _pointwise_forces(m, s):
 
 
 @kernel(inline="always")
-def membrane_advance(m, s, t, step):
-    """Step phases 2-5: integrate, project, check. Returns a status code.
+def membrane_advance(m, s, t, step, par=True):
+    """Step phases 2-5: integrate, project, check. Returns a status code. `par`: as
+    `membrane_forces`.
     # Model: m   # Data in: s.vert_force   # Data out: s.vert_pos, s.vert_vel, s.scal, s.status
     """
     pos, vel = s.vert_pos, s.vert_vel
-    if m.parallel:
+    if par is not None and m.parallel:
         _integrate_parallel(m.vert_free, m.vert_mass, m.integrator == 0, m.dt, s.vert_force, pos, vel, s.vert_acc)
     else:
         _integrate_serial(m.vert_free, m.vert_mass, m.integrator == 0, m.dt, s.vert_force, pos, vel, s.vert_acc)
-    return _after_integration(m, s, t, step)
+    return _after_integration(m, s, t, step, par)
 
 
 @kernel(inline="always")
-def _after_integration(m, s, t, step):
+def _after_integration(m, s, t, step, par):
     """Step phases 3-5 after `_integrate`: check, local constraints, volume."""
     h = m.dt
     pos, vel = s.vert_pos, s.vert_vel
@@ -274,8 +285,12 @@ def _after_integration(m, s, t, step):
         apply_keep_in(m.kin_vert, m.kin_shape, m.shape_kind, m.shape_par, pos, vel)
         s.term_calls[T_KEEP_IN] += 1
     if on[T_VOLUME]:
-        phi, st = project_volume(m.ring_ptr, m.ring_vert, m.vol0, m.vert_weight, h, pos, vel,
-                                 s.grad, s.dirn, s.cubic, s.vert_acc, m.parallel)
+        if par is None:  # a None argument: the multi-core build is not compiled
+            phi, st = project_volume(m.ring_ptr, m.ring_vert, m.vol0, m.vert_weight, h, pos, vel,
+                                     s.grad, s.dirn, s.cubic, s.vert_acc, None)
+        else:
+            phi, st = project_volume(m.ring_ptr, m.ring_vert, m.vol0, m.vert_weight, h, pos, vel,
+                                     s.grad, s.dirn, s.cubic, s.vert_acc, m.parallel)
         s.term_calls[T_VOLUME] += 1
         if st != PROJ_OK:
             s.status[3] = st
@@ -307,13 +322,14 @@ def _first_nonfinite(pos, vel, fallback):
 
 
 @kernel
-def run_membrane(m, s, nstep, step0):
-    """nstep whole membrane steps; time advances as t0 + k h. Returns steps done."""
+def run_membrane(m, s, nstep, step0, par=True):
+    """nstep whole membrane steps; time advances as t0 + k h. Returns steps done.
+    `par`: as `membrane_forces` (`serial_only`)."""
     t0 = s.scal[S_TIME]
     for k in range(nstep):
         t = t0 + k * m.dt
-        membrane_forces(m, s, t)
-        if membrane_advance(m, s, t, step0 + k) != OK:
+        membrane_forces(m, s, t, par)
+        if membrane_advance(m, s, t, step0 + k, par) != OK:
             return k
         s.scal[S_TIME] = t0 + (k + 1) * m.dt
     return nstep
@@ -355,13 +371,13 @@ def capture_frame(m, s, pos_out, scal_out):
 
 
 @kernel
-def run_membrane_frames(m, s, stops, step0, frame_pos, frame_scal):
+def run_membrane_frames(m, s, stops, step0, frame_pos, frame_scal, par=True):
     """Step to each step index of stops, capturing a frame at each; returns the
     frames captured (fewer than stops when a step fails; its status is in s.status)."""
     done = step0
     for i in range(stops.shape[0]):
         n = stops[i] - done
-        k = run_membrane(m, s, n, done)
+        k = run_membrane(m, s, n, done, par)
         done += k
         if k < n:
             return i

@@ -44,6 +44,12 @@ arrays, the `repr` of anything JSON cannot hold), and runs the others again.
 
 `workers=1` runs the tasks one after the other in this process (no pickling;
 for debugging).
+
+Compiling once: the workers share the on-disk compile cache, but on a first run
+each would compile the same kernels at once, each taking as long as one alone
+would on the whole machine. So the first task runs alone in a worker (`_first_alone`), compiling and
+caching what it needs, before the others fan out and load it: at most one round
+of tasks longer when the cache is warm.
 """
 
 from __future__ import annotations
@@ -282,7 +288,9 @@ def _sweep_local(fn, params, todo, n, finish, on_error, failed) -> None:
     try:
         pool = ProcessPoolExecutor(max_workers=n, mp_context=mp.get_context("spawn"),
                                    initializer=_worker_init)
-        futures = {pool.submit(_call, fn, params[i]): i for i in todo}
+        # the first task alone: the kernels it compiles are then in the disk cache for the others
+        futures = {_first_alone(pool, fn, params[todo[0]]): todo[0]} if todo else {}
+        futures.update({pool.submit(_call, fn, params[i]): i for i in todo[1:]})
     finally:
         if saved is None:
             os.environ.pop("NUMBA_NUM_THREADS", None)
@@ -305,6 +313,20 @@ def _sweep_local(fn, params, todo, n, finish, on_error, failed) -> None:
         if f not in taken and f.done() and not f.cancelled():
             exc = f.exception()
             finish(i, ("lost", exc) if exc is not None else f.result())
+
+
+def _first_alone(pool, fn: Callable, p: Any):
+    """The first task's future, once it has finished alone in a worker: the kernels
+    it compiled are then in the disk cache, where the other workers load them."""
+    from concurrent.futures import wait
+
+    future = pool.submit(_call, fn, p)
+    try:
+        wait([future])
+    except BaseException:  # Ctrl-C: the pool goes with it
+        pool.shutdown(wait=False, cancel_futures=True)
+        raise
+    return future
 
 
 def _sweep_dask(fn: Callable, params: list, todo: list, address: str, finish, on_error: str) -> None:

@@ -73,13 +73,17 @@ def test_cache_folder_follows_the_kernel_sources_only(tmp_path):
 
 
 def test_a_kernel_compiled_beside_cached_parallel_twins_loads_in_a_new_process(tmp_path):
-    """numba issue 8578: the breathing trunk caches the parallel twins; a later process
-    compiles the membrane-only step beside them (loaded from the cache); a third process
-    that loads that step first crashed (a null call, exit -11) before hybrid started
-    numba's threading layer at import."""
+    """numba issue 8578: a mesh above the parallel threshold caches the step with its
+    parallel twins; a later process compiles the frame-capturing step beside it
+    (loaded from the cache); a third process that loads that one first crashed (a
+    null call, exit -11) before hybrid started numba's threading layer at import.
+    (Below the threshold the twins are not compiled at all: `hybrid.step.step_par`.)"""
     env = {**__import__("os").environ, "NUMBA_CACHE_DIR": str(tmp_path)}
-    membrane = "import hybrid; from hybrid.demo import membrane_demo; hybrid.load(membrane_demo()).step(2)"
-    for code in ("import hybrid; hybrid.load('breathing').step(2)", membrane, membrane):
+    large = ("import dataclasses, hybrid, numpy as np; from hybrid.bench import bench_membrane; "
+             "model = hybrid.compile_scene(bench_membrane(4)); "
+             "sim = hybrid.Simulation(dataclasses.replace(model, arrays=model.arrays._replace(parallel=True))); ")
+    frames = large + "sim.step_frames(np.array([1, 2]), sim.frames_buffer(2))"
+    for code in (large + "sim.step(2)", frames, frames):
         done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
         assert done.returncode == 0, (code, done.returncode, done.stderr[-2000:])
 

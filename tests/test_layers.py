@@ -25,7 +25,7 @@ LAYERS = (
     ("step", ("step", "readouts")),
     ("coupled step", ("coupling",)),
     ("simulation", ("simulation", "builds")),
-    ("observers", ("run", "record", "record.*", "render", "sweep", "grid", "outputs")),
+    ("observers", ("run", "record", "record.*", "render", "sweep", "grid", "outputs", "provenance")),
     ("public API", ("",)),  # hybrid/__init__.py
     ("bench, command line, studies", ("bench", "bench.*", "bench_rigid", "cli", "__main__", "docgen", "studies",
                                       "studies.*")),

@@ -136,7 +136,7 @@ def test_a_second_run_into_a_busy_folder_is_refused_and_sigterm_finishes_the_fir
     t = read(out / "run.mcap")["membrane"]["t"]
     _frames_from_zero(t)  # the first's frames only, every one from 0
     assert t[-1] == pytest.approx(summary["duration_s"], abs=0.01 + 1e-9)
-    assert (out / "breathing.png").stat().st_size > 10_000
+    assert (out / "membrane_demo.png").stat().st_size > 10_000
 
 
 def test_sighup_stops_a_run_as_ctrl_c_does(tmp_path):
@@ -158,14 +158,28 @@ def test_sighup_stops_a_run_as_ctrl_c_does(tmp_path):
     _frames_from_zero(read(out / "run.mcap")["membrane"]["t"])
 
 
+def test_a_rerun_into_a_folder_that_holds_a_run_is_refused_unless_overwrite(tmp_path, capsys):
+    """Issue 15, item 5: an explicit --out that holds a run is refused, one line, and left as it was."""
+    out = tmp_path / "o"
+    assert main(["run", "membrane_demo", "--duration", "0.05", "--no-record", "--out", str(out)]) == 0
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    assert main(["run", "membrane_demo", "--duration", "0.1", "--out", str(out)]) == 2
+    line = _one_line(capsys.readouterr().err)
+    assert "holds no earlier run" in line and str(out) in line and "--overwrite" in line
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    assert main(["run", "membrane_demo", "--duration", "0.1", "--no-record", "--overwrite", "--out", str(out)]) == 0
+    assert json.loads((out / "summary.json").read_text())["steps"] == 100
+
+
 def test_a_failed_rerun_replaces_the_earlier_summary(tmp_path, capsys):
-    """Item 9: a run that cannot write its recording leaves "failed", not the last run's "ok"."""
+    """Item 9: a run (with --overwrite) that cannot write its recording leaves "failed",
+    not the last run's "ok"."""
     out = tmp_path / "o"
     assert main(["run", "membrane_demo", "--duration", "0.05", "--out", str(out)]) == 0
     assert json.loads((out / "summary.json").read_text())["status"] == "ok"
     (out / "run.mcap").unlink()
     (out / "run.mcap").mkdir()  # the recording cannot be opened
-    assert main(["run", "membrane_demo", "--duration", "0.05", "--out", str(out)]) == 2
+    assert main(["run", "membrane_demo", "--duration", "0.05", "--overwrite", "--out", str(out)]) == 2
     line = _one_line(capsys.readouterr().err)
     summary = json.loads((out / "summary.json").read_text())
     assert summary["status"] == "failed" and "run.mcap" in summary["error"] and "run.mcap" in line
@@ -268,7 +282,7 @@ def test_the_runners_memory_does_not_grow_with_the_runs_length(tmp_path):
     summary = json.loads((tmp_path / "long" / "summary.json").read_text())
     assert summary["steps"] == 2_000_000 and summary["volume_rel_error_max"] < 1e-12
     # the streamed trace's file is gone with the run
-    assert {p.name for p in (tmp_path / "long").iterdir()} == {"breathing.png", "summary.json", ".hybrid-run.lock"}
+    assert {p.name for p in (tmp_path / "long").iterdir()} == {"membrane_demo.png", "summary.json", ".hybrid-run.lock"}
 
 
 def test_a_streamed_trace_reads_back_as_the_one_in_memory(tmp_path):
@@ -286,7 +300,7 @@ def test_a_streamed_trace_reads_back_as_the_one_in_memory(tmp_path):
         assert env["pressure_pa"].min() == a["pressure_pa"].min()
     sa, sb = dict(kept["summary"]), dict(streamed["summary"])
     for s in (sa, sb):
-        del s["wall_s"], s["us_per_step"]
+        del s["wall_s"], s["us_per_step"], s["provenance"]["started_utc"]
     assert sa == sb
 
 

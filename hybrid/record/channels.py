@@ -99,7 +99,7 @@ class _FrameWriter:
             "scene": plan["scene"], "dt_s": plan["dt_s"], "every_s": plan["every_s"], "nvert": n,
             "face_vert": face.tolist(), "regions": plan["regions"], "vert_label": plan["vert_label"].tolist(),
             "vert_rgba": np.round(colours, 4).tolist(), "link_vert": plan["link_vert"].tolist(),
-            "geoms": plan["geoms"], "bodies": bodies})
+            "geoms": plan["geoms"], "bodies": bodies, "provenance": plan.get("provenance")})
         # MCAP gives metadata no CRC of its own: the reader checks this one
         w.metadata("hybrid", {"description": description,
                               "description_crc32": f"{zlib.crc32(description.encode()):08x}"})

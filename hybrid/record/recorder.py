@@ -13,11 +13,12 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import HybridError
+from ..provenance import run_provenance
 from ..step import F_PRESSURE, F_TIME, F_VOLUME
 from .channels import _frame_bytes_estimate, _FrameWriter, _nslot, _plan
 from .encoder import _load_encoder
 from .schemas import MESH_EVERY_FRAME_MAX, SCALAR_CHANNELS
-from ..run import TRACE_KEYS
+from ..run import TRACE_KEYS, scene_parts
 
 
 #: the recording interval when none is given (s), as a whole number of steps
@@ -87,16 +88,23 @@ class Recorder:
     `background`: encode, compress and write on a thread of their own (the compiled
     encoder and the compressor release the GIL), so that the run goes on meanwhile.
     `flush()` writes what is held; `close()` writes the rest and finishes the file.
+    `provenance`: how the run was made (`hybrid.provenance.run_provenance`; by default
+    made here), written in the file's metadata (`read(path)["model"]["provenance"]`).
     """
 
     def __init__(self, path: str | Path, sim, *, every_s: float | None = None, mesh_every: int | None = None,
-                 chunk_size: int = 1 << 20, flush_s: float = 1.0, background: bool = True):
+                 chunk_size: int = 1 << 20, flush_s: float = 1.0, background: bool = True,
+                 provenance: dict | None = None):
         self.every_steps = record_steps(every_s, sim.model.dt_s)
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._dt_s = sim.model.dt_s
         self.every_s = self.every_steps * self._dt_s if every_s is None else float(every_s)
         plan = _plan(sim, self.every_s)
+        plan["provenance"] = provenance if provenance is not None else run_provenance(sim)
+        # without the runner's trace: which of volume, volume error and pressure the scene has
+        parts = scene_parts(sim.model)
+        self._has = np.array(["closed surface" in parts, "volume constraint" in parts, "pressure" in parts])
         n = plan["nvert"]
         self.nbody = len(plan["bodies"])
         self.flush_s = flush_s
@@ -155,6 +163,7 @@ class Recorder:
         else:
             row[1:1 + len(SCALAR_CHANNELS)] = np.nan
             row[1], row[2], row[3] = sim.volume, sim.volume_rel_error, sim.pressure
+            row[1:4][~self._has] = np.nan  # nothing claimed of a part the scene lacks
         self._held = k + 1
         if self._held == len(buf.pos) or time.perf_counter() - self._last_flush > self.flush_s:
             self._hand_over()
@@ -187,8 +196,9 @@ class Recorder:
                 vol, v0 = frames.scal[part, F_VOLUME], sim.model.arrays.vol0
                 buf.number[held:end, 1:1 + len(SCALAR_CHANNELS)] = np.nan
                 buf.number[held:end, 1] = vol
-                buf.number[held:end, 2] = np.abs(vol - v0) / v0 if v0 else 0.0
+                buf.number[held:end, 2] = np.abs(vol - v0) / v0 if v0 else np.nan
                 buf.number[held:end, 3] = frames.scal[part, F_PRESSURE]
+                buf.number[held:end, 1:4][:, ~self._has] = np.nan
             self._held = end
             if end == len(buf.pos):
                 self._hand_over()

@@ -158,8 +158,9 @@ def centroid(vert_pos, chunk_acc, parallel):
     """The mean of the positions (m), a tuple (x, y, z): the origin of the volume
     sums. The chunks' sums are added in order, so both builds agree to the bit.
     # Data in: vert_pos (nvert, 3) m   # Scratch: chunk_acc (chunk_count(nvert), >= 3)
+    # parallel: a bool, the build to run; None: the serial one, the other not even compiled
     """
-    if parallel:
+    if parallel is not None and parallel:
         _position_sums_parallel(vert_pos, chunk_acc)
     else:
         _position_sums_serial(vert_pos, chunk_acc)
@@ -227,9 +228,9 @@ def volume_cubic(ring_ptr, ring_vert, ref, vert_pos, dirn, chunk_acc, out, paral
     # Model: ring_ptr, ring_vert   # Data in: ref (x, y, z) m, the origin of the sums
     # Data in: vert_pos (m), dirn (nvert, 3) (projection direction D)
     # Scratch: chunk_acc (chunk_count(nvert), >= 2): the sums of each chunk of points
-    # Data out: out (2,) = (c2, c3)
+    # Data out: out (2,) = (c2, c3)   # parallel: as `centroid`
     """
-    if parallel:
+    if parallel is not None and parallel:
         _cubic_terms_parallel(ring_ptr, ring_vert, ref, vert_pos, dirn, chunk_acc)
     else:
         _cubic_terms_serial(ring_ptr, ring_vert, ref, vert_pos, dirn, chunk_acc)
@@ -425,9 +426,10 @@ def project_volume(ring_ptr, ring_vert, vol0, vert_weight, h, vert_pos, vert_vel
     # Data in/out: vert_pos, vert_vel
     # Scratch: grad (volume gradient at X*, kept for the rib coupling), dirn, cubic (2,),
     #          chunk_acc (chunk_count(nvert), >= 3): the sums of each chunk of points
+    # parallel: as `centroid`
     """
     ref = centroid(vert_pos, chunk_acc, parallel)
-    if parallel:
+    if parallel is not None and parallel:
         _volume_gather_parallel(ring_ptr, ring_vert, ref, vert_weight, vert_pos, grad, dirn, chunk_acc)
     else:
         _volume_gather_serial(ring_ptr, ring_vert, ref, vert_weight, vert_pos, grad, dirn, chunk_acc)
@@ -444,7 +446,7 @@ def project_volume(ring_ptr, ring_vert, vol0, vert_weight, h, vert_pos, vert_vel
     phi, status = solve_cubic_near_zero(c0, c1, cubic[0], cubic[1])
     if status != PROJ_OK:
         return 0.0, status
-    if parallel:
+    if parallel is not None and parallel:
         _volume_update_parallel(vert_weight, phi, dirn, h, vert_pos, vert_vel)
     else:
         _volume_update_serial(vert_weight, phi, dirn, h, vert_pos, vert_vel)
@@ -462,7 +464,7 @@ def soft_volume_force(ring_ptr, ring_vert, vol0, stiff, bulk, vert_pos, grad, cu
     # Data in: vert_pos
     # Data out: vert_force; scratch grad, cubic, chunk_acc (chunk_count(nvert), >= 3)
     """
-    ref = centroid(vert_pos, chunk_acc, False)
+    ref = centroid(vert_pos, chunk_acc, None)  # serial: the multi-core build is not compiled for it
     vol = 0.0
     c1 = 0.0
     for i in range(vert_pos.shape[0]):
@@ -478,7 +480,7 @@ def soft_volume_force(ring_ptr, ring_vert, vol0, stiff, bulk, vert_pos, grad, cu
     if bulk > 0.0:
         p = -bulk * (vol / 3.0 - vol0) / vol0
     else:
-        volume_cubic(ring_ptr, ring_vert, ref, vert_pos, grad, chunk_acc, cubic, False)
+        volume_cubic(ring_ptr, ring_vert, ref, vert_pos, grad, chunk_acc, cubic, None)
         phi, status = solve_cubic_near_zero(vol / 3.0 - vol0, c1, cubic[0], cubic[1])
         if status != PROJ_OK:
             return np.nan
