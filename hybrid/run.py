@@ -296,7 +296,7 @@ def _count_stops(nstep: int, periods, extra) -> int:
 
 def run(sim: Simulation, duration_s: float, *, frame_dt_s: float = 0.01, progress: bool = False,
         observers=(), trace_spill=None, stop=None, provenance: dict | None = None) -> dict:
-    """Run `sim` for `duration_s` and return the summary (see `summary keys`).
+    """Run `sim` for `duration_s`: {"summary": the summary, "trace": the `Trace`}.
 
     `observers`: called at each frame after the trace has its values (e.g.
     `hybrid.record.Recorder`); they must not change the state. An observer with a
@@ -313,8 +313,10 @@ def run(sim: Simulation, duration_s: float, *, frame_dt_s: float = 0.01, progres
     summary's "provenance" table (`hybrid.provenance.run_provenance`; by default
     made here, without the command line's overrides and removed terms).
 
-    Returns a dict with the summary and the trace under "trace". On a
-    HybridError the summary holds "status": "failed" and "error", and the
+    The summary (README, "Outputs and metrics"): scene, status, steps, times; the
+    top-level metrics of earlier versions; "metrics", {series: {"min", "max",
+    "t_min_s", "t_max_s"}} for each series of the parts the scene has; and
+    "provenance". On a HybridError the summary holds "status": "failed" and "error", and the
     error is re-raised as `RunFailed` carrying the partial result; on a
     KeyboardInterrupt, "status": "interrupted", re-raised as `RunInterrupted`.
     """
