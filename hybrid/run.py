@@ -315,7 +315,10 @@ def run(sim: Simulation, duration_s: float, *, frame_dt_s: float = 0.01, progres
     summary's "provenance" table (`hybrid.provenance.run_provenance`; by default
     made here, without the command line's overrides and removed terms).
 
-    On a HybridError the summary holds "status": "failed" and "error", and the
+    The summary (README, "Outputs and metrics"): scene, status, steps, times; the
+    top-level metrics of earlier versions; "metrics", {series: {"min", "max",
+    "t_min_s", "t_max_s"}} for each series of the parts the scene has; and
+    "provenance". On a HybridError the summary holds "status": "failed" and "error", and the
     error is re-raised as `RunFailed` carrying the partial result; on a
     KeyboardInterrupt, "status": "interrupted", re-raised as `RunInterrupted`.
     """
