@@ -149,8 +149,13 @@ def frames_from_scene(scene_arg: str | None, duration_s: float | None = None, *,
                   body_pos=np.asarray(keep["bpos"]) if bodies else None,
                   body_quat=np.asarray(keep["bquat"]) if bodies else None,
                   geoms=body_geoms(sim.mj_model) if sim.mj_model is not None else [],
-                  apex_descent=tr["apex_descent_mm"][idx][:n], muscle=tr["muscle_n_per_m"][idx][:n],
-                  rib_lift=tr["rib_lift_mm"][idx][:n], regions=names, vert_label=label)
+                  apex_descent=tr["apex_descent_mm"][idx][:n], muscle=_present(tr["muscle_n_per_m"][idx][:n]),
+                  rib_lift=_present(tr["rib_lift_mm"][idx][:n]), regions=names, vert_label=label)
+
+
+def _present(series: np.ndarray) -> np.ndarray | None:
+    """A trace series, or None where the scene lacks its part (the trace holds NaN then)."""
+    return None if np.all(np.isnan(series)) else series
 
 
 def key_frames(fr: Frames) -> tuple[int, int, int]:
