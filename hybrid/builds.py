@@ -28,21 +28,22 @@ class BuildChoice:
 
     `build="auto"` on a model that may run in parallel (`MembraneArrays.parallel`)
     with more than one usable thread (`hybrid.kernel.usable_threads`: numba's
-    threads, at most the CPUs of the process's affinity): the run starts serial.
-    A probe cuts its next steps into `PROBE_PAIRS` pairs of pieces, serial and
-    parallel in turn, each of about `PROBE_S` of wall time (at least a step); the
-    build with the smaller mean time per step over its pieces runs on (the mean,
-    not the fastest piece: under load the parallel build's pieces vary most, and
-    a lucky one says nothing of the run); a probe stops after its first pair when
-    one build is `PROBE_CLEAR` times faster. The pieces
-    are the run's own steps (the builds agree to the bit), so a probe costs only
-    the time its slower pieces lose. Time here is the time spent stepping (what
-    the pieces took), not the wall clock: pauses between calls count for
-    nothing. Probes come again after `PROBE_EVERY_S`,
-    doubling while the choice holds up to `PROBE_MAX_S`, and early when the
-    running build gets `SLOWDOWN` times slower than when chosen (another program
-    took a core); never so often that their loss exceeds `PROBE_BUDGET` of the
-    run's time. "serial" or "parallel" fix the build.
+    threads, at most the CPUs of the process's affinity): the run starts serial,
+    its first step (which loads the compiled code) untimed. A probe cuts the next
+    steps into `PROBE_PAIRS` pairs of pieces, serial and parallel in turn, each of
+    about `PROBE_S` of wall time (at least a step); the build with the smaller
+    mean time per step over its pieces runs on (the mean, not the fastest piece:
+    under load the parallel build's pieces vary most, and a lucky one says
+    nothing of the run). A probe stops after its first pair when one build is
+    `PROBE_CLEAR` times the faster. The pieces are the run's own steps, so a probe
+    costs only what its slower pieces lose. Time here is the time spent stepping
+    (what the pieces took), not the wall clock: pauses between calls count for
+    nothing. Probes come again after `PROBE_EVERY_S`, doubling while the choice
+    holds up to `PROBE_MAX_S`, and early when the running build gets `SLOWDOWN`
+    times slower than when chosen (another program took a core); never so often
+    that their loss exceeds `PROBE_BUDGET` of the stepping time. "serial" or
+    "parallel" fix the build. (A scene with Python schedules, stepped one step
+    per call, keeps the build it has: serial, unless fixed.)
 
     The simulation asks `chunk(remaining)` for (parallel, steps) and reports each
     piece with `record(parallel, steps, seconds)`.

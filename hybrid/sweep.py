@@ -116,7 +116,8 @@ def _call(fn: Callable, p: Any, pickled: bool = True) -> tuple:
     """Run one task: ("ok", result) or ("error", packed exception). In a worker
     (`pickled`) the result comes as pickle's bytes, so that one that cannot be
     rebuilt in the caller fails its task rather than the pool."""
-    _numba_one_thread()
+    if pickled:  # a worker; in the caller's process (workers=1) its threads stay as they are
+        _numba_one_thread()
     try:
         result = fn(**p) if isinstance(p, dict) else fn(p)
     except Exception as exc:  # noqa: BLE001 - every task failure is reported
