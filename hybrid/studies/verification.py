@@ -225,7 +225,8 @@ def free_body(mesh: Mesh, steps: int, energy_steps: int) -> list[dict]:
             sim = started(h)
         sim.step(int(round(steps * dt / h)))
         drift[h] = float(np.abs(momenta(sim)[1] - L0).max() / L_scale)
-    ratios = [drift[dt / 2] / drift[dt], drift[dt / 4] / drift[dt / 2]]
+    ratios = [drift[dt / 2] / drift[dt] if drift[dt] else None,
+              drift[dt / 4] / drift[dt / 2] if drift[dt / 2] else None]
     rows.append({**_row("free_body_angular_momentum", mesh, drift[dt], 0.0,
                         f"drift over {steps * dt:.3g} s at h = {dt:.3g} s, of sum m |r x v|"),
                  "drift_by_dt": {f"{h:.4g}": d for h, d in drift.items()}, "drift_ratio_half_step": ratios})
