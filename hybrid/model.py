@@ -50,6 +50,8 @@ _CORE_AFTER = {
     "dt": "s",
     "integrator": "0 explicit Euler, 1 symplectic Euler",
     "max_speed": "m/s: a point faster than this has run away",
+    "volume_shake": "bool: the volume projection's direction is the gradient where the step starts (SHAKE: "
+                    "symplectic; the continuum formulation), else at the predicted positions (the paper's)",
     "parallel": "bool: the per-point passes run their multi-core build (hybrid.kernel); in a model, that "
                 "they may: the simulation times both builds as it runs (hybrid.builds)",
 }
@@ -284,6 +286,7 @@ def compile_scene(scene: Scene) -> Model:
         vol0=b.out.get("vol0", 0.0),
         sched=sched_table, dt=float(scene.dt_s), integrator=integrator,
         max_speed=_positive(scene.max_speed_m_s, "max_speed_m_s"),
+        volume_shake=scene.formulation == "continuum",
         parallel=use_parallel(nvert),
     )
     for arr in arrays:

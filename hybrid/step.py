@@ -35,7 +35,8 @@ from .terms.muscle import add_muscle
 from .terms.pointwise import point_forces_parallel, point_forces_serial
 from .terms.shape_memory import shape_memory_frames, shape_memory_frames_parallel
 from .terms.springs import add_applied, add_attraction, add_mass_spring
-from .terms.volume import PROJ_OK, face_volume, project_volume, soft_volume_force
+from .terms.volume import (PROJ_OK, face_volume, project_volume, soft_volume_force, volume_direction_parallel,
+                           volume_direction_serial)
 from .terms.volume import Pressure, add_pressure
 from .terms.fibres import MuscleFibres, add_muscle_fibres
 
@@ -242,6 +243,11 @@ def membrane_advance(m, s, t, step, par=True):
     # Model: m   # Data in: s.vert_force   # Data out: s.vert_pos, s.vert_vel, s.scal, s.status
     """
     pos, vel = s.vert_pos, s.vert_vel
+    if m.volume_shake and m.term_on[T_VOLUME]:  # the projection's direction where the step starts
+        if par is not None and m.parallel:
+            volume_direction_parallel(m.ring_ptr, m.ring_vert, m.vert_weight, pos, s.dirn)
+        else:
+            volume_direction_serial(m.ring_ptr, m.ring_vert, m.vert_weight, pos, s.dirn)
     if par is not None and m.parallel:
         _integrate_parallel(m.vert_free, m.vert_mass, m.integrator == 0, m.dt, s.vert_force, pos, vel, s.vert_acc)
     else:
@@ -287,10 +293,10 @@ def _after_integration(m, s, t, step, par):
     if on[T_VOLUME]:
         if par is None:  # a None argument: the multi-core build is not compiled
             phi, st = project_volume(m.ring_ptr, m.ring_vert, m.vol0, m.vert_weight, h, pos, vel,
-                                     s.grad, s.dirn, s.cubic, s.vert_acc, None)
+                                     s.grad, s.dirn, s.cubic, s.vert_acc, None, m.volume_shake)
         else:
             phi, st = project_volume(m.ring_ptr, m.ring_vert, m.vol0, m.vert_weight, h, pos, vel,
-                                     s.grad, s.dirn, s.cubic, s.vert_acc, m.parallel)
+                                     s.grad, s.dirn, s.cubic, s.vert_acc, m.parallel, m.volume_shake)
         s.term_calls[T_VOLUME] += 1
         if st != PROJ_OK:
             s.status[3] = st

@@ -359,10 +359,10 @@ def solve_cubic_near_zero(c0, c1, c2, c3):
     return best, PROJ_OK
 
 
-def _volume_gather(ring_ptr, ring_vert, ref, vert_weight, vert_pos, grad, dirn, chunk_acc):
-    """Per point: grad_i V (closed fan), D_i = w_i grad_i V; per chunk of
-    CHUNK_VERTS points, the sums of the terms of 3 V and c1, x_i . g_i and
-    D_i . g_i, into chunk_acc[:, :2]."""
+def _volume_gather(ring_ptr, ring_vert, ref, vert_weight, vert_pos, grad, dirn, chunk_acc, shake):
+    """Per point: grad_i V (closed fan), D_i = w_i grad_i V (kept as given when
+    `shake`: taken at the step's start); per chunk of CHUNK_VERTS points, the sums
+    of the terms of 3 V and c1, x_i . g_i and D_i . g_i, into chunk_acc[:, :2]."""
     sixth = 1.0 / 6.0
     n = vert_weight.shape[0]
     for c in prange((n + CHUNK_VERTS - 1) // CHUNK_VERTS):
@@ -377,15 +377,31 @@ def _volume_gather(ring_ptr, ring_vert, ref, vert_weight, vert_pos, grad, dirn, 
             grad[i, 1] = gy
             grad[i, 2] = gz
             px, py, pz = vert_pos[i, 0] - ref[0], vert_pos[i, 1] - ref[1], vert_pos[i, 2] - ref[2]
-            w = vert_weight[i]
-            dx, dy, dz = w * gx, w * gy, w * gz
-            dirn[i, 0] = dx
-            dirn[i, 1] = dy
-            dirn[i, 2] = dz
+            if shake:
+                dx, dy, dz = dirn[i, 0], dirn[i, 1], dirn[i, 2]
+            else:
+                w = vert_weight[i]
+                dx, dy, dz = w * gx, w * gy, w * gz
+                dirn[i, 0] = dx
+                dirn[i, 1] = dy
+                dirn[i, 2] = dz
             s_vol += px * gx + py * gy + pz * gz
             s_c1 += dx * gx + dy * gy + dz * gz
         chunk_acc[c, 0] = s_vol
         chunk_acc[c, 1] = s_c1
+
+
+def _volume_direction(ring_ptr, ring_vert, vert_weight, vert_pos, dirn):
+    """D_i = w_i grad_i V at vert_pos: SHAKE's projection direction, taken at the
+    positions where the step starts (the constraint force's line of action over the
+    step), which keeps the scheme symplectic: a free body's energy stays bounded."""
+    sixth = 1.0 / 6.0
+    for i in prange(vert_weight.shape[0]):
+        w = vert_weight[i] * sixth
+        gx, gy, gz = ring_cross_sum(ring_ptr, ring_vert, vert_pos, i)
+        dirn[i, 0] = w * gx
+        dirn[i, 1] = w * gy
+        dirn[i, 2] = w * gz
 
 
 def _volume_update(vert_weight, phi, dirn, h, vert_pos, vert_vel):
@@ -400,11 +416,12 @@ def _volume_update(vert_weight, phi, dirn, h, vert_pos, vert_vel):
 
 _volume_gather_serial, _volume_gather_parallel = kernel_twin(_volume_gather)
 _volume_update_serial, _volume_update_parallel = kernel_twin(_volume_update)
+volume_direction_serial, volume_direction_parallel = kernel_twin(_volume_direction)
 
 
 @kernel
 def project_volume(ring_ptr, ring_vert, vol0, vert_weight, h, vert_pos, vert_vel, grad, dirn, cubic,
-                   chunk_acc, parallel):
+                   chunk_acc, parallel, shake=False):
     """Exact constant-volume projection (paper 4.2-4.3).
 
     X = X* + phi D, D_i = w_i grad_i V(X*), w_i = 1/m_i (0 for points that are
@@ -430,9 +447,9 @@ def project_volume(ring_ptr, ring_vert, vol0, vert_weight, h, vert_pos, vert_vel
     """
     ref = centroid(vert_pos, chunk_acc, parallel)
     if parallel is not None and parallel:
-        _volume_gather_parallel(ring_ptr, ring_vert, ref, vert_weight, vert_pos, grad, dirn, chunk_acc)
+        _volume_gather_parallel(ring_ptr, ring_vert, ref, vert_weight, vert_pos, grad, dirn, chunk_acc, shake)
     else:
-        _volume_gather_serial(ring_ptr, ring_vert, ref, vert_weight, vert_pos, grad, dirn, chunk_acc)
+        _volume_gather_serial(ring_ptr, ring_vert, ref, vert_weight, vert_pos, grad, dirn, chunk_acc, shake)
     vol = 0.0
     c1 = 0.0
     # the chunks' sums in order: both builds agree to the last bit

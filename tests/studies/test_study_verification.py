@@ -37,12 +37,10 @@ def test_small_verification_study(tmp_path, capsys):
     assert max(r["measured"] for r in by["patch_test"]) < 1e-12
     for oracle in ("free_body_net_force", "free_body_net_moment", "free_body_momentum", "paper_table1"):
         assert by[oracle][0]["measured"] < 1e-12, by[oracle]
-    # the angular momentum drifts through the volume projection's position correction, O(h):
-    # halving the step halves it
-    ratios = by["free_body_angular_momentum"][0]["drift_ratio_half_step"]
-    assert all(0.4 < q < 0.6 for q in ratios), ratios
-    # the free, undamped body's energy over 10^5 steps: what changes between the first and
-    # the last quarter is the integrator's error, second order here (a quarter per halving)
+    # SHAKE's projection (the continuum formulation's) is symplectic and its constraint
+    # impulse central: the angular momentum is kept to round-off, and the energy of the
+    # free, undamped body stays bounded over 10^5 steps (no drift beyond 1e-3 at two steps,
+    # against a 15% oscillation of symplectic Euler at the larger one)
+    assert by["free_body_angular_momentum"][0]["measured"] < 1e-12, by["free_body_angular_momentum"]
     e = by["free_body_energy"][0]
-    assert abs(e["measured"]) < 0.2, e
-    assert 0.1 < e["change_ratio_half_step"] < 0.4, e
+    assert all(abs(c) < 1e-3 for c in e["change_by_dt"].values()), e
