@@ -35,8 +35,8 @@ from .terms.muscle import add_muscle
 from .terms.pointwise import point_forces_parallel, point_forces_serial
 from .terms.shape_memory import shape_memory_frames, shape_memory_frames_parallel
 from .terms.springs import add_applied, add_attraction, add_mass_spring
-from .terms.volume import (PROJ_OK, face_volume, project_volume, soft_volume_force, volume_direction_parallel,
-                           volume_direction_serial)
+from .terms.volume import PROJ_OK, face_volume, project_volume, soft_volume_force
+from .terms.volume import volume_direction_parallel, volume_direction_serial
 from .terms.volume import Pressure, add_pressure
 from .terms.fibres import MuscleFibres, add_muscle_fibres
 

@@ -424,7 +424,9 @@ def project_volume(ring_ptr, ring_vert, vol0, vert_weight, h, vert_pos, vert_vel
                    chunk_acc, parallel, shake=False):
     """Exact constant-volume projection (paper 4.2-4.3).
 
-    X = X* + phi D, D_i = w_i grad_i V(X*), w_i = 1/m_i (0 for points that are
+    X = X* + phi D, D_i = w_i grad_i V(X*) (with `shake`, D as given: the gradient
+    where the step started, `volume_direction_*`, which keeps the scheme
+    symplectic), w_i = 1/m_i (0 for points that are
     not integrated), phi the root nearest 0 of the cubic V(X* + phi D) = V0;
     velocities v_i += phi D_i / h, the impulse of the constraint force
     (phi / h^2) grad_i V. Returns (phi, status); phi is in kg/m, and
