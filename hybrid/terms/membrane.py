@@ -141,9 +141,10 @@ def _vert_stiffness(nvert, mem_vert, mem_par) -> np.ndarray:
 # ---------------------------------------------------------------- kernels
 
 @kernel(inline="always")
-def membrane_face_force(mem_vert, mem_par, k, vert_pos, vert_vel, kv_on):
-    """Forces (N) on corners b and c of membrane triangle k (corner a takes minus
-    their sum): minus the gradient of A0 W(E) (+ the Kelvin-Voigt stress's)."""
+def _edges_and_strain(mem_vert, mem_par, k, vert_pos):
+    """Triangle k's current edges e1 = b - a, e2 = c - a (m) and its Green strain
+    E = D^T (G - G0) D / 2 (D its rest inverse edge matrix, upper triangular; G the
+    edges' Gram matrix): (e1x, e1y, e1z, e2x, e2y, e2z, E00, E01, E11)."""
     a, b, c = mem_vert[k, 0], mem_vert[k, 1], mem_vert[k, 2]
     p = mem_par[k]
     e1x, e1y, e1z = vert_pos[b, 0] - vert_pos[a, 0], vert_pos[b, 1] - vert_pos[a, 1], vert_pos[b, 2] - vert_pos[a, 2]
@@ -152,11 +153,19 @@ def membrane_face_force(mem_vert, mem_par, k, vert_pos, vert_vel, kv_on):
     g11 = e1x * e1x + e1y * e1y + e1z * e1z - p[P_G11]
     g12 = e1x * e2x + e1y * e2y + e1z * e2z - p[P_G12]
     g22 = e2x * e2x + e2y * e2y + e2z * e2z - p[P_G22]
-    # Green strain E = D^T (G - G0) D / 2, D upper triangular
     t = g11 * d01 + g12 * d11
-    s00 = 0.5 * d00 * d00 * g11
-    s01 = 0.5 * d00 * t
-    s11 = 0.5 * (d01 * t + d11 * (g12 * d01 + g22 * d11))
+    return (e1x, e1y, e1z, e2x, e2y, e2z, 0.5 * d00 * d00 * g11, 0.5 * d00 * t,
+            0.5 * (d01 * t + d11 * (g12 * d01 + g22 * d11)))
+
+
+@kernel(inline="always")
+def membrane_face_force(mem_vert, mem_par, k, vert_pos, vert_vel, kv_on):
+    """Forces (N) on corners b and c of membrane triangle k (corner a takes minus
+    their sum): minus the gradient of A0 W(E) (+ the Kelvin-Voigt stress's)."""
+    a, b, c = mem_vert[k, 0], mem_vert[k, 1], mem_vert[k, 2]
+    p = mem_par[k]
+    d00, d01, d11 = p[P_D00], p[P_D01], p[P_D11]
+    e1x, e1y, e1z, e2x, e2y, e2z, s00, s01, s11 = _edges_and_strain(mem_vert, mem_par, k, vert_pos)
     if kv_on and p[P_TAU] > 0.0:  # add tau dE/dt: the same map applied to dG/dt
         v1x, v1y, v1z = vert_vel[b, 0] - vert_vel[a, 0], vert_vel[b, 1] - vert_vel[a, 1], vert_vel[b, 2] - vert_vel[a, 2]
         v2x, v2y, v2z = vert_vel[c, 0] - vert_vel[a, 0], vert_vel[c, 1] - vert_vel[a, 1], vert_vel[c, 2] - vert_vel[a, 2]
@@ -245,18 +254,8 @@ def membrane_energy(mem_vert, mem_par, vert_pos):
     """The membrane's elastic energy sum A0 W(E) (J)."""
     total = 0.0
     for k in range(mem_vert.shape[0]):
-        a, b, c = mem_vert[k, 0], mem_vert[k, 1], mem_vert[k, 2]
         p = mem_par[k]
-        e1x, e1y, e1z = vert_pos[b, 0] - vert_pos[a, 0], vert_pos[b, 1] - vert_pos[a, 1], vert_pos[b, 2] - vert_pos[a, 2]
-        e2x, e2y, e2z = vert_pos[c, 0] - vert_pos[a, 0], vert_pos[c, 1] - vert_pos[a, 1], vert_pos[c, 2] - vert_pos[a, 2]
-        d00, d01, d11 = p[P_D00], p[P_D01], p[P_D11]
-        g11 = e1x * e1x + e1y * e1y + e1z * e1z - p[P_G11]
-        g12 = e1x * e2x + e1y * e2y + e1z * e2z - p[P_G12]
-        g22 = e2x * e2x + e2y * e2y + e2z * e2z - p[P_G22]
-        t = g11 * d01 + g12 * d11
-        s00 = 0.5 * d00 * d00 * g11
-        s01 = 0.5 * d00 * t
-        s11 = 0.5 * (d01 * t + d11 * (g12 * d01 + g22 * d11))
+        s00, s01, s11 = _edges_and_strain(mem_vert, mem_par, k, vert_pos)[6:]
         tr = s00 + s11
         total += p[P_AREA] * (p[P_MU] * (s00 * s00 + 2.0 * s01 * s01 + s11 * s11) + 0.5 * p[P_LAM] * tr * tr)
     return total
