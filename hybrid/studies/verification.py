@@ -89,8 +89,9 @@ def closed_form_inflation(p_pa: float, radius_m: float, youngs: float, nu: float
     return (s - 1.0) * radius_m
 
 
-def _relax(sim: Simulation, metric, rel_tol: float, chunk_s: float, max_s: float) -> tuple[float, float]:
-    """Step until `metric(sim)` changes by less than rel_tol over a chunk three times in a row."""
+def _relax(sim: Simulation, metric, rel_tol: float, chunk_s: float, max_s: float) -> tuple[float, bool]:
+    """Step until `metric(sim)` changes by less than rel_tol over a chunk three times in
+    a row, at most to max_s: (the metric, whether it settled)."""
     n = max(1, int(round(chunk_s / sim.model.dt_s)))
     last, calm = metric(sim), 0
     while sim.time < max_s:
@@ -100,7 +101,7 @@ def _relax(sim: Simulation, metric, rel_tol: float, chunk_s: float, max_s: float
         last = now
         if calm >= 3:
             break
-    return last, sim.time
+    return last, calm >= 3
 
 
 def _stable_dt(scene: Scene) -> float:
@@ -121,10 +122,10 @@ def pressure_sphere(mesh: Mesh) -> dict:
     scene = _with_dt(scene)
     sim = Simulation(compile_scene(scene))
     r0 = _r_eq(sim.volume)
-    r, _ = _relax(sim, lambda s: _r_eq(s.volume) - r0, 1e-7, 0.02, 5.0)
+    r, settled = _relax(sim, lambda s: _r_eq(s.volume) - r0, 1e-7, 0.02, 5.0)
     want = closed_form_inflation(PRESSURE_PA, RADIUS_M, YOUNGS_N_PER_M, POISSON)
     return {"oracle": "pressure_sphere", "nvert": mesh.nvert, "measured": r, "predicted": want,
-            "rel_error": abs(r - want) / want, "unit": "m", "edge_m": _edge(mesh)}
+            "rel_error": abs(r - want) / want, "unit": "m", "edge_m": _edge(mesh), "settled": settled}
 
 
 def _with_dt(scene: Scene) -> Scene:
@@ -160,10 +161,10 @@ def hanging_sphere(mesh: Mesh, incompressible: bool = False) -> dict:
     def descent(s):
         return float(mass @ (rest[bottom, 2] - s.vert_pos[bottom, 2]) / mass.sum())
 
-    sag, _ = _relax(sim, descent, 1e-8, 0.05, 10.0)
+    sag, settled = _relax(sim, descent, 1e-8, 0.05, 10.0)
     return {"oracle": "hanging_sphere_incompressible" if incompressible else "hanging_sphere",
             "nvert": mesh.nvert, "measured": sag, "predicted": None, "rel_error": None, "unit": "m",
-            "edge_m": _edge(mesh)}
+            "edge_m": _edge(mesh), "settled": settled}
 
 
 def patch_test(n: int, seed: int) -> dict:
