@@ -21,7 +21,7 @@ from . import regions as _regions
 from . import schedule as _sched
 from .errors import SceneError
 from .kernel import use_parallel
-from .mesh import Mesh
+from .mesh import Mesh, vertex_area
 from .scene import FORMULATIONS, INTEGRATORS, MESH_GENERATORS, Masses, MeshSpec, Scene
 from .stability import max_stable_dt
 from .terms import CONSTRAINT_TYPES, FORCE_TYPES, TERM_CLASSES, TERMS, Build, Volume
@@ -166,22 +166,12 @@ def build_mesh(scene: Scene) -> Mesh:
     raise SceneError(f"mesh: expected a path or a generator in {list(MESH_GENERATORS)}, received generator={gen!r}")
 
 
-def _vert_area(mesh: Mesh) -> np.ndarray:
-    """Each vertex's share of the surface area: a third of its faces' areas (m^2)."""
-    p = mesh.vert_pos[mesh.face_vert]
-    area = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
-    out = np.zeros(mesh.nvert)
-    for c in range(3):
-        np.add.at(out, mesh.face_vert[:, c], area / 3.0)
-    return out
-
-
 def _masses(spec: Masses, mesh: Mesh, regions: dict) -> np.ndarray:
     given = [k for k in ("total_kg", "density_kg_per_m2", "per_vertex_kg") if getattr(spec, k) is not None]
     if len(given) != 1:
         raise SceneError(f"masses: expected exactly one of total_kg, density_kg_per_m2, per_vertex_kg, "
                          f"received {given or 'none'}")
-    area = _vert_area(mesh)
+    area = vertex_area(mesh.vert_pos, mesh.face_vert)
     if spec.total_kg is not None:
         total = checks.positive("masses.total_kg", spec.total_kg, checks.MAX_MASS_KG, " kg")
         return total * area / area.sum()

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .mesh.geometry import region_faces
 from .model import MembraneArrays
 from .terms import Membrane, MassSpring, Muscle, MuscleFibres, ShapeMemory
 from .terms.fibres import add_muscle_fibres
@@ -69,14 +70,6 @@ def elastic_energy(a: MembraneArrays, vert_pos: np.ndarray) -> float | None:
         stretch = np.linalg.norm(p[:, 1] - p[:, 0], axis=1) - a.spring_rest
         e += float(0.5 * (a.spring_stiff * stretch ** 2).sum())
     return float(e)
-
-
-def region_faces(face_vert: np.ndarray, verts: np.ndarray, nvert: int) -> np.ndarray:
-    """The faces of a region: those with at least two of their corners among `verts`
-    (so two regions that split the points split the faces)."""
-    inside = np.zeros(nvert, bool)
-    inside[verts] = True
-    return np.nonzero(inside[face_vert].sum(axis=1) >= 2)[0]
 
 
 def swept_volume(face_vert: np.ndarray, rest: np.ndarray, pos: np.ndarray) -> float:

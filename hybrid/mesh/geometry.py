@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["volume", "volume_gradient", "vertex_area", "cross_rows", "scatter_corners"]
+__all__ = ["volume", "volume_gradient", "vertex_area", "region_faces", "cross_rows", "scatter_corners"]
 
 
 def volume(vert_pos: np.ndarray, face_vert: np.ndarray) -> float:
@@ -57,6 +57,14 @@ def vertex_area(vert_pos: np.ndarray, face_vert: np.ndarray) -> np.ndarray:
     a = pos[face[:, 0]]
     third = np.linalg.norm(cross_rows(pos[face[:, 1]] - a, pos[face[:, 2]] - a), axis=1) / 6.0
     return np.bincount(face.T.ravel(), weights=np.tile(third, 3), minlength=len(pos))
+
+
+def region_faces(face_vert: np.ndarray, verts, nvert: int) -> np.ndarray:
+    """Indices of a region's faces: those with at least two of their corners among
+    `verts` (so two regions that split the points split the faces)."""
+    inside = np.zeros(nvert, bool)
+    inside[verts] = True
+    return np.nonzero(inside[face_vert].sum(axis=1) >= 2)[0]
 
 
 def cross_rows(u: np.ndarray, v: np.ndarray) -> np.ndarray:

@@ -26,8 +26,9 @@ import numpy as np
 
 from ..errors import SceneError
 from ..kernel import kernel
+from ..mesh.geometry import region_faces
 from .base import Rows, Term, force, param
-from .muscle import schedule_peak
+from .muscle import fibre_direction, schedule_peak
 
 __all__ = ["MuscleFibres", "fibre_shares", "add_muscle_fibres"]
 
@@ -51,18 +52,10 @@ class MuscleFibres(Term):
 
     def compile(self, b, what):
         idx = super().compile(b, what)
-        if (self.toward_m is None) == (self.axis is None):
-            raise SceneError(f"{what}: expected exactly one fibre direction, toward_m or axis, received "
-                             f"toward_m={self.toward_m!r} axis={self.axis!r}")
-        toward = self.value("toward_m", what)
-        axis = self.value("axis", what)
-        if axis is not None and not np.linalg.norm(axis) > 0:
-            raise SceneError(f"{what}.axis: expected a non-zero vector, received {self.axis!r}")
+        toward, axis = fibre_direction(self, what)
         s = b.schedule(self.tension_n_per_m, f"{what}.tension_n_per_m", 1)
         mesh = b.mesh
-        inside = np.zeros(mesh.nvert, bool)
-        inside[idx] = True
-        faces = mesh.face_vert[inside[mesh.face_vert].sum(axis=1) >= 2]
+        faces = mesh.face_vert[region_faces(mesh.face_vert, idx, mesh.nvert)]
         edge, share = fibre_shares(mesh.vert_pos, faces, toward=toward, axis=axis)
         if edge.shape[0] == 0:
             raise SceneError(f"{what}.region: expected triangles with at least two of their points in the region "

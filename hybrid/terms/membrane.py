@@ -30,6 +30,7 @@ from numba import prange
 from .. import checks
 from ..errors import SceneError
 from ..kernel import kernel
+from ..mesh.geometry import region_faces
 from .base import Rows, Term, force, param
 
 __all__ = ["Membrane", "membrane_rest", "membrane_face_force", "add_membrane_serial", "membrane_faces_parallel",
@@ -71,9 +72,7 @@ class Membrane(Term):
         nu = self.value("poisson_ratio", what)  # plane stress admits up to 1; tissue sheets lie in [0, 0.5]
         lam, mu = lame_moduli(self.value("youngs_modulus_n_per_m", what), nu)
         tau = self.value("damping_time_s", what)
-        inside = np.zeros(b.mesh.nvert, bool)
-        inside[idx] = True
-        faces = np.nonzero(inside[b.mesh.face_vert].sum(axis=1) >= 2)[0]
+        faces = region_faces(b.mesh.face_vert, idx, b.mesh.nvert)
         if faces.size == 0:
             raise SceneError(f"{what}.region: expected a region holding whole triangles, received "
                              f"{idx.size} points of which no triangle has two")

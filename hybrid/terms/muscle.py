@@ -12,7 +12,7 @@ from ..errors import SceneError
 from ..kernel import kernel
 from .base import Rows, Term, force, param
 
-__all__ = ["Muscle", "muscle_pairs", "add_muscle", "schedule_peak"]
+__all__ = ["Muscle", "muscle_pairs", "add_muscle", "schedule_peak", "fibre_direction"]
 
 
 @force("muscle")
@@ -33,13 +33,7 @@ class Muscle(Term):
 
     def compile(self, b, what):
         idx = super().compile(b, what)
-        if (self.toward_m is None) == (self.axis is None):
-            raise SceneError(f"{what}: expected exactly one fibre direction, toward_m or axis, received "
-                             f"toward_m={self.toward_m!r} axis={self.axis!r}")
-        toward = self.value("toward_m", what)
-        axis = self.value("axis", what)
-        if axis is not None and not np.linalg.norm(axis) > 0:
-            raise SceneError(f"{what}.axis: expected a non-zero vector, received {self.axis!r}")
+        toward, axis = fibre_direction(self, what)
         angle = self.value("max_angle_deg", what)
         s = b.schedule(self.stiffness, f"{what}.stiffness", 1)
         mesh = b.mesh
@@ -50,6 +44,18 @@ class Muscle(Term):
                              f"direction; widen max_angle_deg or check toward_m/axis")
         np.add.at(b.vert_stiffness, pv, schedule_peak(b.schedules[s]))
         b.add_rows(mus_vert=pv, mus_nbr=pn, mus_sched=np.full(pv.size, s))
+
+
+def fibre_direction(term, what: str) -> tuple:
+    """(toward_m, axis) of a muscle term, exactly one given, checked (the other None)."""
+    if (term.toward_m is None) == (term.axis is None):
+        raise SceneError(f"{what}: expected exactly one fibre direction, toward_m or axis, received "
+                         f"toward_m={term.toward_m!r} axis={term.axis!r}")
+    toward = term.value("toward_m", what)
+    axis = term.value("axis", what)
+    if axis is not None and not np.linalg.norm(axis) > 0:
+        raise SceneError(f"{what}.axis: expected a non-zero vector, received {term.axis!r}")
+    return toward, axis
 
 
 def schedule_peak(s) -> float:
