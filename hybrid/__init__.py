@@ -33,7 +33,7 @@ from .resolve import resolve_scene, scene_names
 from .run import RunFailed, run
 from .scene import (AppliedForce, Attraction, Damping, Gravity, KeepIn, Masses, MassSpring, MeshSpec, Muscle,
                     Nailed, Prescribed, Rigid, RigidLink, Scene, ShapeMemory, SoftVolume, Volume, Membrane)
-from .scene import MuscleFibres, Pressure
+from .scene import MuscleFibres, PassiveFibres, Pressure
 from .schedule import Breathing, Constant, Function, Table
 from .simulation import Simulation
 from .sweep import sweep
@@ -45,7 +45,7 @@ __all__ = [
     "Scene", "MeshSpec", "Masses",
     "Gravity", "Damping", "ShapeMemory", "Membrane", "MassSpring", "Muscle", "AppliedForce", "Attraction", "SoftVolume",
     "Nailed", "KeepIn", "Prescribed", "Volume", "Rigid", "RigidLink",
-    "Pressure", "MuscleFibres",
+    "Pressure", "MuscleFibres", "PassiveFibres",
     # region selectors
     "All", "Border", "Indices", "HalfSpace", "Ball", "Box", "Nearest", "Patch", "Union_", "Intersection", "Difference",
     # schedules

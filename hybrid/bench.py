@@ -130,7 +130,7 @@ def coupled_row(*, nstep: int = 4000, repeats: int = 9) -> dict:
     """The breathing scene's full coupled step against a bare mj_step of its
     MJCF. The two are timed alternately, repeat by repeat, so that the ratio
     of each repeat sees the same machine; medians of the times and of the ratios."""
-    scene = load_scene(builtin_scene("breathing"))
+    scene = load_scene(builtin_scene("breathing_paper"))
     sim = Simulation(compile_scene(scene))
     stepper = rigid.BareStepper(rigid.resolve_mjcf(scene))
 
@@ -160,7 +160,7 @@ def recording_row(*, duration_s: float = 12.0, repeats: int = 9) -> dict:
     with the default one (`Recorder`, encoding on its own thread), and with the
     encoding done between steps (`background=False`), timed in turn repeat by repeat,
     each from `Recorder(...)` to `close()`; medians of the times and of the ratios."""
-    scene = load_scene(builtin_scene("breathing"))
+    scene = load_scene(builtin_scene("breathing_paper"))
     model = compile_scene(scene)
     times: dict[str, list] = {"off": [], "on": [], "inline": []}
     with tempfile.TemporaryDirectory() as tmp:

@@ -99,6 +99,10 @@ def _valid(kind: str, meta: dict) -> str:
     """What a field of `kind` accepts, as `hybrid.terms.base.check_value` checks it."""
     if kind == "positive":
         return "a number > 0" + (f" and <= {_show(float(meta['hi']))}" if meta.get("hi") is not None else "")
+    if kind == "step":
+        return f'a number > 0 and <= {_show(float(meta["hi"]))}, or "auto" (half the stable-step estimate, rounded down to 1, 2 or 5 x 10^k)'
+    if kind == "floats":
+        return "[z, ...], finite numbers"
     if kind == "nonneg":
         return "a number >= 0" + (f" and <= {_show(float(meta['hi']))}" if meta.get("hi") is not None else "")
     if kind == "angle_deg":

@@ -19,7 +19,7 @@ import numpy as np
 from . import checks
 from . import regions as _regions
 from . import schedule as _sched
-from .errors import SceneError
+from .errors import MeshError, SceneError
 from .kernel import use_parallel
 from .mesh import Mesh, vertex_area
 from .scene import FORMULATIONS, INTEGRATORS, MESH_GENERATORS, Masses, MeshSpec, Scene
@@ -85,6 +85,7 @@ class Model:
     dt_stable_s: float
     rigid: object = None
     link_vert: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
+    vert_viscosity: np.ndarray | None = None  # N s/m: the membrane's Kelvin-Voigt share per point
 
     @property
     def nvert(self) -> int:
@@ -100,9 +101,9 @@ class Model:
         integ = self.arrays.integrator if integrator is None else _integrator_id(integrator)
         arrays = self.arrays._replace(dt=float(dt_s), integrator=integ)
         scene = dataclasses.replace(self.scene, dt_s=float(dt_s), integrator=INTEGRATORS[integ])
-        dt_stable = _stable_dt(arrays, self.vert_stiffness)
+        dt_stable = _stable_dt(arrays, self.vert_stiffness, self.vert_viscosity)
         return Model(scene, self.mesh, self.regions, arrays, self.terms, self.python_schedules,
-                     self.vert_stiffness, dt_stable, self.rigid, self.link_vert)
+                     self.vert_stiffness, dt_stable, self.rigid, self.link_vert, self.vert_viscosity)
 
     def without_speed_limit(self) -> "Model":
         """The same model without the runaway test (`max_speed_m_s`): for numerical
@@ -135,6 +136,10 @@ def _positive(value, name):
     return checks.number(name, value, lo=0)
 
 
+#: the generators `mesh.level` refines
+LEVEL_GENERATORS = ("uv_sphere", "ring_sphere", "fibonacci_sphere")
+
+
 def build_mesh(scene: Scene) -> Mesh:
     """The scene's surface: a given Mesh, a mesh file, or a generator."""
     from . import mesh as _mesh
@@ -149,16 +154,39 @@ def build_mesh(scene: Scene) -> Mesh:
            for f in dataclasses.fields(MeshSpec) if getattr(spec, f.name) is not None and f.name != "generator"}
     center = np.asarray(val["center_m"])
     if spec.path is not None:
+        if val.get("level") is not None:
+            raise SceneError(f"mesh.level: a mesh read from a file ({spec.path!r}) has no levels; "
+                             f"expected no level with mesh.path, received level={val['level']!r}")
         m = Mesh.load(scene.resolve(spec.path))
         return Mesh.from_arrays(m.vert_pos * val["unit_scale"] + center, m.face_vert, name=m.name)
     radius = val["radius_m"]
     gen = spec.generator
+    if val.get("level") is not None and gen not in LEVEL_GENERATORS:
+        raise SceneError(f"mesh.level: expected a generator that refines by level ({', '.join(LEVEL_GENERATORS)}), "
+                         f"received generator={gen!r}")
+    conform = val.get("conform_z_m", ())
+    if conform and gen not in ("uv_sphere", "ring_sphere"):
+        raise SceneError(f"mesh.conform_z_m: expected a generator with circles of latitude (uv_sphere or "
+                         f"ring_sphere), received generator={gen!r}")
+    npoint = _mesh.level_counts(val.get("level") or 0)[2]
+    try:
+        if gen == "fibonacci_sphere":
+            return _mesh.fibonacci_sphere(npoint, radius, center=tuple(center))
+        if gen == "ring_sphere":
+            return _mesh.ring_sphere(npoint, radius, center=tuple(center), conform_z=conform)
+    except MeshError as exc:
+        raise SceneError(f"mesh: {exc}") from None
     if gen == "uv_sphere":
+        if val.get("level") is not None:
+            val["segments"], val["rings"], _ = _mesh.level_counts(val["level"])
         npoint = val["segments"] * (val["rings"] - 1) + 2
         if npoint > checks.MAX_POINTS:  # before any array is allocated
             raise SceneError(f"mesh: segments = {val['segments']} x rings = {val['rings']} gives {npoint} points; "
                              f"expected at most {checks.MAX_POINTS}")
-        return _mesh.uv_sphere(radius, val["segments"], val["rings"], center=tuple(center))
+        try:
+            return _mesh.uv_sphere(radius, val["segments"], val["rings"], center=tuple(center), conform_z=conform)
+        except MeshError as exc:
+            raise SceneError(f"mesh: {exc}") from None
     if gen == "icosphere":
         return _mesh.icosphere(val["subdivisions"], radius, center=tuple(center))
     if gen == "icosahedron":
@@ -209,10 +237,40 @@ def _region(sel, mesh, regions, what):
                            face_vert=mesh.face_vert)
 
 
+#: the share of the stable-step estimate that dt_s = "auto" takes (the estimate is
+#: per point and 16-18% optimistic on the breathing membrane: FINDINGS)
+AUTO_DT_SHARE = 0.5
+
+
+def nice_floor(x: float) -> float:
+    """The largest 1, 2 or 5 x 10^k at most x (> 0): a step that reads well in tables."""
+    k = math.floor(math.log10(x))
+    for mant in (5.0, 2.0, 1.0):
+        if mant * 10.0 ** k <= x * (1 + 1e-12):
+            return mant * 10.0 ** k
+    return 10.0 ** k
+
+
+def auto_dt(dt_stable_s: float) -> float:
+    """The step dt_s = "auto" takes: AUTO_DT_SHARE of the stable-step estimate, rounded
+    down by `nice_floor`, and at most MAX_DT_S."""
+    return min(nice_floor(AUTO_DT_SHARE * dt_stable_s), checks.MAX_DT_S) if math.isfinite(dt_stable_s) \
+        else checks.MAX_DT_S
+
+
 def compile_scene(scene: Scene) -> Model:
-    """Validate `scene` and build its immutable model (see the module docstring)."""
+    """Validate `scene` and build its immutable model (see the module docstring).
+    dt_s = "auto": the scene is compiled once to estimate its stable step, then with
+    `auto_dt` of it (the model's scene holds the number)."""
     if not isinstance(scene, Scene):
         raise SceneError(f"scene: expected a hybrid.scene.Scene, received {type(scene).__name__}")
+    if isinstance(scene.dt_s, str) and scene.dt_s == "auto":
+        probe = _compile(dataclasses.replace(scene, dt_s=min(1e-3, scene.duration_s)))
+        return _compile(dataclasses.replace(scene, dt_s=auto_dt(probe.dt_stable_s)))
+    return _compile(scene)
+
+
+def _compile(scene: Scene) -> Model:
     _check_dt(scene.dt_s)
     _check_duration(scene.duration_s, scene.dt_s)
     checks.text("name", scene.name)
@@ -236,6 +294,7 @@ def compile_scene(scene: Scene) -> Model:
         raise SceneError(f"terms: expected unique names, received {dup} more than once; give each a `name`")
 
     b = Build(mesh, regions, vert_mass, len(TERMS))
+    b.selectors = dict(scene.regions)
     for section, terms, types in (("forces", scene.forces, FORCE_TYPES),
                                   ("constraints", scene.constraints, CONSTRAINT_TYPES)):
         for term in terms:
@@ -285,7 +344,8 @@ def compile_scene(scene: Scene) -> Model:
     terms = tuple(TERMS[i] for i in range(len(TERMS)) if b.term_on[i])
     return Model(scene=scene, mesh=mesh, regions=regions, arrays=arrays, terms=terms,
                  python_schedules=tuple(python_fns), vert_stiffness=b.vert_stiffness,
-                 dt_stable_s=_stable_dt(arrays, b.vert_stiffness), rigid=rigid, link_vert=b.link_vert)
+                 dt_stable_s=_stable_dt(arrays, b.vert_stiffness, b.vert_viscosity), rigid=rigid,
+                 link_vert=b.link_vert, vert_viscosity=b.vert_viscosity)
 
 
 def _refuse_single_points(scene: Scene) -> None:
@@ -308,14 +368,16 @@ def _or(names) -> str:
     return ", ".join(names[:-1]) + " or " + names[-1]
 
 
-def _stable_dt(arrays: MembraneArrays, vert_stiffness: np.ndarray) -> float:
-    """Largest stable step over the integrated points (per-point linear analysis)."""
+def _stable_dt(arrays: MembraneArrays, vert_stiffness: np.ndarray, vert_viscosity=None) -> float:
+    """Largest stable step over the integrated points (per-point linear analysis);
+    vert_viscosity (N s/m): viscous terms outside damp_coef (the membrane's Kelvin-Voigt)."""
+    damp = arrays.damp_coef if vert_viscosity is None else arrays.damp_coef + vert_viscosity
     # points with neither stiffness nor damping move freely: no step limit
-    free = (arrays.vert_free > 0) & ((vert_stiffness > 0) | (arrays.damp_coef > 0))
+    free = (arrays.vert_free > 0) & ((vert_stiffness > 0) | (damp > 0))
     if not np.any(free):
         return math.inf
     integ = "explicit_euler" if arrays.integrator == 0 else "symplectic_euler"
-    h = max_stable_dt(arrays.vert_mass[free], vert_stiffness[free], arrays.damp_coef[free], integ, h_hi=10.0)
+    h = max_stable_dt(arrays.vert_mass[free], vert_stiffness[free], damp[free], integ, h_hi=10.0)
     h_min = float(h.min())
     damped = free & (arrays.damp_coef > 0)
     if arrays.integrator == 0 and arrays.term_on[Volume.id] and np.any(damped):

@@ -11,8 +11,9 @@ import numpy as np
 
 from .mesh.geometry import region_faces
 from .model import MembraneArrays
-from .terms import Membrane, MassSpring, Muscle, MuscleFibres, ShapeMemory
+from .terms import Membrane, MassSpring, Muscle, MuscleFibres, PassiveFibres, ShapeMemory
 from .terms.fibres import add_muscle_fibres
+from .terms.passive_fibres import add_passive_fibres, passive_fibres_energy
 from .terms.membrane import add_membrane_serial, membrane_energy
 from .terms.muscle import add_muscle
 from .terms.shape_memory import add_shape_memory
@@ -21,7 +22,7 @@ from .terms.springs import add_mass_spring
 __all__ = ["internal_forces", "net_internal", "elastic_energy", "region_faces", "swept_volume"]
 
 #: terms whose forces are internal to the membrane (between its points)
-INTERNAL_TERMS = (Membrane, ShapeMemory, Muscle, MassSpring, MuscleFibres)
+INTERNAL_TERMS = (Membrane, ShapeMemory, Muscle, MassSpring, MuscleFibres, PassiveFibres)
 #: internal terms that are no energy's gradient (paper formulation)
 NON_CONSERVATIVE = (ShapeMemory, Muscle)
 
@@ -43,6 +44,8 @@ def internal_forces(a: MembraneArrays, vert_pos: np.ndarray, sched_val: np.ndarr
         add_mass_spring(a.spring_vert, a.spring_stiff, a.spring_rest, vert_pos, f)
     if on[MuscleFibres.id]:
         add_muscle_fibres(a.fib_edge, a.fib_share, a.fib_sched, sched_val, vert_pos, f)
+    if on[PassiveFibres.id]:
+        add_passive_fibres(a.pf_vert, a.pf_par, vert_pos, f)
     return f
 
 
@@ -65,6 +68,8 @@ def elastic_energy(a: MembraneArrays, vert_pos: np.ndarray) -> float | None:
     e = 0.0
     if a.term_on[Membrane.id]:
         e += membrane_energy(a.mem_vert, a.mem_par, vert_pos)
+    if a.term_on[PassiveFibres.id]:
+        e += passive_fibres_energy(a.pf_vert, a.pf_par, vert_pos)
     if a.term_on[MassSpring.id]:
         p = vert_pos[a.spring_vert]
         stretch = np.linalg.norm(p[:, 1] - p[:, 0], axis=1) - a.spring_rest

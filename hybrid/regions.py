@@ -18,7 +18,7 @@ from .errors import SceneError
 from .mesh.geometry import vertex_area
 
 __all__ = ["Indices", "HalfSpace", "Ball", "Box", "Nearest", "Patch", "All", "Border",
-           "Union_", "Intersection", "Difference", "Selector", "select", "contains"]
+           "Union_", "Intersection", "Difference", "Selector", "select", "contains", "select_faces"]
 
 
 def _vec3(v, name):
@@ -249,3 +249,35 @@ def nearest_surface_point(vert_pos: np.ndarray, face_vert: np.ndarray, point) ->
     d2 = np.sum((cand - x) ** 2, axis=2)
     k, f = np.unravel_index(np.argmin(d2), d2.shape)
     return cand[k, f]
+
+
+def _expand(sel, selectors: dict, depth: int = 0):
+    """`sel` with every region name replaced by its selector (recursively)."""
+    if depth > MAX_SELECTOR_DEPTH:
+        raise SceneError(f"selectors nested more than {MAX_SELECTOR_DEPTH} levels deep")
+    if isinstance(sel, str):
+        return All() if sel == "all" else _expand(selectors[sel], selectors, depth + 1)
+    if isinstance(sel, Union_):
+        return Union_(tuple(_expand(p, selectors, depth + 1) for p in sel.parts))
+    if isinstance(sel, Intersection):
+        return Intersection(tuple(_expand(p, selectors, depth + 1) for p in sel.parts))
+    if isinstance(sel, Difference):
+        return Difference(_expand(sel.base, selectors, depth + 1), _expand(sel.minus, selectors, depth + 1))
+    return sel
+
+
+def select_faces(sel: Selector, vert_pos: np.ndarray, face_vert: np.ndarray, selectors: dict,
+                 *, name: str) -> np.ndarray | None:
+    """The faces whose centroid the selector holds, for a selector of geometry only
+    (half-spaces, balls, boxes and their combinations, names of such regions): on
+    a mesh whose edges follow the region's border (e.g. `mesh.conform_z_m`) these
+    are exactly the faces inside it. None for a selector of points (indices,
+    border, nearest, patch), whose faces are then those with two points in it."""
+    try:
+        geo = _expand(sel, selectors)
+    except KeyError:
+        return None
+    if any(contains(geo, cls) for cls in (Indices, Border, Nearest, Patch)):
+        return None
+    tri = np.asarray(vert_pos)[np.asarray(face_vert)]
+    return np.unique(_select(geo, tri.mean(axis=1), name, {}, (None, None))).astype(np.int64)

@@ -30,9 +30,11 @@ from .schedule import Breathing, schedule_eval, stack_schedules
 from .outputs import (LOCK_NAME, FolderLock, claim_folder, default_out, holds_run, out_folder, plot_trace,
                       write_outputs, write_summary)
 from .provenance import run_provenance
-from .scene import Muscle, SoftVolume, Volume
+from .scene import Muscle, MuscleFibres, SoftVolume, Volume
 from .simulation import Simulation
 from .step import F_KE, F_PRESSURE, F_TIME, F_VOLUME, capture_frame
+from .mesh.geometry import region_faces
+from .readouts import swept_volume
 from .terms.volume import face_volume
 
 __all__ = ["TRACE_KEYS", "METRIC_KEYS", "Trace", "scene_parts", "metric_table", "run", "RunFailed", "RunInterrupted", "FolderLock", "default_out", "run_steps",
@@ -51,6 +53,7 @@ TRACE_KEYS = (
     "muscle_n_per_m",     # the first muscle's stiffness (scenes with a muscle)
     "kinetic_energy_j",
     "volume_rel_change",  # |V - V0| / V0 whatever keeps the volume (closed surfaces)
+    "swept_volume_ml",    # volume the region named "diaphragm" swept inward from rest (scenes with one)
 )
 #: the series a summary gives min, max and their times of (all but the time)
 METRIC_KEYS = TRACE_KEYS[1:]
@@ -175,11 +178,11 @@ class Trace:
 def scene_parts(model: Model) -> frozenset:
     """What the scene has that some metrics need: "ribs" (points linked to rigid
     bodies), "closed surface", "volume constraint" (the exact one), "pressure" (a
-    volume term, exact or soft) and "muscle"."""
+    volume term, exact or soft), "muscle" and "diaphragm" (a region of that name)."""
     on = model.arrays.term_on
     parts = {"ribs": model.link_vert.size > 0, "closed surface": model.mesh.closed,
              "volume constraint": bool(on[Volume.id]), "pressure": bool(on[Volume.id] or on[SoftVolume.id]),
-             "muscle": _breathing(model)[0] is not None}
+             "muscle": _breathing(model)[0] is not None, "diaphragm": SWEPT_REGION in model.regions}
     return frozenset(name for name, has in parts.items() if has)
 
 
@@ -228,11 +231,17 @@ def _mean_z(pos: np.ndarray, vert: np.ndarray) -> np.ndarray:
 
 
 def _breathing(model: Model):
-    """The first muscle's schedule, and its breathing period if it has one."""
+    """The first muscle's schedule (a per-point muscle's stiffness, or a fibre
+    tension), and its breathing waveform if it has one."""
     for term in model.scene.forces:
-        if isinstance(term, Muscle):
-            return term.stiffness, (term.stiffness if isinstance(term.stiffness, Breathing) else None)
+        if isinstance(term, (Muscle, MuscleFibres)):
+            sched = term.stiffness if isinstance(term, Muscle) else term.tension_n_per_m
+            return sched, (sched if isinstance(sched, Breathing) else None)
     return None, None
+
+
+#: the region whose swept volume the trace gives (`swept_volume_ml`)
+SWEPT_REGION = "diaphragm"
 
 
 #: steps a command-line run starts only when confirmed (--yes)
@@ -340,6 +349,8 @@ def run(sim: Simulation, duration_s: float, *, frame_dt_s: float = 0.01, progres
     # the muscle stiffness at each frame: its table stacked once, evaluated compiled
     muscle_table, muscle_fns = stack_schedules([muscle_sched]) if muscle_sched is not None else (None, [])
     muscle_val = np.zeros(3)
+    swept_faces = model.mesh.face_vert[region_faces(model.mesh.face_vert, model.regions[SWEPT_REGION],
+                                                    model.nvert)] if "diaphragm" in parts else None
 
     def muscle_at(t):
         if muscle_table is None:
@@ -383,6 +394,8 @@ def run(sim: Simulation, duration_s: float, *, frame_dt_s: float = 0.01, progres
             else np.nan
         rows[:, _COL["pressure_pa"]] = scal[:, F_PRESSURE] if "pressure" in parts else np.nan
         rows[:, _COL["kinetic_energy_j"]] = scal[:, F_KE]
+        rows[:, _COL["swept_volume_ml"]] = [-swept_volume(swept_faces, rest, p) * 1e6 for p in pos] \
+            if swept_faces is not None else np.nan
         if "muscle" in parts:
             for j, t in enumerate(scal[:, F_TIME].tolist()):
                 rows[j, _COL["muscle_n_per_m"]] = muscle_at(t)

@@ -21,14 +21,14 @@ from .errors import SceneError
 from .terms.base import FORMULATIONS, param
 from .terms import (AppliedForce, Attraction, Damping, Gravity, KeepIn, MassSpring, Membrane, Muscle, Nailed,
                     Prescribed, ShapeMemory, SoftVolume, Volume)
-from .terms import MuscleFibres, Pressure
+from .terms import MuscleFibres, PassiveFibres, Pressure
 
 __all__ = [
     "MeshSpec", "Masses",
     "Gravity", "Damping", "ShapeMemory", "Membrane", "MassSpring", "Muscle", "AppliedForce", "Attraction",
     "SoftVolume", "Nailed", "KeepIn", "Prescribed", "Volume", "RigidLink", "Rigid", "Scene",
     "INTEGRATORS", "FORMULATIONS",
-    "Pressure", "MuscleFibres",
+    "Pressure", "MuscleFibres", "PassiveFibres",
 ]
 
 INTEGRATORS = ("explicit_euler", "symplectic_euler")
@@ -36,7 +36,7 @@ INTEGRATORS = ("explicit_euler", "symplectic_euler")
 #: per-point model of Promayon et al. 1997 kept exactly; "continuum", material parameters
 #: that mean the same on every mesh, internal forces that obey action and reaction
 FORMULATIONS = FORMULATIONS
-MESH_GENERATORS = ("uv_sphere", "icosphere", "icosahedron")
+MESH_GENERATORS = ("uv_sphere", "ring_sphere", "fibonacci_sphere", "icosphere", "icosahedron")
 
 
 @dataclass(frozen=True)
@@ -45,8 +45,19 @@ class MeshSpec:
 
     Either a file (`path`: STL, OBJ, PLY or OFF, positions in `unit_scale` m
     per file unit) or a generator: "uv_sphere" (the paper's 80-point sphere at
-    13 segments x 7 rings), "icosphere" (`subdivisions`) or "icosahedron".
+    13 segments x 7 rings), "ring_sphere" (pole-free: even circles of
+    latitude), "fibonacci_sphere" (pole-free: the spiral lattice), "icosphere"
+    (`subdivisions`) or "icosahedron".
     The result is translated by `center_m` (generators are centred there).
+    `level` K refines the two sphere families together for convergence studies:
+    about 80 x 2^K points (the paper's 80-point sphere at K = 0), the spacing
+    divided by sqrt(2) at each level; on a UV sphere it sets segments and rings
+    (13 and 7 times 2^(K/2), rounded), on the pole-free spheres the point count
+    (the UV sphere's at the same level, about that on a ring sphere; 80 without
+    a level). `conform_z_m` (m above the centre): latitudes that are circles of
+    the UV or ring sphere at every level, so that regions bounded there (the
+    anatomy's parts) are bounded by edges and converge without a mesh-dependent
+    jagged edge.
     """
     generator: Optional[str] = param("choice", "uv_sphere", choices=MESH_GENERATORS)
     path: Optional[str] = param("text", None)
@@ -54,6 +65,8 @@ class MeshSpec:
     segments: int = param("integer", 13, lo=3)
     rings: int = param("integer", 7, lo=2)
     subdivisions: int = param("integer", 3, lo=0, hi=7)
+    level: Optional[int] = param("integer", None, lo=0, hi=16)
+    conform_z_m: tuple = param("floats", ())
     center_m: tuple[float, float, float] = param("vec3", (0.0, 0.0, 0.0))
     unit_scale: float = param("positive", 1.0, hi=checks.MAX_LENGTH_M, unit="m per file unit")
 
@@ -100,7 +113,7 @@ class Scene:
     forces: tuple = ()
     constraints: tuple = ()
     rigid: Optional[Rigid] = None
-    dt_s: float = param("positive", 1e-3, hi=checks.MAX_DT_S)
+    dt_s: float = param("step", 1e-3, hi=checks.MAX_DT_S)  # or "auto": see hybrid.model.auto_dt
     integrator: str = param("choice", "symplectic_euler", choices=INTEGRATORS)
     formulation: str = param("choice", "continuum", choices=FORMULATIONS)
     duration_s: float = param("positive", 1.0, hi=checks.MAX_DURATION_S)

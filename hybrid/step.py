@@ -39,6 +39,7 @@ from .terms.volume import PROJ_OK, face_volume, project_volume, soft_volume_forc
 from .terms.volume import volume_direction_parallel, volume_direction_serial
 from .terms.volume import Pressure, add_pressure
 from .terms.fibres import MuscleFibres, add_muscle_fibres
+from .terms.passive_fibres import PassiveFibres, add_passive_fibres
 
 __all__ = ["Scal", "StepStatus", "FrameColumn", "MembraneState", "new_state", "membrane_forces", "membrane_advance", "run_membrane",
            "run_membrane_frames", "capture_frame", "kinetic_energy_of", "Frames", "step_par"]
@@ -48,7 +49,7 @@ __all__ = ["Scal", "StepStatus", "FrameColumn", "MembraneState", "new_state", "m
  T_PRESCRIBED, T_KEEP_IN, T_VOLUME) = (Gravity.id, AppliedForce.id, Attraction.id, Damping.id, ShapeMemory.id,
                                        MassSpring.id, Muscle.id, SoftVolume.id, Prescribed.id, KeepIn.id, Volume.id)
 T_MEMBRANE = Membrane.id
-T_PRESSURE, T_MUSCLE_FIBRES = Pressure.id, MuscleFibres.id
+T_PRESSURE, T_MUSCLE_FIBRES, T_PASSIVE_FIBRES = Pressure.id, MuscleFibres.id, PassiveFibres.id
 
 
 class Scal(IntEnum):
@@ -168,6 +169,9 @@ def membrane_forces(m, s, t, par=True):
     if on[T_MUSCLE_FIBRES]:
         add_muscle_fibres(m.fib_edge, m.fib_share, m.fib_sched, s.sched_val, s.vert_pos, s.vert_force)
         s.term_calls[T_MUSCLE_FIBRES] += 1
+    if on[T_PASSIVE_FIBRES]:
+        add_passive_fibres(m.pf_vert, m.pf_par, s.vert_pos, s.vert_force)
+        s.term_calls[T_PASSIVE_FIBRES] += 1
 
 
 def _integrate(vert_free, vert_mass, explicit, h, vert_force, vert_pos, vert_vel, chunk_acc):

@@ -10,8 +10,8 @@ from helpers import CLOSED
 
 @pytest.fixture(scope="session")
 def breathing():
-    """The packaged breathing trunk (models/scenes/breathing.toml), as a Scene."""
-    return load_scene(builtin_scene("breathing"))
+    """The paper's breathing trunk (models/scenes/breathing_paper.toml), as a Scene."""
+    return load_scene(builtin_scene("breathing_paper"))
 
 
 @pytest.fixture(params=list(CLOSED), ids=list(CLOSED))

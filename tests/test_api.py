@@ -14,7 +14,7 @@ import hybrid
 
 
 def test_load_builtin_breathing_exposes_state_and_mujoco():
-    sim = hybrid.load()
+    sim = hybrid.load("breathing_paper")
     assert sim.mj_model is not None and sim.mj_data is not None
     z_rib0 = sim.mj_data.site_xpos.copy()
     sim.step(800)  # 0.8 s into the first inspiration
@@ -26,7 +26,7 @@ def test_load_builtin_breathing_exposes_state_and_mujoco():
 
 
 def test_parameters_change_and_the_run_repeats(tmp_path):
-    scene = hybrid.load_scene("breathing")
+    scene = hybrid.load_scene("breathing_paper")
     runs = {}
     for dt in (1e-3, 5e-4):
         sim = hybrid.load(dataclasses.replace(scene, dt_s=dt))
@@ -48,7 +48,7 @@ def test_load_scene_takes_every_name_the_command_line_takes():
     assert hybrid.load("membrane_demo").mj_model is None
     scene = hybrid.load_scene("membrane_demo", overrides=["dt_s=5e-4"], without=["muscle"])
     assert scene.dt_s == 5e-4 and "muscle" not in scene.term_names()
-    with pytest.raises(hybrid.SceneError, match="'snoring'.*breathing, membrane_demo"):
+    with pytest.raises(hybrid.SceneError, match="'snoring'.*breathing, breathing_paper, membrane_demo"):
         hybrid.load("snoring")
     assert {"breathing", "membrane_demo", "myotorso_breathing"} <= set(hybrid.scene_names())
 
@@ -59,7 +59,7 @@ def test_every_public_name_resolves_and_is_listed_once():
         assert getattr(hybrid, name) is not None, name
     # the vocabulary of a scene: every term, region selector and schedule
     from hybrid import regions, scene, schedule
-    vocabulary = (set(scene.__all__) - {"INTEGRATORS", "FORMULATIONS"} | set(regions.__all__) - {"Selector", "select", "contains"}
+    vocabulary = (set(scene.__all__) - {"INTEGRATORS", "FORMULATIONS"} | set(regions.__all__) - {"Selector", "select", "contains", "select_faces"}
                   | set(schedule.__all__) - {"Schedule", "as_schedule", "ScheduleTable", "stack_schedules",
                                              "schedule_eval"})
     assert vocabulary <= set(hybrid.__all__)

@@ -62,7 +62,7 @@ def test_builtin_scenes_and_trunk_resolve_inside_the_installed_package(tmp_path)
     env = {**os.environ, "PYTHONPATH": str(site), "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, cwd=tmp_path,
                          check=True).stdout.splitlines()
-    assert out[0] == "['breathing', 'myotorso_breathing']"
+    assert out[0] == "['breathing', 'breathing_paper', 'myotorso_breathing']"
     models = site / "hybrid" / "models"
     for line, expected in zip(out[1:], ("scenes/breathing.toml", "scenes/myotorso_breathing.toml", "trunk.xml")):
         assert Path(line) == models / expected and Path(line).is_file()

@@ -29,9 +29,9 @@ def _panels(img):
 
 @pytest.fixture(scope="module")
 def recording(tmp_path_factory):
-    """The breathing trunk through its first breath (4 s), recorded."""
+    """The paper's breathing trunk through its first breath (4 s), recorded."""
     path = tmp_path_factory.mktemp("rec") / "run.mcap"
-    sim = hybrid.load()
+    sim = hybrid.load("breathing_paper")
     with Recorder(path, sim) as rec:
         run(sim, 4.05, observers=[rec])
     return path

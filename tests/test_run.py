@@ -16,7 +16,7 @@ def _plain_observer(sim, trace):
 
 @pytest.mark.parametrize("scene", ["breathing", "membrane_demo"])
 def test_compiled_frames_give_the_trace_of_frame_by_frame_stepping(scene):
-    make = (lambda: hybrid.load()) if scene == "breathing" else (lambda: hybrid.load(membrane_demo()))
+    make = (lambda: hybrid.load("breathing_paper")) if scene == "breathing" else (lambda: hybrid.load(membrane_demo()))
     duration = 5.0 if scene == "breathing" else 1.0  # the breathing: one whole cycle, so rest_return_mm
     batched = run(make(), duration)
     stepped = run(make(), duration, observers=[_plain_observer])

@@ -185,7 +185,7 @@ def test_a_mesh_file_resolves_in_the_scene_files_folder(tmp_path, monkeypatch):
 # ----------------------------------------------------------------- overrides
 
 def test_overrides_follow_dotted_paths_through_named_terms():
-    scene = sf.load_scene(sf.builtin_scene())
+    scene = sf.load_scene(sf.builtin_scene("breathing_paper"))
     new = sf.apply_overrides(scene, ["dt_s=5e-4", "forces.muscle.stiffness.breathing.peak=80",
                                      "forces.4.critical_fraction=0.5", "integrator=explicit_euler",
                                      "rigid.links.rib_left.body=rib_left_attach", "mesh.radius_m = 0.11"])
@@ -207,7 +207,7 @@ def test_overrides_follow_dotted_paths_through_named_terms():
     ("regions.nowhere.half_space.point=[0, 0, 0]", "no key 'nowhere'"),
 ])
 def test_bad_overrides_name_the_culprit(item, culprit):
-    scene = sf.load_scene(sf.builtin_scene())
+    scene = sf.load_scene(sf.builtin_scene("breathing_paper"))
     with pytest.raises(SceneError) as err:
         sf.apply_overrides(scene, [item])
     assert culprit in str(err.value) and "\n" not in str(err.value)

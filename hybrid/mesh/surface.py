@@ -148,6 +148,16 @@ class Mesh:
         except MeshError as exc:
             raise MeshError(f"mesh file {str(path)!r}: {exc}") from None
 
+    def save(self, path) -> None:
+        """Write the surface to an OBJ file (`hybrid.mesh.obj.write_obj`): vertex k
+        stays vertex k and every position reads back to the same double."""
+        from .obj import write_obj
+        path = Path(path)
+        if path.suffix.lower() != ".obj":
+            raise MeshError(f"mesh file {str(path)!r}: expected a .obj path to save to, received suffix "
+                            f"{path.suffix!r}")
+        write_obj(path, self.vert_pos, self.face_vert)
+
     # -- immutability -------------------------------------------------------
 
     def __setattr__(self, key, value):

@@ -40,13 +40,56 @@ def build_study_parser() -> argparse.ArgumentParser:
                         ("work-precision", "error against run time of both integrators, breathing and "
                                            "membrane-only scenes"),
                         ("verification", "the continuum formulation against closed forms and conservation laws "
-                                         "on three mesh families")):
+                                         "on three mesh families"),
+                        ("convergence", "a scene's metrics on a grid of mesh levels x time steps: limits, "
+                                        "orders, and the cheapest run for 10%, 3% and 1% error")):
         s = sub.add_parser(name, help=help_)
+        if name == "convergence":
+            s.add_argument("scene", nargs="?", default="breathing",
+                           help="a scene whose mesh refines by level (default: breathing)")
         s.add_argument("--out", required=True, metavar="DIR", help="output folder (created)")
         s.add_argument("--small", action="store_true", help="a small version (seconds; for tests)")
         s.add_argument("--scheduler", metavar="ADDRESS", default=None,
                        help="run on an existing Dask cluster (tcp://HOST:PORT) instead of the local cores")
+        if name == "convergence":
+            s.add_argument("--metric", action="append", metavar="NAME",
+                           help="a trace series whose largest value is studied (repeatable; default: "
+                                "rib_lift_mm, apex_descent_mm, pressure_pa, swept_volume_ml)")
+            s.add_argument("--levels", metavar="K0-K1", help="the mesh levels (default 0-5; --small 0-2)")
+            s.add_argument("--steps", type=int, metavar="N", help="time steps per level, halving (default 3)")
+            s.add_argument("--duration", type=float, metavar="S", help="simulated time per run (s)")
+            s.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                           help="a scene override for every run (e.g. mesh.generator=fibonacci_sphere)")
     return p
+
+
+def _levels(text):
+    """"K0-K1" or "K0,K1,..." as a tuple of levels."""
+    if text is None:
+        return None
+    try:
+        if "-" in text:
+            lo, hi = (int(x) for x in text.split("-"))
+            return tuple(range(lo, hi + 1))
+        return tuple(int(x) for x in text.split(","))
+    except ValueError:
+        raise HybridError(f"--levels: expected K0-K1 or K0,K1,... (integers), received {text!r}") from None
+
+
+def _convergence(args) -> None:
+    from . import convergence
+    from .convergence import DEFAULT_METRICS
+    r = convergence.run(args.out, scene=args.scene, metrics=tuple(args.metric or DEFAULT_METRICS),
+                        small=args.small, levels=_levels(args.levels), nstep=args.steps,
+                        duration_s=args.duration, overrides=tuple(args.set), scheduler=args.scheduler)
+    order = ", ".join(f"{k} {_num(e['observed_order_space'], '.2f')}" for k, e in r["estimate"].items() if e)
+    change = ", ".join(f"{k} {v:.2%}" for k, v in r["finest_change"].items())
+    print(f"convergence: {len(r['runs'])} runs, {len(r['failures'])} failed; order in space: {order}; "
+          f"change between the two finest levels: {change}; {r['runtime_s']:.1f} s -> {args.out}/convergence.json")
+
+
+def _num(x, spec):
+    return "-" if x is None else format(x, spec)
 
 
 def _stability(args) -> None:
@@ -95,7 +138,8 @@ def main_study(argv) -> int:
     try:
         out_folder(Path(args.out))
         {"stability": _stability, "extremes": _extremes,
-         "work-precision": _work_precision, "verification": _verification}[args.study](args)
+         "work-precision": _work_precision, "verification": _verification,
+         "convergence": _convergence}[args.study](args)
         return 0
     except HybridError as exc:
         sys.stderr.write(f"hybrid study: error: {' '.join(str(exc).split())}\n")

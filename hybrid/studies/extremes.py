@@ -101,7 +101,7 @@ def _flat_demo(thickness_ratio: float) -> Scene:
 
 
 def _breathing():
-    return resolve_scene("breathing")
+    return resolve_scene("breathing_paper")
 
 
 def _rib_variant(tmp: Path, name: str, edit: Callable[[ET.Element], None]) -> Callable[[], Scene]:

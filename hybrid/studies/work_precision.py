@@ -4,7 +4,7 @@ membrane-only scene at time steps from the stability bound down by halves.
 `run(out_dir)` writes `work_precision.json`, `work_precision.md` and
 `work_precision.png` (log-log error against wall time, and error against h).
 
-Scenes     "breathing": the packaged trunk (`hybrid.load_scene("breathing")`,
+Scenes     "breathing": the packaged trunk (`hybrid.load_scene("breathing_paper")`,
            membrane coupled to MuJoCo ribs); "membrane": `hybrid.demo.membrane_demo()`.
            Both damp at 0.3 of critical, which explicit Euler needs.
 Steps      h = 1e-3 s / 2^k, k = 0..LEVELS-1: 1e-3 s is the scenes' own step,
@@ -57,7 +57,7 @@ def _scene(name: str):
     from ..resolve import resolve_scene
     if name not in SCENES:
         raise ValueError(f"scene: expected one of {list(SCENES)}, received {name!r}")
-    return resolve_scene({"breathing": "breathing", "membrane": "membrane_demo"}[name])
+    return resolve_scene({"breathing": "breathing_paper", "membrane": "membrane_demo"}[name])
 
 
 def simulate(scene: str, integrator: str, k: int, window_s: float, repeats: int = 1) -> dict:

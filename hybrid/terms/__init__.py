@@ -4,7 +4,7 @@ compiled kernel (`hybrid.terms.base` says how they fit together).
 
 Families: `pointwise` (gravity, damping and the step's fused per-point pass),
 `shape_memory`, `springs` (mass-spring, applied forces, attractive points),
-`muscle`, `fibres` (muscle fibres that pull both ends), `volume` (exact and soft volume, pressure load), `local` (nailed, prescribed,
+`muscle`, `fibres` (muscle fibres that pull both ends), `passive_fibres` (a sheet stiffer along its fibres), `volume` (exact and soft volume, pressure load), `local` (nailed, prescribed,
 keep-in). `order_terms` below registers them: a new term is its module and
 one entry there.
 """
@@ -17,14 +17,15 @@ from .springs import AppliedForce, Attraction, MassSpring
 from .muscle import Muscle
 from .volume import Pressure, SoftVolume, Volume
 from .fibres import MuscleFibres
+from .passive_fibres import PassiveFibres
 from .local import KeepIn, Nailed, Prescribed
 
 __all__ = ["Term", "Build", "FORCE_TYPES", "CONSTRAINT_TYPES", "TERM_CLASSES", "FLAGGED", "TERMS",
            "Gravity", "Damping", "ShapeMemory", "Membrane", "MassSpring", "AppliedForce", "Attraction", "Muscle",
-           "SoftVolume", "Volume", "Nailed", "KeepIn", "Prescribed", "Pressure", "MuscleFibres"]
+           "SoftVolume", "Volume", "Nailed", "KeepIn", "Prescribed", "Pressure", "MuscleFibres", "PassiveFibres"]
 
 order_terms((Gravity, AppliedForce, Attraction, Damping, ShapeMemory, MassSpring, Muscle, SoftVolume, Membrane,
-             Pressure, MuscleFibres,
+             Pressure, MuscleFibres, PassiveFibres,
              Nailed, Prescribed, KeepIn, Volume))
 
 #: names of the terms with a flag and a kernel, in id order (MembraneArrays.term_on)

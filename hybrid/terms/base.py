@@ -33,6 +33,7 @@ from .. import checks
 from .. import regions as _regions
 from .. import schedule as _sched
 from ..errors import SceneError
+from ..mesh.geometry import region_faces
 from ..mesh.validate import few
 
 __all__ = ["param", "Rows", "force", "constraint", "order_terms", "Term", "Build", "FORCE_TYPES", "CONSTRAINT_TYPES",
@@ -53,7 +54,7 @@ FLAGGED: list = []
 
 #: kinds checked by `check_value`; "selector" and "schedule" are checked where
 #: they are evaluated (hybrid.regions.select, hybrid.schedule.as_schedule)
-VALUE_KINDS = ("positive", "nonneg", "angle_deg", "vec3", "target", "choice", "text", "name", "integer")
+VALUE_KINDS = ("positive", "step", "floats", "nonneg", "angle_deg", "vec3", "target", "choice", "text", "name", "integer")
 
 
 def param(kind: str, default=dataclasses.MISSING, **meta):
@@ -81,6 +82,14 @@ def check_value(where: str, kind: str, value, meta: dict | None = None):
     meta = meta or {}
     if kind == "positive":
         return checks.number(where, value, lo=0) if meta.get("hi") is None else checks.positive(where, value, meta["hi"])
+    if kind == "step":  # a time step, or "auto": the model's stable-step estimate, halved and rounded down
+        if value == "auto":
+            return value
+        return checks.positive(where, value, meta["hi"])
+    if kind == "floats":
+        if not isinstance(value, (list, tuple)):
+            checks.fail(where, f"expected a list of numbers, received {checks.show(value)}")
+        return tuple(checks.number(f"{where}[{i}]", v) for i, v in enumerate(value))
     if kind == "nonneg":
         return checks.number(where, value, lo=0, lo_open=False, hi=meta.get("hi"), hi_open=False)
     if kind == "angle_deg":
@@ -249,6 +258,8 @@ class Build:
         self.vert_mass = vert_mass
         self.vert_free = np.ones(mesh.nvert, np.uint8)
         self.vert_stiffness = np.zeros(mesh.nvert)
+        self.vert_viscosity = np.zeros(mesh.nvert)  # N s/m, of viscous terms outside damp_coef (stable step)
+        self.selectors: dict = {}  # the scene's regions as selectors (face_region)
         self.term_on = np.zeros(nterm, np.uint8)
         self.rows: dict = defaultdict(list)
         self.out: dict = {}
@@ -256,6 +267,13 @@ class Build:
         self.link_vert = np.zeros(0, np.int32)
         self.moving: np.ndarray | None = None
         self.claims: list = []  # (kind, what, points) of the point constraints (claim_points)
+
+    def face_region(self, sel, what: str, idx: np.ndarray) -> np.ndarray:
+        """The faces of region `sel` (its points `idx`): those whose centroid it holds when
+        it is made of geometry (`hybrid.regions.select_faces`), else those with two of
+        their points in it."""
+        faces = _regions.select_faces(sel, self.mesh.vert_pos, self.mesh.face_vert, self.selectors, name=what)
+        return faces if faces is not None else region_faces(self.mesh.face_vert, idx, self.mesh.nvert)
 
     def region(self, sel, what: str) -> np.ndarray:
         """The sorted vertex indices a selector picks (SceneError naming `what` if none)."""

@@ -26,11 +26,10 @@ import numpy as np
 
 from ..errors import SceneError
 from ..kernel import kernel
-from ..mesh.geometry import region_faces
 from .base import Rows, Term, force, param
 from .muscle import fibre_direction, schedule_peak
 
-__all__ = ["MuscleFibres", "fibre_shares", "add_muscle_fibres"]
+__all__ = ["MuscleFibres", "fibre_shares", "fibre_coefficients", "add_muscle_fibres"]
 
 
 @force("muscle_fibres")
@@ -38,7 +37,8 @@ class MuscleFibres(Term):
     """Muscle as fibres that pull both ends: an active fibre tension
     `tension_n_per_m` (N/m, force per unit width of muscle sheet; a number, a
     `Breathing` waveform, a `Table` or a function of time) in the triangles of
-    `region` (a triangle is in it when two of its points are), the fibres along
+    `region` (`Build.face_region`: the triangles whose centroid it holds, or with
+    two points in it for a region of points), the fibres along
     the direction toward the point `toward_m` (m) or along `axis`, projected
     on the surface. Each edge carries its share of the tension on both ends."""
     formulations = ("continuum",)
@@ -55,10 +55,10 @@ class MuscleFibres(Term):
         toward, axis = fibre_direction(self, what)
         s = b.schedule(self.tension_n_per_m, f"{what}.tension_n_per_m", 1)
         mesh = b.mesh
-        faces = mesh.face_vert[region_faces(mesh.face_vert, idx, mesh.nvert)]
+        faces = mesh.face_vert[b.face_region(self.region, what, idx)]
         edge, share = fibre_shares(mesh.vert_pos, faces, toward=toward, axis=axis)
         if edge.shape[0] == 0:
-            raise SceneError(f"{what}.region: expected triangles with at least two of their points in the region "
+            raise SceneError(f"{what}.region: expected triangles in the region "
                              f"and fibres not normal to them, found none among the region's {idx.size} points")
         length = np.linalg.norm(mesh.vert_pos[edge[:, 1]] - mesh.vert_pos[edge[:, 0]], axis=1)
         # a tension's geometric stiffness, |T s| / l across each edge, at both ends (stability estimate)
@@ -75,6 +75,35 @@ class MuscleFibres(Term):
             b.out[name] = cls.arrays[name].build(np.asarray(b.rows[name])[keep] if keep.size else [])
 
 
+def fibre_coefficients(vert_pos, face_vert, direction):
+    """(ok (nf,) bool, c (n_ok, 3)): for each triangle whose fibre direction is not
+    normal to it (`direction` (nf, 3) at the triangle, projected on its plane), the
+    coefficients of f (x) f = sum_k c_k u_k (x) u_k over its unit edges u_k (edge k
+    from corner k to corner k + 1): three equations, three unknowns."""
+    pos = np.asarray(vert_pos, float)
+    face = np.asarray(face_vert, np.int64).reshape(-1, 3)
+    p = pos[face]  # (nf, 3 corners, 3)
+    e = np.stack([p[:, 1] - p[:, 0], p[:, 2] - p[:, 1], p[:, 0] - p[:, 2]], axis=1)
+    length = np.linalg.norm(e, axis=2)
+    normal = np.cross(e[:, 0], -e[:, 2])
+    normal /= np.linalg.norm(normal, axis=1)[:, None]
+    d = np.asarray(direction, float)
+    f = d - np.sum(d * normal, axis=1)[:, None] * normal
+    fn = np.linalg.norm(f, axis=1)
+    ok = fn > 1e-9 * np.linalg.norm(d, axis=1)
+    f = f[ok] / fn[ok, None]
+    e, length, normal = e[ok], length[ok], normal[ok]
+    # in-plane basis (b1, b2); three equations in the (11, 12, 22) components
+    b1 = e[:, 0] / length[:, 0, None]
+    b2 = np.cross(normal, b1)
+    u = e / length[:, :, None]
+    ua, ub = np.einsum("fkx,fx->fk", u, b1), np.einsum("fkx,fx->fk", u, b2)
+    fa, fb = np.sum(f * b1, axis=1), np.sum(f * b2, axis=1)
+    mat = np.stack([ua * ua, ua * ub, ub * ub], axis=1)  # (nf, 3 components, 3 edges)
+    rhs = np.stack([fa * fa, fa * fb, fb * fb], axis=1)
+    return ok, np.linalg.solve(mat, rhs[:, :, None])[:, :, 0]
+
+
 def fibre_shares(vert_pos, face_vert, *, toward=None, axis=None):
     """Each edge's share of a unit fibre tension over the triangles face_vert.
 
@@ -84,28 +113,14 @@ def fibre_shares(vert_pos, face_vert, *, toward=None, axis=None):
     """
     pos = np.asarray(vert_pos, float)
     face = np.asarray(face_vert, np.int64).reshape(-1, 3)
-    p = pos[face]  # (nf, 3 corners, 3)
-    e = np.stack([p[:, 1] - p[:, 0], p[:, 2] - p[:, 1], p[:, 0] - p[:, 2]], axis=1)  # edges k: corner k -> k+1
-    length = np.linalg.norm(e, axis=2)
-    normal = np.cross(e[:, 0], -e[:, 2])
-    area = 0.5 * np.linalg.norm(normal, axis=1)
-    normal /= (2.0 * area)[:, None]
+    p = pos[face]
     d = (np.asarray(toward, float) - p.mean(axis=1)) if toward is not None else np.tile(np.asarray(axis, float),
                                                                                       (len(face), 1))
-    f = d - np.sum(d * normal, axis=1)[:, None] * normal
-    fn = np.linalg.norm(f, axis=1)
-    ok = fn > 1e-9 * np.linalg.norm(d, axis=1)
-    f = f[ok] / fn[ok, None]
-    e, length, normal, area, face = e[ok], length[ok], normal[ok], area[ok], face[ok]
-    # in-plane basis (b1, b2); f (x) f = sum_k c_k u_k (x) u_k, three equations in (11, 12, 22)
-    b1 = e[:, 0] / length[:, 0, None]
-    b2 = np.cross(normal, b1)
-    u = e / length[:, :, None]
-    ua, ub = np.einsum("fkx,fx->fk", u, b1), np.einsum("fkx,fx->fk", u, b2)
-    fa, fb = np.sum(f * b1, axis=1), np.sum(f * b2, axis=1)
-    mat = np.stack([ua * ua, ua * ub, ub * ub], axis=1)  # (nf, 3 components, 3 edges)
-    rhs = np.stack([fa * fa, fa * fb, fb * fb], axis=1)
-    c = np.linalg.solve(mat, rhs[:, :, None])[:, :, 0]
+    ok, c = fibre_coefficients(pos, face, d)
+    face, p = face[ok], p[ok]
+    e = np.stack([p[:, 1] - p[:, 0], p[:, 2] - p[:, 1], p[:, 0] - p[:, 2]], axis=1)
+    length = np.linalg.norm(e, axis=2)
+    area = 0.5 * np.linalg.norm(np.cross(e[:, 0], -e[:, 2]), axis=1)
     share = c * area[:, None] / length
     i = face
     j = np.roll(face, -1, axis=1)  # edge k runs from corner k to corner k+1

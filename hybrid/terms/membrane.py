@@ -30,7 +30,6 @@ from numba import prange
 from .. import checks
 from ..errors import SceneError
 from ..kernel import kernel
-from ..mesh.geometry import region_faces
 from .base import Rows, Term, force, param
 
 __all__ = ["Membrane", "membrane_rest", "membrane_face_force", "add_membrane_serial", "membrane_faces_parallel",
@@ -50,7 +49,8 @@ def lame_moduli(youngs_n_per_m: float, poisson: float) -> tuple[float, float]:
 @force("membrane")
 class Membrane(Term):
     """An elastic membrane (the continuum formulation's shape memory): each
-    triangle of `region` (a face with at least two of its points in it)
+    triangle of `region` (a face whose centroid a region of geometry holds,
+    or with at least two of its points in a region of points: `Build.face_region`)
     resists the change of its shape with a sheet's 2D Young's modulus
     `youngs_modulus_n_per_m` (N/m: Young's modulus times thickness) and
     Poisson's ratio `poisson_ratio`, and its rate of strain with the
@@ -72,7 +72,7 @@ class Membrane(Term):
         nu = self.value("poisson_ratio", what)  # plane stress admits up to 1; tissue sheets lie in [0, 0.5]
         lam, mu = lame_moduli(self.value("youngs_modulus_n_per_m", what), nu)
         tau = self.value("damping_time_s", what)
-        faces = region_faces(b.mesh.face_vert, idx, b.mesh.nvert)
+        faces = b.face_region(self.region, what, idx)
         if faces.size == 0:
             raise SceneError(f"{what}.region: expected a region holding whole triangles, received "
                              f"{idx.size} points of which no triangle has two")
@@ -95,6 +95,8 @@ class Membrane(Term):
                      mvf_ptr=np.concatenate([[0], np.cumsum(counts)]).astype(np.int32),
                      mvf_slot=order.astype(np.int32), kv_on=bool(np.any(mem_par[:, P_TAU] > 0)))
         b.vert_stiffness += _vert_stiffness(mesh.nvert, mem_vert, mem_par)
+        # Kelvin-Voigt: each triangle's viscosity is its stiffness times its damping time
+        b.vert_viscosity += _vert_stiffness(mesh.nvert, mem_vert, mem_par, weight=mem_par[:, P_TAU])
 
 
 def membrane_rest(vert_pos, mem_vert, what="membrane") -> np.ndarray:
@@ -121,16 +123,19 @@ def membrane_rest(vert_pos, mem_vert, what="membrane") -> np.ndarray:
     return out
 
 
-def _vert_stiffness(nvert, mem_vert, mem_par) -> np.ndarray:
+def _vert_stiffness(nvert, mem_vert, mem_par, weight=None) -> np.ndarray:
     """Each point's elastic stiffness (N/m) for the stable-step estimate: a row-sum
     (Gershgorin) bound of the linear stiffness, A0 (lambda + 2 mu) |grad phi_i| sum_j |grad phi_j|
-    over its triangles (phi the linear shape functions)."""
+    over its triangles (phi the linear shape functions); each triangle's share times
+    `weight` (nface,) when given."""
     d00, d01, d11 = mem_par[:, P_D00], mem_par[:, P_D01], mem_par[:, P_D11]
     gb = np.hypot(d00, d01)
     gc = np.abs(d11)
     ga = np.hypot(d00, d01 + d11)
     tot = ga + gb + gc
     c = mem_par[:, P_AREA] * (mem_par[:, P_LAM] + 2.0 * mem_par[:, P_MU]) * tot
+    if weight is not None:
+        c = c * weight
     k = np.zeros(nvert)
     for corner, g in enumerate((ga, gb, gc)):
         np.add.at(k, mem_vert[:, corner], c * g)

@@ -18,7 +18,7 @@ from helpers import FrameCopies
 
 
 def test_read_back_equals_the_simulation_at_the_recorded_times(tmp_path):
-    sim = hybrid.load()  # the coupled breathing trunk
+    sim = hybrid.load("breathing_paper")  # the coupled breathing trunk, 80 points
     copies = FrameCopies()
     with Recorder(tmp_path / "run.mcap", sim) as rec:
         result = run(sim, 0.3, observers=[copies, rec])

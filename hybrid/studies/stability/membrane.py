@@ -26,7 +26,7 @@ __all__ = ["breathing_membrane_scene", "membrane_spectrum", "self_excitation"]
 def breathing_membrane_scene(critical_fraction: float | None = None):
     """The breathing scene's 80-point membrane without its rigid part, its
     muscles off (linearization about the rest shape, which is then an equilibrium)."""
-    sc = resolve_scene("breathing")
+    sc = resolve_scene("breathing_paper")
     sc = dataclasses.replace(sc, rigid=None).without("muscle", "muscle_insertion")
     if critical_fraction is not None:
         sc = dataclasses.replace(sc, forces=tuple(
@@ -83,9 +83,9 @@ def membrane_spectrum(*, small=False) -> dict:
                               [h0 * f for f in (1, 2, 3, 4, 5, 6, 8)], n_b)
     grid = [h0 * f for f in (1, 2, 3, 4, 5, 6, 8, 10)]
     h_obs, _ = largest_true(lambda h: observed_stable(model, h, seconds=0.3 if small else 1.0), grid, n_b)
-    full = dataclasses.replace(resolve_scene("breathing"), rigid=None)
+    full = dataclasses.replace(resolve_scene("breathing_paper"), rigid=None)
     h_breath, _ = largest_true(lambda h: breath_stable(full, h), grid, 2 if small else 8)
-    coupled = resolve_scene("breathing")
+    coupled = resolve_scene("breathing_paper")
     h_coupled = None
     if not small:
         h_coupled, _ = largest_true(lambda h: breath_stable(coupled, h), grid, 6)

@@ -1,0 +1,316 @@
+"""Error against run time in space and time: a scene's metrics on a grid of mesh
+levels x time steps, their limits, and the cheapest run for a target accuracy.
+
+`run(out_dir, scene=...)` writes `convergence.json`, `convergence.md` and
+`convergence.png`.
+
+Grid       mesh levels K (`mesh.level`: about 80 x 2^K points, the spacing divided
+           by sqrt(2) a level) x time steps dt0(K) / 2^j, j = 0..NSTEP-1, where
+           dt0(K) is the scene's own step at that level (`dt_s = "auto"`: half
+           the stable-step estimate, rounded down; a numeric dt_s is kept where
+           it is below that). Each run is independent (`hybrid.sweep`: the local
+           cores or a Dask cluster) and simulates `duration_s` (default: the
+           scene's duration).
+Metrics    each the largest value of a trace series over the run (`hybrid.run`,
+           docs/metrics.md): for the breathing scene the rib lift, apex descent,
+           peak pressure and the diaphragm's swept volume.
+Time       at each level, Richardson extrapolation of the three steps (two when
+           NSTEP = 2: first order, the order of both integrators) gives the
+           level's value at dt -> 0 and the observed order in time.
+Space      the levels' dt -> 0 values extrapolated the same way over the three
+           finest levels (refinement ratio sqrt(2) in spacing): the limit, the
+           observed order in space, and the limit's own error estimate (how far
+           the extrapolation from the two finest levels moves from the one a
+           level coarser). Errors are relative to the limit.
+Work       the wall time of each run's stepping (after a warm-up that compiles)
+           per simulated second.
+Recommend  for target relative errors 10%, 3% and 1%, per metric, the run of the
+           grid of least wall time per simulated second whose error meets the
+           target; where none does, the level and step the fitted error models
+           (C h^p in space, C dt^q in time, each given half the target) predict,
+           marked "predicted", with the cost scaled from the finest run as
+           nvert x steps.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import HybridError
+from ..sweep import sweep
+from .stability.report import write_json
+
+__all__ = ["run", "simulate", "richardson", "estimate", "recommend", "DEFAULT_METRICS", "TARGETS"]
+
+DEFAULT_METRICS = ("rib_lift_mm", "apex_descent_mm", "pressure_pa", "swept_volume_ml")
+TARGETS = (0.10, 0.03, 0.01)
+RATIO_SPACE = math.sqrt(2.0)  # the spacing ratio between mesh levels
+RATIO_TIME = 2.0
+#: (levels, steps per level, duration s or None for the scene's) by size
+SIZES = {False: dict(levels=(0, 1, 2, 3, 4, 5), nstep=3, duration_s=None),
+         True: dict(levels=(0, 1, 2), nstep=2, duration_s=0.5)}
+#: an observed order outside this range is not trusted for extrapolation: the
+#: methods' formal order (1 in time; 1 in space for the regions' point membership) is used
+ORDER_RANGE = (0.5, 4.0)
+
+
+def _model(scene, overrides, level, dt):
+    from ..model import compile_scene
+    from ..resolve import resolve_scene
+    sets = [*overrides, f"mesh.level={level}"]
+    if dt is not None:
+        sets.append(f"dt_s={dt!r}")
+    return compile_scene(resolve_scene(scene, overrides=sets))
+
+
+def base_step(scene, overrides, level) -> tuple[float, int]:
+    """(dt0, nvert) at a level: the scene's step there (see the module docstring)."""
+    from ..model import auto_dt
+    m = _model(scene, overrides, level, None)
+    return min(m.dt_s, auto_dt(m.dt_stable_s)), m.nvert
+
+
+def simulate(scene, overrides, level, dt, duration_s, metrics) -> dict:
+    """One run of the grid (a sweep task): {"values": {metric: its max}, "wall_s",
+    "nvert", "status"}."""
+    from ..run import RunFailed, run as run_scene
+    from ..simulation import Simulation
+    model = _model(scene, overrides, level, dt)
+    Simulation(model).step(1)  # compiles (or loads the cache) outside the timing
+    sim = Simulation(model)
+    try:
+        summary = run_scene(sim, duration_s)["summary"]
+    except RunFailed as exc:
+        summary = exc.result["summary"]
+    table = summary["metrics"]
+    missing = [k for k in metrics if k not in table]
+    if missing:
+        raise HybridError(f"--metric: scene {model.scene.name!r} has no series {missing}; "
+                          f"expected some of {sorted(table)}")
+    return {"values": {k: table[k]["max"] for k in metrics}, "wall_s": summary["wall_s"],
+            "nvert": model.nvert, "status": summary["status"], "error": summary.get("error")}
+
+
+def richardson(values, ratio: float, order: float | None = None):
+    """Extrapolate the sequence `values` (coarse to fine, refined by `ratio`) to the
+    limit: (limit, observed order or None, order used). Three values or more: the
+    order observed on the last three (used when in ORDER_RANGE, else 1); two: order 1."""
+    v = np.asarray(values, float)
+    observed = None
+    if len(v) >= 3:
+        d1, d2 = v[-2] - v[-3], v[-1] - v[-2]
+        if d1 != 0 and d2 != 0 and d1 * d2 > 0:
+            observed = math.log(abs(d1 / d2)) / math.log(ratio)
+    p = order if order is not None else (observed if observed is not None and
+                                         ORDER_RANGE[0] <= observed <= ORDER_RANGE[1] else 1.0)
+    if len(v) < 2:
+        return float(v[-1]), observed, p
+    return float(v[-1] + (v[-1] - v[-2]) / (ratio ** p - 1.0)), observed, p
+
+
+def estimate(runs: list, metrics, levels) -> dict:
+    """Per metric: each level's dt -> 0 value, the limit in space, the orders, the
+    limit's error estimate, each level's relative error; and each run's error."""
+    out = {}
+    for k in metrics:
+        per_level, orders_t = [], []
+        for level in levels:
+            rows = sorted((r for r in runs if r["level"] == level and r["status"] == "ok"),
+                          key=lambda r: -r["dt"])
+            if not rows:
+                continue
+            x0, q_obs, _ = richardson([r["values"][k] for r in rows], RATIO_TIME)
+            per_level.append((level, x0))
+            if q_obs is not None:
+                orders_t.append(q_obs)
+        if not per_level:
+            out[k] = None
+            continue
+        xs = [x for _, x in per_level]
+        limit, p_obs, p = richardson(xs, RATIO_SPACE)
+        coarser = richardson(xs[:-1], RATIO_SPACE, order=p)[0] if len(xs) >= 3 else None
+        scale = abs(limit) if limit != 0 else 1.0
+        out[k] = {"metric": k, "limit": limit, "limit_error_estimate": abs(limit - coarser) if coarser is not None else None,
+                  "observed_order_space": p_obs, "order_used_space": p,
+                  "observed_order_time": float(np.median(orders_t)) if orders_t else None,
+                  "levels": [lv for lv, _ in per_level], "value_by_level": xs,  # at dt -> 0
+                  "error_by_level": [abs(x - limit) / scale for x in xs]}
+        for r in runs:
+            if r["status"] == "ok":
+                r.setdefault("rel_error", {})[k] = abs(r["values"][k] - limit) / scale
+    return out
+
+
+def recommend(runs: list, est: dict, metrics, targets=TARGETS) -> list:
+    """The cheapest (level, dt) per metric and target (module docstring)."""
+    rows = []
+    ok = [r for r in runs if r["status"] == "ok"]
+    finest = max(ok, key=lambda r: (r["nvert"], -r["dt"])) if ok else None
+    for k in metrics:
+        e = est.get(k)
+        if e is None:
+            continue
+        for target in targets:
+            meet = [r for r in ok if r["rel_error"][k] <= target]
+            if meet:
+                best = min(meet, key=lambda r: r["wall_s_per_sim_s"])
+                rows.append({"metric": k, "target_rel_error": target, "level": best["level"],
+                             "nvert": best["nvert"], "dt": best["dt"], "rel_error": best["rel_error"][k],
+                             "wall_s_per_sim_s": best["wall_s_per_sim_s"], "predicted": False})
+            elif finest is not None:
+                rows.append({"metric": k, "target_rel_error": target, "predicted": True,
+                             **_predict(e, runs, finest, target)})
+    return rows
+
+
+def _predict(e: dict, runs: list, finest: dict, target: float) -> dict:
+    """The level and step the error models predict for `target`, half of it to each:
+    space error err_K r^(-p (K - K)) from the finest level's; the step the finest
+    level's smallest, halved per level added (the stable step falls with the
+    spacing, at most as 1/N on UV spheres), and smaller still where its time error
+    (first order) would exceed the half."""
+    levels, err = e["levels"], e["error_by_level"]
+    p = e["order_used_space"]
+    need = target / 2
+    k_last = levels[-1]
+    level = k_last if err[-1] <= need else \
+        k_last + math.ceil(math.log(err[-1] / need) / (p * math.log(RATIO_SPACE)))
+    same = sorted((r for r in runs if r["level"] == k_last and r["status"] == "ok"), key=lambda r: r["dt"])
+    scale = abs(e["limit"]) or 1.0
+    dt = same[0]["dt"] * 2.0 ** (k_last - level)
+    e_time = abs(same[0]["values"][e["metric"]] - e["value_by_level"][-1]) / scale
+    if e_time > need:
+        dt *= need / e_time
+    nvert = round(finest["nvert"] * 2 ** (level - finest["level"]))
+    cost = finest["wall_s_per_sim_s"] * (nvert / finest["nvert"]) * (finest["dt"] / dt)
+    return {"level": level, "nvert": nvert, "dt": dt, "rel_error": None, "wall_s_per_sim_s": cost}
+
+
+def run(out_dir, *, scene: str = "breathing", metrics=DEFAULT_METRICS, small: bool = False,
+        levels=None, nstep: int | None = None, duration_s: float | None = None, overrides=(),
+        scheduler: str | None = None) -> dict:
+    """The study (module docstring); returns what convergence.json holds."""
+    from ..resolve import resolve_scene
+    t0 = time.perf_counter()
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    size = SIZES[bool(small)]
+    levels = tuple(size["levels"] if levels is None else levels)
+    nstep = size["nstep"] if nstep is None else int(nstep)
+    if nstep < 1 or len(levels) < 2:
+        raise HybridError(f"convergence: expected at least two mesh levels and one step per level, "
+                          f"received levels {list(levels)} and {nstep} step(s)")
+    sc = resolve_scene(scene, overrides=list(overrides))
+    duration = float(size["duration_s"] or sc.duration_s) if duration_s is None else float(duration_s)
+    metrics = tuple(metrics)
+    grid = []
+    for level in levels:
+        dt0, _ = base_step(scene, overrides, level)
+        grid += [dict(scene=scene, overrides=tuple(overrides), level=level, dt=dt0 / 2 ** j,
+                      duration_s=duration, metrics=metrics) for j in range(nstep)]
+    results = sweep(simulate, grid, scheduler=scheduler, on_error="return", out=out / "runs")
+    runs, failures = [], []
+    for g, r in zip(grid, results):
+        if isinstance(r, Exception):
+            if isinstance(r, HybridError) and "--metric" in str(r):
+                raise r
+            failures.append({"level": g["level"], "dt": g["dt"], "error": str(r)})
+            continue
+        row = {"level": g["level"], "nvert": r["nvert"], "dt": g["dt"], "values": r["values"],
+               "wall_s": r["wall_s"], "wall_s_per_sim_s": r["wall_s"] / duration, "status": r["status"]}
+        if r["status"] != "ok":
+            failures.append({"level": g["level"], "dt": g["dt"], "error": r["error"]})
+        runs.append(row)
+    est = estimate(runs, metrics, levels)
+    res = {"scene": sc.name, "overrides": list(overrides), "metrics": list(metrics), "duration_s": duration,
+           "levels": list(levels), "steps_per_level": nstep, "runs": runs, "failures": failures,
+           "estimate": est, "recommendation": recommend(runs, est, metrics),
+           "finest_change": _finest_change(runs, metrics, levels), "runtime_s": time.perf_counter() - t0}
+    write_json(out / "convergence.json", res)
+    (out / "convergence.md").write_text(_markdown(res))
+    _plot(out / "convergence.png", res)
+    return res
+
+
+def _finest_change(runs, metrics, levels) -> dict:
+    """Per metric, the relative change between the two finest levels at their smallest steps."""
+    by = {}
+    for lv in levels[-2:]:
+        rows = [r for r in runs if r["level"] == lv and r["status"] == "ok"]
+        if rows:
+            by[lv] = min(rows, key=lambda r: r["dt"])
+    if len(by) < 2:
+        return {}
+    a, b = (by[lv] for lv in levels[-2:])
+    return {k: abs(b["values"][k] - a["values"][k]) / max(abs(b["values"][k]), 1e-300) for k in metrics}
+
+
+def _fmt(x, spec=".4g"):
+    return "-" if x is None else format(x, spec)
+
+
+def _markdown(res: dict) -> str:
+    lines = [f"# Convergence of `{res['scene']}` in space and time", "",
+             f"Mesh levels {res['levels']} x {res['steps_per_level']} time steps per level, "
+             f"{res['duration_s']:g} s simulated per run; overrides {res['overrides'] or 'none'}. "
+             "Errors are relative to the Richardson limit.", "",
+             "| metric | limit | its error estimate | order in space | order in time | change between the two finest levels |",
+             "|---|---|---|---|---|---|"]
+    for k in res["metrics"]:
+        e = res["estimate"].get(k)
+        if e is None:
+            continue
+        lines.append(f"| {k} | {_fmt(e['limit'])} | {_fmt(e['limit_error_estimate'], '.2g')} | "
+                     f"{_fmt(e['observed_order_space'], '.2f')} | {_fmt(e['observed_order_time'], '.2f')} | "
+                     f"{_fmt(res['finest_change'].get(k), '.2%')} |")
+    lines += ["", "## Runs", "", "| level | points | dt (s) | " + " | ".join(res["metrics"]) + " | wall s per sim s |",
+              "|---|---|---|" + "---|" * len(res["metrics"]) + "---|"]
+    for r in res["runs"]:
+        lines.append(f"| {r['level']} | {r['nvert']} | {r['dt']:.3g} | "
+                     + " | ".join(_fmt(r["values"][k]) for k in res["metrics"]) + f" | {r['wall_s_per_sim_s']:.3g} |")
+    lines += ["", "## Recommendation", "",
+              "| metric | target | level | points | dt (s) | error | wall s per sim s | |", "|---|---|---|---|---|---|---|---|"]
+    for r in res["recommendation"]:
+        lines.append(f"| {r['metric']} | {r['target_rel_error']:.0%} | {r['level']} | {r['nvert']} | {r['dt']:.3g} | "
+                     f"{_fmt(r['rel_error'], '.2%')} | {r['wall_s_per_sim_s']:.3g} | "
+                     f"{'predicted' if r['predicted'] else 'measured'} |")
+    if res["failures"]:
+        lines += ["", "## Failed runs", ""] + [f"- level {f['level']}, dt {f['dt']:.3g} s: {f['error']}"
+                                               for f in res["failures"]]
+    return "\n".join(lines) + "\n"
+
+
+def _plot(path: Path, res: dict) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    ok = [r for r in res["runs"] if r["status"] == "ok" and "rel_error" in r]
+    ms = [k for k in res["metrics"] if res["estimate"].get(k)]
+    fig, axes = plt.subplots(1, max(len(ms), 1), figsize=(4.2 * max(len(ms), 1), 3.8), squeeze=False)
+    for ax, k in zip(axes[0], ms):
+        for lv in res["levels"]:  # one curve per level, across time steps
+            rows = sorted((r for r in ok if r["level"] == lv), key=lambda r: r["wall_s_per_sim_s"])
+            if rows:
+                ax.loglog([r["wall_s_per_sim_s"] for r in rows], [max(r["rel_error"][k], 1e-16) for r in rows],
+                          "o-", label=f"level {lv}")
+        for j in range(res["steps_per_level"]):  # one per time step index, across levels
+            rows = []
+            for lv in res["levels"]:
+                same = sorted((r for r in ok if r["level"] == lv), key=lambda r: -r["dt"])
+                if len(same) > j:
+                    rows.append(same[j])
+            if len(rows) > 1:
+                ax.loglog([r["wall_s_per_sim_s"] for r in rows], [max(r["rel_error"][k], 1e-16) for r in rows],
+                          "k--", lw=0.8, alpha=0.5, label="dt0/%d, across levels" % 2 ** j if j == 0 else None)
+        ax.set_title(k)
+        ax.set_xlabel("wall s per simulated s")
+        ax.set_ylabel("relative error")
+        ax.grid(True, which="both", alpha=0.3)
+    axes[0][0].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

@@ -1,0 +1,102 @@
+"""The breathing scene at any resolution (issue: a breathing trunk that converges): mesh
+levels of two families, an anatomy of physical size on each, a file mesh equal to the
+generated one, dt_s = "auto", and the diaphragm's swept volume."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+import hybrid
+from hybrid.errors import MeshError, SceneError
+from hybrid.mesh import fibonacci_sphere, level_counts, uv_sphere, vertex_area
+from hybrid.model import auto_dt, compile_scene, nice_floor
+from hybrid.resolve import resolve_scene
+from hybrid.run import run
+
+ANATOMY = ("diaphragm", "abdomen", "rib_band", "tendon", "muscle", "rib_left_points", "rib_right_points",
+           "spine", "iliac", "pubic")
+
+
+def test_levels_start_at_the_papers_sphere_and_double_the_points():
+    assert level_counts(0) == (13, 7, 80)
+    counts = [level_counts(k)[2] for k in range(8)]
+    assert all(1.75 < b / a < 2.25 for a, b in zip(counts, counts[1:])), counts
+    with pytest.raises(MeshError, match="mesh level: expected an integer in \\[0, 16\\], received -1"):
+        level_counts(-1)
+
+
+def test_fibonacci_sphere_is_closed_outward_and_even():
+    for n in (80, 631, 2518):
+        m = fibonacci_sphere(n, 0.12)
+        assert m.nvert == n and m.closed and m.volume() > 0
+        # even cells: no pole fan (a UV sphere's pole cells are 1/S of its equator's)
+        area = vertex_area(m.vert_pos, m.face_vert)
+        assert area.max() / area.min() < 2.0, (n, area.max() / area.min())
+        # the hull of points on the sphere: a polyhedron inside it, second-order close
+        assert 4 / 3 * np.pi * 0.12 ** 3 * (1 - 8.0 / n) < m.volume() < 4 / 3 * np.pi * 0.12 ** 3
+    uv = uv_sphere(0.12, 74, 35)
+    a = vertex_area(uv.vert_pos, uv.face_vert)
+    assert a.max() / a.min() > 10  # what the pole-free family avoids
+
+
+@pytest.mark.parametrize("generator", ["uv_sphere", "fibonacci_sphere"])
+def test_the_breathing_anatomy_exists_at_every_level(generator):
+    base = resolve_scene("breathing")
+    area_mm2 = {}
+    for level in range(6):
+        sc = resolve_scene(base, overrides=[f"mesh.generator={generator}", f"mesh.level={level}"])
+        m = compile_scene(sc)
+        assert m.nvert == level_counts(level)[2]
+        for name in ANATOMY:
+            assert m.regions[name].size >= 1, (level, name)
+        # the regions are of physical size: their areas converge as the mesh refines
+        area = vertex_area(m.mesh.vert_pos, m.mesh.face_vert)
+        area_mm2[level] = {name: area[m.regions[name]].sum() * 1e6 for name in ("diaphragm", "rib_band", "spine")}
+    # the band z in [0.045, 0.08] of a sphere of radius 0.12 m: 2 pi R dz = 26,389 mm^2; one
+    # cell row more or less at the edges, h about 2.2 R / sqrt(N) (13 mm at level 5)
+    band = 2 * np.pi * 0.12 * 0.035 * 1e6
+    assert abs(area_mm2[5]["rib_band"] - band) < 0.4 * band
+    assert abs(area_mm2[5]["diaphragm"] - 2 * np.pi * 0.12 * 0.075 * 1e6) < 0.2 * 2 * np.pi * 0.12 * 0.075 * 1e6
+
+
+def test_a_level_needs_a_generator_that_refines(tmp_path):
+    with pytest.raises(SceneError, match="mesh.level: expected a generator that refines by level.*icosphere"):
+        compile_scene(resolve_scene("breathing", overrides=["mesh.generator=icosphere"]))
+
+
+def test_the_scene_on_a_saved_level_4_mesh_runs_as_on_the_generated_one(tmp_path):
+    generated = resolve_scene("breathing", overrides=["mesh.level=4"])
+    model = compile_scene(generated)
+    path = tmp_path / "level4.obj"
+    model.mesh.save(path)
+    from_file = dataclasses.replace(generated, mesh=dataclasses.replace(generated.mesh, path=str(path), level=None))
+    model_file = compile_scene(from_file)
+    np.testing.assert_array_equal(model_file.mesh.vert_pos, model.mesh.vert_pos)
+    res = [run(hybrid.Simulation(m), 0.05)["summary"]["metrics"] for m in (model, model_file)]
+    for key, v in res[0].items():  # 17 digits read back to the same doubles: the same run
+        assert res[1][key]["max"] == pytest.approx(v["max"], rel=1e-9, abs=1e-15), key
+    with pytest.raises(SceneError, match="mesh.level: a mesh read from a file"):
+        compile_scene(dataclasses.replace(from_file, mesh=dataclasses.replace(from_file.mesh, level=4)))
+
+
+def test_auto_step_is_half_the_stable_estimate_rounded_down():
+    assert [nice_floor(x) for x in (1e-3, 9.9e-4, 4.7e-4, 2.3e-4, 1.25e-4)] == [1e-3, 5e-4, 2e-4, 2e-4, 1e-4]
+    for level in (0, 3):
+        m = compile_scene(resolve_scene("breathing", overrides=[f"mesh.level={level}"]))
+        assert m.dt_s == auto_dt(m.dt_stable_s) and m.dt_s <= 0.5 * m.dt_stable_s
+        assert m.scene.dt_s == m.dt_s  # the model's scene holds the number the run uses
+    with pytest.raises(SceneError, match="dt_s"):
+        compile_scene(resolve_scene("breathing", overrides=["dt_s=fast"]))
+
+
+def test_the_trace_gives_the_diaphragms_swept_volume():
+    sim = hybrid.load("breathing", overrides=["mesh.level=1"])
+    trace = run(sim, 0.5)["trace"].arrays()
+    # the dome descends: it sweeps volume into the abdomen, as the simulation's readout says
+    assert trace["swept_volume_ml"][-1] == pytest.approx(-sim.swept_volume_m3("diaphragm") * 1e6, rel=1e-12)
+    assert trace["swept_volume_ml"][-1] > 1.0
+    plain = hybrid.load(hybrid.Scene(forces=(hybrid.Membrane(youngs_modulus_n_per_m=100.0),)))
+    assert np.isnan(run(plain, 0.01)["trace"].arrays()["swept_volume_ml"]).all()  # no diaphragm region
