@@ -167,7 +167,7 @@ def build_mesh(scene: Scene) -> Mesh:
     conform = val.get("conform_z_m", ())
     if conform and gen not in ("uv_sphere", "ring_sphere"):
         raise SceneError(f"mesh.conform_z_m: expected a generator with circles of latitude (uv_sphere or "
-                         f"ring_sphere), received generator={gen!r}")
+                         f"ring_sphere), received generator={gen!r}; or no latitudes (--set mesh.conform_z_m=[])")
     npoint = _mesh.level_counts(val.get("level") or 0)[2]
     try:
         if gen == "fibonacci_sphere":
