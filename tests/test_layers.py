@@ -20,7 +20,7 @@ LAYERS = (
     ("errors, kernel", ("errors", "kernel", "checks")),
     ("geometry, regions, schedules", ("mesh", "mesh.*", "regions", "schedule", "stability")),
     ("terms", ("terms", "terms.*")),
-    ("scene", ("scene", "scenefile", "demo", "resolve")),
+    ("scene", ("scene", "scenefile", "rigidfile", "demo", "resolve")),
     ("model, rigid", ("model", "rigid", "rigid.*")),
     ("step", ("step", "readouts")),
     ("coupled step", ("coupling",)),
