@@ -27,7 +27,7 @@ LAYERS = (
     ("simulation", ("simulation", "builds")),
     ("observers", ("run", "record", "record.*", "render", "sweep", "grid", "outputs", "provenance")),
     ("public API", ("",)),  # hybrid/__init__.py
-    ("bench, command line, studies", ("bench", "bench.*", "bench_rigid", "cli", "__main__", "docgen", "studies",
+    ("bench, command line, studies", ("bench", "bench.*", "bench_rigid", "cli", "__main__", "docgen", "inspection", "studies",
                                       "studies.*")),
 )
 # the door to MuJoCo: model time (rigid) and step time (coupling)

@@ -39,6 +39,8 @@ _FREE = mujoco.mjtJoint.mjJNT_FREE
 _BALL = mujoco.mjtJoint.mjJNT_BALL
 _JOINT_KINDS = {int(mujoco.mjtJoint.mjJNT_FREE): "free", int(mujoco.mjtJoint.mjJNT_BALL): "ball",
                 int(mujoco.mjtJoint.mjJNT_SLIDE): "slide", int(mujoco.mjtJoint.mjJNT_HINGE): "hinge"}
+# weld and lock constraints as hard as MuJoCo's soft constraints go (impedance 0.99-0.999)
+_SOLIMP = [0.99, 0.999, 0.001, 0.5, 2.0]
 _NQ = {"free": 7, "ball": 4, "slide": 1, "hinge": 1}
 _NV = {"free": 6, "ball": 3, "slide": 1, "hinge": 1}
 
@@ -194,7 +196,7 @@ def apply_controls(spec: mujoco.MjSpec, rig: Rigid, label: str, timestep_s: floa
         eq = spec.add_equality(type=mujoco.mjtEq.mjEQ_WELD, name1=name, name2="world",
                                objtype=mujoco.mjtObj.mjOBJ_BODY)
         eq.data[0:11] = [0.0, 0.0, 0.0, *(rot.T @ -data0.xpos[b]), *_quat_inv_mul(data0.xquat[b], [1, 0, 0, 0]), 1.0]
-        eq.solref = [2.0 * dt, 1.0]
+        eq.solref, eq.solimp = [2.0 * dt, 1.0], _SOLIMP
 
     # joints held by springs or locked, at their start position
     free_names = [n for n in joints if n not in gone]
@@ -220,7 +222,7 @@ def apply_controls(spec: mujoco.MjSpec, rig: Rigid, label: str, timestep_s: floa
         adr = model0.jnt_qposadr[j]
         eq = spec.add_equality(type=mujoco.mjtEq.mjEQ_JOINT, name1=name, objtype=mujoco.mjtObj.mjOBJ_JOINT)
         eq.data[0:5] = [float(qstart[adr] - model0.qpos0[adr]), 0.0, 0.0, 0.0, 0.0]
-        eq.solref = [2.0 * dt, 1.0]
+        eq.solref, eq.solimp = [2.0 * dt, 1.0], _SOLIMP
 
     # actuators driven by schedules
     actuators = _names(model0, "actuator", model0.nu)
