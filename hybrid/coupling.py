@@ -349,6 +349,11 @@ class Coupling:
         return count
 
     # -- records
+    def link_forces(self) -> np.ndarray:
+        """(n, 3) N: the force sent to each linked point's site in the last step (a copy),
+        in site order (`link_vert`)."""
+        return self._force.copy()
+
     def wrench_history(self) -> np.ndarray:
         """(nstep, nbody, 6) [N, N m]: `xfrc_applied` of every recorded step."""
         nb = self.system.model.nbody

@@ -21,7 +21,7 @@ from .draw import draw_capsules, empty_world, launch_viewer
 from .mjcf import (BUILTIN_MJCF, PACKAGE_MJCF, TRUNK_XML, compile_spec, load_rigid_spec, load_spec,
                    resolve_mjcf)
 from .references import BareStepper, FlexSphere
-from .replay import replay_wrenches
+from .replay import replay_states, replay_wrenches
 from .system import (STATE_SPEC, CoupledRigid, RigidSystem, get_state, mj_step_ctypes, point_wrench_kernel,
                      site_vel_kernel)
 
@@ -42,6 +42,7 @@ __all__ = [
     "CoupledRigid",
     "get_state",
     "replay_wrenches",
+    "replay_states",
     "point_wrench_kernel",
     "site_vel_kernel",
     "mj_step_ctypes",
