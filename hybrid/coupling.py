@@ -9,7 +9,8 @@ runs the coupled step, in this order:
 2. every linked point's membrane force, plus the pressure force of the last volume
    projection p grad_i V (how the incompressible abdomen pushes on the ribs), plus
    its weight, goes to its body as a wrench applied at its site (`xfrc_applied`);
-3. MuJoCo steps (`mj_step2` then `mj_step1`, or `mj_step` + `mj_step1` for RK4, so
+3. the actuators the scene drives (`rigid.ctrl`) take their schedules' values at t
+   (`mjData.ctrl`); MuJoCo steps (`mj_step2` then `mj_step1`, or `mj_step` + `mj_step1` for RK4, so
    that the site kinematics belong to the new state; bit for bit `mj_step`);
 4. the linked points take their sites' positions and velocities;
 5. the free points integrate, the local constraints and the exact volume projection

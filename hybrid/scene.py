@@ -27,7 +27,7 @@ __all__ = [
     "MeshSpec", "Masses",
     "Gravity", "Damping", "ShapeMemory", "Membrane", "MassSpring", "Muscle", "AppliedForce", "Attraction",
     "SoftVolume", "Nailed", "KeepIn", "Prescribed", "Volume", "RigidLink", "Rigid", "Scene",
-    "INTEGRATORS", "FORMULATIONS", "MUJOCO_INTEGRATORS", "DEFAULT_DT_S",
+    "INTEGRATORS", "FORMULATIONS",
     "Pressure", "MuscleFibres",
 ]
 

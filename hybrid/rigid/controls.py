@@ -164,6 +164,7 @@ def apply_controls(spec: mujoco.MjSpec, rig: Rigid, label: str, timestep_s: floa
             raise RigidError(f"rigid.fix: body {name!r} has no joint: it is fixed to its parent "
                              f"{bodies[model0.body_parentid[b]]!r} already")
         for j in range(model0.body_jntadr[b], model0.body_jntadr[b] + model0.body_jntnum[b]):
+            _refuse_driven(model0, j, name)
             kind = _JOINT_KINDS[int(model0.jnt_type[j])]
             drop_q += range(model0.jnt_qposadr[j], model0.jnt_qposadr[j] + _NQ[kind])
             drop_v += range(model0.jnt_dofadr[j], model0.jnt_dofadr[j] + _NV[kind])
@@ -259,6 +260,16 @@ def apply_controls(spec: mujoco.MjSpec, rig: Rigid, label: str, timestep_s: floa
     if fixed:
         _check_fixed_where_they_start(spec, label, out.key_id, fixed, data0, model0)
     return out
+
+
+def _refuse_driven(model, j: int, body: str) -> None:
+    """A joint an actuator drives cannot be removed: refused, naming both."""
+    joint_trn = (int(mujoco.mjtTrn.mjTRN_JOINT), int(mujoco.mjtTrn.mjTRN_JOINTINPARENT))
+    for a in range(model.nu):
+        if int(model.actuator_trntype[a]) in joint_trn and int(model.actuator_trnid[a, 0]) == j:
+            raise RigidError(f"rigid.fix: body {body!r}: its joint {model.joint(j).name!r} is driven by actuator "
+                             f"{model.actuator(a).name!r}; expected a body whose joints no actuator drives "
+                             f"(lock or hold the joint instead)")
 
 
 def _set_linear(joint, attr: str, value: float) -> None:
