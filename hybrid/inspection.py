@@ -134,6 +134,8 @@ def format_report(r: dict) -> str:
         return "\n".join([f"MJCF {r['source']}", *_model_lines(r["model"])])
     mem = r["membrane"]
     stable = "none (no stiffness)" if r["dt_stable_s"] is None else f"{r['dt_stable_s']:.3g} s"
+    if r["dt_stable_s"] is not None and r["dt_s"] > r["dt_stable_s"]:
+        stable += " (the step is larger: expect a divergence; set dt_s below it)"
     lines = [f"scene {r['name']} ({r['formulation']}) from {r['source']}",
              f"step: dt {r['dt_s']:g} s (from the {r['dt_from']}); stable-step estimate {stable}",
              f"membrane: {mem['points']} points, {mem['faces']} faces, area {mem['area_m2']:.4g} m^2, volume "

@@ -63,7 +63,10 @@ def test_a_scene_with_its_regions_nails_links_and_stable_step(capsys):
     assert r["rigid"]["settings"]["held"] == ["rib_left_hinge", "rib_right_hinge"]
     assert {b["name"] for b in r["rigid"]["model"]["bodies"]} >= {"world", "spine", "rib_left", "rib_right"}
     assert main(["inspect", "breathing"]) == 0
-    assert "stable-step estimate" in capsys.readouterr().out
+    text = capsys.readouterr().out
+    assert "stable-step estimate" in text and "the step is larger" not in text
+    assert main(["inspect", "breathing", "--set", f"dt_s={2 * model.dt_stable_s}"]) == 0
+    assert "the step is larger" in capsys.readouterr().out
 
 
 @pytest.mark.parametrize("argv, words", [
