@@ -68,12 +68,13 @@ class Controls:
 
 def close_names(name: str, names, kind: str) -> str:
     """"; close KIND names: a, b" (difflib), or the first names of that kind."""
+    unnamed = sum(1 for n in names if not n)
     names = [n for n in names if n]
     near = difflib.get_close_matches(str(name), names, n=5, cutoff=0.5)
     if near:
         return f"close {kind} names: {', '.join(near)}"
     if not names:
-        return f"the model has no {kind}s"
+        return f"the model's {unnamed} {kind}s have no names" if unnamed else f"the model has no {kind}s"
     return f"{kind} names: {', '.join(names[:12])}{' ...' if len(names) > 12 else ''}"
 
 

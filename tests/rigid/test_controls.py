@@ -8,6 +8,7 @@ from __future__ import annotations
 import dataclasses
 import importlib.util
 import textwrap
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -216,3 +217,34 @@ def test_myotorso_locked_stands():
     turn_deg = 2 * np.degrees(np.arccos(min(1.0, abs(float(q0 @ sim.mj_data.xquat[torso])))))
     assert turn_deg < 0.1  # 0.021 degrees over 2 s measured; unsupported, it slumps by tens of degrees
     assert sim.volume_rel_error < 1e-12
+
+
+def _humanoid():
+    spec = importlib.util.find_spec("gymnasium")
+    path = None if spec is None or spec.origin is None else \
+        Path(spec.origin).parent / "envs" / "mujoco" / "assets" / "humanoid.xml"
+    return path if path is not None and path.is_file() else None
+
+
+@pytest.mark.skipif(_humanoid() is None, reason="gymnasium (which ships MuJoCo's humanoid.xml) is not installed")
+def test_gymnasiums_humanoid_fixed_held_and_driven():
+    path = str(_humanoid())
+    centre = (0.0, 0.0, 1.12)
+    sc = Scene(formulation="paper", mesh=MeshSpec(generator="icosahedron", radius_m=0.1, center_m=centre),
+               masses=Masses(total_kg=1.0), regions={"top": HalfSpace((0, 0, 1.17), (0, 0, 1))},
+               forces=(ShapeMemory(300.0), Damping(critical_fraction=0.3)),
+               rigid=Rigid(path, links=(RigidLink("top", "torso"),), fix_root=True, hold=("*",),
+                           ctrl={"abdomen_*": 0.3}))
+    model = compile_scene(sc)
+    assert model.dt_s == 0.003  # humanoid.xml's own timestep (RK4, its own integrator)
+    sim = Simulation(model)
+    sim.step(300)
+    np.testing.assert_allclose(body_pos(sim, "torso"), [0, 0, 1.4], atol=1e-12)
+    abdomen = [sim.mj_model.actuator(a).name for a in range(sim.mj_model.nu)
+               if sim.mj_model.actuator(a).name.startswith("abdomen_")]
+    assert model.rigid.settings()["driven"] == abdomen and len(abdomen) == 3
+    for a in abdomen:
+        assert sim.mj_data.ctrl[sim.mj_model.actuator(a).id] == 0.3
+    assert 1e-4 < np.abs(sim.mj_data.qpos).max() < 0.2  # every joint held near 0 while the abdomen's motors push
+    with pytest.raises(RigidError, match=r"rigid.keyframe: .* the model's 5 keyframes have no names"):
+        compile_scene(dataclasses.replace(sc, rigid=dataclasses.replace(sc.rigid, keyframe="stand")))
