@@ -36,7 +36,6 @@ from .mjcf import compile_spec
 __all__ = ["Controls", "apply_controls", "close_names", "start_data"]
 
 _FREE = mujoco.mjtJoint.mjJNT_FREE
-_BALL = mujoco.mjtJoint.mjJNT_BALL
 _JOINT_KINDS = {int(mujoco.mjtJoint.mjJNT_FREE): "free", int(mujoco.mjtJoint.mjJNT_BALL): "ball",
                 int(mujoco.mjtJoint.mjJNT_SLIDE): "slide", int(mujoco.mjtJoint.mjJNT_HINGE): "hinge"}
 # weld and lock constraints as hard as MuJoCo's soft constraints go (impedance 0.99-0.999)
