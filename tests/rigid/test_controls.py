@@ -136,6 +136,9 @@ def test_the_mjcfs_own_timestep_and_integrator_are_kept_unless_the_scene_sets_th
     ({"ctrl": {"m_shoulder": lambda t: t}}, SceneError, ["rigid.ctrl.m_shoulder", "Python function"]),
     ({"integrator": "Verlet"}, SceneError, ["rigid.integrator", "'Verlet'", "RK4"]),
     ({"hold_stiffness_nm_per_rad": -1.0}, SceneError, ["rigid.hold_stiffness_nm_per_rad", "-1.0"]),
+    ({"hold_damping_nms_per_rad": -2.0}, SceneError, ["rigid.hold_damping_nms_per_rad", "-2.0"]),
+    ({"weld": ("world",)}, RigidError, ["rigid.weld", "'world' cannot be welded"]),
+    ({"lock": ("root",)}, RigidError, ["rigid.lock[0]", "free joint"]),
     ({"fix_root": "yes"}, SceneError, ["rigid.fix_root", "true or false"]),
     ({"fix": "torso"}, SceneError, ["rigid.fix", "expected a list of names"]),
 ])
