@@ -1,4 +1,5 @@
-"""The command line: `hybrid run`, `hybrid sweep`, `hybrid bench`, `hybrid render`, `hybrid view`.
+"""The command line: `hybrid run`, `hybrid sweep`, `hybrid bench`, `hybrid render`, `hybrid view`,
+`hybrid inspect`.
 
 Bad input prints one line naming the culprit on stderr and exits with
 status 2, without a traceback; a run that fails still writes what it
@@ -208,6 +209,11 @@ def _positive_float(text: str) -> float:
     return value
 
 
+def _cmd_inspect(args) -> int:
+    from .inspection import main_inspect
+    return main_inspect(args)
+
+
 def _cmd_study(args) -> int:
     from .studies.cli import main_study
     return main_study(args.study_argv)
@@ -256,6 +262,14 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--json", metavar="FILE", help="also write the figures as JSON")
     b.add_argument("--quick", action="store_true", help="small sizes only (a smoke test)")
     b.set_defaults(func=_cmd_bench)
+    i = sub.add_parser("inspect", help="what a scene or an MJCF model holds: bodies at qpos0, joints, actuators, "
+                                       "keyframes; regions, links, nails, terms and the stable step")
+    i.add_argument("source", nargs="?", help="a scene (TOML file or built-in name, default breathing), or an MJCF "
+                                             "file (*.xml), \"trunk\" or a package model (myo_sim:myotorso)")
+    i.add_argument("--json", action="store_true", help="print JSON (for scripts)")
+    i.add_argument("--without", action="append", metavar="NAME", help="drop a force term or constraint by name")
+    i.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a scene value, e.g. dt_s=5e-4")
+    i.set_defaults(func=_cmd_inspect)
     st = sub.add_parser("study", help="numerical studies: stability, extremes, work-precision", add_help=False, prefix_chars="\0")
     st.add_argument("study_argv", nargs=argparse.REMAINDER)
     st.set_defaults(func=_cmd_study)

@@ -9,7 +9,8 @@ runs the coupled step, in this order:
 2. every linked point's membrane force, plus the pressure force of the last volume
    projection p grad_i V (how the incompressible abdomen pushes on the ribs), plus
    its weight, goes to its body as a wrench applied at its site (`xfrc_applied`);
-3. MuJoCo steps (`mj_step2` then `mj_step1`, or `mj_step` + `mj_step1` for RK4, so
+3. the actuators the scene drives (`rigid.ctrl`) take their schedules' values at t
+   (`mjData.ctrl`); MuJoCo steps (`mj_step2` then `mj_step1`, or `mj_step` + `mj_step1` for RK4, so
    that the site kinematics belong to the new state; bit for bit `mj_step`);
 4. the linked points take their sites' positions and velocities;
 5. the free points integrate, the local constraints and the exact volume projection
@@ -44,10 +45,11 @@ from numba import types
 from .errors import RigidError, SimulationDiverged
 from .kernel import kernel
 from .rigid import CoupledRigid, mj_step_ctypes, point_wrench_kernel, site_vel_kernel
+from .schedule import schedule_eval
 from .step import (OK, S_PRESSURE, S_TIME, T_GRAVITY, Frames, MembraneState, capture_frame, membrane_advance,
                    membrane_forces, step_par)
 
-__all__ = ["LinkArrays", "MjViews", "WrenchHistory", "Coupling", "run_coupled", "run_coupled_frames"]
+__all__ = ["LinkArrays", "CtrlArrays", "MjViews", "WrenchHistory", "Coupling", "run_coupled", "run_coupled_frames"]
 
 _RK4 = int(mujoco.mjtIntegrator.mjINT_RK4)
 _DSBL_GRAVITY = int(mujoco.mjtDisableBit.mjDSBL_GRAVITY)
@@ -95,6 +97,15 @@ class LinkArrays(NamedTuple):
     vel: np.ndarray
 
 
+class CtrlArrays(NamedTuple):
+    """The actuators a scene drives (`rigid.ctrl`): act (nc,) int64, their ids;
+    sched, their schedules (`hybrid.schedule.ScheduleTable`, row j for act[j]);
+    scratch: val (3,), a schedule's value."""
+    act: np.ndarray
+    sched: object
+    val: np.ndarray
+
+
 class MjViews(NamedTuple):
     """MuJoCo's model and data as the compiled loop sees them: model_ptr, data_ptr
     (int), the `mjModel*` and `mjData*` for the C step functions, and views of the
@@ -102,7 +113,7 @@ class MjViews(NamedTuple):
     site_xpos (nsite, 3) m; xipos (nbody, 3) m, the bodies' centres of mass;
     xfrc_applied (nbody, 6) [N, N m]; cvel (nbody, 6) [rad/s, m/s]; subtree_com
     (nbody, 3) m; qpos (nq,); xpos (nbody, 3) m and xquat (nbody, 4) (w, x, y, z),
-    the bodies' poses."""
+    the bodies' poses; ctrl (nu,), the actuators' controls."""
     model_ptr: int
     data_ptr: int
     site_xpos: np.ndarray
@@ -113,6 +124,7 @@ class MjViews(NamedTuple):
     qpos: np.ndarray
     xpos: np.ndarray
     xquat: np.ndarray
+    ctrl: np.ndarray
 
 
 class WrenchHistory(NamedTuple):
@@ -126,16 +138,18 @@ class WrenchHistory(NamedTuple):
 # ----------------------------------------------------------------- the coupled step
 
 @kernel
-def run_coupled(m, s, links, mj, rk4, nstep, step0, record, hist, par=True):
+def run_coupled(m, s, links, ctrls, mj, rk4, nstep, step0, record, hist, par=True):
     """nstep coupled steps (module docstring, steps 1-5). Returns the steps done
     (< nstep when the membrane fails; its status is in s.status).
 
     # Model:    m (MembraneArrays); links.vert, .site_id, .site_body, .site_root,
-    #           .extra_force (LinkArrays); rk4: bool, step MuJoCo with mj_step (RK4)
+    #           .extra_force (LinkArrays); rk4: bool, step MuJoCo with mj_step (RK4);
+    #           ctrls.act, .sched (CtrlArrays): the driven actuators
     # Data in:  s (MembraneState) at step step0; mj (MjViews): MuJoCo's state
     # Data out: s and MuJoCo's state (through mj.data_ptr) after the steps done;
-    #           mj.xfrc_applied; hist.xfrc[k], hist.qpos[k] when record
-    # Scratch:  links.force, links.vel
+    #           mj.xfrc_applied; mj.ctrl[ctrls.act] at the step's start time;
+    #           hist.xfrc[k], hist.qpos[k] when record
+    # Scratch:  links.force, links.vel, ctrls.val
     # par:      None: the membrane's serial passes only (`hybrid.step.step_par`)
     """
     h = m.dt
@@ -153,6 +167,9 @@ def run_coupled(m, s, links, mj, rk4, nstep, step0, record, hist, par=True):
             for a in range(3):
                 link_force[j, a] = frc[i, a] + p * grad[i, a] + links.extra_force[j, a]
         point_wrench_kernel(mj.site_xpos, mj.xipos, site_id, links.site_body, link_force, xfrc)
+        for j in range(ctrls.act.shape[0]):
+            schedule_eval(ctrls.sched, j, t, ctrls.val)
+            mj.ctrl[ctrls.act[j]] = ctrls.val[0]
         if record:  # element-wise: a slice copy would allocate
             for b in range(xfrc.shape[0]):
                 for a in range(6):
@@ -180,12 +197,12 @@ def run_coupled(m, s, links, mj, rk4, nstep, step0, record, hist, par=True):
 
 
 @kernel
-def run_coupled_frames(m, s, links, mj, rk4, stops, step0, no_hist, frame_pos, frame_scal, frame_body_pos,
+def run_coupled_frames(m, s, links, ctrls, mj, rk4, stops, step0, no_hist, frame_pos, frame_scal, frame_body_pos,
                        frame_body_quat, par=True):
     """`run_coupled` to each step index of stops, capturing a frame at each; returns
     the frames captured (fewer than stops when a step fails).
 
-    # Model:    m, links, rk4 as `run_coupled`
+    # Model:    m, links, ctrls, rk4 as `run_coupled`
     # Data in:  s, mj as `run_coupled`; stops (nframe,) int64 increasing step indices
     # Data out: s, MuJoCo's state as `run_coupled`; per frame i: frame_pos[i]
     #           (nvert, 3) m, frame_scal[i] (`capture_frame`), frame_body_pos[i]
@@ -199,7 +216,7 @@ def run_coupled_frames(m, s, links, mj, rk4, stops, step0, no_hist, frame_pos, f
     record = no_hist.xfrc.shape[0] > 0
     for i in range(stops.shape[0]):
         n = stops[i] - done
-        k = run_coupled(m, s, links, mj, rk4, n, done, record, no_hist, par)
+        k = run_coupled(m, s, links, ctrls, mj, rk4, n, done, record, no_hist, par)
         done += k
         if k < n:
             return i
@@ -271,9 +288,10 @@ class Coupling:
         sys.reset()
         self._links = LinkArrays(self.link_vert, sys.site_id, sys.site_body, sys.site_root,
                                  self.link_extra_force(), self._force, self._vel)
+        self._ctrls = CtrlArrays(sys.ctrl_act, sys.ctrl_sched, np.zeros(3))
         d = sys.data
         self._mj = MjViews(*sys.pointers(), d.site_xpos, d.xipos, d.xfrc_applied, d.cvel,
-                           d.subtree_com, d.qpos, d.xpos, d.xquat)
+                           d.subtree_com, d.qpos, d.xpos, d.xquat, d.ctrl)
         self.initial_state = sys.state()
         self._xfrc_hist.clear()
         self._qpos_hist.clear()
@@ -298,7 +316,7 @@ class Coupling:
                 else self._no_hist)
         mj_time = self.system.data.time
         a = self.model.arrays if arrays is None else arrays
-        done = run_coupled(a, state, self._links, self._mj, self._rk4(), int(nstep), int(step0), record, hist,
+        done = run_coupled(a, state, self._links, self._ctrls, self._mj, self._rk4(), int(nstep), int(step0), record, hist,
                            step_par(a))
         if record:
             self._xfrc_hist.append(hist.xfrc[:done])
@@ -324,7 +342,7 @@ class Coupling:
         each into frames; returns the frames captured. (Without wrench recording.)"""
         mj_time = self.system.data.time
         a = self.model.arrays if arrays is None else arrays
-        count = run_coupled_frames(a, state, self._links, self._mj, self._rk4(), stops, int(step0),
+        count = run_coupled_frames(a, state, self._links, self._ctrls, self._mj, self._rk4(), stops, int(step0),
                                    self._no_hist, frames.pos, frames.scal, frames.body_pos, frames.body_quat,
                                    step_par(a))
         # a reset anywhere in these frames makes none of them trustworthy (frames.count stays 0)
@@ -332,6 +350,11 @@ class Coupling:
         return count
 
     # -- records
+    def link_forces(self) -> np.ndarray:
+        """(n, 3) N: the force sent to each linked point's site in the last step (a copy),
+        in site order (`link_vert`)."""
+        return self._force.copy()
+
     def wrench_history(self) -> np.ndarray:
         """(nstep, nbody, 6) [N, N m]: `xfrc_applied` of every recorded step."""
         nb = self.system.model.nbody

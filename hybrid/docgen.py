@@ -47,7 +47,25 @@ _RIGID = {"mjcf": ("-", "*required*", "\"trunk\" (the packaged two-rib model), a
                                       "\"package:model\" (e.g. \"myo_sim:myotorso\")"),
           "links": ("-", "[]", "[[rigid.links]] tables, below"),
           "prefix": ("-", "\"\"", "a string prepended to the model's names"),
-          "add_link_mass": ("-", "true", "true or false: add the linked points' masses to their bodies")}
+          "add_link_mass": ("-", "true", "true or false: add the linked points' masses to their bodies"),
+          "keyframe": ("-", "none", "the name of a keyframe of the model: the run starts from it (qpos, qvel, "
+                                    "act, ctrl), the membrane placed against the bodies there"),
+          "fix": ("-", "[]", "[body, ...]: their joints removed, each body fixed to its parent where it starts "
+                             "(a body on the world stays there)"),
+          "fix_root": ("-", "false", "true or false: every free-floating root body (a free joint on the world) "
+                                     "fixed where it starts"),
+          "weld": ("-", "[]", "[body, ...]: welded to the world where they start (a MuJoCo weld, time "
+                              "constant 2 dt)"),
+          "hold": ("-", "[]", "[joint or pattern, ...] (\"*\": all but free joints): held where they start by "
+                              "springs, replacing the joint's own stiffness and damping"),
+          "hold_stiffness_nm_per_rad": ("N m/rad", "1000", "a number > 0 (N/m for a slide joint)"),
+          "hold_damping_nms_per_rad": ("N m s/rad", "10", "a number >= 0 (N s/m for a slide joint)"),
+          "lock": ("-", "[]", "[hinge or slide joint or pattern, ...]: locked where they start (MuJoCo joint "
+                              "equalities, time constant 2 dt)"),
+          "ctrl": ("-", "{}", "{actuator or pattern = schedule}: the actuators' ctrl set before every step "
+                              "(a number, a breathing waveform or a table)"),
+          "integrator": ("-", "the MJCF's", "MuJoCo's integrator: \"Euler\", \"RK4\", \"implicit\" or "
+                                            "\"implicitfast\"")}
 _LINKS = {"region": ("-", "*required*", "a selector (see Regions)"),
           "body": ("-", "*required*", "the name of a body of the MJCF model"),
           "name": ("-", "the body's name", "a string (what --without and --set refer to)")}
@@ -288,6 +306,10 @@ def render() -> str:
         *_field_rows(top),
         "",
         "Tables: " + ", ".join(f"`{t}`" for t in tables) + " (`mesh` and `masses` *required*).",
+        "",
+        "`dt_s` left out: the MJCF's own timestep (`<option timestep>`) for a scene with a rigid part,",
+        "else 1e-3 s. MuJoCo keeps the MJCF's own integrator unless `rigid.integrator` sets it; the",
+        "summary's `rigid` table records the step and integrator used and where each came from.",
         "",
         "`formulation` says how the membrane's parameters are meant. \"paper\" is the per-point model of Promayon,",
         "Baconnier & Puech (1997) kept exactly (its stiffnesses act on points, so their meaning",

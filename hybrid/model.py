@@ -22,7 +22,7 @@ from . import schedule as _sched
 from .errors import MeshError, SceneError
 from .kernel import use_parallel
 from .mesh import Mesh, vertex_area
-from .scene import FORMULATIONS, INTEGRATORS, MESH_GENERATORS, Masses, MeshSpec, Scene
+from .scene import DEFAULT_DT_S, FORMULATIONS, INTEGRATORS, MESH_GENERATORS, Masses, MeshSpec, Scene
 from .stability import max_stable_dt
 from .terms import CONSTRAINT_TYPES, FORCE_TYPES, TERM_CLASSES, TERMS, Build, Volume
 from .terms.base import check_value
@@ -265,14 +265,15 @@ def compile_scene(scene: Scene) -> Model:
     if not isinstance(scene, Scene):
         raise SceneError(f"scene: expected a hybrid.scene.Scene, received {type(scene).__name__}")
     if isinstance(scene.dt_s, str) and scene.dt_s == "auto":
-        probe = _compile(dataclasses.replace(scene, dt_s=min(1e-3, scene.duration_s)))
+        probe = _compile(dataclasses.replace(scene, dt_s=None))
         return _compile(dataclasses.replace(scene, dt_s=auto_dt(probe.dt_stable_s)))
     return _compile(scene)
 
 
 def _compile(scene: Scene) -> Model:
-    _check_dt(scene.dt_s)
-    _check_duration(scene.duration_s, scene.dt_s)
+    if scene.dt_s is not None:
+        _check_dt(scene.dt_s)
+        _check_duration(scene.duration_s, scene.dt_s)
     checks.text("name", scene.name)
     checks.text("formulation", scene.formulation, FORMULATIONS)
     if scene.formulation == "continuum":
@@ -313,6 +314,11 @@ def _compile(scene: Scene) -> Model:
         from .rigid import build_rigid  # imports mujoco, only for scenes that have rigid parts
         rigid, b.link_vert = build_rigid(scene, mesh, regions, vert_mass)
         b.vert_free[b.link_vert] = 0
+    # the step: the scene's, else the MJCF's own (a rigid part), else the default
+    dt = scene.dt_s if scene.dt_s is not None else rigid.model.opt.timestep if rigid is not None else DEFAULT_DT_S
+    if scene.dt_s is None:
+        _check_dt(dt)
+        _check_duration(scene.duration_s, dt)
     # linked points keep their forces (they go to the rigid bodies); nailed and
     # prescribed points need none
     b.moving = b.vert_free > 0
@@ -333,7 +339,7 @@ def _compile(scene: Scene) -> Model:
         **{k: b.out[k] if k in b.out else default(nvert) for k, default in _TERM_ARRAYS.items()},
         vert_weight=b.out["vert_weight"],
         vol0=b.out.get("vol0", 0.0),
-        sched=sched_table, dt=float(scene.dt_s), integrator=integrator,
+        sched=sched_table, dt=float(dt), integrator=integrator,
         max_speed=_positive(scene.max_speed_m_s, "max_speed_m_s"),
         volume_shake=scene.formulation == "continuum",
         parallel=use_parallel(nvert),

@@ -460,6 +460,9 @@ def run(sim: Simulation, duration_s: float, *, frame_dt_s: float = 0.01, progres
         "rest_return_mm": rest_return_mm,
         "metrics": metric_table(trace),
     }
+    if model.rigid is not None:  # what the rigid model runs with: the MJCF's own or the scene's
+        summary["rigid"] = {**model.rigid.settings(), "timestep_s": h,
+                            "timestep_from": "mjcf" if model.scene.dt_s is None else "scene"}
     if error is not None:
         summary["error"] = str(error)
     if interrupted is not None:

@@ -32,6 +32,8 @@ __all__ = [
 ]
 
 INTEGRATORS = ("explicit_euler", "symplectic_euler")
+#: the step of a scene without a rigid part that sets no dt_s (s)
+DEFAULT_DT_S = 1e-3
 #: how the membrane's parameters are meant (hybrid.terms.base.FORMULATIONS): "paper", the
 #: per-point model of Promayon et al. 1997 kept exactly; "continuum", material parameters
 #: that mean the same on every mesh, internal forces that obey action and reaction
@@ -95,13 +97,32 @@ class RigidLink:
     name: str = "rigid_link"
 
 
+#: MuJoCo's integrators, as `rigid.integrator` names them
+MUJOCO_INTEGRATORS = ("Euler", "RK4", "implicit", "implicitfast")
+
+
 @dataclass(frozen=True)
 class Rigid:
-    """The rigid part: an MJCF file (ours or a user's) and the membrane links to it."""
+    """The rigid part: an MJCF file (ours or a user's), the membrane links to it, and
+    what the scene changes in the model (`hybrid.rigid.controls`): bodies fixed or
+    welded to the world, joints held by stiff springs or locked, the keyframe it
+    starts from, actuators driven by schedules, MuJoCo's integrator. Names of joints
+    and actuators may be glob patterns ("lumbar*", "*"). The model's file is only read.
+    """
     mjcf: str
     links: tuple[RigidLink, ...] = ()
     prefix: str = ""
     add_link_mass: bool = True
+    keyframe: Optional[str] = param("text", None)
+    fix: tuple = ()  # body names: their joints removed, each fixed to its parent where it starts
+    fix_root: bool = False  # every free-floating root body fixed where it starts
+    weld: tuple = ()  # body names: welded to the world where they start (a MuJoCo weld)
+    hold: tuple = ()  # joint names or patterns: held where they start by springs
+    hold_stiffness_nm_per_rad: float = param("positive", 1e3, hi=checks.MAX_STIFFNESS_N_PER_M)
+    hold_damping_nms_per_rad: float = param("nonneg", 10.0, hi=checks.MAX_STIFFNESS_N_PER_M)
+    lock: tuple = ()  # hinge or slide joint names or patterns: locked where they start
+    ctrl: dict = field(default_factory=dict)  # actuator name or pattern -> schedule
+    integrator: Optional[str] = param("choice", None, choices=MUJOCO_INTEGRATORS)
 
 
 @dataclass(frozen=True)
@@ -113,7 +134,9 @@ class Scene:
     forces: tuple = ()
     constraints: tuple = ()
     rigid: Optional[Rigid] = None
-    dt_s: float = param("step", 1e-3, hi=checks.MAX_DT_S)  # or "auto": see hybrid.model.auto_dt
+    # None: the MJCF's own timestep for a scene with a rigid part, else DEFAULT_DT_S;
+    # "auto": half the model's stable-step estimate, rounded down (hybrid.model.auto_dt)
+    dt_s: Optional[float] = param("step", None, hi=checks.MAX_DT_S)
     integrator: str = param("choice", "symplectic_euler", choices=INTEGRATORS)
     formulation: str = param("choice", "continuum", choices=FORMULATIONS)
     duration_s: float = param("positive", 1.0, hi=checks.MAX_DURATION_S)

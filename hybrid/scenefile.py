@@ -39,8 +39,8 @@ The format (SI units; every key optional unless marked *required*)::
     [[constraints]] # type = nailed | keep_in | prescribed | volume
     type = "volume"
 
-    [rigid]         # mjcf (required): "trunk" (the packaged model) or a path; prefix; add_link_mass
-    mjcf = "trunk"
+    [rigid]         # mjcf (required): "trunk" (the packaged model) or a path; prefix; add_link_mass;
+    mjcf = "trunk"  #   keyframe, fix, fix_root, weld, hold, lock, ctrl, integrator (hybrid.rigidfile)
     [[rigid.links]] # region and body required; name defaults to the body's
     region = "ribs"
     body = "rib_left"
@@ -65,7 +65,8 @@ from . import checks
 from . import regions as R
 from . import schedule as S
 from .errors import SceneError
-from .scene import Masses, MeshSpec, Rigid, RigidLink, Scene
+from .rigidfile import rigid_from_table, rigid_to_table
+from .scene import Masses, MeshSpec, Scene
 from .terms import CONSTRAINT_TYPES, FORCE_TYPES
 from .terms.base import check_value
 
@@ -325,21 +326,9 @@ def scene_from_dict(data: dict, *, source: str = "scene", base_dir: str | Path |
     kw["constraints"] = _terms(ctx, "constraints", data.get("constraints", []), CONSTRAINT_TYPES)
 
     if "rigid" in data:
-        rig = _table(ctx, "rigid", data["rigid"])
-        _keys(ctx, "rigid", rig, ("mjcf", "links", "prefix", "add_link_mass"), ("mjcf",))
-        links = rig.get("links", [])
-        if not isinstance(links, list) or not all(isinstance(x, dict) for x in links):
-            ctx.fail("rigid.links", f"expected an array of tables ([[rigid.links]]), received {_show(links)}")
-        lk = []
-        for k, tbl in enumerate(links):
-            p = f"rigid.links[{k}]"
-            _keys(ctx, p, tbl, ("region", "body", "name"), ("region", "body"))
-            lk.append(RigidLink(region=_selector(ctx, f"{p}.region", tbl["region"]),
-                                body=_str(ctx, f"{p}.body", tbl["body"]),
-                                name=_str(ctx, f"{p}.name", tbl.get("name", tbl["body"]))))
-        kw["rigid"] = Rigid(mjcf=_str(ctx, "rigid.mjcf", rig["mjcf"]), links=tuple(lk),
-                            prefix=_str(ctx, "rigid.prefix", rig.get("prefix", "")),
-                            add_link_mass=_bool(ctx, "rigid.add_link_mass", rig.get("add_link_mass", True)))
+        kw["rigid"] = rigid_from_table(source, data["rigid"], lambda p, v: _selector(ctx, p, v),
+                                       lambda p, v, n: _schedule(ctx, p, v, n),
+                                       lambda p, f, v: _field(ctx, p, f, v))
 
     if base_dir is not None:
         kw["base_dir"] = str(base_dir)
@@ -452,6 +441,8 @@ def scene_to_dict(scene: Scene) -> dict:
     d: dict = {"name": scene.name, "formulation": scene.formulation, "dt_s": scene.dt_s,
                "integrator": scene.integrator,
                "duration_s": scene.duration_s, "max_speed_m_s": scene.max_speed_m_s}
+    if scene.dt_s is None:  # the MJCF's own (a rigid part) or the default
+        del d["dt_s"]
     ms = scene.mesh
     mesh = {k: getattr(ms, k) for k in _MESH if getattr(ms, k) is not None}
     if ms.path is not None:
@@ -469,9 +460,7 @@ def scene_to_dict(scene: Scene) -> dict:
     d["forces"] = [_term_to(t, f"forces[{k}]") for k, t in enumerate(scene.forces)]
     d["constraints"] = [_term_to(c, f"constraints[{k}]") for k, c in enumerate(scene.constraints)]
     if scene.rigid is not None:
-        r = scene.rigid
-        d["rigid"] = {"mjcf": str(r.mjcf), "prefix": r.prefix, "add_link_mass": r.add_link_mass,
-                      "links": [{"region": _sel_to(k.region), "body": k.body, "name": k.name} for k in r.links]}
+        d["rigid"] = rigid_to_table(scene.rigid, _sel_to, _sched_to)
     return d
 
 

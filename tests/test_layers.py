@@ -20,14 +20,14 @@ LAYERS = (
     ("errors, kernel", ("errors", "kernel", "checks")),
     ("geometry, regions, schedules", ("mesh", "mesh.*", "regions", "schedule", "stability")),
     ("terms", ("terms", "terms.*")),
-    ("scene", ("scene", "scenefile", "demo", "resolve")),
+    ("scene", ("scene", "scenefile", "rigidfile", "demo", "resolve")),
     ("model, rigid", ("model", "rigid", "rigid.*")),
     ("step", ("step", "readouts")),
     ("coupled step", ("coupling",)),
     ("simulation", ("simulation", "builds")),
     ("observers", ("run", "record", "record.*", "render", "sweep", "grid", "outputs", "provenance")),
     ("public API", ("",)),  # hybrid/__init__.py
-    ("bench, command line, studies", ("bench", "bench.*", "bench_rigid", "cli", "__main__", "docgen", "studies",
+    ("bench, command line, studies", ("bench", "bench.*", "bench_rigid", "cli", "__main__", "docgen", "inspection", "studies",
                                       "studies.*")),
 )
 # the door to MuJoCo: model time (rigid) and step time (coupling)

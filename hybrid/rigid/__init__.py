@@ -6,11 +6,14 @@ lazily, so that a membrane-only scene never loads MuJoCo. By concern:
 
 - `mjcf`: MJCF files and package models ("myo_sim:myotorso") loaded into an MjSpec,
   compiling with readable errors, MuJoCo's warnings sent to the log;
+- `controls`: what a scene changes in its model (`rigid.fix`, `weld`, `hold`, `lock`,
+  `keyframe`, `ctrl`, `integrator`), each name checked against the model;
 - `compose`: what hybrid adds to a spec (attachment sites, link masses), the
   scene's rigid part (`build_rigid`) and the free body of the rigid study;
 - `system`: the compiled system driven by point forces (`RigidSystem`,
   `CoupledRigid`) and the compiled site kernels the coupled step shares;
-- `replay`: recorded wrenches through MuJoCo alone;
+- `replay`: recorded wrenches (and controls) through MuJoCo alone;
+- `describe`: what a compiled model holds, as plain data (`hybrid inspect`);
 - `draw`: MuJoCo's viewer for `hybrid view`;
 - `references`: MuJoCo alone, what the benchmark times our step against.
 """
@@ -21,7 +24,7 @@ from .draw import draw_capsules, empty_world, launch_viewer
 from .mjcf import (BUILTIN_MJCF, PACKAGE_MJCF, TRUNK_XML, compile_spec, load_rigid_spec, load_spec,
                    resolve_mjcf)
 from .references import BareStepper, FlexSphere
-from .replay import replay_wrenches
+from .replay import replay_states, replay_wrenches
 from .system import (STATE_SPEC, CoupledRigid, RigidSystem, get_state, mj_step_ctypes, point_wrench_kernel,
                      site_vel_kernel)
 
@@ -42,6 +45,7 @@ __all__ = [
     "CoupledRigid",
     "get_state",
     "replay_wrenches",
+    "replay_states",
     "point_wrench_kernel",
     "site_vel_kernel",
     "mj_step_ctypes",

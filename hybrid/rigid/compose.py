@@ -24,6 +24,7 @@ from hybrid.errors import RigidError, SceneError
 from hybrid.scene import KeepIn, Nailed, Prescribed, Rigid, RigidLink, Scene
 from hybrid.terms.base import claim_points
 
+from .controls import apply_controls, start_data
 from .mjcf import compile_spec, load_rigid_spec
 from .system import CoupledRigid
 
@@ -43,12 +44,11 @@ def _taken_sites(spec: mujoco.MjSpec, site_names: Sequence[str]) -> list[str]:
 
 
 def add_sites(spec: mujoco.MjSpec, model0: mujoco.MjModel, body_names: Sequence[str],
-              point_pos: np.ndarray, site_names: Sequence[str]) -> np.ndarray:
+              point_pos: np.ndarray, site_names: Sequence[str], key_id: int = -1) -> np.ndarray:
     """Add site `site_names[j]` to body `body_names[j]` at world position `point_pos[j]`
-    (m) of the model's pose at `qpos0`; model0 is `spec` compiled (before the sites).
-    Returns (n, 3) m, the sites' positions in their bodies' frames."""
-    data0 = mujoco.MjData(model0)
-    mujoco.mj_kinematics(model0, data0)
+    (m) of the model's pose at `qpos0` (or at keyframe key_id); model0 is `spec` compiled
+    (before the sites). Returns (n, 3) m, the sites' positions in their bodies' frames."""
+    data0 = start_data(model0, key_id)
     local = np.empty((len(site_names), 3))
     for j, (name, p) in enumerate(zip(body_names, point_pos)):
         bid = model0.body(name).id
@@ -114,7 +114,9 @@ def build_rigid(scene: Scene, mesh, regions: dict, vert_mass: np.ndarray) -> tup
     linked vertices, sorted, each with a site `f"{prefix}hybrid_link_{i}"` at its rest
     position on its body. Raises SceneError (malformed links, a point linked twice or
     also nailed/prescribed) or RigidError (missing or unparsable MJCF, unknown body,
-    taken site name, a model MuJoCo cannot compile), each a one-line message.
+    taken site name, a model MuJoCo cannot compile; a body, joint, actuator or keyframe
+    the control keys name that the model lacks: `hybrid.rigid.controls`), each a
+    one-line message. The sites are placed where the bodies start (`rigid.keyframe`).
     """
     rig = scene.rigid
     if not isinstance(rig, Rigid):
@@ -124,6 +126,7 @@ def build_rigid(scene: Scene, mesh, regions: dict, vert_mass: np.ndarray) -> tup
     if not isinstance(rig.add_link_mass, bool):
         raise SceneError(f"rigid.add_link_mass: expected true or false, received {rig.add_link_mass!r}")
     spec, label, source = load_rigid_spec(scene)
+    controls = apply_controls(spec, rig, label, scene.dt_s)
     bodies = _body_names(spec)
     sites = [s.name for s in spec.sites if s.name]
 
@@ -157,7 +160,7 @@ def build_rigid(scene: Scene, mesh, regions: dict, vert_mass: np.ndarray) -> tup
     if taken:
         raise RigidError(f"rigid.prefix: site name(s) {taken[:3]} already exist in {label}; "
                          f"choose another prefix than {rig.prefix!r}")
-    local = add_sites(spec, model0, body_names, mesh.vert_pos[link_vert], site_names)
+    local = add_sites(spec, model0, body_names, mesh.vert_pos[link_vert], site_names, controls.key_id)
 
     link_mass = np.asarray(vert_mass, float)[link_vert]
     mass_added = np.zeros(link_vert.size, bool)
@@ -165,9 +168,10 @@ def build_rigid(scene: Scene, mesh, regions: dict, vert_mass: np.ndarray) -> tup
         mass_added = np.array([n != "world" and model0.body(n).id != 0 for n in body_names])
         _add_point_masses(spec, model0, body_names, local, link_mass, mass_added)
 
-    system = CoupledRigid(spec, site_names, timestep=float(scene.dt_s), link_vert=link_vert,
+    # MuJoCo keeps the MJCF's own timestep unless the scene sets dt_s
+    system = CoupledRigid(spec, site_names, timestep=scene.dt_s, link_vert=link_vert,
                           link_body=body_names, link_mass=link_mass, mass_added=mass_added,
-                          mjcf_path=source)
+                          mjcf_path=source, controls=controls)
     return system, link_vert
 
 

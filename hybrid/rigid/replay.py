@@ -47,3 +47,28 @@ def replay_wrenches(model: mujoco.MjModel, initial_state: np.ndarray, xfrc: np.n
     state, _ = _rollout.rollout(model, data, state0[None, :], control,
                                 control_spec=int(mujoco.mjtState.mjSTATE_XFRC_APPLIED))
     return state[0, :, 1:1 + model.nq].copy()
+
+
+def replay_states(model: mujoco.MjModel, initial_state: np.ndarray, xfrc: np.ndarray,
+                  ctrl: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """`replay_wrenches` with the actuators' controls too: step k applies `xfrc[k]`
+    and `ctrl[k]` (nstep, nu) (None: the initial state's ctrl throughout). Returns
+    (qpos (nstep, nq), qvel (nstep, nv)) after each step."""
+    nstate = mujoco.mj_stateSize(model, STATE_SPEC)
+    state0 = np.asarray(initial_state, dtype=float)
+    if state0.shape != (nstate,):
+        raise RigidError(f"initial_state: expected shape ({nstate},) (mjSTATE_FULLPHYSICS), got {state0.shape}")
+    x = np.asarray(xfrc, dtype=float)
+    if x.ndim != 3 or x.shape[1:] != (model.nbody, 6):
+        raise RigidError(f"xfrc: expected shape (nstep, {model.nbody}, 6), got {x.shape}")
+    nstep = x.shape[0]
+    parts, spec = [x.reshape(nstep, model.nbody * 6)], int(mujoco.mjtState.mjSTATE_XFRC_APPLIED)
+    if ctrl is not None and model.nu:
+        c = np.asarray(ctrl, dtype=float)
+        if c.shape != (nstep, model.nu):
+            raise RigidError(f"ctrl: expected shape ({nstep}, {model.nu}), got {c.shape}")
+        parts.insert(0, c)  # MuJoCo orders a state's parts by their bit: ctrl before xfrc_applied
+        spec |= int(mujoco.mjtState.mjSTATE_CTRL)
+    control = np.ascontiguousarray(np.concatenate(parts, axis=1)[None])
+    state, _ = _rollout.rollout(model, mujoco.MjData(model), state0[None, :], control, control_spec=spec)
+    return state[0, :, 1:1 + model.nq].copy(), state[0, :, 1 + model.nq:1 + model.nq + model.nv].copy()

@@ -36,6 +36,9 @@ import numpy as np
 from hybrid.errors import RigidError
 from hybrid.kernel import jit
 
+from hybrid.schedule import schedule_eval, stack_schedules
+
+from .controls import Controls
 from .mjcf import compile_spec
 
 #: The state signature used for snapshots and replays (`mjSTATE_FULLPHYSICS`).
@@ -164,6 +167,7 @@ class RigidSystem:
         self.site_body = model.site_bodyid[self.site_id].astype(np.int64)
         self.body_id = np.unique(self.site_body)
         self.site_root = model.body_rootid[self.site_body].astype(np.int64)
+        self.start_key = -1  # the keyframe a reset starts from (-1: qpos0)
         mujoco.mj_forward(model, self._data)
 
     # -- access -------------------------------------------------------------------
@@ -266,9 +270,16 @@ class RigidSystem:
         return out
 
     def reset(self) -> None:
-        """Back to the model's initial state (`qpos0`, zero velocity, time 0, no wrench)."""
-        mujoco.mj_resetData(self._model, self._data)
-        mujoco.mj_forward(self._model, self._data)
+        """Back to the model's initial state (`qpos0`, or the keyframe `start_key`; time 0,
+        no wrench)."""
+        self._start(self._data)
+
+    def _start(self, data: mujoco.MjData) -> None:
+        if self.start_key >= 0:
+            mujoco.mj_resetDataKeyframe(self._model, data, self.start_key)
+        else:
+            mujoco.mj_resetData(self._model, data)
+        mujoco.mj_forward(self._model, data)
 
 
 class CoupledRigid(RigidSystem):
@@ -282,16 +293,40 @@ class CoupledRigid(RigidSystem):
     """
 
     def __init__(self, spec, site_names, *, timestep, link_vert, link_body, link_mass, mass_added,
-                 mjcf_path):
+                 mjcf_path, controls: Controls | None = None):
         super().__init__(spec, site_names, timestep=timestep)
+        self.controls = Controls() if controls is None else controls
+        self.controls.finish(self._model)
+        self.start_key = self.controls.key_id
+        #: the driven actuators' ids (nc,) and their schedules, read by the coupled step
+        self.ctrl_act = np.array([self._model.actuator(a).id for a in self.controls.ctrl_actuators], np.int64)
+        self.ctrl_sched = stack_schedules(self.controls.ctrl_schedules)[0]
+        self.reset()
         self.link_vert = np.asarray(link_vert, np.int32)
         self.link_body = tuple(link_body)
         self.link_mass = np.asarray(link_mass, float)
         self.mass_added = np.asarray(mass_added, bool)
         self.mjcf_path = mjcf_path
         for arr in (self.link_vert, self.link_mass, self.mass_added, self.site_id, self.site_body,
-                    self.site_root, self.body_id):
+                    self.site_root, self.body_id, self.ctrl_act):
             arr.flags.writeable = False
+
+    def settings(self) -> dict:
+        """What the scene changed in the model and what MuJoCo integrates with (JSON values,
+        for the summary; `hybrid.rigid.controls`)."""
+        return {**self.controls.settings, "timestep_s": float(self._model.opt.timestep)}
+
+    def reset(self) -> None:
+        """`RigidSystem.reset`, then the driven actuators at their schedules' values at t = 0."""
+        super().reset()
+        self.apply_ctrl(0.0)
+
+    def apply_ctrl(self, t: float) -> None:
+        """Set the driven actuators' `ctrl` to their schedules at time t (s)."""
+        val = np.zeros(3)
+        for j, a in enumerate(self.ctrl_act):
+            schedule_eval(self.ctrl_sched, j, float(t), val)
+            self._data.ctrl[a] = val[0]
 
     def fork(self, timestep: float | None = None) -> "CoupledRigid":
         """A copy with its own `MjModel` (a full copy: changing its parameters leaves this
@@ -302,5 +337,5 @@ class CoupledRigid(RigidSystem):
         if timestep is not None:
             other._model.opt.timestep = float(timestep)
         other._data = mujoco.MjData(other._model)
-        mujoco.mj_forward(other._model, other._data)
+        other.reset()
         return other

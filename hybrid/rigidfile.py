@@ -1,0 +1,96 @@
+"""The `[rigid]` table of a scene file, read into a `Rigid` and written back.
+
+`hybrid.scenefile` calls these with its own readers of selectors, schedules and
+kind-checked fields (passed in, so that this module imports nothing of it). The
+control keys (`keyframe`, `fix`, `fix_root`, `weld`, `hold`, `lock`, `ctrl`,
+`integrator`, ...) are checked here for their form; the names they give are checked
+against the model when it is compiled (`hybrid.rigid.controls`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+from . import checks
+from .errors import SceneError
+from .scene import Rigid, RigidLink
+
+__all__ = ["RIGID_KEYS", "NAME_LISTS", "rigid_from_table", "rigid_to_table"]
+
+#: the keys of [rigid]: the fields of Rigid
+RIGID_KEYS = tuple(f.name for f in dataclasses.fields(Rigid))
+#: the keys that hold lists of names (bodies, or joint name patterns)
+NAME_LISTS = ("fix", "weld", "hold", "lock")
+_KINDED = {f.name: f for f in dataclasses.fields(Rigid) if "kind" in f.metadata}
+
+
+def _fail(where: str, msg: str):
+    raise SceneError(f"{where}: {msg}")
+
+
+def rigid_from_table(source: str, rig, selector, schedule, field_value) -> Rigid:
+    """The `Rigid` of a parsed [rigid] table. source: the file's name for messages;
+    selector(path, v), schedule(path, v, ncomp), field_value(path, field, v): the scene
+    file's readers. Raises SceneError, one line naming the key."""
+    where = f"{source}: rigid"
+    if not isinstance(rig, dict):
+        _fail(where, f"expected a table, received {checks.show(rig)}")
+    unknown = [k for k in rig if k not in RIGID_KEYS]
+    if unknown:
+        _fail(f"{where}.{unknown[0]}", f"unknown key; valid keys here: {sorted(RIGID_KEYS)}")
+    if "mjcf" not in rig:
+        _fail(where, f"missing required key 'mjcf'; valid keys here: {sorted(RIGID_KEYS)}")
+    links = rig.get("links", [])
+    if not isinstance(links, list) or not all(isinstance(x, dict) for x in links):
+        _fail(f"{where}.links", f"expected an array of tables ([[rigid.links]]), received {checks.show(links)}")
+    lk = []
+    for k, tbl in enumerate(links):
+        p = f"rigid.links[{k}]"
+        unknown = [x for x in tbl if x not in ("region", "body", "name")]
+        if unknown:
+            _fail(f"{source}: {p}.{unknown[0]}", "unknown key; valid keys here: ['body', 'name', 'region']")
+        for req in ("region", "body"):
+            if req not in tbl:
+                _fail(f"{source}: {p}", f"missing required key {req!r}; valid keys here: ['body', 'name', 'region']")
+        lk.append(RigidLink(region=selector(f"{p}.region", tbl["region"]),
+                            body=checks.text(f"{source}: {p}.body", tbl["body"]),
+                            name=checks.text(f"{source}: {p}.name", tbl.get("name", tbl["body"]))))
+    kw = {"mjcf": checks.text(f"{where}.mjcf", rig["mjcf"]), "links": tuple(lk),
+          "prefix": checks.text(f"{where}.prefix", rig.get("prefix", "")),
+          "add_link_mass": checks.boolean(f"{where}.add_link_mass", rig.get("add_link_mass", True)),
+          "fix_root": checks.boolean(f"{where}.fix_root", rig.get("fix_root", False))}
+    for key in NAME_LISTS:
+        if key in rig:
+            kw[key] = _names(f"{where}.{key}", rig[key])
+    for key, f in _KINDED.items():
+        if key in rig:
+            kw[key] = field_value(f"rigid.{key}", f, rig[key])
+    if "ctrl" in rig:
+        ctrl = rig["ctrl"]
+        if not isinstance(ctrl, dict):
+            _fail(f"{where}.ctrl", f"expected a table {{actuator name or pattern = schedule}}, received "
+                                   f"{checks.show(ctrl)}")
+        kw["ctrl"] = {name: schedule(f"rigid.ctrl.{name}", v, 1) for name, v in ctrl.items()}
+    return Rigid(**kw)
+
+
+def _names(where: str, v) -> tuple:
+    if not isinstance(v, list):
+        _fail(where, f"expected a list of names, e.g. [\"pelvis\"], received {checks.show(v)}")
+    for k, x in enumerate(v):
+        if not isinstance(x, str) or not x:
+            _fail(f"{where}[{k}]", f"expected a non-empty name, received {checks.show(x)}")
+    return tuple(v)
+
+
+def rigid_to_table(r: Rigid, selector_to, schedule_to) -> dict:
+    """The [rigid] table of `r` (inverse of `rigid_from_table`): every key but those
+    left unset (TOML has no null), so that `--set rigid.KEY...` finds each table."""
+    d = {"mjcf": str(r.mjcf), "prefix": r.prefix, "add_link_mass": r.add_link_mass,
+         "links": [{"region": selector_to(k.region), "body": k.body, "name": k.name} for k in r.links],
+         "fix_root": r.fix_root, **{key: list(getattr(r, key)) for key in NAME_LISTS}}
+    for key in _KINDED:
+        if getattr(r, key) is not None:
+            d[key] = getattr(r, key)
+    d["ctrl"] = {name: schedule_to(s, f"rigid.ctrl.{name}") for name, s in r.ctrl.items()}
+    return d
