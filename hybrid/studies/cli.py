@@ -53,6 +53,9 @@ def build_study_parser() -> argparse.ArgumentParser:
         s.add_argument("--small", action="store_true", help="a small version (seconds; for tests)")
         s.add_argument("--scheduler", metavar="ADDRESS", default=None,
                        help="run on an existing Dask cluster (tcp://HOST:PORT) instead of the local cores")
+        if name == "work-precision":
+            s.add_argument("--scene", default="breathing_paper",
+                           help="the coupled scene (default: breathing_paper, the paper's trunk at its 1 ms step)")
         if name == "convergence":
             s.add_argument("--metric", action="append", metavar="NAME",
                            help="a trace series whose largest value is studied (repeatable; default: "
@@ -127,7 +130,7 @@ def _extremes(args) -> None:
 
 def _work_precision(args) -> None:
     from . import work_precision
-    r = work_precision.run(args.out, small=args.small, scheduler=args.scheduler)
+    r = work_precision.run(args.out, small=args.small, scheduler=args.scheduler, scene=args.scene)
     print("work-precision: observed order " + ", ".join(f"{k} {p:.2f}" for k, p in r["order"].items())
           + "; reference converged: " + ", ".join(f"{s} {v['converged']}" for s, v in r["reference"].items())
           + f"; {len(r['failures'])} failed run(s); {r['runtime_s']:.1f} s -> {args.out}/work_precision.json")

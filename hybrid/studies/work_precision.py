@@ -4,7 +4,8 @@ membrane-only scene at time steps from the stability bound down by halves.
 `run(out_dir)` writes `work_precision.json`, `work_precision.md` and
 `work_precision.png` (log-log error against wall time, and error against h).
 
-Scenes     "breathing": the packaged trunk (`hybrid.load_scene("breathing_paper")`,
+Scenes     "breathing": a coupled scene (`--scene`; by default the paper's trunk,
+           `hybrid.load_scene("breathing_paper")`,
            membrane coupled to MuJoCo ribs); "membrane": `hybrid.demo.membrane_demo()`.
            Both damp at 0.3 of critical, which explicit Euler needs.
 Steps      h = 1e-3 s / 2^k, k = 0..LEVELS-1: 1e-3 s is the scenes' own step,
@@ -20,8 +21,10 @@ Errors     over one breath (4 s; 0.25 s in small mode), from frames every 10 ms:
            vertex: max over frames of max over vertices of |x - x_ref| (m),
            the runs' `error`; rib angle: max over frames and joints of
            |qpos - qpos_ref| (rad: the trunk's joints are its rib hinges; breathing
-           scene only); pressure: max over
-           frames of |p - p_ref| (Pa).
+           scene only); rib lift: max over frames of the difference of the linked
+           points' mean height from rest (mm, the summary's rib lift; breathing
+           only); pressure: max over frames of |p - p_ref| (Pa). These are the
+           time step's errors on one mesh: `hybrid study convergence` adds the mesh's.
 Work       wall time of the stepping (after a warm-up that compiles; the least
            of 3 repeats), and per simulated second. The runs are independent: `hybrid.sweep.sweep`
            runs them on all local cores, or on a Dask cluster (`scheduler`).
@@ -53,14 +56,19 @@ SIZES = {False: dict(levels=5, ref_k=9, window_s=4.0),
 ORDER_LEVELS = 3   # the observed order from the finest levels
 
 
-def _scene(name: str):
+#: the coupled scene the study runs by default (`--scene`): the paper's, at its 1 ms step
+DEFAULT_SCENE = "breathing_paper"
+
+
+def _scene(name: str, coupled: str = DEFAULT_SCENE):
     from ..resolve import resolve_scene
     if name not in SCENES:
         raise ValueError(f"scene: expected one of {list(SCENES)}, received {name!r}")
-    return resolve_scene({"breathing": "breathing_paper", "membrane": "membrane_demo"}[name])
+    return resolve_scene({"breathing": coupled, "membrane": "membrane_demo"}[name])
 
 
-def simulate(scene: str, integrator: str, k: int, window_s: float, repeats: int = 1) -> dict:
+def simulate(scene: str, integrator: str, k: int, window_s: float, repeats: int = 1,
+             coupled: str = DEFAULT_SCENE) -> dict:
     """One run at h = H0 / 2^k over `window_s`: the frames every 10 ms
     (vertex positions, rib hinge angles, pressure) and the wall time.
     The wall time is the least of `repeats` runs (the machine is shared: the
@@ -69,7 +77,7 @@ def simulate(scene: str, integrator: str, k: int, window_s: float, repeats: int 
     from ..simulation import Simulation
 
     dt = H0 / 2 ** k
-    model = compile_scene(_scene(scene)).with_dt(dt, integrator)
+    model = compile_scene(_scene(scene, coupled)).with_dt(dt, integrator)
     Simulation(model).step(1)  # warm-up: compiles (or loads numba's cache) outside the timing
     sim = Simulation(model)
     nq = sim.mj_model.nq if sim.mj_model is not None else 0  # the trunk's joints: its two rib hinges
@@ -78,6 +86,9 @@ def simulate(scene: str, integrator: str, k: int, window_s: float, repeats: int 
     pos = np.empty((nframe, model.nvert, 3))
     ang = np.empty((nframe, nq))
     prs = np.empty(nframe)
+    lift = np.full(nframe, np.nan)  # mm: the linked points' mean z from rest (the summary's rib lift)
+    link = model.link_vert
+    z0 = model.mesh.vert_pos[link, 2].mean() if link.size else 0.0
     walls = []
     for rep in range(max(1, int(repeats))):
         if rep:
@@ -90,11 +101,13 @@ def simulate(scene: str, integrator: str, k: int, window_s: float, repeats: int 
             if rep == 0:  # deterministic: the frames of the first run
                 pos[f] = sim.vert_pos
                 prs[f] = sim.pressure
+                if link.size:
+                    lift[f] = (sim.vert_pos[link, 2].mean() - z0) * 1e3
                 if nq:
                     ang[f] = sim.mj_data.qpos
         walls.append(wall)
     wall = min(walls)
-    return {"scene": scene, "integrator": integrator, "k": k, "dt": dt, "pos": pos, "angle": ang,
+    return {"scene": scene, "integrator": integrator, "k": k, "dt": dt, "pos": pos, "angle": ang, "lift": lift,
             "pressure": prs, "wall_s": wall, "sim_s": nframe * FRAME_S}
 
 
@@ -102,6 +115,7 @@ def _errors(r: dict, ref: dict) -> dict:
     e = {"error": float(np.max(np.linalg.norm(r["pos"] - ref["pos"], axis=2))),
          "pressure_error": float(np.max(np.abs(r["pressure"] - ref["pressure"])))}
     e["angle_error"] = float(np.max(np.abs(r["angle"] - ref["angle"]))) if r["angle"].size else None
+    e["rib_lift_error_mm"] = float(np.max(np.abs(r["lift"] - ref["lift"]))) if np.isfinite(r["lift"]).all() else None
     return e
 
 
@@ -114,8 +128,11 @@ def observed_order(dts, errors, n: int = ORDER_LEVELS) -> float:
     return float(np.polyfit(x, y, 1)[0])
 
 
-def run(out_dir, *, small: bool = False, scheduler: str | None = None, workers: int | None = None) -> dict:
-    """The study; writes DIR/work_precision.json, .md and .png; returns the JSON's dict."""
+def run(out_dir, *, small: bool = False, scheduler: str | None = None, workers: int | None = None,
+        scene: str = DEFAULT_SCENE) -> dict:
+    """The study, its coupled runs on `scene` (a scene name or file); writes
+    DIR/work_precision.json, .md and .png; returns the JSON's dict. The time step
+    only: `hybrid.studies.convergence` has the mesh's half."""
     t_start = time.perf_counter()
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -125,12 +142,12 @@ def run(out_dir, *, small: bool = False, scheduler: str | None = None, workers: 
     from ..model import compile_scene
     bounds = {}
     for s in SCENES:
-        model = compile_scene(_scene(s))
+        model = compile_scene(_scene(s, scene))
         bounds[s] = {i: model.with_dt(H0, i).dt_stable_s for i in INTEGRATORS}
     # the references first: the longest tasks start first
-    tasks = [dict(scene=s, integrator="symplectic_euler", k=k, window_s=window)
+    tasks = [dict(scene=s, integrator="symplectic_euler", k=k, window_s=window, coupled=scene)
              for s in SCENES for k in (ref_k + 1, ref_k)]
-    tasks += [dict(scene=s, integrator=i, k=k, window_s=window, repeats=3)
+    tasks += [dict(scene=s, integrator=i, k=k, window_s=window, repeats=3, coupled=scene)
               for s in SCENES for i in INTEGRATORS for k in range(size["levels"])]
     results = sweep(simulate, tasks, scheduler=scheduler, workers=workers, on_error="return")
 
@@ -174,7 +191,7 @@ def run(out_dir, *, small: bool = False, scheduler: str | None = None, workers: 
         # converged: the reference's own error is at most a tenth of the smallest run error
         reference[s]["converged"] = bool(reference[s]["error_estimate"] <= 0.1 * smallest)
 
-    data = {"runs": rows, "order": order, "order_angle": order_angle, "order_pressure": order_pressure,
+    data = {"coupled_scene": scene, "runs": rows, "order": order, "order_angle": order_angle, "order_pressure": order_pressure,
             "reference": reference, "failures": failures, "stability_bound_s": bounds,
             "window_s": window, "frame_s": FRAME_S, "small": bool(small),
             "scheduler": scheduler, "runtime_s": time.perf_counter() - t_start}
@@ -187,14 +204,17 @@ def run(out_dir, *, small: bool = False, scheduler: str | None = None, workers: 
 
 
 def _markdown(d: dict) -> str:
-    lines = [f"Work-precision over {d['window_s']:g} s (frames every {1e3 * d['frame_s']:g} ms).", "",
-             "| scene | integrator | h (s) | h / bound | vertex error (m) | rib angle error (rad) "
+    lines = [f"Work-precision over {d['window_s']:g} s (frames every {1e3 * d['frame_s']:g} ms): the error of "
+             f"the time step on one mesh; \"breathing\" is the scene `{d['coupled_scene']}`. The mesh's share of "
+             "the error, and both together, are `hybrid study convergence`'s.", "",
+             "| scene | integrator | h (s) | h / bound | vertex error (m) | rib lift error (mm) | rib angle error (rad) "
              "| pressure error (Pa) | wall (s) | wall per simulated s |",
-             "|---|---|---|---|---|---|---|---|---|"]
+             "|---|---|---|---|---|---|---|---|---|---|"]
     for r in d["runs"]:
         ang = "-" if r["angle_error"] is None else f"{r['angle_error']:.2e}"
+        lift = "-" if r["rib_lift_error_mm"] is None else f"{r['rib_lift_error_mm']:.2e}"
         lines.append(f"| {r['scene']} | {r['integrator']} | {r['dt']:.3g} | {r['dt_over_bound']:.2f} "
-                     f"| {r['error']:.2e} | {ang} | {r['pressure_error']:.2e} | {r['wall_s']:.3f} "
+                     f"| {r['error']:.2e} | {lift} | {ang} | {r['pressure_error']:.2e} | {r['wall_s']:.3f} "
                      f"| {r['wall_per_sim_s']:.3f} |")
     lines += ["", "| scene/integrator | order (vertex) | order (rib angle) | order (pressure) |", "|---|---|---|---|"]
     for k, p in d["order"].items():

@@ -21,6 +21,7 @@ def test_small_work_precision(tmp_path, capsys):
         assert {"scene", "integrator", "dt", "error", "wall_s"} <= set(r)
         assert all(isinstance(r[k], float) and math.isfinite(r[k]) and r[k] > 0 for k in ("dt", "error", "wall_s"))
         assert r["pressure_error"] >= 0 and (r["angle_error"] is None) == (r["scene"] == "membrane")
+        assert (r["rib_lift_error_mm"] is None) == (r["scene"] == "membrane")
         assert abs(0.01 / r["dt"] - round(0.01 / r["dt"])) < 1e-9
     # the references are converged: Richardson's estimate of their error is far below every run's
     for s, ref in d["reference"].items():
@@ -38,6 +39,11 @@ def test_small_work_precision(tmp_path, capsys):
     for key, p in d["order"].items():
         assert 0.7 < p < 1.5, (key, p)
     assert abs(observed_order([1.0, 0.5, 0.25], [4.0, 2.0, 1.0]) - 1.0) < 1e-12
+    # the rib lift's error falls with the step too (first order: halving h about halves it)
+    lift = sorted((r for r in d["runs"] if r["scene"] == "breathing" and r["integrator"] == "symplectic_euler"),
+                  key=lambda r: -r["dt"])
+    assert all(a["rib_lift_error_mm"] > b["rib_lift_error_mm"] for a, b in zip(lift, lift[1:]))
+    assert "hybrid study convergence" in (tmp_path / "work_precision.md").read_text()
 
 
 def test_small_work_precision_on_dask_cluster(tmp_path, dask_cluster):
