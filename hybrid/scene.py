@@ -31,7 +31,7 @@ __all__ = [
     "Pressure", "MuscleFibres",
 ]
 
-INTEGRATORS = ("explicit_euler", "symplectic_euler")
+INTEGRATORS = ("explicit_euler", "symplectic_euler", "implicit_euler")
 #: how the membrane's parameters are meant (hybrid.terms.base.FORMULATIONS): "paper", the
 #: per-point model of Promayon et al. 1997 kept exactly; "continuum", material parameters
 #: that mean the same on every mesh, internal forces that obey action and reaction
@@ -103,6 +103,10 @@ class Scene:
     dt_s: float = param("positive", 1e-3, hi=checks.MAX_DT_S)
     integrator: str = param("choice", "symplectic_euler", choices=INTEGRATORS)
     formulation: str = param("choice", "continuum", choices=FORMULATIONS)
+    # implicit Euler's Newton solve (hybrid.implicit): converged when the residual force is at
+    # most this fraction of the forces, within this many iterations
+    implicit_tol: float = param("positive", 1e-6, hi=0.1, unit="of the forces")
+    implicit_max_iter: int = param("integer", 20, lo=1, hi=1000)
     duration_s: float = param("positive", 1.0, hi=checks.MAX_DURATION_S)
     # a point faster than this has run away (tissue moves at cm/s)
     max_speed_m_s: float = param("positive", 50.0)
