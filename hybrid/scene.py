@@ -106,7 +106,7 @@ class Scene:
     # implicit Euler's Newton solve (hybrid.implicit): converged when the residual force is at
     # most this fraction of the forces, within this many iterations
     implicit_tol: float = param("positive", 1e-6, hi=0.1, unit="of the forces")
-    implicit_max_iter: int = param("integer", 20, lo=1, hi=1000)
+    implicit_max_iter: int = param("integer", 50, lo=1, hi=1000)
     duration_s: float = param("positive", 1.0, hi=checks.MAX_DURATION_S)
     # a point faster than this has run away (tissue moves at cm/s)
     max_speed_m_s: float = param("positive", 50.0)

@@ -12,12 +12,12 @@ a geometric part (S, indefinite under compression) and a material part
 (C = lambda I (x) I + 2 mu I, positive semi-definite for lambda, mu >= 0). The
 out-of-plane changes dF = n (x) w see only the geometric part, w^T S w, so the
 element Hessian is positive semi-definite exactly when S is. The projection
-used by the Newton solver clamps the negative eigenvalue(s) of the 2 x 2
-stress S (closed form): the projected Hessian is positive semi-definite, equals
-the exact one wherever that one is, and on the out-of-plane subspace equals
-the eigenvalue-clamped exact Hessian; in-plane under compression it drops the
-negative stress also where the material part would have made up for it (a
-stiffer, still consistent Newton matrix). Kelvin-Voigt viscosity tau C : dE/dt
+(`project`) clamps the negative eigenvalue(s) of the 2 x 2 stress S (closed
+form): the projected Hessian is positive semi-definite, equals the exact one
+wherever that one is, and on the out-of-plane subspace equals the
+eigenvalue-clamped exact Hessian; in-plane under compression it drops the
+negative stress also where the material part would have made up for it.
+Kelvin-Voigt viscosity tau C : dE/dt
 has the velocity Jacobian tau times the material part (its dependence on the
 position through F is left to the Newton iteration's residual).
 
@@ -42,7 +42,7 @@ from ..kernel import kernel
 from .membrane import P_AREA, P_D00, P_D01, P_D11, P_LAM, P_MU, P_TAU, _edges_and_strain
 
 __all__ = ["NCACHE", "membrane_tangent_cache", "membrane_tangent_product", "membrane_tangent_diag",
-           "fibre_tangent_product", "fibre_tangent_diag", "clamp_stress"]
+           "fibre_tangent_product", "fibre_tangent_diag", "clamp_stress", "kelvin_voigt_dissipation", "fibre_energy"]
 
 # membrane_tangent_cache columns: F's columns f0, f1 (3 each), the (projected) stress S00, S01, S11 (N/m)
 NCACHE = 9
@@ -213,3 +213,40 @@ def fibre_tangent_diag(fib_edge, fib_share, fib_sched, sched_val, vert_pos, kx, 
             blocks[i, 7] -= c * uy * uz
             blocks[i, 8] += c * (1.0 - uz * uz)
 
+
+
+@kernel
+def kelvin_voigt_dissipation(mem_vert, mem_par, vert_pos, vert_vel):
+    """The membrane viscosity's dissipation function R = sum A0 tau W(dE/dt) (W),
+    whose minus velocity gradient at fixed positions is the viscous force."""
+    total = 0.0
+    for k in range(mem_vert.shape[0]):
+        p = mem_par[k]
+        tau = p[P_TAU]
+        if tau <= 0.0:
+            continue
+        a, b, c = mem_vert[k, 0], mem_vert[k, 1], mem_vert[k, 2]
+        d00, d01, d11 = p[P_D00], p[P_D01], p[P_D11]
+        e1x, e1y, e1z = vert_pos[b, 0] - vert_pos[a, 0], vert_pos[b, 1] - vert_pos[a, 1], vert_pos[b, 2] - vert_pos[a, 2]
+        e2x, e2y, e2z = vert_pos[c, 0] - vert_pos[a, 0], vert_pos[c, 1] - vert_pos[a, 1], vert_pos[c, 2] - vert_pos[a, 2]
+        v1x, v1y, v1z = vert_vel[b, 0] - vert_vel[a, 0], vert_vel[b, 1] - vert_vel[a, 1], vert_vel[b, 2] - vert_vel[a, 2]
+        v2x, v2y, v2z = vert_vel[c, 0] - vert_vel[a, 0], vert_vel[c, 1] - vert_vel[a, 1], vert_vel[c, 2] - vert_vel[a, 2]
+        g11 = 2.0 * (e1x * v1x + e1y * v1y + e1z * v1z)  # dG/dt
+        g12 = e1x * v2x + e1y * v2y + e1z * v2z + e2x * v1x + e2y * v1y + e2z * v1z
+        g22 = 2.0 * (e2x * v2x + e2y * v2y + e2z * v2z)
+        t = g11 * d01 + g12 * d11
+        r00, r01, r11 = 0.5 * d00 * d00 * g11, 0.5 * d00 * t, 0.5 * (d01 * t + d11 * (g12 * d01 + g22 * d11))
+        tr = r00 + r11
+        total += p[P_AREA] * tau * (p[P_MU] * (r00 * r00 + 2.0 * r01 * r01 + r11 * r11) + 0.5 * p[P_LAM] * tr * tr)
+    return total
+
+
+@kernel
+def fibre_energy(fib_edge, fib_share, fib_sched, sched_val, vert_pos):
+    """The fibres' work function T s |x_j - x_i| summed over the edges (J)."""
+    total = 0.0
+    for k in range(fib_edge.shape[0]):
+        i, j = fib_edge[k, 0], fib_edge[k, 1]
+        dx, dy, dz = vert_pos[j, 0] - vert_pos[i, 0], vert_pos[j, 1] - vert_pos[i, 1], vert_pos[j, 2] - vert_pos[i, 2]
+        total += sched_val[fib_sched[k], 0] * fib_share[k] * math.sqrt(dx * dx + dy * dy + dz * dz)
+    return total
