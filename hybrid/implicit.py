@@ -145,15 +145,15 @@ def implicit_forces(m, sched_val, x, v, out):
 @kernel
 def newton_product(m, sched_val, x, face, h, project, u, y):
     """y = (M + h^2 K + h C) u on every point (no rows zeroed): the Newton matrix at x,
-    `face` its membrane tangent cache (`membrane_tangent_cache` at x); the fibres'
-    Hessian projected when `project`."""
+    `face` its membrane tangent cache (`membrane_tangent_cache` at x); the Hessian
+    projected per element when `project`."""
     on = m.term_on
     for i in range(y.shape[0]):
         c = m.vert_mass[i] + (h * m.damp_coef[i] if on[T_DAMPING] else 0.0)
         for a in range(3):
             y[i, a] = c * u[i, a]
     if on[T_MEMBRANE]:
-        membrane_tangent_product(m.mem_vert, m.mem_par, face, h * h, h, u, y)
+        membrane_tangent_product(m.mem_vert, m.mem_par, face, project, h * h, h, u, y)
     if on[T_FIBRES]:
         fibre_tangent_product(m.fib_edge, m.fib_share, m.fib_sched, sched_val, x, project, h * h, u, y)
 
@@ -372,11 +372,10 @@ def implicit_step(m, s, step, imp):
             for a in range(3):
                 w.x_kv[i, a] = w.x_try[i, a]
         phi = _merit(m, s.sched_val, h, w)
-        membrane_tangent_cache(m.mem_vert, m.mem_par, w.x_try, True, w.face)
+        membrane_tangent_cache(m.mem_vert, m.mem_par, w.x_try, w.face)
         _preconditioner(m, s.sched_val, w.x_try, w.face, h, w.blocks)
         # the exact Hessian, its negative curvature ending the conjugate gradients early
         # (truncated Newton); when met at once, the Hessian projected per element instead
-        membrane_tangent_cache(m.mem_vert, m.mem_par, w.x_try, False, w.face)
         for i in range(n):
             for a in range(3):
                 w.cg_r[i, a] = h * w.res[i, a]
@@ -384,7 +383,6 @@ def implicit_step(m, s, step, imp):
         eta = min(0.1, 0.1 * tol * scale / rn)
         k = _solve(m, s.sched_val, w, h, False, eta * h * rn, cg_max)
         if k < 0:
-            membrane_tangent_cache(m.mem_vert, m.mem_par, w.x_try, True, w.face)
             for i in range(n):
                 for a in range(3):
                     w.cg_r[i, a] = h * w.res[i, a]
@@ -398,10 +396,11 @@ def implicit_step(m, s, step, imp):
         frac = 1.0  # of the step now applied
         for k in range(HALVINGS + 1):
             rn_new, scale, worst = _residual(m, s.sched_val, pos, vel, h, w)
-            phi_new = _merit(m, s.sched_val, h, w)
-            # Armijo on the potential; or, near the root where the potential's change is
-            # round-off, a residual that halved
-            if phi_new <= phi + ARMIJO * frac * slope or rn_new <= 0.5 * rn or k == HALVINGS:
+            # a residual that halved (near the root the potential's change is round-off),
+            # else Armijo on the potential
+            if rn_new <= 0.5 * rn or k == HALVINGS:
+                break
+            if _merit(m, s.sched_val, h, w) <= phi + ARMIJO * frac * slope:
                 break
             frac *= 0.5
             for i in range(n):

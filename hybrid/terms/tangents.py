@@ -44,8 +44,9 @@ from .membrane import P_AREA, P_D00, P_D01, P_D11, P_LAM, P_MU, P_TAU, _edges_an
 __all__ = ["NCACHE", "membrane_tangent_cache", "membrane_tangent_product", "membrane_tangent_diag",
            "fibre_tangent_product", "fibre_tangent_diag", "clamp_stress", "kelvin_voigt_dissipation", "fibre_energy"]
 
-# membrane_tangent_cache columns: F's columns f0, f1 (3 each), the (projected) stress S00, S01, S11 (N/m)
-NCACHE = 9
+# membrane_tangent_cache columns: F's columns f0, f1 (3 each), the stress S00, S01, S11 (N/m), the
+# projected stress (the same three, its negative eigenvalues clamped)
+NCACHE = 12
 
 
 @kernel(inline="always")
@@ -63,9 +64,9 @@ def clamp_stress(s00, s01, s11):
 
 
 @kernel
-def membrane_tangent_cache(mem_vert, mem_par, vert_pos, project, cache):
-    """Per triangle, what its Hessian products read at vert_pos: F's columns and
-    the stress S, its negative eigenvalues clamped when `project`.
+def membrane_tangent_cache(mem_vert, mem_par, vert_pos, cache):
+    """Per triangle, what its Hessian products read at vert_pos: F's columns, the
+    stress S and S with its negative eigenvalues clamped.
     # Model: mem_vert (nf, 3) int32, mem_par (nf, NPAR)   # Data in: vert_pos (m)
     # Data out: cache (nf, NCACHE)
     """
@@ -76,21 +77,21 @@ def membrane_tangent_cache(mem_vert, mem_par, vert_pos, project, cache):
         lt = p[P_LAM] * (s00 + s11)
         m2 = 2.0 * p[P_MU]
         S00, S01, S11 = lt + m2 * s00, m2 * s01, lt + m2 * s11
-        if project:
-            S00, S01, S11 = clamp_stress(S00, S01, S11)
         c = cache[k]
         c[0], c[1], c[2] = d00 * e1x, d00 * e1y, d00 * e1z
         c[3], c[4], c[5] = d01 * e1x + d11 * e2x, d01 * e1y + d11 * e2y, d01 * e1z + d11 * e2z
         c[6], c[7], c[8] = S00, S01, S11
+        c[9], c[10], c[11] = clamp_stress(S00, S01, S11)
 
 
 @kernel
-def membrane_tangent_product(mem_vert, mem_par, cache, kx, kv, u, y):
-    """y += (kx K + kv C) u: K the membrane's (projected, as cached) Hessian, C its
+def membrane_tangent_product(mem_vert, mem_par, cache, project, kx, kv, u, y):
+    """y += (kx K + kv C) u: K the membrane's Hessian (projected when `project`), C its
     Kelvin-Voigt damping matrix (tau times the material part).
     # Model: mem_vert, mem_par   # Data in: cache (membrane_tangent_cache), u (nvert, 3)
     # Data out: y (nvert, 3), added to
     """
+    col = 9 if project else 6
     for k in range(mem_vert.shape[0]):
         a, b, c = mem_vert[k, 0], mem_vert[k, 1], mem_vert[k, 2]
         p = mem_par[k]
@@ -108,7 +109,7 @@ def membrane_tangent_product(mem_vert, mem_par, cache, kx, kv, u, y):
         e01 = 0.5 * (f0x * g1x + f0y * g1y + f0z * g1z + f1x * g0x + f1y * g0y + f1z * g0z)
         lt = lam * (e00 + e11)
         t00, t01, t11 = cm * (lt + 2.0 * mu * e00), cm * 2.0 * mu * e01, cm * (lt + 2.0 * mu * e11)
-        s00, s01, s11 = kx * q[6], kx * q[7], kx * q[8]
+        s00, s01, s11 = kx * q[col], kx * q[col + 1], kx * q[col + 2]
         # P_a = F dS_a (material) + sum_b S_ab dF_b (geometric)
         p0x = f0x * t00 + f1x * t01 + s00 * g0x + s01 * g1x
         p0y = f0y * t00 + f1y * t01 + s00 * g0y + s01 * g1y
@@ -132,7 +133,7 @@ def membrane_tangent_product(mem_vert, mem_par, cache, kx, kv, u, y):
 
 @kernel
 def membrane_tangent_diag(mem_vert, mem_par, cache, kx, kv, blocks):
-    """blocks += each point's 3 x 3 diagonal block of kx K + kv C (row-major, (nvert, 9)):
+    """blocks += each point's 3 x 3 diagonal block of kx K + kv C, K projected (row-major, (nvert, 9)):
     per triangle and corner n with weights w = (g_n0, g_n1), q = F w,
     A0 [kx w^T S w I + cm ((lambda + mu) q q^T + mu |w|^2 F F^T)].
     """
@@ -150,7 +151,7 @@ def membrane_tangent_diag(mem_vert, mem_par, cache, kx, kv, blocks):
                 w0, w1 = d00, d01
             else:
                 w0, w1 = 0.0, d11
-            geo = kg * (w0 * w0 * q[6] + 2.0 * w0 * w1 * q[7] + w1 * w1 * q[8])
+            geo = kg * (w0 * w0 * q[9] + 2.0 * w0 * w1 * q[10] + w1 * w1 * q[11])
             ww = mu * (w0 * w0 + w1 * w1)
             i = mem_vert[k, corner]
             for r in range(3):

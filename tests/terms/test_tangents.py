@@ -71,11 +71,11 @@ def membrane_force(a, x, v):
 
 def membrane_matrix(a, x, kx, kv, project):
     cache = np.zeros((a.mem_vert.shape[0], NCACHE))
-    membrane_tangent_cache(a.mem_vert, a.mem_par, x, project, cache)
+    membrane_tangent_cache(a.mem_vert, a.mem_par, x, cache)
 
     def product(u):
         y = np.zeros_like(u)
-        membrane_tangent_product(a.mem_vert, a.mem_par, cache, kx, kv, u, y)
+        membrane_tangent_product(a.mem_vert, a.mem_par, cache, project, kx, kv, u, y)
         return y
     return columns(x.shape[0], product), cache
 
@@ -130,7 +130,7 @@ def test_the_newton_matrix_against_finite_differences_of_the_implicit_forces(mod
     zero = np.zeros_like(x)
     v = 0.05 * np.random.default_rng(7).standard_normal(x.shape)
     face = np.zeros((a.mem_vert.shape[0], NCACHE))
-    membrane_tangent_cache(a.mem_vert, a.mem_par, x, False, face)
+    membrane_tangent_cache(a.mem_vert, a.mem_par, x, face)
 
     def product(u):
         y = np.zeros_like(u)
