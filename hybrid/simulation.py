@@ -374,7 +374,7 @@ class Simulation:
         points then take their sites' positions and velocities, as at reset). New
         positions clear the last projection (`pressure` 0 and its volume gradient):
         it belonged to the old ones, and with a rigid part the first step then
-        transmits no pressure to the ribs;
+        transmits no pressure to the ribs (implicit Euler also forgets its warm start);
         time_s: simulated time, >= 0 s (the step count follows, time_s / dt rounded);
         qpos (nq,), qvel (nv,): MuJoCo's generalized positions and velocities of the
         rigid part (`mj_model.nq`, `mj_model.nv`), only for a scene with one.
@@ -404,6 +404,9 @@ class Simulation:
             s.vert_pos[:] = pos
             s.scal[S_PRESSURE] = s.scal[S_PHI] = 0.0
             s.grad[:] = 0.0
+            if s.implicit is not None:  # implicit Euler's warm start and carried pressure: the old state's
+                s.implicit.dv[:] = 0.0
+                s.implicit.info[Info.PRESSURE] = 0.0
         if vel is not None:
             s.vert_vel[:] = vel
         if time_s is not None:
