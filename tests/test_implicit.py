@@ -118,3 +118,4 @@ def test_implicit_euler_needs_the_continuum_formulation():
         compile_scene(dataclasses.replace(membrane_demo(), integrator="implicit_euler"))
     with pytest.raises(SceneError, match="implicit_max_iter"):
         compile_scene(trunk(integrator="implicit_euler", implicit_max_iter=0))
+
