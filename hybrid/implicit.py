@@ -82,9 +82,11 @@ class Info(IntEnum):
     NEWTON_TOTAL = 5  # over the run
     CG_TOTAL = 6
     WORST = 7  # the vertex of the largest residual
+    PROJECTED_TOTAL = 8  # Newton iterations over the run solved with the projected Hessian
 
 
-I_NEWTON, I_RESIDUAL, I_CG, I_CARRIED, I_PRESSURE, I_NEWTON_TOTAL, I_CG_TOTAL, I_WORST = (int(k) for k in Info)
+(I_NEWTON, I_RESIDUAL, I_CG, I_CARRIED, I_PRESSURE, I_NEWTON_TOTAL, I_CG_TOTAL, I_WORST,
+ I_PROJECTED_TOTAL) = (int(k) for k in Info)
 
 
 class ImplicitWork(NamedTuple):
@@ -92,7 +94,7 @@ class ImplicitWork(NamedTuple):
     (warm start); x_try, v_try, f, f_expl, res, x_kv (the positions the line search's
     viscous dissipation is taken at) and the conjugate gradients' cg_* (nvert, 3): scratch; grad (nvert, 3) m^2: the volume gradient at the step's
     start; blocks (nvert, 9): the inverse diagonal blocks; face (nface_m, NCACHE):
-    the membrane's tangent cache; info (8,): the `Info` slots."""
+    the membrane's tangent cache; info (len(Info),): the `Info` slots."""
     dv: np.ndarray
     x_try: np.ndarray
     v_try: np.ndarray
@@ -118,7 +120,7 @@ def implicit_work(arrays) -> ImplicitWork | None:
     n = arrays.vert_rest.shape[0]
     vec = [np.zeros((n, 3)) for _ in range(13)]
     return ImplicitWork(*vec, blocks=np.zeros((n, 9)), face=np.zeros((arrays.mem_vert.shape[0], NCACHE)),
-                        info=np.zeros(8))
+                        info=np.zeros(len(Info)))
 
 
 @kernel
@@ -387,6 +389,7 @@ def implicit_step(m, s, step, imp):
                 for a in range(3):
                     w.cg_r[i, a] = h * w.res[i, a]
             k = 1 + _solve(m, s.sched_val, w, h, True, eta * h * rn, cg_max)
+            info[I_PROJECTED_TOTAL] += 1
         cg_total += k
         it += 1
         slope = -h * _dot(w.res, w.cg_x)  # the potential's derivative along the step (< 0)
