@@ -70,6 +70,7 @@ T_MEMBRANE, T_FIBRES, T_DAMPING, T_VOLUME = Membrane.id, MuscleFibres.id, Dampin
 CG_MIN_ITER = 50  # the conjugate gradients' cap: 3 x the free coordinates, at least this
 HALVINGS = 12
 ARMIJO = 1e-4  # the fraction of the predicted decrease a step must achieve
+FORCING = 0.5  # the linear solve: to this fraction of the residual, and of what convergence asks
 
 
 class Info(IntEnum):
@@ -381,8 +382,8 @@ def implicit_step(m, s, step, imp):
         for i in range(n):
             for a in range(3):
                 w.cg_r[i, a] = h * w.res[i, a]
-        # solve just accurately enough: a tenth of what convergence asks, at most 0.1 of the residual
-        eta = min(0.1, 0.1 * tol * scale / rn)
+        # solve just accurately enough: FORCING of what convergence asks, at most FORCING of the residual
+        eta = min(FORCING, FORCING * tol * scale / rn)
         k = _solve(m, s.sched_val, w, h, False, eta * h * rn, cg_max)
         if k < 0:
             for i in range(n):
