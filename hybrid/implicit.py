@@ -93,9 +93,10 @@ class Info(IntEnum):
 class ImplicitWork(NamedTuple):
     """The implicit step's arrays: dv (nvert, 3) m/s, the last step's velocity change
     (warm start); x_try, v_try, f, f_expl, res, x_kv (the positions the line search's
-    viscous dissipation is taken at) and the conjugate gradients' cg_* (nvert, 3): scratch; grad (nvert, 3) m^2: the volume gradient at the step's
-    start; blocks (nvert, 9): the inverse diagonal blocks; face (nface_m, NCACHE):
-    the membrane's tangent cache; info (len(Info),): the `Info` slots."""
+    viscous dissipation is taken at) and the conjugate gradients' cg_* (nvert, 3):
+    scratch; grad (nvert, 3) m^2: the volume gradient at the step's start; blocks
+    (nvert, 9): the inverse diagonal blocks; face (nface_m, NCACHE): the membrane's
+    tangent cache; info (len(Info),): the `Info` slots."""
     dv: np.ndarray
     x_try: np.ndarray
     v_try: np.ndarray
