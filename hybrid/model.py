@@ -29,7 +29,7 @@ from .terms.base import check_value
 
 __all__ = ["TERMS", "MembraneArrays", "Model", "compile_scene", "build_mesh"]
 
-INTEGRATOR_ID = {"explicit_euler": 0, "symplectic_euler": 1}
+INTEGRATOR_ID = {"explicit_euler": 0, "symplectic_euler": 1, "implicit_euler": 2}
 
 # What the compiled step reads besides the terms' own arrays (hybrid.terms),
 # name -> meaning; MembraneArrays is these, then every term class's arrays.
@@ -48,7 +48,9 @@ _CORE_AFTER = {
     "vol0": "m^3, the rest volume (0 without a volume term)",
     "sched": "ScheduleTable",
     "dt": "s",
-    "integrator": "0 explicit Euler, 1 symplectic Euler",
+    "integrator": "0 explicit Euler, 1 symplectic Euler, 2 implicit Euler (hybrid.implicit)",
+    "implicit_tol": "implicit Euler's Newton tolerance, a fraction of the forces",
+    "implicit_max_iter": "implicit Euler's Newton iteration cap",
     "max_speed": "m/s: a point faster than this has run away",
     "volume_shake": "bool: the volume projection's direction is the gradient where the step starts (SHAKE: "
                     "symplectic; the continuum formulation), else at the predicted positions (the paper's)",
@@ -98,7 +100,7 @@ class Model:
     def with_dt(self, dt_s: float, integrator: str | None = None) -> "Model":
         """The same model with another time step (no file is read again)."""
         _check_dt(dt_s)
-        integ = self.arrays.integrator if integrator is None else _integrator_id(integrator)
+        integ = self.arrays.integrator if integrator is None else _integrator_id(integrator, self.scene.formulation)
         arrays = self.arrays._replace(dt=float(dt_s), integrator=integ)
         scene = dataclasses.replace(self.scene, dt_s=float(dt_s), integrator=INTEGRATORS[integ])
         dt_stable = _stable_dt(arrays, self.vert_stiffness, self.vert_viscosity)
@@ -126,10 +128,20 @@ def _check_duration(duration, dt):
         raise SceneError(f"duration_s: expected at least one step of dt_s = {dt:g} s, received {duration:g} s")
 
 
-def _integrator_id(name):
+def _integrator_id(name, formulation):
     if name not in INTEGRATOR_ID:
         raise SceneError(f"integrator: expected one of {list(INTEGRATORS)}, received {name!r}")
+    if name == "implicit_euler" and formulation != "continuum":
+        # the paper's shape memory and muscle derive from no energy: no Hessian to solve with
+        raise SceneError(f"integrator: 'implicit_euler' needs formulation 'continuum' (forces with a Hessian), "
+                         f"received formulation {formulation!r}; use 'symplectic_euler' or 'explicit_euler'")
     return INTEGRATOR_ID[name]
+
+
+def _scene_value(scene, name):
+    """A Scene field's value checked by the kind its declaration gives."""
+    meta = {f.name: f.metadata for f in dataclasses.fields(Scene)}[name]
+    return check_value(name, meta["kind"], getattr(scene, name), meta)
 
 
 def _positive(value, name):
@@ -278,7 +290,7 @@ def _compile(scene: Scene) -> Model:
     checks.text("formulation", scene.formulation, FORMULATIONS)
     if scene.formulation == "continuum":
         _refuse_single_points(scene)
-    integrator = _integrator_id(scene.integrator)
+    integrator = _integrator_id(scene.integrator, scene.formulation)
     mesh = build_mesh(scene)
     nvert = mesh.nvert
 
@@ -340,6 +352,7 @@ def _compile(scene: Scene) -> Model:
         vert_weight=b.out["vert_weight"],
         vol0=b.out.get("vol0", 0.0),
         sched=sched_table, dt=float(dt), integrator=integrator,
+        implicit_tol=_scene_value(scene, "implicit_tol"), implicit_max_iter=_scene_value(scene, "implicit_max_iter"),
         max_speed=_positive(scene.max_speed_m_s, "max_speed_m_s"),
         volume_shake=scene.formulation == "continuum",
         parallel=use_parallel(nvert),
@@ -380,7 +393,7 @@ def _stable_dt(arrays: MembraneArrays, vert_stiffness: np.ndarray, vert_viscosit
     damp = arrays.damp_coef if vert_viscosity is None else arrays.damp_coef + vert_viscosity
     # points with neither stiffness nor damping move freely: no step limit
     free = (arrays.vert_free > 0) & ((vert_stiffness > 0) | (damp > 0))
-    if not np.any(free):
+    if not np.any(free) or arrays.integrator == INTEGRATOR_ID["implicit_euler"]:  # backward Euler: any step
         return math.inf
     integ = "explicit_euler" if arrays.integrator == 0 else "symplectic_euler"
     h = max_stable_dt(arrays.vert_mass[free], vert_stiffness[free], damp[free], integ, h_hi=10.0)

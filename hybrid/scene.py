@@ -31,7 +31,7 @@ __all__ = [
     "Pressure", "MuscleFibres", "PassiveFibres",
 ]
 
-INTEGRATORS = ("explicit_euler", "symplectic_euler")
+INTEGRATORS = ("explicit_euler", "symplectic_euler", "implicit_euler")
 #: the step of a scene without a rigid part that sets no dt_s (s)
 DEFAULT_DT_S = 1e-3
 #: how the membrane's parameters are meant (hybrid.terms.base.FORMULATIONS): "paper", the
@@ -139,6 +139,10 @@ class Scene:
     dt_s: Optional[float] = param("step", None, hi=checks.MAX_DT_S)
     integrator: str = param("choice", "symplectic_euler", choices=INTEGRATORS)
     formulation: str = param("choice", "continuum", choices=FORMULATIONS)
+    # implicit Euler's Newton solve (hybrid.implicit): converged when the residual force is at
+    # most this fraction of the forces, within this many iterations
+    implicit_tol: float = param("positive", 1e-6, hi=0.1, unit="of the forces")
+    implicit_max_iter: int = param("integer", 50, lo=1, hi=1000)
     duration_s: float = param("positive", 1.0, hi=checks.MAX_DURATION_S)
     # a point faster than this has run away (tissue moves at cm/s)
     max_speed_m_s: float = param("positive", 50.0)

@@ -11,7 +11,7 @@ The format (SI units; every key optional unless marked *required*)::
     name = "breathing"            # top level: name, formulation, dt_s, integrator, duration_s
     formulation = "paper"         # or "continuum" (the default): what the parameters mean
     dt_s = 1e-3
-    integrator = "symplectic_euler"    # or "explicit_euler"
+    integrator = "symplectic_euler"    # or "explicit_euler", "implicit_euler"
     duration_s = 12.0
 
     [mesh]          # generator = "uv_sphere" | "icosphere" | "icosahedron", or path = "file.stl"
@@ -440,6 +440,7 @@ def scene_to_dict(scene: Scene) -> dict:
         raise SceneError("mesh: a hybrid.mesh.Mesh object cannot be written as TOML; use a MeshSpec")
     d: dict = {"name": scene.name, "formulation": scene.formulation, "dt_s": scene.dt_s,
                "integrator": scene.integrator,
+               "implicit_tol": scene.implicit_tol, "implicit_max_iter": scene.implicit_max_iter,
                "duration_s": scene.duration_s, "max_speed_m_s": scene.max_speed_m_s}
     if scene.dt_s is None:  # the MJCF's own (a rigid part) or the default
         del d["dt_s"]

@@ -17,6 +17,7 @@ from . import readouts
 from .builds import BuildChoice
 from .terms.volume import PROJ_NO_GRADIENT, face_volume
 from .errors import ConstraintError, SceneError, SimulationDiverged
+from .implicit import IMPLICIT_NOT_CONVERGED, Info
 from .model import TERMS, Model
 from .step import (DIVERGED_NONFINITE, OK, S_MAXDISP, S_PHI, S_PRESSURE, S_TIME, VOLUME_FAILED, Frames,
                    kinetic_energy_of, membrane_advance, membrane_forces, new_state, run_membrane,
@@ -279,10 +280,18 @@ class Simulation:
         code, step, vert = int(s.status[0]), int(s.status[1]), int(s.status[2])
         h = model.arrays.dt
         t = step * h
-        if code == VOLUME_FAILED:
+        if code == IMPLICIT_NOT_CONVERGED:
+            info = s.implicit.info
+            a = model.arrays
+            err: Exception = SimulationDiverged(
+                f"implicit Euler did not converge at t = {t:.6g} s (step {step}): residual {info[Info.RESIDUAL]:.3g} "
+                f"of the forces after {int(info[Info.NEWTON])} Newton iterations, above implicit_tol = "
+                f"{a.implicit_tol:g} (largest at vertex {vert}); raise implicit_max_iter (now {a.implicit_max_iter}) "
+                f"or take dt_s <= {0.5 * h:.3g} s", time_s=t, step=step, vert=vert, dt_suggested_s=0.5 * h)
+        elif code == VOLUME_FAILED:
             why = ("the volume gradient vanished on the free points" if s.status[3] == PROJ_NO_GRADIENT
                    else "the volume cubic has no real root")
-            err: Exception = ConstraintError(
+            err = ConstraintError(
                 f"volume projection failed at t = {t:.6g} s (step {step}): {why}; expected a closed surface "
                 f"with free points to move")
         else:
@@ -365,7 +374,7 @@ class Simulation:
         points then take their sites' positions and velocities, as at reset). New
         positions clear the last projection (`pressure` 0 and its volume gradient):
         it belonged to the old ones, and with a rigid part the first step then
-        transmits no pressure to the ribs;
+        transmits no pressure to the ribs (implicit Euler also forgets its warm start);
         time_s: simulated time, >= 0 s (the step count follows, time_s / dt rounded);
         qpos (nq,), qvel (nv,): MuJoCo's generalized positions and velocities of the
         rigid part (`mj_model.nq`, `mj_model.nv`), only for a scene with one.
@@ -395,6 +404,9 @@ class Simulation:
             s.vert_pos[:] = pos
             s.scal[S_PRESSURE] = s.scal[S_PHI] = 0.0
             s.grad[:] = 0.0
+            if s.implicit is not None:  # implicit Euler's warm start and carried pressure: the old state's
+                s.implicit.dv[:] = 0.0
+                s.implicit.info[Info.PRESSURE] = 0.0
         if vel is not None:
             s.vert_vel[:] = vel
         if time_s is not None:

@@ -3,7 +3,7 @@
 One step, membrane only:
 1. forces at time t (only the terms the model has);
 2. free integration of the points that are not nailed, prescribed or linked
-   (explicit Euler, the paper's eq. 4, or symplectic Euler);
+   (explicit Euler, the paper's eq. 4, symplectic Euler, or implicit Euler: hybrid.implicit);
 3. local constraints: prescribed trajectories, keep-in-region;
 4. the exact volume projection, velocities adjusted; p = phi / h^2;
 5. the divergence check: non-finite values, or a point that moved farther
@@ -40,6 +40,7 @@ from .terms.volume import volume_direction_parallel, volume_direction_serial
 from .terms.volume import Pressure, add_pressure
 from .terms.fibres import MuscleFibres, add_muscle_fibres
 from .terms.passive_fibres import PassiveFibres, add_passive_fibres
+from .implicit import EXPLICIT, implicit_pressure, implicit_step, implicit_work
 
 __all__ = ["Scal", "StepStatus", "FrameColumn", "MembraneState", "new_state", "membrane_forces", "membrane_advance", "run_membrane",
            "run_membrane_frames", "capture_frame", "kinetic_energy_of", "Frames", "step_par"]
@@ -83,7 +84,8 @@ class MembraneState(NamedTuple):
     sched_val / sched_next (nsched, 3): schedules at t and t + h;
     scal: time s, pressure Pa, phi, kinetic energy J, largest step displacement m;
     status: code, failing step, worst vertex, projection status;
-    term_calls (nterm,): how many times each term's kernel ran."""
+    term_calls (nterm,): how many times each term's kernel ran;
+    implicit: implicit Euler's work arrays (hybrid.implicit), None for the other integrators."""
     vert_pos: np.ndarray
     vert_vel: np.ndarray
     vert_force: np.ndarray
@@ -98,6 +100,7 @@ class MembraneState(NamedTuple):
     scal: np.ndarray
     status: np.ndarray
     term_calls: np.ndarray
+    implicit: object = None
 
 
 def new_state(arrays: MembraneArrays) -> MembraneState:
@@ -109,7 +112,7 @@ def new_state(arrays: MembraneArrays) -> MembraneState:
         vert_acc=np.zeros((chunk_count(n), 4)), dirn=np.zeros((n, 3)),
         cubic=np.zeros(2),
         sched_val=np.zeros((ns, 3)), sched_next=np.zeros((ns, 3)), scal=np.zeros(8),
-        status=np.zeros(4, np.int64), term_calls=np.zeros(len(TERMS), np.int64))
+        status=np.zeros(4, np.int64), term_calls=np.zeros(len(TERMS), np.int64), implicit=implicit_work(arrays))
 
 
 def step_par(arrays: MembraneArrays):
@@ -252,11 +255,18 @@ def membrane_advance(m, s, t, step, par=True):
             volume_direction_parallel(m.ring_ptr, m.ring_vert, m.vert_weight, pos, s.dirn)
         else:
             volume_direction_serial(m.ring_ptr, m.ring_vert, m.vert_weight, pos, s.dirn)
-    if par is not None and m.parallel:
-        _integrate_parallel(m.vert_free, m.vert_mass, m.integrator == 0, m.dt, s.vert_force, pos, vel, s.vert_acc)
-    else:
-        _integrate_serial(m.vert_free, m.vert_mass, m.integrator == 0, m.dt, s.vert_force, pos, vel, s.vert_acc)
-    return _after_integration(m, s, t, step, par)
+    code = implicit_step(m, s, step, s.implicit)  # implicit Euler (hybrid.implicit), else EXPLICIT
+    if code == EXPLICIT:
+        if par is not None and m.parallel:
+            _integrate_parallel(m.vert_free, m.vert_mass, m.integrator == 0, m.dt, s.vert_force, pos, vel, s.vert_acc)
+        else:
+            _integrate_serial(m.vert_free, m.vert_mass, m.integrator == 0, m.dt, s.vert_force, pos, vel, s.vert_acc)
+    elif code != OK:
+        return code
+    code = _after_integration(m, s, t, step, par)
+    if code == OK and m.term_on[T_VOLUME]:  # implicit Euler's solve carried part of the pressure
+        s.scal[S_PRESSURE] = implicit_pressure(s.implicit, s.scal[S_PRESSURE])
+    return code
 
 
 @kernel(inline="always")

@@ -22,7 +22,7 @@ LAYERS = (
     ("terms", ("terms", "terms.*")),
     ("scene", ("scene", "scenefile", "rigidfile", "demo", "resolve")),
     ("model, rigid", ("model", "rigid", "rigid.*")),
-    ("step", ("step", "readouts")),
+    ("step", ("step", "readouts", "implicit")),
     ("coupled step", ("coupling",)),
     ("simulation", ("simulation", "builds")),
     ("observers", ("run", "record", "record.*", "render", "sweep", "grid", "outputs", "provenance")),

@@ -38,7 +38,7 @@ CASES = [
     ("dt_nan", lambda: base_scene(dt_s=math.nan), SceneError, r"dt_s: .*received nan"),
     ("dt_string", lambda: base_scene(dt_s="1e-3"), SceneError, r"dt_s: .*received '1e-3'"),
     ("integrator", lambda: base_scene(integrator="rk4"), SceneError,
-     r"integrator: expected one of \['explicit_euler', 'symplectic_euler'\], received 'rk4'"),
+     r"integrator: expected one of \['explicit_euler', 'symplectic_euler', 'implicit_euler'\], received 'rk4'"),
     ("duplicate_names", lambda: with_force(ShapeMemory(100.0, region="top")), SceneError,
      r"terms: expected unique names, received \['shape_memory'\]"),
     ("unknown_force", lambda: with_force(Nailed("top", name="nail_top")), SceneError,

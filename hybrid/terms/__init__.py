@@ -4,8 +4,10 @@ compiled kernel (`hybrid.terms.base` says how they fit together).
 
 Families: `pointwise` (gravity, damping and the step's fused per-point pass),
 `shape_memory`, `springs` (mass-spring, applied forces, attractive points),
-`muscle`, `fibres` (muscle fibres that pull both ends), `passive_fibres` (a sheet stiffer along its fibres), `volume` (exact and soft volume, pressure load), `local` (nailed, prescribed,
-keep-in). `order_terms` below registers them: a new term is its module and
+`muscle`, `fibres` (muscle fibres that pull both ends), `passive_fibres` (a sheet stiffer along its fibres),
+`volume` (exact and soft volume, pressure load), `local` (nailed, prescribed,
+keep-in); `tangents` holds the continuum forces' Jacobians for implicit Euler (no term of its own).
+`order_terms` below registers them: a new term is its module and
 one entry there.
 """
 

@@ -1,0 +1,463 @@
+"""Backward (implicit) Euler for the membrane: `integrator = "implicit_euler"`.
+
+The step's free points take v+ = v + dv, x+ = x + h v+ with
+
+    M dv = h (f_i(x+, v+) + f_e),
+
+f_i the forces treated implicitly (the continuum membrane with its Kelvin-Voigt
+viscosity, muscle fibres, drag) and f_e the others at the step's start
+(gravity, applied loads, pressure loads, ...: the step's force pass minus f_i
+there), plus, with a volume constraint, the last step's pressure on the
+volume gradient. Nailed, prescribed and linked points keep their positions
+and velocities during the solve (zero rows). The exact volume projection
+follows as in the explicit steps and corrects the pressure carried: at rest the
+correction vanishes and the pressure readout is the constraint's whole
+multiplier (without the carried pressure a stiff membrane's solve would
+collapse inward each step and the projection push it back along another
+direction, reading a pressure too small by 1 + h^2 k/m).
+
+Newton's method on dv, warm-started from the last step's dv. Each iteration
+solves (M + h^2 K + h C) ddv = h r, r = f_i + f_e - M dv / h (N) the residual,
+C the damping matrix and K the forces' exact Hessian (`hybrid.terms.tangents`),
+by conjugate gradients preconditioned with the inverse 3 x 3 diagonal blocks of
+the matrix with K made positive semi-definite per element, applied element by
+element (no matrix is assembled). Where the exact matrix has negative curvature
+(a membrane under compression: it has no bending stiffness) the conjugate
+gradients stop there (truncated Newton); met at the first iteration, the solve
+is repeated with the per-element projected Hessian (projected Newton). Solving
+with the projected Hessian throughout converged linearly and slowly on the
+sagging trunk at 10x the explicit bound (no convergence in 200 iterations where
+this needs at most 14): the projection drops the compressive stress that the
+mass term nearly balances on out-of-plane modes. Each step is then halved until
+the incremental potential (whose dv-gradient is -h r, the viscous part taken at
+the iteration's start) falls by 1e-4 of the predicted decrease, or |r| halves
+(at most 12 halvings). A step has converged when |r| <= implicit_tol (|f_i| +
+|f_e| + |M dv / h|) (2-norms over the free points); one that has not after
+implicit_max_iter iterations stops the run (`IMPLICIT_NOT_CONVERGED`), the
+state left at the step's start.
+
+`implicit_step` is called from `hybrid.step.membrane_advance` with the state's
+`implicit` work arrays, None for every other integrator: the None prunes the
+whole solver from those scenes' compiled code.
+"""
+
+from __future__ import annotations
+
+import math
+from enum import IntEnum
+from typing import NamedTuple
+
+import numpy as np
+
+from .kernel import CHUNK_VERTS, kernel
+from .terms import Damping, Membrane, MuscleFibres, Volume
+from .terms.fibres import add_muscle_fibres
+from .terms.membrane import add_membrane_serial
+from .terms.membrane import membrane_energy
+from .terms.tangents import (NCACHE, fibre_energy, fibre_tangent_diag, fibre_tangent_product, kelvin_voigt_dissipation,
+                             membrane_tangent_cache, membrane_tangent_diag, membrane_tangent_product)
+
+__all__ = ["IMPLICIT_ID", "IMPLICIT_NOT_CONVERGED", "ImplicitWork", "Info", "implicit_work", "implicit_step",
+           "implicit_pressure", "implicit_forces", "newton_product"]
+
+#: `MembraneArrays.integrator` of implicit Euler
+IMPLICIT_ID = 2
+#: the step status of a Newton solve that did not converge (beside hybrid.step.StepStatus)
+IMPLICIT_NOT_CONVERGED = 4
+EXPLICIT = -1  # implicit_step's answer for the other integrators
+
+T_MEMBRANE, T_FIBRES, T_DAMPING, T_VOLUME = Membrane.id, MuscleFibres.id, Damping.id, Volume.id
+CG_MIN_ITER = 50  # the conjugate gradients' cap: 3 x the free coordinates, at least this
+HALVINGS = 12
+ARMIJO = 1e-4  # the fraction of the predicted decrease a step must achieve
+FORCING = 0.5  # the linear solve: to this fraction of the residual, and of what convergence asks
+
+
+class Info(IntEnum):
+    """The slots of `ImplicitWork.info`."""
+    NEWTON = 0  # Newton iterations of the last step
+    RESIDUAL = 1  # its relative residual |r| / (|f_i| + |f_e| + |M dv / h|)
+    CG = 2  # conjugate-gradient iterations of the last step
+    CARRIED = 3  # Pa, the pressure the last solve carried
+    PRESSURE = 4  # Pa, the last step's pressure (carried + the projection's)
+    NEWTON_TOTAL = 5  # over the run
+    CG_TOTAL = 6
+    WORST = 7  # the vertex of the largest residual
+    PROJECTED_TOTAL = 8  # Newton iterations over the run solved with the projected Hessian
+
+
+(I_NEWTON, I_RESIDUAL, I_CG, I_CARRIED, I_PRESSURE, I_NEWTON_TOTAL, I_CG_TOTAL, I_WORST,
+ I_PROJECTED_TOTAL) = (int(k) for k in Info)
+
+
+class ImplicitWork(NamedTuple):
+    """The implicit step's arrays: dv (nvert, 3) m/s, the last step's velocity change
+    (warm start); x_try, v_try, f, f_expl, res, x_kv (the positions the line search's
+    viscous dissipation is taken at) and the conjugate gradients' cg_* (nvert, 3):
+    scratch; grad (nvert, 3) m^2: the volume gradient at the step's start; blocks
+    (nvert, 9): the inverse diagonal blocks; face (nface_m, NCACHE): the membrane's
+    tangent cache; info (len(Info),): the `Info` slots."""
+    dv: np.ndarray
+    x_try: np.ndarray
+    v_try: np.ndarray
+    f: np.ndarray
+    f_expl: np.ndarray
+    res: np.ndarray
+    x_kv: np.ndarray
+    grad: np.ndarray
+    cg_x: np.ndarray
+    cg_r: np.ndarray
+    cg_z: np.ndarray
+    cg_p: np.ndarray
+    cg_q: np.ndarray
+    blocks: np.ndarray
+    face: np.ndarray
+    info: np.ndarray
+
+
+def implicit_work(arrays) -> ImplicitWork | None:
+    """The work arrays of a model that steps with implicit Euler, else None."""
+    if arrays.integrator != IMPLICIT_ID:
+        return None
+    n = arrays.vert_rest.shape[0]
+    vec = [np.zeros((n, 3)) for _ in range(13)]
+    return ImplicitWork(*vec, blocks=np.zeros((n, 9)), face=np.zeros((arrays.mem_vert.shape[0], NCACHE)),
+                        info=np.zeros(len(Info)))
+
+
+@kernel
+def implicit_forces(m, sched_val, x, v, out):
+    """out = the forces implicit Euler treats implicitly at (x, v): membrane (with its
+    viscosity), muscle fibres, drag.
+    # Model: m   # Data in: sched_val (schedules at t), x (m), v (m/s)   # Data out: out (N)
+    """
+    for i in range(out.shape[0]):
+        for a in range(3):
+            out[i, a] = 0.0
+    on = m.term_on
+    if on[T_MEMBRANE]:
+        add_membrane_serial(m.mem_vert, m.mem_par, m.kv_on, x, v, out)
+    if on[T_FIBRES]:
+        add_muscle_fibres(m.fib_edge, m.fib_share, m.fib_sched, sched_val, x, out)
+    if on[T_DAMPING]:
+        for i in range(out.shape[0]):
+            c = m.damp_coef[i]
+            for a in range(3):
+                out[i, a] -= c * v[i, a]
+
+
+@kernel
+def newton_product(m, sched_val, x, face, h, project, u, y):
+    """y = (M + h^2 K + h C) u on every point (no rows zeroed): the Newton matrix at x,
+    `face` its membrane tangent cache (`membrane_tangent_cache` at x); the Hessian
+    projected per element when `project`."""
+    on = m.term_on
+    for i in range(y.shape[0]):
+        c = m.vert_mass[i] + (h * m.damp_coef[i] if on[T_DAMPING] else 0.0)
+        for a in range(3):
+            y[i, a] = c * u[i, a]
+    if on[T_MEMBRANE]:
+        membrane_tangent_product(m.mem_vert, m.mem_par, face, project, h * h, h, u, y)
+    if on[T_FIBRES]:
+        fibre_tangent_product(m.fib_edge, m.fib_share, m.fib_sched, sched_val, x, project, h * h, u, y)
+
+
+@kernel
+def _masked_product(m, sched_val, x, face, h, project, u, y):
+    newton_product(m, sched_val, x, face, h, project, u, y)
+    for i in range(y.shape[0]):
+        if not m.vert_free[i]:
+            y[i, 0] = y[i, 1] = y[i, 2] = 0.0
+
+
+@kernel
+def _preconditioner(m, sched_val, x, face, h, blocks):
+    """blocks = the inverse 3 x 3 diagonal blocks of the Newton matrix (identity on fixed points)."""
+    on = m.term_on
+    n = blocks.shape[0]
+    for i in range(n):
+        c = m.vert_mass[i] + (h * m.damp_coef[i] if on[T_DAMPING] else 0.0)
+        for r in range(9):
+            blocks[i, r] = c if r % 4 == 0 else 0.0
+    if on[T_MEMBRANE]:
+        membrane_tangent_diag(m.mem_vert, m.mem_par, face, h * h, h, blocks)
+    if on[T_FIBRES]:
+        fibre_tangent_diag(m.fib_edge, m.fib_share, m.fib_sched, sched_val, x, h * h, blocks)
+    for i in range(n):
+        b = blocks[i]
+        if not m.vert_free[i]:
+            for r in range(9):
+                b[r] = 1.0 if r % 4 == 0 else 0.0
+            continue
+        c00 = b[4] * b[8] - b[5] * b[7]
+        c01 = b[2] * b[7] - b[1] * b[8]
+        c02 = b[1] * b[5] - b[2] * b[4]
+        det = b[0] * c00 + b[3] * c01 + b[6] * c02
+        if not det > 0.0:  # cannot happen for a positive definite block; Jacobi then
+            b[0], b[4], b[8] = 1.0 / b[0], 1.0 / b[4], 1.0 / b[8]
+            b[1] = b[2] = b[3] = b[5] = b[6] = b[7] = 0.0
+            continue
+        inv = 1.0 / det
+        c11 = b[0] * b[8] - b[2] * b[6]
+        c12 = b[2] * b[3] - b[0] * b[5]
+        c22 = b[0] * b[4] - b[1] * b[3]
+        c10 = b[5] * b[6] - b[3] * b[8]
+        c20 = b[3] * b[7] - b[4] * b[6]
+        c21 = b[1] * b[6] - b[0] * b[7]
+        b[0], b[1], b[2] = c00 * inv, c01 * inv, c02 * inv
+        b[3], b[4], b[5] = c10 * inv, c11 * inv, c12 * inv
+        b[6], b[7], b[8] = c20 * inv, c21 * inv, c22 * inv
+
+
+@kernel
+def _apply_blocks(blocks, r, z):
+    for i in range(r.shape[0]):
+        b = blocks[i]
+        rx, ry, rz = r[i, 0], r[i, 1], r[i, 2]
+        z[i, 0] = b[0] * rx + b[1] * ry + b[2] * rz
+        z[i, 1] = b[3] * rx + b[4] * ry + b[5] * rz
+        z[i, 2] = b[6] * rx + b[7] * ry + b[8] * rz
+
+
+@kernel
+def _dot(a, b):
+    s = 0.0
+    for i in range(a.shape[0]):
+        s += a[i, 0] * b[i, 0] + a[i, 1] * b[i, 1] + a[i, 2] * b[i, 2]
+    return s
+
+
+@kernel
+def _solve(m, sched_val, w, h, project, target, cg_max):
+    """w.cg_x = the preconditioned conjugate gradients' solution of (Newton matrix) x = w.cg_r
+    (rows of fixed points zero), to |residual| <= target or cg_max iterations. Returns the iterations."""
+    x, r, z, p, q = w.cg_x, w.cg_r, w.cg_z, w.cg_p, w.cg_q
+    for i in range(x.shape[0]):
+        for a in range(3):
+            x[i, a] = 0.0
+    _apply_blocks(w.blocks, r, z)
+    for i in range(p.shape[0]):
+        for a in range(3):
+            p[i, a] = z[i, a]
+    rz = _dot(r, z)
+    for k in range(cg_max):
+        _masked_product(m, sched_val, w.x_try, w.face, h, project, p, q)
+        pq = _dot(p, q)
+        if not pq > 0.0:  # negative curvature (or p = 0): stop with what we have (truncated Newton)
+            return -1 if k == 0 else k
+        alpha = rz / pq
+        for i in range(x.shape[0]):
+            for a in range(3):
+                x[i, a] += alpha * p[i, a]
+                r[i, a] -= alpha * q[i, a]
+        if math.sqrt(_dot(r, r)) <= target:
+            return k + 1
+        _apply_blocks(w.blocks, r, z)
+        rz_new = _dot(r, z)
+        beta = rz_new / rz
+        rz = rz_new
+        for i in range(p.shape[0]):
+            for a in range(3):
+                p[i, a] = z[i, a] + beta * p[i, a]
+    return cg_max
+
+
+@kernel
+def _residual(m, sched_val, pos, vel, h, w):
+    """At dv: x_try, v_try, f = f_i(x_try, v_try), res = f + f_expl - M dv / h (0 on fixed
+    points). Returns (|res|, |f| + |f_expl| + |M dv / h|, the vertex of the largest residual)."""
+    dv, xt, vt, res = w.dv, w.x_try, w.v_try, w.res
+    free = m.vert_free
+    for i in range(pos.shape[0]):
+        for a in range(3):
+            if free[i]:
+                vt[i, a] = vel[i, a] + dv[i, a]
+                xt[i, a] = pos[i, a] + h * vt[i, a]
+            else:
+                vt[i, a] = vel[i, a]
+                xt[i, a] = pos[i, a]
+    implicit_forces(m, sched_val, xt, vt, w.f)
+    rr = ff = ee = mm = 0.0
+    worst, big = 0, -1.0
+    for i in range(pos.shape[0]):
+        if not free[i]:
+            res[i, 0] = res[i, 1] = res[i, 2] = 0.0
+            continue
+        s = m.vert_mass[i] / h
+        ri = 0.0
+        for a in range(3):
+            f, e, md = w.f[i, a], w.f_expl[i, a], s * dv[i, a]
+            r = f + e - md
+            res[i, a] = r
+            ri += r * r
+            ff += f * f
+            ee += e * e
+            mm += md * md
+        rr += ri
+        if ri > big:
+            big, worst = ri, i
+    return math.sqrt(rr), math.sqrt(ff) + math.sqrt(ee) + math.sqrt(mm), worst
+
+
+@kernel
+def _merit(m, sched_val, h, w):
+    """The incremental potential at dv (after `_residual`), whose dv-gradient is minus
+    h res: 1/2 dv M dv - h f_e . dv + E(x_try) + h/2 sum c |v_try|^2 + h R(x_try, v_try),
+    E the membrane's and fibres' energies, R the viscosity's dissipation function at
+    the positions x_kv where the Newton iteration started (the gradient there exact)."""
+    on = m.term_on
+    total = 0.0
+    for i in range(w.dv.shape[0]):
+        if m.vert_free[i]:
+            for a in range(3):
+                total += w.dv[i, a] * (0.5 * m.vert_mass[i] * w.dv[i, a] - h * w.f_expl[i, a])
+        if on[T_DAMPING]:
+            total += 0.5 * h * m.damp_coef[i] * (w.v_try[i, 0] ** 2 + w.v_try[i, 1] ** 2 + w.v_try[i, 2] ** 2)
+    if on[T_MEMBRANE]:
+        total += membrane_energy(m.mem_vert, m.mem_par, w.x_try)
+        if m.kv_on:
+            total += h * kelvin_voigt_dissipation(m.mem_vert, m.mem_par, w.x_kv, w.v_try)
+    if on[T_FIBRES]:
+        total += fibre_energy(m.fib_edge, m.fib_share, m.fib_sched, sched_val, w.x_try)
+    return total
+
+
+@kernel
+def _volume_gradient(face_vert, pos, grad):
+    """grad = grad V at pos (m^2), face by face."""
+    for i in range(grad.shape[0]):
+        grad[i, 0] = grad[i, 1] = grad[i, 2] = 0.0
+    sixth = 1.0 / 6.0
+    for k in range(face_vert.shape[0]):
+        a, b, c = face_vert[k, 0], face_vert[k, 1], face_vert[k, 2]
+        for (i, j, l) in ((a, b, c), (b, c, a), (c, a, b)):
+            grad[i, 0] += sixth * (pos[j, 1] * pos[l, 2] - pos[j, 2] * pos[l, 1])
+            grad[i, 1] += sixth * (pos[j, 2] * pos[l, 0] - pos[j, 0] * pos[l, 2])
+            grad[i, 2] += sixth * (pos[j, 0] * pos[l, 1] - pos[j, 1] * pos[l, 0])
+
+
+@kernel
+def implicit_step(m, s, step, imp):
+    """Step phase 2 for implicit Euler: the free points' new velocities and positions,
+    with the divergence check's sums per chunk of points into s.vert_acc (as
+    `hybrid.step._integrate`). Returns 0 (done), `IMPLICIT_NOT_CONVERGED` (status
+    set, state unchanged) or `EXPLICIT` when imp is None (another integrator).
+    # Model: m   # Data in: s.vert_force (all forces at the step's start), s.sched_val
+    # Data in/out: s.vert_pos, s.vert_vel, imp   # Data out: s.vert_acc, s.status on failure
+    """
+    if imp is None:
+        return EXPLICIT
+    h = m.dt
+    pos, vel = s.vert_pos, s.vert_vel
+    n = pos.shape[0]
+    w = imp
+    info = w.info
+    free = m.vert_free
+    # the explicit part: every force at the step's start less the implicit ones there
+    implicit_forces(m, s.sched_val, pos, vel, w.f)
+    carried = info[I_PRESSURE] if m.term_on[T_VOLUME] else 0.0
+    if carried != 0.0:
+        _volume_gradient(m.face_vert, pos, w.grad)
+    nfree = 0
+    for i in range(n):
+        nfree += free[i] != 0
+        for a in range(3):
+            w.f_expl[i, a] = s.vert_force[i, a] - w.f[i, a] + (carried * w.grad[i, a] if carried != 0.0 else 0.0)
+            if not free[i]:
+                w.dv[i, a] = 0.0
+    info[I_CARRIED] = carried
+    tol = m.implicit_tol
+    cg_max = max(CG_MIN_ITER, 9 * nfree)
+    rn, scale, worst = _residual(m, s.sched_val, pos, vel, h, w)
+    it = 0
+    cg_total = 0
+    while not (rn <= tol * scale) and it < m.implicit_max_iter and rn < np.inf:
+        for i in range(n):
+            for a in range(3):
+                w.x_kv[i, a] = w.x_try[i, a]
+        phi = _merit(m, s.sched_val, h, w)
+        membrane_tangent_cache(m.mem_vert, m.mem_par, w.x_try, w.face)
+        _preconditioner(m, s.sched_val, w.x_try, w.face, h, w.blocks)
+        # the exact Hessian, its negative curvature ending the conjugate gradients early
+        # (truncated Newton); when met at once, the Hessian projected per element instead
+        for i in range(n):
+            for a in range(3):
+                w.cg_r[i, a] = h * w.res[i, a]
+        # solve just accurately enough: FORCING of what convergence asks, at most FORCING of the residual
+        eta = min(FORCING, FORCING * tol * scale / rn)
+        k = _solve(m, s.sched_val, w, h, False, eta * h * rn, cg_max)
+        if k < 0:
+            for i in range(n):
+                for a in range(3):
+                    w.cg_r[i, a] = h * w.res[i, a]
+            k = 1 + _solve(m, s.sched_val, w, h, True, eta * h * rn, cg_max)
+            info[I_PROJECTED_TOTAL] += 1
+        cg_total += k
+        it += 1
+        slope = -h * _dot(w.res, w.cg_x)  # the potential's derivative along the step (< 0)
+        for i in range(n):
+            for a in range(3):
+                w.dv[i, a] += w.cg_x[i, a]
+        frac = 1.0  # of the step now applied
+        for k in range(HALVINGS + 1):
+            rn_new, scale, worst = _residual(m, s.sched_val, pos, vel, h, w)
+            # a residual that halved (near the root the potential's change is round-off),
+            # else Armijo on the potential
+            if rn_new <= 0.5 * rn or k == HALVINGS:
+                break
+            if _merit(m, s.sched_val, h, w) <= phi + ARMIJO * frac * slope:
+                break
+            frac *= 0.5
+            for i in range(n):
+                for a in range(3):
+                    w.dv[i, a] -= frac * w.cg_x[i, a]
+        rn = rn_new
+    info[I_NEWTON] = it
+    info[I_RESIDUAL] = rn / scale if scale > 0.0 else 0.0
+    info[I_CG] = cg_total
+    info[I_NEWTON_TOTAL] += it
+    info[I_CG_TOTAL] += cg_total
+    info[I_WORST] = worst
+    if not (rn <= tol * scale):
+        for i in range(n):  # no warm start from a failed solve
+            for a in range(3):
+                w.dv[i, a] = 0.0
+        s.status[0] = IMPLICIT_NOT_CONVERGED
+        s.status[1] = step
+        s.status[2] = worst
+        return IMPLICIT_NOT_CONVERGED
+    acc = s.vert_acc
+    for c in range(acc.shape[0]):
+        dsum = ke = dmax = 0.0
+        far = 0
+        for i in range(c * CHUNK_VERTS, min((c + 1) * CHUNK_VERTS, n)):
+            if not free[i]:
+                continue
+            d2 = 0.0
+            for a in range(3):
+                dx = w.x_try[i, a] - pos[i, a]
+                pos[i, a] = w.x_try[i, a]
+                vel[i, a] = w.v_try[i, a]
+                d2 += dx * dx
+            dsum += d2
+            ke += m.vert_mass[i] * (vel[i, 0] ** 2 + vel[i, 1] ** 2 + vel[i, 2] ** 2)
+            if d2 > dmax:
+                dmax = d2
+                far = i
+        acc[c, 0] = dsum
+        acc[c, 1] = ke
+        acc[c, 2] = dmax
+        acc[c, 3] = far
+    return 0
+
+
+@kernel
+def implicit_pressure(imp, projected):
+    """The step's pressure (Pa) from the volume projection's `projected` = phi / h^2:
+    itself for the other integrators; for implicit Euler plus the pressure its solve
+    carried (kept as the next step's)."""
+    if imp is None:
+        return projected
+    p = imp.info[I_CARRIED] + projected
+    imp.info[I_PRESSURE] = p
+    return p

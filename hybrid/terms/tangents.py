@@ -1,0 +1,253 @@
+"""The Jacobians of the continuum formulation's forces, for implicit steps
+(`hybrid.implicit`): products y += J u looped over the elements, no matrix stored.
+
+Membrane (`hybrid.terms.membrane`). A triangle's energy is A0 W(E) with
+F = [e1 e2] D its deformation gradient (3 x 2), E = (F^T F - I)/2 and the
+second Piola-Kirchhoff stress S = lambda tr(E) I + 2 mu E. Its second
+derivative along a change dF of F is
+
+    d2 W[dF, dF] = S : (dF^T dF) + dE : C : dE,   dE = sym(F^T dF),
+
+a geometric part (S, indefinite under compression) and a material part
+(C = lambda I (x) I + 2 mu I, positive semi-definite for lambda, mu >= 0). The
+out-of-plane changes dF = n (x) w see only the geometric part, w^T S w, so the
+element Hessian is positive semi-definite exactly when S is. The projection
+(`project`) clamps the negative eigenvalue(s) of the 2 x 2 stress S (closed
+form): the projected Hessian is positive semi-definite, equals the exact one
+wherever that one is, and on the out-of-plane subspace equals the
+eigenvalue-clamped exact Hessian; in-plane under compression it drops the
+negative stress also where the material part would have made up for it.
+Kelvin-Voigt viscosity tau C : dE/dt
+has the velocity Jacobian tau times the material part (its dependence on the
+position through F is left to the Newton iteration's residual).
+
+The nodes enter F through dF_0 = d00 (u_b - u_a), dF_1 = d01 (u_b - u_a) + d11 (u_c - u_a)
+(D upper triangular), so an element product is a few dozen multiplications.
+
+Muscle fibres (`hybrid.terms.fibres`): an edge of tension T s pulls with
+energy T s l; its Hessian on (x_i, x_j) is [[K, -K], [-K, K]], K = T s (I - u u^T) / l,
+positive semi-definite for T s >= 0 and projected to 0 otherwise.
+
+Drag (`hybrid.terms.pointwise.Damping`): F = -c v, Jacobian -c I.
+
+The products return the Hessian's sign (positive semi-definite): the force
+Jacobian is minus it.
+"""
+
+from __future__ import annotations
+
+import math
+
+from ..kernel import kernel
+from .membrane import P_AREA, P_D00, P_D01, P_D11, P_LAM, P_MU, P_TAU, _edges_and_strain
+
+__all__ = ["NCACHE", "membrane_tangent_cache", "membrane_tangent_product", "membrane_tangent_diag",
+           "fibre_tangent_product", "fibre_tangent_diag", "clamp_stress", "kelvin_voigt_dissipation", "fibre_energy"]
+
+# membrane_tangent_cache columns: F's columns f0, f1 (3 each), the stress S00, S01, S11 (N/m), the
+# projected stress (the same three, its negative eigenvalues clamped)
+NCACHE = 12
+
+
+@kernel(inline="always")
+def clamp_stress(s00, s01, s11):
+    """The 2 x 2 symmetric S with its negative eigenvalues set to 0 (closed form)."""
+    m = 0.5 * (s00 + s11)
+    r = math.sqrt(0.25 * (s00 - s11) ** 2 + s01 * s01)
+    lo, hi = m - r, m + r
+    if lo >= 0.0:
+        return s00, s01, s11
+    if hi <= 0.0:
+        return 0.0, 0.0, 0.0
+    c = hi / (hi - lo)  # hi times the projector (S - lo I) / (hi - lo) on hi's eigenvector
+    return c * (s00 - lo), c * s01, c * (s11 - lo)
+
+
+@kernel
+def membrane_tangent_cache(mem_vert, mem_par, vert_pos, cache):
+    """Per triangle, what its Hessian products read at vert_pos: F's columns, the
+    stress S and S with its negative eigenvalues clamped.
+    # Model: mem_vert (nf, 3) int32, mem_par (nf, NPAR)   # Data in: vert_pos (m)
+    # Data out: cache (nf, NCACHE)
+    """
+    for k in range(mem_vert.shape[0]):
+        p = mem_par[k]
+        d00, d01, d11 = p[P_D00], p[P_D01], p[P_D11]
+        e1x, e1y, e1z, e2x, e2y, e2z, s00, s01, s11 = _edges_and_strain(mem_vert, mem_par, k, vert_pos)
+        lt = p[P_LAM] * (s00 + s11)
+        m2 = 2.0 * p[P_MU]
+        S00, S01, S11 = lt + m2 * s00, m2 * s01, lt + m2 * s11
+        c = cache[k]
+        c[0], c[1], c[2] = d00 * e1x, d00 * e1y, d00 * e1z
+        c[3], c[4], c[5] = d01 * e1x + d11 * e2x, d01 * e1y + d11 * e2y, d01 * e1z + d11 * e2z
+        c[6], c[7], c[8] = S00, S01, S11
+        c[9], c[10], c[11] = clamp_stress(S00, S01, S11)
+
+
+@kernel
+def membrane_tangent_product(mem_vert, mem_par, cache, project, kx, kv, u, y):
+    """y += (kx K + kv C) u: K the membrane's Hessian (projected when `project`), C its
+    Kelvin-Voigt damping matrix (tau times the material part).
+    # Model: mem_vert, mem_par   # Data in: cache (membrane_tangent_cache), u (nvert, 3)
+    # Data out: y (nvert, 3), added to
+    """
+    col = 9 if project else 6
+    for k in range(mem_vert.shape[0]):
+        a, b, c = mem_vert[k, 0], mem_vert[k, 1], mem_vert[k, 2]
+        p = mem_par[k]
+        q = cache[k]
+        d00, d01, d11 = p[P_D00], p[P_D01], p[P_D11]
+        lam, mu = p[P_LAM], p[P_MU]
+        cm = kx + kv * p[P_TAU]  # material part: stiffness and viscosity
+        ubx, uby, ubz = u[b, 0] - u[a, 0], u[b, 1] - u[a, 1], u[b, 2] - u[a, 2]
+        ucx, ucy, ucz = u[c, 0] - u[a, 0], u[c, 1] - u[a, 1], u[c, 2] - u[a, 2]
+        g0x, g0y, g0z = d00 * ubx, d00 * uby, d00 * ubz  # dF's columns
+        g1x, g1y, g1z = d01 * ubx + d11 * ucx, d01 * uby + d11 * ucy, d01 * ubz + d11 * ucz
+        f0x, f0y, f0z, f1x, f1y, f1z = q[0], q[1], q[2], q[3], q[4], q[5]
+        e00 = f0x * g0x + f0y * g0y + f0z * g0z
+        e11 = f1x * g1x + f1y * g1y + f1z * g1z
+        e01 = 0.5 * (f0x * g1x + f0y * g1y + f0z * g1z + f1x * g0x + f1y * g0y + f1z * g0z)
+        lt = lam * (e00 + e11)
+        t00, t01, t11 = cm * (lt + 2.0 * mu * e00), cm * 2.0 * mu * e01, cm * (lt + 2.0 * mu * e11)
+        s00, s01, s11 = kx * q[col], kx * q[col + 1], kx * q[col + 2]
+        # P_a = F dS_a (material) + sum_b S_ab dF_b (geometric)
+        p0x = f0x * t00 + f1x * t01 + s00 * g0x + s01 * g1x
+        p0y = f0y * t00 + f1y * t01 + s00 * g0y + s01 * g1y
+        p0z = f0z * t00 + f1z * t01 + s00 * g0z + s01 * g1z
+        p1x = f0x * t01 + f1x * t11 + s01 * g0x + s11 * g1x
+        p1y = f0y * t01 + f1y * t11 + s01 * g0y + s11 * g1y
+        p1z = f0z * t01 + f1z * t11 + s01 * g0z + s11 * g1z
+        A = p[P_AREA]
+        bx, by, bz = A * (d00 * p0x + d01 * p1x), A * (d00 * p0y + d01 * p1y), A * (d00 * p0z + d01 * p1z)
+        cx, cy, cz = A * d11 * p1x, A * d11 * p1y, A * d11 * p1z
+        y[a, 0] -= bx + cx
+        y[a, 1] -= by + cy
+        y[a, 2] -= bz + cz
+        y[b, 0] += bx
+        y[b, 1] += by
+        y[b, 2] += bz
+        y[c, 0] += cx
+        y[c, 1] += cy
+        y[c, 2] += cz
+
+
+@kernel
+def membrane_tangent_diag(mem_vert, mem_par, cache, kx, kv, blocks):
+    """blocks += each point's 3 x 3 diagonal block of kx K + kv C, K projected (row-major, (nvert, 9)):
+    per triangle and corner n with weights w = (g_n0, g_n1), q = F w,
+    A0 [kx w^T S w I + cm ((lambda + mu) q q^T + mu |w|^2 F F^T)].
+    """
+    for k in range(mem_vert.shape[0]):
+        p = mem_par[k]
+        q = cache[k]
+        d00, d01, d11 = p[P_D00], p[P_D01], p[P_D11]
+        lam, mu = p[P_LAM], p[P_MU]
+        cm = (kx + kv * p[P_TAU]) * p[P_AREA]
+        kg = kx * p[P_AREA]
+        for corner in range(3):
+            if corner == 0:
+                w0, w1 = -d00, -(d01 + d11)
+            elif corner == 1:
+                w0, w1 = d00, d01
+            else:
+                w0, w1 = 0.0, d11
+            geo = kg * (w0 * w0 * q[9] + 2.0 * w0 * w1 * q[10] + w1 * w1 * q[11])
+            ww = mu * (w0 * w0 + w1 * w1)
+            i = mem_vert[k, corner]
+            for r in range(3):
+                qr = w0 * q[r] + w1 * q[3 + r]
+                for s in range(3):
+                    qs = w0 * q[s] + w1 * q[3 + s]
+                    v = cm * ((lam + mu) * qr * qs + ww * (q[r] * q[s] + q[3 + r] * q[3 + s]))
+                    if r == s:
+                        v += geo
+                    blocks[i, 3 * r + s] += v
+
+
+@kernel(inline="always")
+def _fibre_stiffness(fib_edge, fib_share, fib_sched, sched_val, vert_pos, k, project):
+    """Edge k's K = T s (I - u u^T) / l as (T s / l, ux, uy, uz); 0 when projected and T s < 0."""
+    i, j = fib_edge[k, 0], fib_edge[k, 1]
+    dx, dy, dz = vert_pos[j, 0] - vert_pos[i, 0], vert_pos[j, 1] - vert_pos[i, 1], vert_pos[j, 2] - vert_pos[i, 2]
+    ln = math.sqrt(dx * dx + dy * dy + dz * dz)
+    ts = sched_val[fib_sched[k], 0] * fib_share[k]
+    if project and ts < 0.0:
+        ts = 0.0
+    return ts / ln, dx / ln, dy / ln, dz / ln
+
+
+@kernel
+def fibre_tangent_product(fib_edge, fib_share, fib_sched, sched_val, vert_pos, project, kx, u, y):
+    """y += kx K u for the fibre edges' Hessian K at vert_pos (projected when `project`).
+    # Model: fib_edge, fib_share, fib_sched   # Data in: sched_val, vert_pos, u   # Data out: y, added to
+    """
+    for k in range(fib_edge.shape[0]):
+        i, j = fib_edge[k, 0], fib_edge[k, 1]
+        c, ux, uy, uz = _fibre_stiffness(fib_edge, fib_share, fib_sched, sched_val, vert_pos, k, project)
+        wx, wy, wz = u[i, 0] - u[j, 0], u[i, 1] - u[j, 1], u[i, 2] - u[j, 2]
+        d = ux * wx + uy * wy + uz * wz
+        c *= kx
+        kx_, ky_, kz_ = c * (wx - d * ux), c * (wy - d * uy), c * (wz - d * uz)
+        y[i, 0] += kx_
+        y[i, 1] += ky_
+        y[i, 2] += kz_
+        y[j, 0] -= kx_
+        y[j, 1] -= ky_
+        y[j, 2] -= kz_
+
+
+@kernel
+def fibre_tangent_diag(fib_edge, fib_share, fib_sched, sched_val, vert_pos, kx, blocks):
+    """blocks += kx K at both ends of every fibre edge (projected)."""
+    for k in range(fib_edge.shape[0]):
+        c, ux, uy, uz = _fibre_stiffness(fib_edge, fib_share, fib_sched, sched_val, vert_pos, k, True)
+        c *= kx
+        for end in range(2):
+            i = fib_edge[k, end]
+            blocks[i, 0] += c * (1.0 - ux * ux)
+            blocks[i, 1] -= c * ux * uy
+            blocks[i, 2] -= c * ux * uz
+            blocks[i, 3] -= c * ux * uy
+            blocks[i, 4] += c * (1.0 - uy * uy)
+            blocks[i, 5] -= c * uy * uz
+            blocks[i, 6] -= c * ux * uz
+            blocks[i, 7] -= c * uy * uz
+            blocks[i, 8] += c * (1.0 - uz * uz)
+
+
+
+@kernel
+def kelvin_voigt_dissipation(mem_vert, mem_par, vert_pos, vert_vel):
+    """The membrane viscosity's dissipation function R = sum A0 tau W(dE/dt) (W),
+    whose minus velocity gradient at fixed positions is the viscous force."""
+    total = 0.0
+    for k in range(mem_vert.shape[0]):
+        p = mem_par[k]
+        tau = p[P_TAU]
+        if tau <= 0.0:
+            continue
+        a, b, c = mem_vert[k, 0], mem_vert[k, 1], mem_vert[k, 2]
+        d00, d01, d11 = p[P_D00], p[P_D01], p[P_D11]
+        e1x, e1y, e1z = vert_pos[b, 0] - vert_pos[a, 0], vert_pos[b, 1] - vert_pos[a, 1], vert_pos[b, 2] - vert_pos[a, 2]
+        e2x, e2y, e2z = vert_pos[c, 0] - vert_pos[a, 0], vert_pos[c, 1] - vert_pos[a, 1], vert_pos[c, 2] - vert_pos[a, 2]
+        v1x, v1y, v1z = vert_vel[b, 0] - vert_vel[a, 0], vert_vel[b, 1] - vert_vel[a, 1], vert_vel[b, 2] - vert_vel[a, 2]
+        v2x, v2y, v2z = vert_vel[c, 0] - vert_vel[a, 0], vert_vel[c, 1] - vert_vel[a, 1], vert_vel[c, 2] - vert_vel[a, 2]
+        g11 = 2.0 * (e1x * v1x + e1y * v1y + e1z * v1z)  # dG/dt
+        g12 = e1x * v2x + e1y * v2y + e1z * v2z + e2x * v1x + e2y * v1y + e2z * v1z
+        g22 = 2.0 * (e2x * v2x + e2y * v2y + e2z * v2z)
+        t = g11 * d01 + g12 * d11
+        r00, r01, r11 = 0.5 * d00 * d00 * g11, 0.5 * d00 * t, 0.5 * (d01 * t + d11 * (g12 * d01 + g22 * d11))
+        tr = r00 + r11
+        total += p[P_AREA] * tau * (p[P_MU] * (r00 * r00 + 2.0 * r01 * r01 + r11 * r11) + 0.5 * p[P_LAM] * tr * tr)
+    return total
+
+
+@kernel
+def fibre_energy(fib_edge, fib_share, fib_sched, sched_val, vert_pos):
+    """The fibres' work function T s |x_j - x_i| summed over the edges (J)."""
+    total = 0.0
+    for k in range(fib_edge.shape[0]):
+        i, j = fib_edge[k, 0], fib_edge[k, 1]
+        dx, dy, dz = vert_pos[j, 0] - vert_pos[i, 0], vert_pos[j, 1] - vert_pos[i, 1], vert_pos[j, 2] - vert_pos[i, 2]
+        total += sched_val[fib_sched[k], 0] * fib_share[k] * math.sqrt(dx * dx + dy * dy + dz * dz)
+    return total

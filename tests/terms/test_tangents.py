@@ -1,0 +1,194 @@
+"""The Jacobians implicit Euler solves with (hybrid.terms.tangents, hybrid.implicit):
+each against central finite differences of the compiled forces on a small irregular
+mesh deformed at random, and the membrane's projection to positive semi-definite."""
+
+import numpy as np
+import pytest
+
+from hybrid import Damping, HalfSpace, Masses, Membrane, MuscleFibres, Scene
+from hybrid.implicit import implicit_forces, newton_product
+from hybrid.mesh import irregular_sphere
+from hybrid.model import compile_scene
+from hybrid.terms.fibres import add_muscle_fibres
+from hybrid.terms.membrane import add_membrane_serial
+from hybrid.terms.tangents import (NCACHE, fibre_tangent_diag, fibre_tangent_product, membrane_tangent_cache,
+                                   membrane_tangent_diag, membrane_tangent_product)
+
+R = 0.12
+TENSION = 40.0  # N/m
+
+
+@pytest.fixture(scope="module")
+def model():
+    mesh = irregular_sphere(40, R, seed=2)
+    return compile_scene(Scene(mesh=mesh, masses=Masses(total_kg=1.0), integrator="implicit_euler", forces=(
+        Membrane(800.0, poisson_ratio=0.3, damping_time_s=0.02),
+        MuscleFibres(HalfSpace((0.0, 0.0, 0.0), (0.0, 0.0, 1.0)), TENSION, toward_m=(0.0, 0.0, R)),
+        Damping(drag_n_s_per_m3=30.0))))
+
+
+def deformed(model, seed, scale=0.01):
+    """The rest shape moved at random by about `scale` m (strains of about 10%)."""
+    x = model.arrays.vert_rest
+    return x + scale * np.random.default_rng(seed).standard_normal(x.shape)
+
+
+def sched(model):
+    return np.full((model.arrays.sched.kind.shape[0], 3), TENSION)
+
+
+def columns(n, product):
+    """The matrix of a linear map on (n, 3) arrays, column by column."""
+    out = np.zeros((3 * n, 3 * n))
+    for j in range(3 * n):
+        u = np.zeros((n, 3))
+        u.flat[j] = 1.0
+        out[:, j] = product(u).ravel()
+    return out
+
+
+def finite_difference(fun, x, eps):
+    """d fun / d x (3n x 3n) by central differences of step eps."""
+    n = x.shape[0]
+    out = np.zeros((3 * n, 3 * n))
+    for j in range(3 * n):
+        xp, xm = x.copy(), x.copy()
+        xp.flat[j] += eps
+        xm.flat[j] -= eps
+        out[:, j] = ((fun(xp) - fun(xm)) / (2.0 * eps)).ravel()
+    return out
+
+
+def rel_error(a, b):
+    return np.abs(a - b).max() / np.abs(b).max()
+
+
+def membrane_force(a, x, v):
+    f = np.zeros_like(x)
+    add_membrane_serial(a.mem_vert, a.mem_par, a.kv_on, x, v, f)
+    return f
+
+
+def membrane_matrix(a, x, kx, kv, project):
+    cache = np.zeros((a.mem_vert.shape[0], NCACHE))
+    membrane_tangent_cache(a.mem_vert, a.mem_par, x, cache)
+
+    def product(u):
+        y = np.zeros_like(u)
+        membrane_tangent_product(a.mem_vert, a.mem_par, cache, project, kx, kv, u, y)
+        return y
+    return columns(x.shape[0], product), cache
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_the_membrane_hessian_is_minus_the_force_jacobian(model, seed):
+    a = model.arrays
+    x = deformed(model, seed)
+    zero = np.zeros_like(x)
+    hess, _ = membrane_matrix(a, x, 1.0, 0.0, False)
+    fd = finite_difference(lambda y: membrane_force(a, y, zero), x, 1e-7)
+    assert rel_error(-hess, fd) <= 1e-6
+    assert np.abs(hess - hess.T).max() <= 1e-12 * np.abs(hess).max()
+
+
+def test_the_kelvin_voigt_damping_matrix_is_minus_the_velocity_jacobian(model):
+    a = model.arrays
+    x = deformed(model, 3)
+    v = 0.05 * np.random.default_rng(4).standard_normal(x.shape)
+    damp, _ = membrane_matrix(a, x, 0.0, 1.0, False)
+    fd = finite_difference(lambda w: membrane_force(a, x, w), v, 1e-4)
+    assert np.abs(damp).max() > 0
+    assert rel_error(-damp, fd) <= 1e-6
+
+
+def test_the_fibre_hessian_is_minus_the_force_jacobian(model):
+    a = model.arrays
+    x = deformed(model, 5)
+    sv = sched(model)
+
+    def force(y):
+        f = np.zeros_like(y)
+        add_muscle_fibres(a.fib_edge, a.fib_share, a.fib_sched, sv, y, f)
+        return f
+
+    def product(u):
+        y = np.zeros_like(u)
+        fibre_tangent_product(a.fib_edge, a.fib_share, a.fib_sched, sv, x, False, 1.0, u, y)
+        return y
+    hess = columns(x.shape[0], product)
+    assert rel_error(-hess, finite_difference(force, x, 1e-7)) <= 1e-6
+
+
+def test_the_newton_matrix_against_finite_differences_of_the_implicit_forces(model):
+    """M + h^2 K + h C with every term (membrane, its viscosity, fibres, drag),
+    unprojected, against M - h^2 dF/dx - h dF/dv: dF/dx at v = 0 (where the
+    viscous force's dependence on x, which the Newton matrix leaves out, vanishes)."""
+    a = model.arrays
+    h = 2e-3
+    x = deformed(model, 6)
+    sv = sched(model)
+    zero = np.zeros_like(x)
+    v = 0.05 * np.random.default_rng(7).standard_normal(x.shape)
+    face = np.zeros((a.mem_vert.shape[0], NCACHE))
+    membrane_tangent_cache(a.mem_vert, a.mem_par, x, face)
+
+    def product(u):
+        y = np.zeros_like(u)
+        newton_product(a, sv, x, face, h, False, u, y)
+        return y
+
+    def forces(y, w):
+        f = np.zeros_like(y)
+        implicit_forces(a, sv, y, w, f)
+        return f
+    newton = columns(x.shape[0], product)
+    dfdx = finite_difference(lambda y: forces(y, zero), x, 1e-7)
+    dfdv = finite_difference(lambda w: forces(x, w), v, 1e-4)
+    mass = np.diag(np.repeat(a.vert_mass, 3))
+    expected = mass - h * h * dfdx - h * dfdv
+    assert rel_error(newton - mass, expected - mass) <= 1e-6
+
+
+def test_the_diagonal_blocks_are_those_of_the_matrix(model):
+    a = model.arrays
+    x = deformed(model, 8)
+    sv = sched(model)
+    n = x.shape[0]
+    kx, kv = 4e-6, 2e-3
+    mat, cache = membrane_matrix(a, x, kx, kv, True)
+
+    def product(u):
+        y = np.zeros_like(u)
+        fibre_tangent_product(a.fib_edge, a.fib_share, a.fib_sched, sv, x, True, kx, u, y)
+        return y
+    mat += columns(n, product)
+    blocks = np.zeros((n, 9))
+    membrane_tangent_diag(a.mem_vert, a.mem_par, cache, kx, kv, blocks)
+    fibre_tangent_diag(a.fib_edge, a.fib_share, a.fib_sched, sv, x, kx, blocks)
+    want = np.stack([mat[3 * i:3 * i + 3, 3 * i:3 * i + 3].ravel() for i in range(n)])
+    assert np.abs(blocks - want).max() <= 1e-12 * np.abs(want).max()
+
+
+def test_the_projected_element_hessian_is_psd_and_exact_where_the_exact_one_is(model):
+    """Compressed and stretched triangles both: each element's 9 x 9 Hessian, exact
+    and projected. The projected one has no negative eigenvalue; where the exact one
+    has none, they are equal; where it has one, the projection removed it."""
+    a = model.arrays
+    x = 0.93 * deformed(model, 9, scale=0.006)  # some triangles compressed, some stretched
+    convex = indefinite = 0
+    for k in range(a.mem_vert.shape[0]):
+        corners = a.mem_vert[k]
+        one = a._replace(mem_vert=a.mem_vert[k:k + 1], mem_par=a.mem_par[k:k + 1])
+        dofs = (3 * corners[:, None] + np.arange(3)).ravel()
+        exact = membrane_matrix(one, x, 1.0, 0.0, False)[0][np.ix_(dofs, dofs)]
+        proj = membrane_matrix(one, x, 1.0, 0.0, True)[0][np.ix_(dofs, dofs)]
+        scale = np.abs(exact).max()
+        ev_exact, ev_proj = np.linalg.eigvalsh(exact), np.linalg.eigvalsh(proj)
+        assert ev_proj.min() >= -1e-12 * scale, k
+        if ev_exact.min() >= -1e-12 * scale:
+            convex += 1
+            assert np.abs(proj - exact).max() <= 1e-12 * scale, k
+        else:
+            indefinite += 1
+            assert np.abs(proj - exact).max() > 0.0
+    assert convex >= 5 and indefinite >= 5, (convex, indefinite)
