@@ -10,7 +10,7 @@ import zlib
 import numpy as np
 
 from .encoder import (MAX_DEPTH, OP_BEGIN, OP_CLOUD, OP_CONST, OP_DOUBLE, OP_END, OP_IF_FINITE, OP_POINTS,
-                      OP_STAMP, POINT3_BYTES, RECORD_HEAD, _encode_frames, _load_encoder, _tag)
+                      OP_STAMP, POINT3_BYTES, RECORD_HEAD, _load_encoder, _tag, encode_frames)
 from .mcap_writer import _McapWriter
 from .schemas import (GEOM_BOX, GEOM_CAPSULE, GEOM_CYLINDER, GEOM_ELLIPSOID, GEOM_SPHERE, SCALAR_CHANNELS,
                       _schemas, body_geoms, region_colours)
@@ -203,8 +203,8 @@ class _FrameWriter:
             self._index = np.empty((2 * nframe * len(self._programs), 3), np.int64)
         number = np.ascontiguousarray(number, "<f8")
         pos = np.ascontiguousarray(pos, "<f8")
-        k, m = _encode_frames(t_ns, number, cloud.view(np.uint8).reshape(nframe, -1), pos.reshape(nframe, -1),
-                              frame0, self._const, self._prog, self._programs, self._out, self._index, self._size)
+        k, m = encode_frames(t_ns, number, cloud.view(np.uint8).reshape(nframe, -1), pos.reshape(nframe, -1),
+                             frame0, self._const, self._prog, self._programs, self._out, self._index, self._size)
         self._writer.add_chunk(self._out[:k], self._index[:m])
 
     def close(self) -> None:
