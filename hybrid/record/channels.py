@@ -173,7 +173,7 @@ class _FrameWriter:
             program(channel("/rigid/transforms", "foxglove.FrameTransforms"), 1, ops)
             w.message(channel("/rigid/geoms", "foxglove.SceneUpdate"), 0, _geom_scene(plan["geoms"]))
             w.flush_chunk()
-        self._const = np.frombuffer(bytes(const), np.uint8)
+        self._const = np.frombuffer(bytearray(const), np.uint8)  # writable: the type of the cloud's rows
         self._prog = np.array(prog, np.int64).reshape(-1, 3)
         self._programs = np.array(programs, np.int64)
         self._size = np.zeros(len(prog), np.int64)

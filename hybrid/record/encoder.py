@@ -196,7 +196,7 @@ def _encode_frames(t_ns, number, number_bits, cloud, pos_bits, frame0, const, pr
                 elif op == OP_CLOUD:
                     k = _put_varint(out, k, a)
                     k = _put_varint(out, k, ncloud)
-                    k = _put_bytes(out, k, cloud[f], 0, ncloud)
+                    k = _put_bytes(out, k, cloud[f], np.int64(0), ncloud)  # one compiled _put_bytes
             if k - start - RECORD_HEAD != acc[0]:  # the sizing pass and the writing pass disagree
                 raise RuntimeError("hybrid.record: a message's size differs from the size its fields were given")
             out[start] = 5  # opcode: message
@@ -228,6 +228,6 @@ def _load_encoder() -> None:
     if _encode_frames.signatures:
         return
     encode_frames(np.zeros(1, np.int64), np.zeros((1, 1)), np.zeros((1, 16), np.uint8), np.zeros((1, 3)), 0,
-                  np.frombuffer(b"\0", np.uint8), np.zeros((0, 3), np.int64), np.zeros((0, 4), np.int64),
+                  np.zeros(1, np.uint8), np.zeros((0, 3), np.int64), np.zeros((0, 4), np.int64),
                   np.zeros(1, np.uint8), np.zeros((0, 3), np.int64), np.zeros(0, np.int64))
 
