@@ -45,7 +45,8 @@ def _cmd_run(args) -> int:
 
 
 #: what a first run's compile takes on a 2-core machine (s), membrane only or with a rigid part
-COMPILE_ESTIMATE_S = {"membrane": 20, "rigid": 25}
+#: (the 80-point scenes, serial build: 12-14 s of CPU, 19-25 s of wall time under a load of 4)
+COMPILE_ESTIMATE_S = {"membrane": 12, "rigid": 15}
 
 
 def _load_and_run(args, scene) -> int:

@@ -47,9 +47,9 @@ from .kernel import kernel
 from .rigid import CoupledRigid, mj_step_ctypes, point_wrench_kernel, site_vel_kernel
 from .schedule import schedule_eval
 from .step import (OK, S_PRESSURE, S_TIME, T_GRAVITY, Frames, MembraneState, capture_frame, membrane_advance,
-                   membrane_forces, step_par)
+                   membrane_forces, step_switches)
 
-__all__ = ["LinkArrays", "CtrlArrays", "MjViews", "WrenchHistory", "Coupling", "run_coupled", "run_coupled_frames"]
+__all__ = ["LinkArrays", "CtrlArrays", "MjViews", "WrenchHistory", "Coupling", "run_coupled"]
 
 _RK4 = int(mujoco.mjtIntegrator.mjINT_RK4)
 _DSBL_GRAVITY = int(mujoco.mjtDisableBit.mjDSBL_GRAVITY)
@@ -138,94 +138,85 @@ class WrenchHistory(NamedTuple):
 # ----------------------------------------------------------------- the coupled step
 
 @kernel
-def run_coupled(m, s, links, ctrls, mj, rk4, nstep, step0, record, hist, par=True):
-    """nstep coupled steps (module docstring, steps 1-5). Returns the steps done
-    (< nstep when the membrane fails; its status is in s.status).
+def run_coupled(m, s, links, ctrls, mj, rk4, stops, step0, record, hist, frame_pos, frame_scal, frame_body_pos,
+                frame_body_quat, par=True, shape_memory=True, membrane=True, applied=True, attraction=True,
+                mass_spring=True, muscle=True, soft_volume=True, pressure=True, fibres=True, passive=True,
+                prescribed=True,
+                keep_in=True, volume=True, shake=True):
+    """Coupled steps (module docstring, steps 1-5) to each step index of stops,
+    capturing a frame at each (a stop at the current step captures it without
+    stepping). Returns the frames captured: fewer than stops when the membrane
+    fails, its status then in s.status (s.status[1]: the failing step's index).
+    The one compiled loop of the coupled step, for runs by frames and by steps
+    alike (`Coupling.run`: one stop), so that a first run compiles it once.
 
     # Model:    m (MembraneArrays); links.vert, .site_id, .site_body, .site_root,
     #           .extra_force (LinkArrays); rk4: bool, step MuJoCo with mj_step (RK4);
     #           ctrls.act, .sched (CtrlArrays): the driven actuators
-    # Data in:  s (MembraneState) at step step0; mj (MjViews): MuJoCo's state
+    # Data in:  s (MembraneState) at step step0; mj (MjViews): MuJoCo's state;
+    #           stops (nframe,) int64 increasing step indices from step0
     # Data out: s and MuJoCo's state (through mj.data_ptr) after the steps done;
-    #           mj.xfrc_applied; mj.ctrl[ctrls.act] at the step's start time;
-    #           hist.xfrc[k], hist.qpos[k] when record
+    #           mj.xfrc_applied; mj.ctrl[ctrls.act] at each step's start time;
+    #           hist.xfrc[j], hist.qpos[j] of step step0 + j when
+    #           record; per frame i: frame_pos[i] (nvert, 3) m, frame_scal[i]
+    #           (`capture_frame`), frame_body_pos[i] (nbody - 1, 3) m and
+    #           frame_body_quat[i] (nbody - 1, 4) from mj.xpos, mj.xquat (world excluded)
     # Scratch:  links.force, links.vel, ctrls.val
     # par:      None: the membrane's serial passes only (`hybrid.step.step_par`)
+    # switches: None for a term the model lacks, not compiled (`hybrid.step.step_switches`)
     """
     h = m.dt
-    t0 = s.scal[S_TIME]
     pos, vel, frc, grad = s.vert_pos, s.vert_vel, s.vert_force, s.grad
     link_vert, site_id, link_force, link_vel = links.vert, links.site_id, links.force, links.vel
     xfrc, qpos = mj.xfrc_applied, mj.qpos
     n = link_vert.shape[0]
-    for k in range(nstep):
-        t = t0 + k * h
-        membrane_forces(m, s, t, par)
-        p = s.scal[S_PRESSURE]
-        for j in range(n):
-            i = link_vert[j]
-            for a in range(3):
-                link_force[j, a] = frc[i, a] + p * grad[i, a] + links.extra_force[j, a]
-        point_wrench_kernel(mj.site_xpos, mj.xipos, site_id, links.site_body, link_force, xfrc)
-        for j in range(ctrls.act.shape[0]):
-            schedule_eval(ctrls.sched, j, t, ctrls.val)
-            mj.ctrl[ctrls.act[j]] = ctrls.val[0]
-        if record:  # element-wise: a slice copy would allocate
-            for b in range(xfrc.shape[0]):
-                for a in range(6):
-                    hist.xfrc[k, b, a] = xfrc[b, a]
-        if rk4:
-            _mj_step(mj.model_ptr, mj.data_ptr)
-        else:
-            _mj_step2(mj.model_ptr, mj.data_ptr)
-        _mj_step1(mj.model_ptr, mj.data_ptr)
-        if record:
-            for a in range(qpos.shape[0]):
-                hist.qpos[k, a] = qpos[a]
-        site_vel_kernel(mj.site_xpos, mj.cvel, mj.subtree_com, site_id, links.site_body, links.site_root,
-                        link_vel)
-        for j in range(n):
-            i = link_vert[j]
-            sid = site_id[j]
-            for a in range(3):
-                pos[i, a] = mj.site_xpos[sid, a]
-                vel[i, a] = link_vel[j, a]
-        if membrane_advance(m, s, t, step0 + k, par) != OK:
-            return k
-        s.scal[S_TIME] = t0 + (k + 1) * h
-    return nstep
-
-
-@kernel
-def run_coupled_frames(m, s, links, ctrls, mj, rk4, stops, step0, no_hist, frame_pos, frame_scal, frame_body_pos,
-                       frame_body_quat, par=True):
-    """`run_coupled` to each step index of stops, capturing a frame at each; returns
-    the frames captured (fewer than stops when a step fails).
-
-    # Model:    m, links, ctrls, rk4 as `run_coupled`
-    # Data in:  s, mj as `run_coupled`; stops (nframe,) int64 increasing step indices
-    # Data out: s, MuJoCo's state as `run_coupled`; per frame i: frame_pos[i]
-    #           (nvert, 3) m, frame_scal[i] (`capture_frame`), frame_body_pos[i]
-    #           (nbody - 1, 3) m and frame_body_quat[i] (nbody - 1, 4) from mj.xpos,
-    #           mj.xquat (world excluded)
-    # Scratch:  links.force, links.vel; no_hist, an empty WrenchHistory (not recorded)
-    """
     done = step0
-    # False (the history is empty), but typed as a run-time bool as `Coupling.run` passes it:
-    # a literal False would compile run_coupled a second time, for its own signature
-    record = no_hist.xfrc.shape[0] > 0
-    for i in range(stops.shape[0]):
-        n = stops[i] - done
-        k = run_coupled(m, s, links, ctrls, mj, rk4, n, done, record, no_hist, par)
-        done += k
-        if k < n:
-            return i
-        capture_frame(m, s, frame_pos[i], frame_scal[i])
+    for f in range(stops.shape[0]):
+        t0 = s.scal[S_TIME]
+        for k in range(stops[f] - done):
+            t = t0 + k * h
+            row = done - step0 + k
+            membrane_forces(m, s, t, par, shape_memory, membrane, applied, attraction, mass_spring, muscle,
+                            soft_volume, pressure, fibres, passive)
+            p = s.scal[S_PRESSURE]
+            for j in range(n):
+                i = link_vert[j]
+                for a in range(3):
+                    link_force[j, a] = frc[i, a] + p * grad[i, a] + links.extra_force[j, a]
+            point_wrench_kernel(mj.site_xpos, mj.xipos, site_id, links.site_body, link_force, xfrc)
+            for j in range(ctrls.act.shape[0]):
+                schedule_eval(ctrls.sched, j, t, ctrls.val)
+                mj.ctrl[ctrls.act[j]] = ctrls.val[0]
+            if record:  # element-wise: a slice copy would allocate
+                for b in range(xfrc.shape[0]):
+                    for a in range(6):
+                        hist.xfrc[row, b, a] = xfrc[b, a]
+            if rk4:
+                _mj_step(mj.model_ptr, mj.data_ptr)
+            else:
+                _mj_step2(mj.model_ptr, mj.data_ptr)
+            _mj_step1(mj.model_ptr, mj.data_ptr)
+            if record:
+                for a in range(qpos.shape[0]):
+                    hist.qpos[row, a] = qpos[a]
+            site_vel_kernel(mj.site_xpos, mj.cvel, mj.subtree_com, site_id, links.site_body, links.site_root,
+                            link_vel)
+            for j in range(n):
+                i = link_vert[j]
+                sid = site_id[j]
+                for a in range(3):
+                    pos[i, a] = mj.site_xpos[sid, a]
+                    vel[i, a] = link_vel[j, a]
+            if membrane_advance(m, s, t, done + k, par, prescribed, keep_in, volume, shake) != OK:
+                return f
+            s.scal[S_TIME] = t0 + (k + 1) * h
+        done = stops[f]
+        capture_frame(m, s, frame_pos[f], frame_scal[f])
         for b in range(frame_body_pos.shape[1]):
             for a in range(3):
-                frame_body_pos[i, b, a] = mj.xpos[b + 1, a]
+                frame_body_pos[f, b, a] = mj.xpos[b + 1, a]
             for a in range(4):
-                frame_body_quat[i, b, a] = mj.xquat[b + 1, a]
+                frame_body_quat[f, b, a] = mj.xquat[b + 1, a]
     return stops.shape[0]
 
 
@@ -256,6 +247,7 @@ class Coupling:
         self.initial_state: np.ndarray | None = None
         mjm = self.system.model
         self._no_hist = WrenchHistory(np.empty((0, mjm.nbody, 6)), np.empty((0, mjm.nq)))
+        self._frame = Frames(1, model.nvert, mjm.nbody - 1)  # `run`'s frame (scratch)
 
     # -- MuJoCo access
     @property
@@ -316,8 +308,11 @@ class Coupling:
                 else self._no_hist)
         mj_time = self.system.data.time
         a = self.model.arrays if arrays is None else arrays
-        done = run_coupled(a, state, self._links, self._ctrls, self._mj, self._rk4(), int(nstep), int(step0), record, hist,
-                           step_par(a))
+        f = self._frame
+        stop = np.array([step0 + nstep], np.int64)
+        count = run_coupled(a, state, self._links, self._ctrls, self._mj, self._rk4(), stop, int(step0), record, hist, f.pos,
+                            f.scal, f.body_pos, f.body_quat, *step_switches(a))
+        done = int(nstep) if count else int(state.status[1]) - int(step0)
         if record:
             self._xfrc_hist.append(hist.xfrc[:done])
             self._qpos_hist.append(hist.qpos[:done])
@@ -342,9 +337,8 @@ class Coupling:
         each into frames; returns the frames captured. (Without wrench recording.)"""
         mj_time = self.system.data.time
         a = self.model.arrays if arrays is None else arrays
-        count = run_coupled_frames(a, state, self._links, self._ctrls, self._mj, self._rk4(), stops, int(step0),
-                                   self._no_hist, frames.pos, frames.scal, frames.body_pos, frames.body_quat,
-                                   step_par(a))
+        count = run_coupled(a, state, self._links, self._ctrls, self._mj, self._rk4(), stops, int(step0), False, self._no_hist,
+                            frames.pos, frames.scal, frames.body_pos, frames.body_quat, *step_switches(a))
         # a reset anywhere in these frames makes none of them trustworthy (frames.count stays 0)
         self._check_not_reset(state, mj_time, step0, (int(stops[count - 1]) if count else int(step0)) - int(step0))
         return count

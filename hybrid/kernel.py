@@ -49,8 +49,10 @@ __all__ = ["CACHE_DIR", "FAST", "FLAGS", "jit", "kernel", "kernel_twin", "CHUNK_
 # Fast-math without the flags that assume no NaN or infinity: fused
 # multiply-adds and reciprocals, but the divergence check still sees NaN.
 FAST = {"contract", "arcp", "nsz", "afn"}
-# nogil: a compiled step lets other Python threads (the recorder) run meanwhile
-FLAGS = dict(cache=True, error_model="numpy", _nrt=False, fastmath=FAST, nogil=True)
+# nogil: a compiled step lets other Python threads (the recorder) run meanwhile.
+# no_cfunc_wrapper: no C-callable copy of each function (nothing here takes a
+# kernel's address); building one for every kernel and callee costs a first run time.
+FLAGS = dict(cache=True, error_model="numpy", _nrt=False, fastmath=FAST, nogil=True, no_cfunc_wrapper=True)
 # below this, a step is too short for threads to pay (their wake-up is microseconds)
 PARALLEL_MIN_VERTS = 500
 # points per chunk of the passes that sum over the points: long enough to
@@ -216,11 +218,12 @@ def _our_cache():
 
 
 def jit(fn=None, **flags):
-    """`numba.njit(cache=True, **flags)` caching into `CACHE_DIR`; for compiled
-    helpers outside the step (they keep numba's default flags)."""
+    """`numba.njit(cache=True, **flags)` caching into `CACHE_DIR`, without the C-callable
+    copy (`FLAGS`); for compiled helpers outside the step (they keep numba's default
+    arithmetic flags)."""
     def wrap(f):
         with _our_cache():
-            return njit(cache=True, **flags)(f)
+            return njit(cache=True, no_cfunc_wrapper=True, **flags)(f)
     return wrap if fn is None else wrap(fn)
 
 

@@ -211,7 +211,15 @@ def schedule_eval(sched, row, t, out):
         for c in range(3):
             out[c] = sched.tab_v[row, n - 1, c]
         return
-    k = np.searchsorted(tt[:n], t) - 1
+    # k: the last table time below t (np.searchsorted's answer, less one), by bisection
+    # here: numba's generic searchsorted would add its own compiling to a first run
+    k, hi = 0, n - 1  # tt[k] < t <= tt[hi]
+    while hi - k > 1:
+        mid = (k + hi) // 2
+        if tt[mid] < t:
+            k = mid
+        else:
+            hi = mid
     w = (t - tt[k]) / (tt[k + 1] - tt[k])
     for c in range(3):
         out[c] = (1.0 - w) * sched.tab_v[row, k, c] + w * sched.tab_v[row, k + 1, c]

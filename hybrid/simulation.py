@@ -21,7 +21,7 @@ from .implicit import IMPLICIT_NOT_CONVERGED, Info
 from .model import TERMS, Model
 from .step import (DIVERGED_NONFINITE, OK, S_MAXDISP, S_PHI, S_PRESSURE, S_TIME, VOLUME_FAILED, Frames,
                    kinetic_energy_of, membrane_advance, membrane_forces, new_state, run_membrane,
-                   run_membrane_frames, step_par)
+                   run_membrane_frames, advance_switches, force_switches, step_switches)
 
 __all__ = ["Simulation"]
 
@@ -52,6 +52,7 @@ class Simulation:
         self.builds = BuildChoice(model.arrays.parallel, build)
         # the model's arrays with each build's flag: what the compiled calls take
         self._arrays = {p: model.arrays._replace(parallel=p) for p in (False, True)}
+        self._piece_frame: Frames | None = None  # `_run_piece`'s scratch frame
         self.rigid = None
         if model.rigid is not None:
             from .coupling import Coupling  # imports mujoco only for rigid scenes
@@ -182,8 +183,8 @@ class Simulation:
             t = float(s.scal[S_TIME])
             self._python_schedules(t)
             if self.rigid is None:
-                membrane_forces(m, s, t, step_par(m))
-                code = membrane_advance(m, s, t, self.steps_done, step_par(m))
+                membrane_forces(m, s, t, *force_switches(m))
+                code = membrane_advance(m, s, t, self.steps_done, *advance_switches(m))
             else:
                 code = self.rigid.step(s, t, self.steps_done, m)
             if code != OK:
@@ -196,7 +197,7 @@ class Simulation:
         """nstep steps in one compiled call with these arrays (the build their flag
         says); the steps done."""
         if self.rigid is None:
-            return run_membrane(arrays, self.state, nstep, self.steps_done, step_par(arrays))
+            return run_membrane(arrays, self.state, nstep, self.steps_done, *step_switches(arrays))
         return self.rigid.run(self.state, nstep, self.steps_done, arrays)  # the whole coupled loop (hybrid.coupling)
 
     @property
@@ -233,7 +234,7 @@ class Simulation:
             par, k = self.builds.chunk(int(stops[-1]) - self.steps_done)
             t0 = time.perf_counter()
             if k < int(stops[i]) - self.steps_done:  # a piece short of the next frame
-                done = self._run(self._arrays[par], k)
+                done = self._run_piece(self._arrays[par], k)
                 self.builds.record(par, done, time.perf_counter() - t0)
                 self.steps_done += done
                 if done < k:
@@ -249,6 +250,16 @@ class Simulation:
             self.steps_done = int(stops[j - 1])
             i = j
 
+    def _run_piece(self, arrays, nstep: int) -> int:
+        """nstep steps by the frames' compiled call (its frame into a scratch buffer), so
+        that stepping by frames compiles that one loop; the steps done."""
+        if self._piece_frame is None:
+            self._piece_frame = self.frames_buffer(1)
+        stop = np.array([self.steps_done + nstep], np.int64)
+        if self._run_frames(arrays, stop, self._piece_frame, 0):
+            return nstep
+        return int(self.state.status[1]) - self.steps_done  # the failing step's index
+
     def _run_frames(self, arrays, stops: np.ndarray, frames: Frames, first: int) -> int:
         """Step to each of stops in one compiled call, capturing into frames from
         index `first` on; the frames captured."""
@@ -258,7 +269,7 @@ class Simulation:
             frames.body_pos, frames.body_quat = frames.body_pos[first:], frames.body_quat[first:]
         if self.rigid is None:
             return run_membrane_frames(arrays, self.state, stops, self.steps_done, frames.pos, frames.scal,
-                                       step_par(arrays))
+                                       *step_switches(arrays))
         return self.rigid.run_frames(self.state, stops, self.steps_done, frames, arrays)
 
     def _python_schedules(self, t: float) -> None:

@@ -43,7 +43,8 @@ from .terms.passive_fibres import PassiveFibres, add_passive_fibres
 from .implicit import EXPLICIT, implicit_pressure, implicit_step, implicit_work
 
 __all__ = ["Scal", "StepStatus", "FrameColumn", "MembraneState", "new_state", "membrane_forces", "membrane_advance", "run_membrane",
-           "run_membrane_frames", "capture_frame", "kinetic_energy_of", "Frames", "step_par"]
+           "run_membrane_frames", "capture_frame", "kinetic_energy_of", "Frames", "step_par", "FORCE_SWITCHES",
+           "ADVANCE_SWITCHES", "force_switches", "advance_switches", "step_switches"]
 
 # each term's flag in MembraneArrays.term_on and its call counter
 (T_GRAVITY, T_APPLIED, T_ATTRACTION, T_DAMPING, T_SHAPE_MEMORY, T_MASS_SPRING, T_MUSCLE, T_SOFT_VOLUME,
@@ -123,6 +124,46 @@ def step_par(arrays: MembraneArrays):
     return True if arrays.parallel else None
 
 
+# The step kernels' switches, after `par`: one per term kernel (or pass) that a
+# model may lack, in the order of the kernels' parameters. A switch is None when
+# the model lacks it: numba then prunes its branch when the kernel compiles, so
+# that a first run compiles only the kernels its scene uses. True (the default,
+# as when a kernel is called without its switches) compiles the branch and the
+# model's flag (`term_on`) decides at run time: the same arithmetic either way.
+FORCE_SWITCHES = {"shape_memory": T_SHAPE_MEMORY, "membrane": T_MEMBRANE, "applied": T_APPLIED,
+                  "attraction": T_ATTRACTION, "mass_spring": T_MASS_SPRING, "muscle": T_MUSCLE,
+                  "soft_volume": T_SOFT_VOLUME, "pressure": T_PRESSURE, "fibres": T_MUSCLE_FIBRES,
+                  "passive": T_PASSIVE_FIBRES}
+# shake: the volume projection's direction where the step starts (`volume_shake`)
+ADVANCE_SWITCHES = {"prescribed": T_PRESCRIBED, "keep_in": T_KEEP_IN, "volume": T_VOLUME, "shake": T_VOLUME}
+
+
+def _switches(arrays: MembraneArrays, names: dict) -> tuple:
+    """One switch per name: True when the model has the term (and, for shake, projects
+    along the step's start), else None."""
+    on = arrays.term_on.tolist()
+    return tuple(True if on[i] and (name != "shake" or arrays.volume_shake) else None for name, i in names.items())
+
+
+def force_switches(arrays: MembraneArrays) -> tuple:
+    """`membrane_forces`' arguments after (m, s, t) for a model: (par, then one per
+    `FORCE_SWITCHES`, None for a term the model lacks)."""
+    return (step_par(arrays),) + _switches(arrays, FORCE_SWITCHES)
+
+
+def advance_switches(arrays: MembraneArrays) -> tuple:
+    """`membrane_advance`'s arguments after (m, s, t, step) for a model: (par, then
+    one per `ADVANCE_SWITCHES`)."""
+    return (step_par(arrays),) + _switches(arrays, ADVANCE_SWITCHES)
+
+
+def step_switches(arrays: MembraneArrays) -> tuple:
+    """The whole loops' (`run_membrane`, `hybrid.coupling.run_coupled`, their frame
+    versions) last arguments for a model: `force_switches`, then `advance_switches`
+    without its `par`."""
+    return force_switches(arrays) + _switches(arrays, ADVANCE_SWITCHES)
+
+
 @kernel
 def eval_schedules(sched, t, out):
     """All compiled schedules at time t into out (nsched, 3); Python ones are set by the caller."""
@@ -132,47 +173,50 @@ def eval_schedules(sched, t, out):
 
 
 @kernel(inline="always")
-def membrane_forces(m, s, t, par=True):
+def membrane_forces(m, s, t, par=True, shape_memory=True, membrane=True, applied=True, attraction=True,
+                    mass_spring=True, muscle=True, soft_volume=True, pressure=True, fibres=True, passive=True):
     """Step phase 1: the force of every term the model has, at time t. `par`: None
     when the model never runs the multi-core build (`serial_only`), which is then
-    not even compiled; else m.parallel chooses at run time.
+    not even compiled; else m.parallel chooses at run time. The switches after it
+    (`force_switches`): None for a term the model lacks, whose kernel is then not
+    compiled; True: its flag in m.term_on decides.
     # Model: m (MembraneArrays)   # Data in: s.vert_pos, s.vert_vel
     # Data out: s.vert_force, s.sched_val, s.term_calls (and pressure for soft volume)
     """
     eval_schedules(m.sched, t, s.sched_val)
     on = m.term_on
-    _pointwise_forces(m, s, par)
-    if on[T_MEMBRANE]:
+    _pointwise_forces(m, s, par, shape_memory)
+    if membrane is not None and on[T_MEMBRANE]:
         if par is not None and m.parallel:
             membrane_faces_parallel(m.mem_vert, m.mem_par, m.kv_on, s.vert_pos, s.vert_vel, s.face_force)
             membrane_gather_parallel(m.mvf_ptr, m.mvf_slot, s.face_force, s.vert_force)
         else:
             add_membrane_serial(m.mem_vert, m.mem_par, m.kv_on, s.vert_pos, s.vert_vel, s.vert_force)
         s.term_calls[T_MEMBRANE] += 1
-    if on[T_APPLIED]:
+    if applied is not None and on[T_APPLIED]:
         add_applied(m.app_vert, m.app_sched, s.sched_val, s.vert_force)
         s.term_calls[T_APPLIED] += 1
-    if on[T_ATTRACTION]:
+    if attraction is not None and on[T_ATTRACTION]:
         add_attraction(m.att_vert, m.att_stiff, m.att_target, m.att_sched, s.sched_val, s.vert_pos,
                        s.vert_force)
         s.term_calls[T_ATTRACTION] += 1
-    if on[T_MASS_SPRING]:
+    if mass_spring is not None and on[T_MASS_SPRING]:
         add_mass_spring(m.spring_vert, m.spring_stiff, m.spring_rest, s.vert_pos, s.vert_force)
         s.term_calls[T_MASS_SPRING] += 1
-    if on[T_MUSCLE]:
+    if muscle is not None and on[T_MUSCLE]:
         add_muscle(m.mus_vert, m.mus_nbr, m.mus_sched, s.sched_val, s.vert_pos, s.vert_force)
         s.term_calls[T_MUSCLE] += 1
-    if on[T_SOFT_VOLUME]:
+    if soft_volume is not None and on[T_SOFT_VOLUME]:
         s.scal[S_PRESSURE] = soft_volume_force(m.ring_ptr, m.ring_vert, m.vol0, m.soft_stiff, m.soft_bulk,
                                                s.vert_pos, s.grad, s.cubic, s.vert_acc, s.vert_force)
         s.term_calls[T_SOFT_VOLUME] += 1
-    if on[T_PRESSURE]:
+    if pressure is not None and on[T_PRESSURE]:
         add_pressure(m.ring_ptr, m.ring_vert, m.pres_sched, s.sched_val, s.vert_pos, s.vert_force)
         s.term_calls[T_PRESSURE] += 1
-    if on[T_MUSCLE_FIBRES]:
+    if fibres is not None and on[T_MUSCLE_FIBRES]:
         add_muscle_fibres(m.fib_edge, m.fib_share, m.fib_sched, s.sched_val, s.vert_pos, s.vert_force)
         s.term_calls[T_MUSCLE_FIBRES] += 1
-    if on[T_PASSIVE_FIBRES]:
+    if passive is not None and on[T_PASSIVE_FIBRES]:
         add_passive_fibres(m.pf_vert, m.pf_par, s.vert_pos, s.vert_force)
         s.term_calls[T_PASSIVE_FIBRES] += 1
 
@@ -221,20 +265,20 @@ _integrate_serial, _integrate_parallel = kernel_twin(_integrate)
 
 
 @kernel(inline="always")
-def _pointwise_forces(m, s, par):
+def _pointwise_forces(m, s, par, shape_memory):
     """Step phase 1 for gravity, damping and shape memory: the shape memory's
-    ring gathers, then the fused pass `hybrid.terms.pointwise.point_forces`
-    (serial or parallel build)."""
+    ring gathers (compiled unless `shape_memory` is None), then the fused pass
+    `hybrid.terms.pointwise.point_forces` (serial or parallel build)."""
     on = m.term_on
     sm = on[T_SHAPE_MEMORY] != 0
     grav, damp = on[T_GRAVITY] != 0, on[T_DAMPING] != 0
     if par is not None and m.parallel:
-        if sm:
+        if shape_memory is not None and sm:
             shape_memory_frames_parallel(m.sm_vert, m.ring_ptr, m.ring_vert, m.ring_closed, s.vert_pos, s.sm_sums)
         point_forces_parallel(m.vert_free, m.vert_mass, m.accel, grav, m.damp_coef, damp, m.sm_vert, m.sm_stiff,
                                m.sm_coef, s.sm_sums, sm, s.vert_pos, s.vert_vel, s.vert_force)
     else:
-        if sm:
+        if shape_memory is not None and sm:
             shape_memory_frames(m.sm_vert, m.ring_ptr, m.ring_vert, m.ring_closed, s.vert_pos, s.sm_sums)
         point_forces_serial(m.vert_free, m.vert_mass, m.accel, grav, m.damp_coef, damp, m.sm_vert, m.sm_stiff,
                              m.sm_coef, s.sm_sums, sm, s.vert_pos, s.vert_vel, s.vert_force)
@@ -244,13 +288,14 @@ def _pointwise_forces(m, s, par):
 
 
 @kernel(inline="always")
-def membrane_advance(m, s, t, step, par=True):
-    """Step phases 2-5: integrate, project, check. Returns a status code. `par`: as
-    `membrane_forces`.
+def membrane_advance(m, s, t, step, par=True, prescribed=True, keep_in=True, volume=True, shake=True):
+    """Step phases 2-5: integrate, project, check. Returns a status code. `par` and
+    the switches after it (`advance_switches`): as `membrane_forces`.
     # Model: m   # Data in: s.vert_force   # Data out: s.vert_pos, s.vert_vel, s.scal, s.status
     """
     pos, vel = s.vert_pos, s.vert_vel
-    if m.volume_shake and m.term_on[T_VOLUME]:  # the projection's direction where the step starts
+    # the projection's direction where the step starts
+    if shake is not None and m.volume_shake and m.term_on[T_VOLUME]:
         if par is not None and m.parallel:
             volume_direction_parallel(m.ring_ptr, m.ring_vert, m.vert_weight, pos, s.dirn)
         else:
@@ -263,14 +308,14 @@ def membrane_advance(m, s, t, step, par=True):
             _integrate_serial(m.vert_free, m.vert_mass, m.integrator == 0, m.dt, s.vert_force, pos, vel, s.vert_acc)
     elif code != OK:
         return code
-    code = _after_integration(m, s, t, step, par)
-    if code == OK and m.term_on[T_VOLUME]:  # implicit Euler's solve carried part of the pressure
+    code = _after_integration(m, s, t, step, par, prescribed, keep_in, volume)
+    if code == OK and volume is not None and m.term_on[T_VOLUME]:  # implicit Euler's solve carried part of the pressure
         s.scal[S_PRESSURE] = implicit_pressure(s.implicit, s.scal[S_PRESSURE])
     return code
 
 
 @kernel(inline="always")
-def _after_integration(m, s, t, step, par):
+def _after_integration(m, s, t, step, par, prescribed, keep_in, volume):
     """Step phases 3-5 after `_integrate`: check, local constraints, volume."""
     h = m.dt
     pos, vel = s.vert_pos, s.vert_vel
@@ -288,7 +333,7 @@ def _after_integration(m, s, t, step, par):
     s.scal[S_KE] = 0.5 * ke
     s.scal[S_MAXDISP] = math.sqrt(dmax)
     if not (dsum < np.inf and ke < np.inf):
-        return _fail(s, DIVERGED_NONFINITE, step, _first_nonfinite(pos, vel, worst))
+        return _fail(s, DIVERGED_NONFINITE, step, _first_nonfinite(pos, vel, np.int64(worst)))
     # runaway: a speed above max_speed (the volume projection can keep an unstable
     # run bounded but fast). Not the body's size: a small body falling freely
     # travels its size in a step while nothing is unstable, and an unstable step
@@ -297,14 +342,14 @@ def _after_integration(m, s, t, step, par):
     if dmax > lim * lim:
         return _fail(s, DIVERGED_RUNAWAY, step, worst)
     on = m.term_on
-    if on[T_PRESCRIBED]:
+    if prescribed is not None and on[T_PRESCRIBED]:
         eval_schedules(m.sched, t + h, s.sched_next)
         apply_prescribed(m.pre_vert, m.pre_rest, m.pre_sched, s.sched_next, h, pos, vel)
         s.term_calls[T_PRESCRIBED] += 1
-    if on[T_KEEP_IN]:
+    if keep_in is not None and on[T_KEEP_IN]:
         apply_keep_in(m.kin_vert, m.kin_shape, m.shape_kind, m.shape_par, pos, vel)
         s.term_calls[T_KEEP_IN] += 1
-    if on[T_VOLUME]:
+    if volume is not None and on[T_VOLUME]:
         if par is None:  # a None argument: the multi-core build is not compiled
             phi, st = project_volume(m.ring_ptr, m.ring_vert, m.vol0, m.vert_weight, h, pos, vel,
                                      s.grad, s.dirn, s.cubic, s.vert_acc, None, m.volume_shake)
@@ -316,13 +361,13 @@ def _after_integration(m, s, t, step, par):
             s.status[3] = st
             return _fail(s, VOLUME_FAILED, step, 0)
         if not (abs(phi) < np.inf):
-            return _fail(s, DIVERGED_NONFINITE, step, _first_nonfinite(pos, vel, worst))
+            return _fail(s, DIVERGED_NONFINITE, step, _first_nonfinite(pos, vel, np.int64(worst)))
         s.scal[S_PHI] = phi
         s.scal[S_PRESSURE] = phi / (h * h)
     return OK
 
 
-@kernel
+@kernel(inline="always")
 def _fail(s, code, step, vert):
     s.status[0] = code
     s.status[1] = step
@@ -342,14 +387,18 @@ def _first_nonfinite(pos, vel, fallback):
 
 
 @kernel
-def run_membrane(m, s, nstep, step0, par=True):
+def run_membrane(m, s, nstep, step0, par=True, shape_memory=True, membrane=True, applied=True, attraction=True,
+                 mass_spring=True, muscle=True, soft_volume=True, pressure=True, fibres=True, passive=True,
+                 prescribed=True,
+                 keep_in=True, volume=True, shake=True):
     """nstep whole membrane steps; time advances as t0 + k h. Returns steps done.
-    `par`: as `membrane_forces` (`serial_only`)."""
+    `par` and the switches (`step_switches`): as `membrane_forces`, `membrane_advance`."""
     t0 = s.scal[S_TIME]
     for k in range(nstep):
         t = t0 + k * m.dt
-        membrane_forces(m, s, t, par)
-        if membrane_advance(m, s, t, step0 + k, par) != OK:
+        membrane_forces(m, s, t, par, shape_memory, membrane, applied, attraction, mass_spring, muscle,
+                        soft_volume, pressure, fibres, passive)
+        if membrane_advance(m, s, t, step0 + k, par, prescribed, keep_in, volume, shake) != OK:
             return k
         s.scal[S_TIME] = t0 + (k + 1) * m.dt
     return nstep
@@ -366,7 +415,7 @@ class FrameColumn(IntEnum):
 F_TIME, F_VOLUME, F_PRESSURE, F_KE = FrameColumn
 
 
-@kernel
+@kernel(inline="always")
 def kinetic_energy_of(m, s):
     """0.5 sum m v^2 over the integrated points (J)."""
     ke = 0.0
@@ -377,7 +426,7 @@ def kinetic_energy_of(m, s):
     return 0.5 * ke
 
 
-@kernel
+@kernel(inline="always")
 def capture_frame(m, s, pos_out, scal_out):
     """The state's positions and numbers (F_* columns) into one frame's rows."""
     pos = s.vert_pos
@@ -391,16 +440,27 @@ def capture_frame(m, s, pos_out, scal_out):
 
 
 @kernel
-def run_membrane_frames(m, s, stops, step0, frame_pos, frame_scal, par=True):
+def run_membrane_frames(m, s, stops, step0, frame_pos, frame_scal, par=True, shape_memory=True, membrane=True,
+                        applied=True, attraction=True, mass_spring=True, muscle=True, soft_volume=True,
+                        pressure=True, fibres=True, passive=True, prescribed=True, keep_in=True, volume=True,
+                        shake=True):
     """Step to each step index of stops, capturing a frame at each; returns the
-    frames captured (fewer than stops when a step fails; its status is in s.status)."""
+    frames captured (fewer than stops when a step fails; its status is in s.status).
+    A stop at the current step captures it without stepping. `par` and the
+    switches: as `run_membrane`, whose loop this repeats rather than calls: a run by
+    frames then compiles one loop (a callee would compile, and be optimised, apart).
+    Time advances as in `run_membrane` called from each stop."""
     done = step0
     for i in range(stops.shape[0]):
-        n = stops[i] - done
-        k = run_membrane(m, s, n, done, par)
-        done += k
-        if k < n:
-            return i
+        t0 = s.scal[S_TIME]
+        for k in range(stops[i] - done):
+            t = t0 + k * m.dt
+            membrane_forces(m, s, t, par, shape_memory, membrane, applied, attraction, mass_spring, muscle,
+                            soft_volume, pressure, fibres, passive)
+            if membrane_advance(m, s, t, done + k, par, prescribed, keep_in, volume, shake) != OK:
+                return i
+            s.scal[S_TIME] = t0 + (k + 1) * m.dt
+        done = stops[i]
         capture_frame(m, s, frame_pos[i], frame_scal[i])
     return stops.shape[0]
 

@@ -178,11 +178,25 @@ def test_crossing_faces_finds_the_crossings_and_nothing_on_a_sphere():
     assert count == 1 and pairs.tolist() == [[0, 1]]
 
 
+def test_crossing_faces_as_plain_python_finds_what_the_compiled_test_finds(monkeypatch):
+    """Issue 15: a small surface is tested as plain Python (a first run then compiles
+    nothing for it); both ways find the same pairs."""
+    from hybrid.mesh import intersect
+
+    mesh = _pushed_through()
+    found = []
+    for plain_max_faces in (0, mesh.nface):  # compiled, then plain Python
+        monkeypatch.setattr(intersect, "PLAIN_MAX_FACES", plain_max_faces)
+        pairs, count = crossing_faces(mesh.vert_pos, mesh.face_vert)
+        found.append((pairs.tolist(), count))
+    assert found[0] == found[1] and found[0][1] == 12
+
+
 def test_self_intersection_test_of_a_40962_point_icosphere_takes_under_a_second():
     """Item 8: the grid broad phase keeps the test linear: a 40,962-point
     icosphere (81,920 faces) costs about half a second on a busy core."""
     sphere = icosphere(6)
-    crossing_faces(icosphere(1).vert_pos, icosphere(1).face_vert)  # compiled once
+    crossing_faces(icosphere(3).vert_pos, icosphere(3).face_vert)  # compiled once (above PLAIN_MAX_FACES)
     start = time.perf_counter()
     assert crossing_faces(sphere.vert_pos, sphere.face_vert)[1] == 0
     assert time.perf_counter() - start < 1.0

@@ -4,6 +4,7 @@ nothing. A sweep runs its first task alone, so that the others load what it comp
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import subprocess
@@ -47,3 +48,49 @@ def test_a_sweeps_first_task_ends_before_the_others_start():
     assert [r[0] for r in res] == list(range(5))
     assert res[0][2] <= min(r[1] for r in res[1:])
     assert os.getpid() not in {r[3] for r in res}  # every task in a worker
+
+
+_COMPILED = """
+import json, sys
+import hybrid
+from hybrid import coupling, step
+from hybrid.cli import main
+from hybrid.terms import fibres, local, membrane, muscle, shape_memory, springs, volume
+code = main(["run", "membrane_demo", "--duration", "0.01", "--no-record", "--out", sys.argv[1]])
+kernels = {  # each switch of the step: the kernels it guards
+    "shape_memory": [shape_memory.shape_memory_frames, shape_memory.shape_memory_frames_parallel],
+    "membrane": [membrane.add_membrane_serial, membrane.membrane_faces_parallel, membrane.membrane_gather_parallel],
+    "applied": [springs.add_applied], "attraction": [springs.add_attraction], "mass_spring": [springs.add_mass_spring],
+    "muscle": [muscle.add_muscle], "soft_volume": [volume.soft_volume_force], "pressure": [volume.add_pressure],
+    "fibres": [fibres.add_muscle_fibres], "prescribed": [local.apply_prescribed], "keep_in": [local.apply_keep_in],
+    "volume": [volume.project_volume],
+    "shake": [volume.volume_direction_serial, volume.volume_direction_parallel],
+}
+names = list(step.FORCE_SWITCHES) + list(step.ADVANCE_SWITCHES)
+switches = step.step_switches(hybrid.load("membrane_demo").model.arrays)[1:]
+print(json.dumps({"code": code, "loops": {k.py_func.__name__: len(k.signatures) for k in
+                  (step.run_membrane, step.run_membrane_frames, coupling.run_coupled)},
+                  "kernels": {name: [len(k.signatures) for k in kernels[name]] for name in names},
+                  "on": {name: on is not None for name, on in zip(names, switches)}}))
+"""
+
+
+def test_a_first_run_compiles_only_the_kernels_its_scene_uses(tmp_path):
+    """Issue 15: on an empty compile cache, `hybrid run` compiles the kernels of the
+    terms its scene has and no other (their branches are pruned when the step
+    compiles: `hybrid.step.step_switches`), and one step loop: the frames' loop."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT), NUMBA_CACHE_DIR=str(tmp_path / "cache"))
+    proc = subprocess.run([sys.executable, "-c", _COMPILED, str(tmp_path / "out")], capture_output=True, text=True,
+                          env=env, timeout=900)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    got = json.loads(proc.stdout.splitlines()[-1])
+    assert got["code"] == 0
+    assert got["loops"] == {"run_membrane": 0, "run_membrane_frames": 1, "run_coupled": 0}
+    on = got["on"]
+    # membrane_demo: shape memory, muscle, nailed points and the volume constraint; no other term
+    assert {name for name, used in on.items() if used} == {"shape_memory", "muscle", "volume"}
+    for name, counts in got["kernels"].items():
+        if on[name]:  # the serial build of a small scene, not the parallel twins
+            assert counts[0] == 1 and sum(counts) == 1, (name, counts)
+        else:
+            assert sum(counts) == 0, (name, counts)

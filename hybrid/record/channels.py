@@ -10,7 +10,7 @@ import zlib
 import numpy as np
 
 from .encoder import (MAX_DEPTH, OP_BEGIN, OP_CLOUD, OP_CONST, OP_DOUBLE, OP_END, OP_IF_FINITE, OP_POINTS,
-                      OP_STAMP, POINT3_BYTES, RECORD_HEAD, _encode_frames, _load_encoder, _tag)
+                      OP_STAMP, POINT3_BYTES, RECORD_HEAD, _load_encoder, _tag, encode_frames)
 from .mcap_writer import _McapWriter
 from .schemas import (GEOM_BOX, GEOM_CAPSULE, GEOM_CYLINDER, GEOM_ELLIPSOID, GEOM_SPHERE, SCALAR_CHANNELS,
                       _schemas, body_geoms, region_colours)
@@ -173,7 +173,7 @@ class _FrameWriter:
             program(channel("/rigid/transforms", "foxglove.FrameTransforms"), 1, ops)
             w.message(channel("/rigid/geoms", "foxglove.SceneUpdate"), 0, _geom_scene(plan["geoms"]))
             w.flush_chunk()
-        self._const = np.frombuffer(bytes(const), np.uint8)
+        self._const = np.frombuffer(bytearray(const), np.uint8)  # writable: the type of the cloud's rows
         self._prog = np.array(prog, np.int64).reshape(-1, 3)
         self._programs = np.array(programs, np.int64)
         self._size = np.zeros(len(prog), np.int64)
@@ -203,8 +203,8 @@ class _FrameWriter:
             self._index = np.empty((2 * nframe * len(self._programs), 3), np.int64)
         number = np.ascontiguousarray(number, "<f8")
         pos = np.ascontiguousarray(pos, "<f8")
-        k, m = _encode_frames(t_ns, number, cloud.view(np.uint8).reshape(nframe, -1), pos.reshape(nframe, -1),
-                              frame0, self._const, self._prog, self._programs, self._out, self._index, self._size)
+        k, m = encode_frames(t_ns, number, cloud.view(np.uint8).reshape(nframe, -1), pos.reshape(nframe, -1),
+                             frame0, self._const, self._prog, self._programs, self._out, self._index, self._size)
         self._writer.add_chunk(self._out[:k], self._index[:m])
 
     def close(self) -> None:

@@ -119,22 +119,22 @@ def _leaf_len(op, a, nvert, ncloud, stamp_body):  # pragma: no cover - compiled
 
 
 @jit(nogil=True)
-def _encode_frames(t_ns, number, cloud, pos, frame0, const, prog, channels, out, index,
-                   size):  # pragma: no cover - compiled
+def _encode_frames(t_ns, number, number_bits, cloud, pos_bits, frame0, const, prog, channels, out, index,
+                   size, nest):  # pragma: no cover - compiled
     """The MCAP message records of nframe frames, written into out; index[m] =
     (channel, log time ns, offset in out) of each. Returns (bytes written, messages).
 
-    t_ns (nframe,); number (nframe, nslot) the numeric slots; cloud (nframe, nbyte)
-    the point cloud bytes; pos (nframe, 3 nvert) the points' x, y, z; frame0 the run's
-    index of the first frame; channels (nchannel, 4) = (channel id, first op, end op,
-    every nth frame); size (nop,) scratch for the nested messages' lengths. Doubles
-    are written as their bits, little-endian, as protobuf does."""
-    number_bits = number.view(np.uint64)
-    pos_bits = pos.view(np.uint64)
-    nvert = pos.shape[1] // 3
+    t_ns (nframe,); number (nframe, nslot) the numeric slots, number_bits the same
+    as uint64 (their bits); cloud (nframe, nbyte) the point cloud bytes; pos_bits
+    (nframe, 3 nvert) the bits of the points' x, y, z; frame0 the run's index of the
+    first frame; channels (nchannel, 4) = (channel id, first op, end op, every nth
+    frame); size (nop,) and nest (2, MAX_DEPTH) int64 scratch for the nested messages'
+    lengths. Doubles are written as their bits, little-endian, as protobuf does. (The
+    views and the scratch come from the caller: viewing and allocating here would
+    compile numba's own functions for them, about a third of the encoder's compiling.)"""
+    nvert = pos_bits.shape[1] // 3
     ncloud = cloud.shape[1]
-    acc = np.zeros(MAX_DEPTH, np.int64)
-    opened = np.zeros(MAX_DEPTH, np.int64)
+    acc, opened = nest[0], nest[1]
     k = 0
     m = 0
     for f in range(t_ns.shape[0]):
@@ -196,20 +196,29 @@ def _encode_frames(t_ns, number, cloud, pos, frame0, const, prog, channels, out,
                 elif op == OP_CLOUD:
                     k = _put_varint(out, k, a)
                     k = _put_varint(out, k, ncloud)
-                    k = _put_bytes(out, k, cloud[f], 0, ncloud)
+                    k = _put_bytes(out, k, cloud[f], np.int64(0), ncloud)  # one compiled _put_bytes
             if k - start - RECORD_HEAD != acc[0]:  # the sizing pass and the writing pass disagree
                 raise RuntimeError("hybrid.record: a message's size differs from the size its fields were given")
             out[start] = 5  # opcode: message
-            _put_uint(out, start + 1, k - start - 9, 8)
-            _put_uint(out, start + 9, ch, 2)
-            _put_uint(out, start + 11, 0, 4)  # sequence
-            _put_uint(out, start + 15, t, 8)  # log time
-            _put_uint(out, start + 23, t, 8)  # publish time
+            # sizes as int64, not literal constants: one compiled _put_uint, not one per size
+            _put_uint(out, start + 1, k - start - 9, np.int64(8))
+            _put_uint(out, start + 9, ch, np.int64(2))
+            _put_uint(out, start + 11, np.int64(0), np.int64(4))  # sequence
+            _put_uint(out, start + 15, t, np.int64(8))  # log time
+            _put_uint(out, start + 23, t, np.int64(8))  # publish time
             index[m, 0] = ch
             index[m, 1] = t
             index[m, 2] = start
             m += 1
     return k, m
+
+
+def encode_frames(t_ns, number, cloud, pos, frame0, const, prog, channels, out, index, size):
+    """`_encode_frames` of float64 C-contiguous number (nframe, nslot) and pos
+    (nframe, 3 nvert): their bits viewed, the nesting scratch made, here. Returns
+    (bytes written, messages)."""
+    return _encode_frames(t_ns, number, number.view(np.uint64), cloud, pos.view(np.uint64), frame0, const, prog,
+                          channels, out, index, size, np.zeros((2, MAX_DEPTH), np.int64))
 
 
 def _load_encoder() -> None:
@@ -218,7 +227,7 @@ def _load_encoder() -> None:
     the run waits for it), with the argument types `_FrameWriter.write` passes."""
     if _encode_frames.signatures:
         return
-    _encode_frames(np.zeros(1, np.int64), np.zeros((1, 1)), np.zeros((1, 16), np.uint8), np.zeros((1, 3)), 0,
-                   np.frombuffer(b"\0", np.uint8), np.zeros((0, 3), np.int64), np.zeros((0, 4), np.int64),
-                   np.zeros(1, np.uint8), np.zeros((0, 3), np.int64), np.zeros(0, np.int64))
+    encode_frames(np.zeros(1, np.int64), np.zeros((1, 1)), np.zeros((1, 16), np.uint8), np.zeros((1, 3)), 0,
+                  np.zeros(1, np.uint8), np.zeros((0, 3), np.int64), np.zeros((0, 4), np.int64),
+                  np.zeros(1, np.uint8), np.zeros((0, 3), np.int64), np.zeros(0, np.int64))
 
