@@ -55,14 +55,14 @@ import json, sys
 import hybrid
 from hybrid import coupling, step
 from hybrid.cli import main
-from hybrid.terms import fibres, local, membrane, muscle, shape_memory, springs, volume
+from hybrid.terms import fibres, local, membrane, muscle, passive_fibres, shape_memory, springs, volume
 code = main(["run", "membrane_demo", "--duration", "0.01", "--no-record", "--out", sys.argv[1]])
 kernels = {  # each switch of the step: the kernels it guards
     "shape_memory": [shape_memory.shape_memory_frames, shape_memory.shape_memory_frames_parallel],
     "membrane": [membrane.add_membrane_serial, membrane.membrane_faces_parallel, membrane.membrane_gather_parallel],
     "applied": [springs.add_applied], "attraction": [springs.add_attraction], "mass_spring": [springs.add_mass_spring],
     "muscle": [muscle.add_muscle], "soft_volume": [volume.soft_volume_force], "pressure": [volume.add_pressure],
-    "fibres": [fibres.add_muscle_fibres], "prescribed": [local.apply_prescribed], "keep_in": [local.apply_keep_in],
+    "fibres": [fibres.add_muscle_fibres], "passive": [passive_fibres.add_passive_fibres], "prescribed": [local.apply_prescribed], "keep_in": [local.apply_keep_in],
     "volume": [volume.project_volume],
     "shake": [volume.volume_direction_serial, volume.volume_direction_parallel],
 }
