@@ -19,8 +19,8 @@ __all__ = ["RIGID_KEYS", "NAME_LISTS", "rigid_from_table", "rigid_to_table"]
 
 #: the keys of [rigid]: the fields of Rigid
 RIGID_KEYS = tuple(f.name for f in dataclasses.fields(Rigid))
-#: the keys that hold lists of names (bodies, or joint name patterns)
-NAME_LISTS = ("fix", "weld", "hold", "lock")
+#: the keys that hold lists of names (bodies, joint name patterns, or joint names)
+NAME_LISTS = ("fix", "weld", "hold", "lock", "load_joints")
 _KINDED = {f.name: f for f in dataclasses.fields(Rigid) if "kind" in f.metadata}
 
 
