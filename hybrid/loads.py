@@ -36,7 +36,7 @@ from .regions import select
 from .step import S_PRESSURE
 from .terms import Nailed, Volume
 
-__all__ = ["Loads", "LoadGroup", "LoadsObserver"]
+__all__ = ["Loads", "LoadGroup", "LoadsObserver", "topics"]
 
 
 class LoadGroup:
@@ -50,7 +50,7 @@ class LoadGroup:
 
     @property
     def label(self) -> str:
-        return f"{self.kind}:{self.name}"
+        return f"{self.kind}/{self.name}"
 
     def about(self) -> str:
         """The point its moment is taken about, in words."""
@@ -96,15 +96,16 @@ class Loads:
         return bool(self.groups)
 
     def channels(self) -> list[str]:
-        """The names of `sample()`'s rows: per group GROUP.force_n, GROUP.moment_n_m and
-        GROUP.moment_about.JOINT_n_m; with a volume term, iap.force_n and
-        iap.moment_about.JOINT_n_m (GROUP: "body:NAME" or "nail:NAME")."""
+        """The names of `sample()`'s rows: per group GROUP/force_n, GROUP/moment_n_m and
+        GROUP/moment_about/JOINT_n_m; under the exact volume constraint, iap/force_n and
+        iap/moment_about/JOINT_n_m (GROUP: body/NAME or nail/NAME). The recording's
+        channels are /loads/CHANNEL/x, /y, /z (`topics`)."""
         names = []
         for g in self.groups:
-            names += [f"{g.label}.force_n", f"{g.label}.moment_n_m"]
-            names += [f"{g.label}.moment_about.{j}_n_m" for j, _ in self.joints]
+            names += [f"{g.label}/force_n", f"{g.label}/moment_n_m"]
+            names += [f"{g.label}/moment_about/{j}_n_m" for j, _ in self.joints]
         if self._has_pressure():
-            names += ["iap.force_n"] + [f"iap.moment_about.{j}_n_m" for j, _ in self.joints]
+            names += ["iap/force_n"] + [f"iap/moment_about/{j}_n_m" for j, _ in self.joints]
         return names
 
     def _has_pressure(self) -> bool:
@@ -162,13 +163,19 @@ class Loads:
         """{group label or "iap": the point its moments are taken about, in words}."""
         out = {g.label: g.about() for g in self.groups}
         for name, _ in self.joints:
-            out[f"moment_about.{name}"] = f"joint {name!r}'s anchor (MuJoCo xanchor)"
+            out[f"moment_about/{name}"] = f"joint {name!r}'s anchor (MuJoCo xanchor)"
         return out
+
+
+def topics(names: list[str]) -> list[str]:
+    """The recording's topics of the channels `names`, three a channel (x, y, z)."""
+    return [f"/loads/{name}/{axis}" for name in names for axis in "xyz"]
 
 
 class LoadsObserver:
     """A `hybrid.run` observer keeping the loads' range over the run: per channel the
-    componentwise min and max and the largest norm (frames after the first step)."""
+    componentwise min and max and the largest norm (frames after the first step).
+    `current(sim)` gives the figures of sim's step, sampled once (the recorder's too)."""
 
     def __init__(self, loads: Loads):
         self.loads = loads
@@ -180,11 +187,22 @@ class LoadsObserver:
         self.t: list[float] = []
         self.rows: list[np.ndarray] = []
         self.keep = False
+        self._step = self._counted = -1
+        self._last = None
+
+    def current(self, sim) -> np.ndarray | None:
+        """The figures at sim's current step (sampled once a step), None before the first."""
+        if sim.steps_done == 0:  # no step yet: no force has been transferred
+            return None
+        if sim.steps_done != self._step:
+            self._step, self._last = sim.steps_done, self.loads.sample()
+        return self._last
 
     def __call__(self, sim, trace=None) -> None:
-        if sim.steps_done == 0:  # no step yet: no force has been transferred
+        if sim.steps_done == 0 or sim.steps_done == self._counted:
             return
-        v = self.loads.sample()
+        self._counted = sim.steps_done
+        v = self.current(sim)
         np.minimum(self.lo, v, out=self.lo)
         np.maximum(self.hi, v, out=self.hi)
         np.maximum(self.norm_max, np.linalg.norm(v, axis=1), out=self.norm_max)

@@ -305,7 +305,7 @@ def _count_stops(nstep: int, periods, extra) -> int:
 
 
 def run(sim: Simulation, duration_s: float, *, frame_dt_s: float = 0.01, progress: bool = False,
-        observers=(), trace_spill=None, stop=None, provenance: dict | None = None, loads=True) -> dict:
+        observers=(), trace_spill=None, stop=None, provenance: dict | None = None, loads=False) -> dict:
     """Run `sim` for `duration_s`; returns `{"summary": dict, "trace": Trace}`, the
     summary one level down: `run(sim, 4.0)["summary"]["apex_descent_mm"]`
     (docs/metrics.md defines every key of both).
@@ -324,9 +324,10 @@ def run(sim: Simulation, duration_s: float, *, frame_dt_s: float = 0.01, progres
     handler can set it without breaking a call in the middle). `provenance`: the
     summary's "provenance" table (`hybrid.provenance.run_provenance`; by default
     made here, without the command line's overrides and removed terms). `loads`: True
-    (the default) to give the membrane's loads on the skeleton (`hybrid.loads`) in the
-    summary's "loads" for a scene with linked bodies or nailed regions (the run then
-    steps frame by frame), False not to, or a `hybrid.loads.LoadsObserver` to fill.
+    to give the membrane's loads on the skeleton (`hybrid.loads`; `hybrid run` does) in
+    the summary's "loads" for a scene with linked bodies or nailed regions (the run
+    then steps frame by frame; a recorder's `loads`, when an observer has one, is
+    used), or a `hybrid.loads.LoadsObserver` to fill; False (the default) not to.
 
     The summary (README, "Outputs and metrics"): scene, status, steps, times; the
     top-level metrics of earlier versions; "metrics", {series: {"min", "max",
@@ -375,7 +376,7 @@ def run(sim: Simulation, duration_s: float, *, frame_dt_s: float = 0.01, progres
     error = interrupted = None
     batch_observers = [o for o in observers if hasattr(o, "frames")]
     per_frame = [o for o in observers if not hasattr(o, "frames")]
-    loads = _loads_observer(sim, loads)
+    loads = _loads_observer(sim, loads, observers)
     if loads is not None:  # read from the state after each frame's step: frame by frame
         per_frame.insert(0, loads)
     batched = sim.can_step_frames and not per_frame
@@ -485,12 +486,16 @@ def run(sim: Simulation, duration_s: float, *, frame_dt_s: float = 0.01, progres
     return result
 
 
-def _loads_observer(sim: Simulation, loads):
-    """The run's loads observer (`run`'s `loads`), or None."""
-    if loads is False or loads is None:
-        return None
+def _loads_observer(sim: Simulation, loads, observers):
+    """The run's loads observer (`run`'s `loads`; a recorder's own, so that both read
+    the same figures), or None."""
     if isinstance(loads, LoadsObserver):
         return loads
+    if not loads:
+        return None
+    for obs in observers:
+        if isinstance(getattr(obs, "loads", None), LoadsObserver):
+            return obs.loads
     found = Loads(sim)
     return LoadsObserver(found) if found else None
 

@@ -36,7 +36,7 @@ def test_each_body_receives_the_force_of_its_linked_points(trunk):
     extra = trunk.rigid.link_extra_force()
     total = np.zeros(3)
     for g in bodies:
-        f = v[names.index(f"body:{g.name}.force_n")]
+        f = v[names.index(f"body/{g.name}/force_n")]
         # what MuJoCo applied to the body (its xfrc_applied), less the linked points' weight correction
         applied = xfrc[g.body_id, :3] - extra[g.rows].sum(axis=0)
         assert np.abs(f - applied).max() <= 1e-12 * max(1.0, np.abs(applied).max())
@@ -47,10 +47,10 @@ def test_each_body_receives_the_force_of_its_linked_points(trunk):
     assert np.abs(total + (-sent).sum(axis=0)).max() <= 1e-12 * np.abs(sent).sum()
     # the moment about the hinge differs from that about the body's origin by (origin - anchor) x F
     for g in bodies:
-        f = v[names.index(f"body:{g.name}.force_n")]
-        m_origin = v[names.index(f"body:{g.name}.moment_n_m")]
+        f = v[names.index(f"body/{g.name}/force_n")]
+        m_origin = v[names.index(f"body/{g.name}/moment_n_m")]
         for j, (jname, jid) in enumerate(loads.joints):
-            m_joint = v[names.index(f"body:{g.name}.moment_about.{jname}_n_m")]
+            m_joint = v[names.index(f"body/{g.name}/moment_about/{jname}_n_m")]
             shift = np.cross(trunk.mj_data.xpos[g.body_id] - trunk.mj_data.xanchor[jid], f)
             assert np.abs(m_joint - (m_origin + shift)).max() <= 1e-12 * max(1e-3, np.abs(m_joint).max())
 
@@ -67,7 +67,7 @@ def test_iap_moment_is_r_cross_p_grad_v_about_the_anchor(trunk):
     for jname, jid in loads.joints:
         a = trunk.mj_data.xanchor[jid]
         want = sum(np.cross(pos[i] - a, p * grad[i]) for i in held)
-        assert np.abs(v[names.index(f"iap.moment_about.{jname}_n_m")] - want).max() <= 1e-12 * np.abs(want).max()
+        assert np.abs(v[names.index(f"iap/moment_about/{jname}_n_m")] - want).max() <= 1e-12 * np.abs(want).max()
     # over the whole closed surface the pressure has no net force nor moment, about any point
     f_all = p * grad
     for c in (np.zeros(3), np.array([0.3, -0.2, 0.5])):
@@ -76,15 +76,15 @@ def test_iap_moment_is_r_cross_p_grad_v_about_the_anchor(trunk):
 
 def test_a_run_gives_the_loads_range_in_its_summary(tmp_path):
     sim = hybrid.load("breathing", overrides=[f"rigid.load_joints={HINGES}"])
-    s = run(sim, 0.1)["summary"]["loads"]
-    assert s["about"]["body:rib_left"].startswith("the body's origin")
-    assert "moment_about.rib_left_hinge" in s["about"]
-    for key in ("body:rib_left.force_n", "nail:spine.force_n", "nail:pelvis.moment_n_m",
-                "iap.moment_about.rib_right_hinge_n_m"):
+    s = run(sim, 0.1, loads=True)["summary"]["loads"]
+    assert s["about"]["body/rib_left"].startswith("the body's origin")
+    assert "moment_about/rib_left_hinge" in s["about"]
+    for key in ("body/rib_left/force_n", "nail/spine/force_n", "nail/pelvis/moment_n_m",
+                "iap/moment_about/rib_right_hinge_n_m"):
         assert np.all(np.array(s[key]["min"]) <= np.array(s[key]["max"]))
         assert s[key]["norm_max"] > 0.0
     # not asked for: no loads
-    assert "loads" not in run(hybrid.load("breathing"), 0.01, loads=False)["summary"]
+    assert "loads" not in run(hybrid.load("breathing"), 0.01)["summary"]
 
 
 def test_an_unknown_load_joint_is_refused_naming_close_ones():
@@ -111,7 +111,7 @@ def test_nail_reactions_balance_the_pressure_of_a_static_membrane():
     loads = Loads(sim)
     names = loads.channels()
     v = loads.sample()
-    top, bottom = v[names.index("nail:top.force_n")], v[names.index("nail:bottom.force_n")]
+    top, bottom = v[names.index("nail/top/force_n")], v[names.index("nail/bottom/force_n")]
     # the caps pull apart (the pressure inflates the sphere between them) and the nails hold them
     assert top[2] > 1.0 and bottom[2] < -1.0
     # at rest the free membrane is in balance, its pressure load carried to the nails:
@@ -133,12 +133,55 @@ def test_offset_moment_is_r_cross_f():
     names = loads.channels()
     v = loads.sample()
     g = next(g for g in loads.groups if g.name == "top")
-    f = v[names.index("nail:top.force_n")]
-    m_c = v[names.index("nail:top.moment_n_m")]
+    f = v[names.index("nail/top/force_n")]
+    m_c = v[names.index("nail/top/moment_n_m")]
     d = np.array([0.05, -0.02, 0.3])
     pos = sim.state.vert_pos[g.vert]
-    forces = loads.point_forces()["nail:top"]
+    forces = loads.point_forces()["nail/top"]
     m_d = np.cross(pos - (g.centre_m + d), forces).sum(axis=0)
     assert np.abs(m_d - (m_c - np.cross(d, f))).max() <= 1e-12 * np.abs(m_d).max()
     # the pressure lifts the top cap: its load is mostly along +z
     assert f[2] > 0.1 and np.linalg.norm(f[:2]) < 0.01 * f[2]
+
+
+def test_the_recording_holds_the_loads_channels(tmp_path):
+    from hybrid.record import Recorder, read
+
+    sim = hybrid.load("breathing", overrides=[f"rigid.load_joints={HINGES}"])
+    with Recorder(tmp_path / "run.mcap", sim, loads=True) as rec:
+        summary = run(sim, 0.05, observers=[rec], loads=True)["summary"]
+    data = read(tmp_path / "run.mcap")
+    assert data["model"]["loads"] == rec.loads.names
+    fz = data["/loads/body/rib_left/force_n/z"]
+    assert len(fz["t"]) == 5 and fz["t"][0] == pytest.approx(0.01)  # from the first step on
+    # the last frame's values are the state's, and the summary's range covers the channel
+    last = Loads(sim).sample()[rec.loads.names.index("body/rib_left/force_n")]
+    assert fz["value"][-1] == last[2]
+    s = summary["loads"]["body/rib_left/force_n"]
+    assert s["min"][2] == fz["value"].min() and s["max"][2] == fz["value"].max()
+    assert len(data["/loads/iap/moment_about/rib_left_hinge_n_m/y"]["value"]) == 5
+    # not asked for: none
+    sim = hybrid.load("membrane_demo")
+    with Recorder(tmp_path / "demo.mcap", sim) as rec:
+        run(sim, 0.02, observers=[rec])
+    assert not [k for k in read(tmp_path / "demo.mcap") if k.startswith("/loads/")]
+
+
+def test_hybrid_run_writes_the_loads_and_refuses_an_unknown_joint_in_one_line(tmp_path, capsys):
+    import json
+
+    from hybrid.cli import main
+    from hybrid.record import read
+
+    out = tmp_path / "run"
+    assert main(["run", "breathing", "--duration", "0.03", "--out", str(out),
+                 "--set", 'rigid.load_joints=["rib_left_hinge"]']) == 0
+    s = json.loads((out / "summary.json").read_text())["loads"]
+    assert "iap/moment_about/rib_left_hinge_n_m" in s and "nail/pelvis/force_n" in s
+    assert len(read(out / "run.mcap")["/loads/nail/pelvis/force_n/z"]["value"]) == 3
+    capsys.readouterr()
+    assert main(["run", "breathing", "--duration", "0.03", "--out", str(tmp_path / "bad"),
+                 "--set", 'rigid.load_joints=["rib_lft_hinge"]']) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "rigid.load_joints[0]: no joint named 'rib_lft_hinge'" in err[0]
+    assert "close joint names: rib_left_hinge" in err[0]
