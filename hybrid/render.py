@@ -41,6 +41,11 @@ STILL_TITLES = ("a. rest", "b. largest displacement", "c. last frame")
 SHOWN_GEOM_GROUPS = (0, 1, 2)
 
 
+#: MuJoCo's mesh geom type (mjGEOM_MESH), and the radius (m) of the mark drawn for one
+GEOM_MESH = 7
+MESH_MARK_M = 0.006
+
+
 def shown_geoms(geoms: list) -> list:
     """The geoms (`hybrid.record.body_geoms` dicts) a picture draws: those of
     `SHOWN_GEOM_GROUPS` (a geom without a group, from an older recording, counts as
@@ -229,7 +234,9 @@ def _geom_segments(fr: Frames, k: int):
             cols.append(g["rgba"])
         else:
             pts.append(centre)
-            psize.append(max(g["size"][:3]))
+            # a mesh (a bone's surface) as a small mark where it is: its size is no radius,
+            # and a disc of its extent would cover the membrane
+            psize.append(MESH_MARK_M if g["type"] == GEOM_MESH else max(g["size"][:3]))
             pcols.append(g["rgba"])
     return segs, radii, cols, pts, psize, pcols
 
@@ -284,8 +291,15 @@ def _draw_panel(ax, fr: Frames, k: int, centre, half, *, membrane: bool, title: 
 
 
 def breathes(fr: Frames) -> bool:
-    """Whether the scene breathes: its muscle's stiffness varies over the frames."""
-    return fr.muscle is not None and len(fr.muscle) > 1 and float(np.ptp(fr.muscle)) > 0
+    """Whether the frames hold a breath: the muscle contracts to a peak and relaxes after
+    it (a run stopped during the first inspiration has no peak inspiration nor end of
+    expiration to name)."""
+    m = fr.muscle
+    if m is None or len(m) < 2 or not float(np.ptp(m)) > 0:
+        return False
+    tol = 1e-9 * float(np.abs(m).max())
+    top = int(np.argmax(m >= m.max() - tol))
+    return bool(m[top:].min() < m.max() - tol)
 
 
 def panel_titles(fr: Frames) -> tuple:
