@@ -3,8 +3,9 @@
 `hybrid.scenefile` calls these with its own readers of selectors, schedules and
 kind-checked fields (passed in, so that this module imports nothing of it). The
 control keys (`keyframe`, `fix`, `fix_root`, `weld`, `hold`, `lock`, `ctrl`,
-`integrator`, ...) are checked here for their form; the names they give are checked
-against the model when it is compiled (`hybrid.rigid.controls`).
+`integrator`, ...) and `load_joints` (the joints `hybrid.loads` takes moments about) are
+checked here for their form; the names they give are checked against the model when it
+is compiled (`hybrid.rigid.controls`).
 """
 
 from __future__ import annotations

@@ -185,3 +185,21 @@ def test_hybrid_run_writes_the_loads_and_refuses_an_unknown_joint_in_one_line(tm
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "rigid.load_joints[0]: no joint named 'rib_lft_hinge'" in err[0]
     assert "close joint names: rib_left_hinge" in err[0]
+
+
+@pytest.mark.skipif(__import__("importlib").util.find_spec("myo_sim") is None,
+                    reason="myo_sim (PyPI myo-sim) is not installed: pip install -e '.[myo]'")
+def test_the_abdominal_pressure_extends_myotorsos_lumbosacral_joint():
+    """L5/S1 is myotorso's `flex_extension` (lumbar5 on the sacrum; its axis -x, the
+    model's +x to the left and -y anterior): a positive moment along it turns the
+    thorax backward, an extension."""
+    sim = hybrid.load("myotorso_breathing", overrides=['rigid.load_joints=["flex_extension"]', 'rigid.lock=["*"]'])
+    obs_loads = Loads(sim)
+    names = obs_loads.channels()
+    jid = sim.mj_model.joint("flex_extension").id
+    along = []
+    for _ in range(30):
+        sim.step(20)
+        along.append(obs_loads.sample()[names.index("iap/moment_about/flex_extension_n_m")] @ sim.mj_data.xaxis[jid])
+    along = np.array(along)
+    assert along.max() > 0.05 and along.min() > -0.01 * along.max()
