@@ -305,7 +305,7 @@ def _count_stops(nstep: int, periods, extra) -> int:
 
 
 def run(sim: Simulation, duration_s: float, *, frame_dt_s: float = 0.01, progress: bool = False,
-        observers=(), trace_spill=None, stop=None, provenance: dict | None = None, loads=False) -> dict:
+        observers=(), trace_spill=None, stop=None, provenance: dict | None = None, loads=None) -> dict:
     """Run `sim` for `duration_s`; returns `{"summary": dict, "trace": Trace}`, the
     summary one level down: `run(sim, 4.0)["summary"]["apex_descent_mm"]`
     (docs/metrics.md defines every key of both).
@@ -325,9 +325,10 @@ def run(sim: Simulation, duration_s: float, *, frame_dt_s: float = 0.01, progres
     summary's "provenance" table (`hybrid.provenance.run_provenance`; by default
     made here, without the command line's overrides and removed terms). `loads`: True
     to give the membrane's loads on the skeleton (`hybrid.loads`; `hybrid run` does) in
-    the summary's "loads" for a scene with linked bodies or nailed regions (the run
-    then steps frame by frame; a recorder's `loads`, when an observer has one, is
-    used), or a `hybrid.loads.LoadsObserver` to fill; False (the default) not to.
+    the summary's "loads" for a scene with linked bodies or nailed regions, the run then
+    stepping frame by frame; None (the default) only when an observer has its own
+    (a `Recorder(..., loads=True)`: the same figures fill both); False never; or a
+    `hybrid.loads.LoadsObserver` to fill.
 
     The summary (README, "Outputs and metrics"): scene, status, steps, times; the
     top-level metrics of earlier versions; "metrics", {series: {"min", "max",
@@ -491,11 +492,13 @@ def _loads_observer(sim: Simulation, loads, observers):
     the same figures), or None."""
     if isinstance(loads, LoadsObserver):
         return loads
-    if not loads:
+    if loads is False:
         return None
     for obs in observers:
         if isinstance(getattr(obs, "loads", None), LoadsObserver):
             return obs.loads
+    if loads is None:
+        return None
     found = Loads(sim)
     return LoadsObserver(found) if found else None
 

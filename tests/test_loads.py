@@ -149,7 +149,7 @@ def test_the_recording_holds_the_loads_channels(tmp_path):
 
     sim = hybrid.load("breathing", overrides=[f"rigid.load_joints={HINGES}"])
     with Recorder(tmp_path / "run.mcap", sim, loads=True) as rec:
-        summary = run(sim, 0.05, observers=[rec], loads=True)["summary"]
+        summary = run(sim, 0.05, observers=[rec])["summary"]  # the recorder's loads: the run's too
     data = read(tmp_path / "run.mcap")
     assert data["model"]["loads"] == rec.loads.names
     fz = data["/loads/body/rib_left/force_n/z"]

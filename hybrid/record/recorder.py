@@ -94,8 +94,8 @@ class Recorder:
     made here), written in the file's metadata (`read(path)["model"]["provenance"]`).
     `loads`: True to record the membrane's loads on the skeleton (`hybrid.loads`,
     channels /loads/...) where the scene has linked bodies or nailed regions (`hybrid
-    run` does), or a `hybrid.loads.LoadsObserver`; False (default) not to. A run with
-    `run(..., loads=True)` fills this recorder's (`self.loads`) and steps frame by frame.
+    run` does), or a `hybrid.loads.LoadsObserver`; False (default) not to. `hybrid.run`
+    then fills this recorder's (`self.loads`, its summary's too) and steps frame by frame.
     """
 
     def __init__(self, path: str | Path, sim, *, every_s: float | None = None, mesh_every: int | None = None,
