@@ -105,10 +105,12 @@ def _run_into(args, sim, duration: float, out: Path, provenance: dict) -> int:
             try:
                 if not args.no_record:
                     from .record import Recorder
-                    recorder = Recorder(out / "run.mcap", sim, every_s=args.record_every, provenance=provenance)
+                    recorder = Recorder(out / "run.mcap", sim, every_s=args.record_every, provenance=provenance,
+                                        loads=True)
                 try:
+                    # the membrane's loads on the skeleton in the summary (and the recording's, above)
                     result = run(sim, duration, progress=True, observers=[recorder] if recorder else [],
-                                 trace_spill=spill, stop=lambda: bool(caught), provenance=provenance)
+                                 trace_spill=spill, stop=lambda: bool(caught), provenance=provenance, loads=True)
                 except RunFailed as failed:
                     result, failure = failed.result, failed.error
                 except RunInterrupted as interrupted:

@@ -62,6 +62,8 @@ _RIGID = {"mjcf": ("-", "*required*", "\"trunk\" (the packaged two-rib model), a
           "hold_damping_nms_per_rad": ("N m s/rad", "10", "a number >= 0 (N s/m for a slide joint)"),
           "lock": ("-", "[]", "[hinge or slide joint or pattern, ...]: locked where they start (MuJoCo joint "
                               "equalities, time constant 2 dt)"),
+          "load_joints": ("-", "[]", "[joint, ...]: the membrane's loads and the intra-abdominal pressure's moment "
+                          "are also given about each joint's anchor (hybrid.loads; README, \"Loads\")"),
           "ctrl": ("-", "{}", "{actuator or pattern = schedule}: the actuators' ctrl set before every step "
                               "(a number, a breathing waveform or a table)"),
           "integrator": ("-", "the MJCF's", "MuJoCo's integrator: \"Euler\", \"RK4\", \"implicit\" or "

@@ -30,11 +30,27 @@ from .errors import HybridError
 
 __all__ = ["Frames", "frames_from_recording", "frames_from_scene", "key_frames", "breathes", "panel_titles",
            "sagittal_section", "build_figure", "draw_figure", "render", "write_video", "view", "has_display",
-           "membrane_edges", "draw_membrane"]
+           "membrane_edges", "draw_membrane", "shown_geoms", "SHOWN_GEOM_GROUPS"]
 
 PANEL_TITLES = ("a. rest", "b. peak inspiration", "c. end of expiration")
 #: the same key frames of a scene that does not breathe
 STILL_TITLES = ("a. rest", "b. largest displacement", "c. last frame")
+#: MuJoCo geom groups drawn: MJCF models keep their wrapping surfaces, collision
+#: shapes and helpers in groups 3 and above (myo-sim: wrapping 3, collision 4), which
+#: would hide the membrane; MuJoCo's own viewer shows groups 0-2 by default too
+SHOWN_GEOM_GROUPS = (0, 1, 2)
+
+
+#: MuJoCo's mesh geom type (mjGEOM_MESH), and the radius (m) of the mark drawn for one
+GEOM_MESH = 7
+MESH_MARK_M = 0.006
+
+
+def shown_geoms(geoms: list) -> list:
+    """The geoms (`hybrid.record.body_geoms` dicts) a picture draws: those of
+    `SHOWN_GEOM_GROUPS` (a geom without a group, from an older recording, counts as
+    group 0) that are not transparent (rgba alpha > 0)."""
+    return [g for g in geoms if int(g.get("group", 0)) in SHOWN_GEOM_GROUPS and float(g["rgba"][3]) > 0]
 #: how the rest outline is drawn (dashed), in the section and on the 3D view
 REST_STYLE = dict(colors="black", linestyles=(0, (3, 2)), linewidths=1.0)
 _LIGHT = np.array([0.45, -0.35, 0.82]) / np.linalg.norm([0.45, -0.35, 0.82])
@@ -98,7 +114,7 @@ def frames_from_recording(path: str | Path) -> Frames:
 
     return Frames(scene=meta.get("scene", path.stem), t=pts["t"][:n], pos=pts["pos"][:n].astype(float),
                   face_vert=meta["face_vert"], vert_rgba=meta["vert_rgba"], bodies=bodies,
-                  body_pos=body_pos, body_quat=body_quat, geoms=meta.get("geoms", []),
+                  body_pos=body_pos, body_quat=body_quat, geoms=shown_geoms(meta.get("geoms", [])),
                   apex_descent=series("/apex_descent"), muscle=series("/muscle_stiffness"),
                   rib_lift=series("/rib_elevation"), regions=list(meta.get("regions", [])),
                   vert_label=meta.get("vert_label"))
@@ -148,7 +164,7 @@ def frames_from_scene(scene_arg: str | None, duration_s: float | None = None, *,
                   face_vert=np.asarray(sim.model.mesh.face_vert), vert_rgba=colours, bodies=bodies,
                   body_pos=np.asarray(keep["bpos"]) if bodies else None,
                   body_quat=np.asarray(keep["bquat"]) if bodies else None,
-                  geoms=body_geoms(sim.mj_model) if sim.mj_model is not None else [],
+                  geoms=shown_geoms(body_geoms(sim.mj_model)) if sim.mj_model is not None else [],
                   apex_descent=tr["apex_descent_mm"][idx][:n], muscle=_present(tr["muscle_n_per_m"][idx][:n]),
                   rib_lift=_present(tr["rib_lift_mm"][idx][:n]), regions=names, vert_label=label)
 
@@ -218,7 +234,9 @@ def _geom_segments(fr: Frames, k: int):
             cols.append(g["rgba"])
         else:
             pts.append(centre)
-            psize.append(max(g["size"][:3]))
+            # a mesh (a bone's surface) as a small mark where it is: its size is no radius,
+            # and a disc of its extent would cover the membrane
+            psize.append(MESH_MARK_M if g["type"] == GEOM_MESH else max(g["size"][:3]))
             pcols.append(g["rgba"])
     return segs, radii, cols, pts, psize, pcols
 
@@ -243,7 +261,7 @@ def _draw_panel(ax, fr: Frames, k: int, centre, half, *, membrane: bool, title: 
     ax.set_zlim(centre[2] - half, centre[2] + half)
     ax.set_box_aspect((1, 1, 1), zoom=1.45)
     ax.view_init(elev=14, azim=-62)
-    ax.computed_zorder = False  # the bones over the membrane (a schematic, like the paper's figure)
+    ax.computed_zorder = False  # the membrane over the bones: it is what the picture is about
     ax.set_axis_off()
     ax.set_title(title + f"  (t = {fr.t[k]:.2f} s)", fontsize=10)
     if membrane:
@@ -254,18 +272,18 @@ def _draw_panel(ax, fr: Frames, k: int, centre, half, *, membrane: bool, title: 
         shade = 0.35 + 0.65 * np.abs(nrm @ _LIGHT)
         col = fr.vert_rgba[fr.face_vert].mean(axis=1)
         col[:, :3] *= shade[:, None]
-        col[:, 3] = 0.9
+        col[:, 3] = 0.85
         ax.add_collection3d(Poly3DCollection(tri, facecolors=np.clip(col, 0, 1),
-                                             edgecolors=(0, 0, 0, 0.12), linewidths=0.3, zorder=1))
+                                             edgecolors=(0, 0, 0, 0.12), linewidths=0.3, zorder=3))
     segs, radii, cols, pts, psize, pcols = _geom_segments(fr, k)
     if segs:
         widths = np.maximum(np.asarray(radii) * 2 * px_per_m * 0.72, 1.0)  # points (1/72 in)
         ax.add_collection3d(Line3DCollection(np.asarray(segs), colors=np.clip(np.asarray(cols), 0, 1),
-                                             linewidths=widths, capstyle="round", zorder=2))
+                                             linewidths=widths, capstyle="round", zorder=1))
     if pts:
         p = np.asarray(pts)
         ax.scatter(p[:, 0], p[:, 1], p[:, 2], s=(np.asarray(psize) * 2 * px_per_m * 0.72) ** 2,
-                   c=np.clip(np.asarray(pcols), 0, 1), zorder=3)
+                   c=np.clip(np.asarray(pcols), 0, 1), zorder=2)
     if rest_cut is not None:  # the rest outline (its mid-sagittal cut), over everything
         cut, y0 = rest_cut
         lines = np.stack([cut[:, :, 0], np.full(cut.shape[:2], y0), cut[:, :, 1]], axis=-1)
@@ -273,8 +291,15 @@ def _draw_panel(ax, fr: Frames, k: int, centre, half, *, membrane: bool, title: 
 
 
 def breathes(fr: Frames) -> bool:
-    """Whether the scene breathes: its muscle's stiffness varies over the frames."""
-    return fr.muscle is not None and len(fr.muscle) > 1 and float(np.ptp(fr.muscle)) > 0
+    """Whether the frames hold a breath: the muscle contracts to a peak and relaxes after
+    it (a run stopped during the first inspiration has no peak inspiration nor end of
+    expiration to name)."""
+    m = fr.muscle
+    if m is None or len(m) < 2 or not float(np.ptp(m)) > 0:
+        return False
+    tol = 1e-9 * float(np.abs(m).max())
+    top = int(np.argmax(m >= m.max() - tol))
+    return bool(m[top:].min() < m.max() - tol)
 
 
 def panel_titles(fr: Frames) -> tuple:
@@ -550,7 +575,7 @@ def view(scene_arg: str | None, *, duration_s: float | None = None) -> dict:
     end = scene.duration_s if duration_s is None else duration_s
     before = set(threading.enumerate())
     frames = drawn = 0
-    with _rigid.launch_viewer(m, d) as v:
+    with _rigid.launch_viewer(m, d, SHOWN_GEOM_GROUPS) as v:
         window = [t for t in threading.enumerate() if t not in before]  # the viewer's own thread
         wall0 = _time.perf_counter()
         while v.is_running() and sim.time < end:

@@ -3,8 +3,9 @@
 `hybrid.scenefile` calls these with its own readers of selectors, schedules and
 kind-checked fields (passed in, so that this module imports nothing of it). The
 control keys (`keyframe`, `fix`, `fix_root`, `weld`, `hold`, `lock`, `ctrl`,
-`integrator`, ...) are checked here for their form; the names they give are checked
-against the model when it is compiled (`hybrid.rigid.controls`).
+`integrator`, ...) and `load_joints` (the joints `hybrid.loads` takes moments about) are
+checked here for their form; the names they give are checked against the model when it
+is compiled (`hybrid.rigid.controls`).
 """
 
 from __future__ import annotations
@@ -19,8 +20,8 @@ __all__ = ["RIGID_KEYS", "NAME_LISTS", "rigid_from_table", "rigid_to_table"]
 
 #: the keys of [rigid]: the fields of Rigid
 RIGID_KEYS = tuple(f.name for f in dataclasses.fields(Rigid))
-#: the keys that hold lists of names (bodies, or joint name patterns)
-NAME_LISTS = ("fix", "weld", "hold", "lock")
+#: the keys that hold lists of names (bodies, joint name patterns, or joint names)
+NAME_LISTS = ("fix", "weld", "hold", "lock", "load_joints")
 _KINDED = {f.name: f for f in dataclasses.fields(Rigid) if "kind" in f.metadata}
 
 

@@ -35,6 +35,7 @@ from .simulation import Simulation
 from .step import F_KE, F_PRESSURE, F_TIME, F_VOLUME, capture_frame
 from .mesh.geometry import region_faces
 from .readouts import swept_volume
+from .loads import Loads, LoadsObserver
 from .terms.volume import face_volume
 
 __all__ = ["TRACE_KEYS", "METRIC_KEYS", "Trace", "scene_parts", "metric_table", "run", "RunFailed", "RunInterrupted", "FolderLock", "default_out", "run_steps",
@@ -304,7 +305,7 @@ def _count_stops(nstep: int, periods, extra) -> int:
 
 
 def run(sim: Simulation, duration_s: float, *, frame_dt_s: float = 0.01, progress: bool = False,
-        observers=(), trace_spill=None, stop=None, provenance: dict | None = None) -> dict:
+        observers=(), trace_spill=None, stop=None, provenance: dict | None = None, loads=None) -> dict:
     """Run `sim` for `duration_s`; returns `{"summary": dict, "trace": Trace}`, the
     summary one level down: `run(sim, 4.0)["summary"]["apex_descent_mm"]`
     (docs/metrics.md defines every key of both).
@@ -322,7 +323,12 @@ def run(sim: Simulation, duration_s: float, *, frame_dt_s: float = 0.01, progres
     compiled call; when it returns true the run stops there as on Ctrl-C (a signal
     handler can set it without breaking a call in the middle). `provenance`: the
     summary's "provenance" table (`hybrid.provenance.run_provenance`; by default
-    made here, without the command line's overrides and removed terms).
+    made here, without the command line's overrides and removed terms). `loads`: True
+    to give the membrane's loads on the skeleton (`hybrid.loads`; `hybrid run` does) in
+    the summary's "loads" for a scene with linked bodies or nailed regions, the run then
+    stepping frame by frame; None (the default) only when an observer has its own
+    (a `Recorder(..., loads=True)`: the same figures fill both); False never; or a
+    `hybrid.loads.LoadsObserver` to fill.
 
     The summary (README, "Outputs and metrics"): scene, status, steps, times; the
     top-level metrics of earlier versions; "metrics", {series: {"min", "max",
@@ -371,6 +377,9 @@ def run(sim: Simulation, duration_s: float, *, frame_dt_s: float = 0.01, progres
     error = interrupted = None
     batch_observers = [o for o in observers if hasattr(o, "frames")]
     per_frame = [o for o in observers if not hasattr(o, "frames")]
+    loads = _loads_observer(sim, loads, observers)
+    if loads is not None:  # read from the state after each frame's step: frame by frame
+        per_frame.insert(0, loads)
     batched = sim.can_step_frames and not per_frame
     per_call = max(1, min(FRAMES_PER_CALL, int(2e6 // (24 * model.nvert))))  # frames of at most ~2 MB
     frames = sim.frames_buffer(per_call if batched else 1)
@@ -468,6 +477,8 @@ def run(sim: Simulation, duration_s: float, *, frame_dt_s: float = 0.01, progres
     if model.rigid is not None:  # what the rigid model runs with: the MJCF's own or the scene's
         summary["rigid"] = {**model.rigid.settings(), "timestep_s": h,
                             "timestep_from": "mjcf" if model.scene.dt_s is None else "scene"}
+    if loads is not None:
+        summary["loads"] = loads.summary()
     if error is not None:
         summary["error"] = str(error)
     if interrupted is not None:
@@ -479,6 +490,22 @@ def run(sim: Simulation, duration_s: float, *, frame_dt_s: float = 0.01, progres
     if interrupted is not None:
         raise RunInterrupted(result) from interrupted
     return result
+
+
+def _loads_observer(sim: Simulation, loads, observers):
+    """The run's loads observer (`run`'s `loads`; a recorder's own, so that both read
+    the same figures), or None."""
+    if isinstance(loads, LoadsObserver):
+        return loads
+    if loads is False:
+        return None
+    for obs in observers:
+        if isinstance(getattr(obs, "loads", None), LoadsObserver):
+            return obs.loads
+    if loads is None:
+        return None
+    found = Loads(sim)
+    return LoadsObserver(found) if found else None
 
 
 class RunFailed(HybridError):

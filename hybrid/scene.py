@@ -123,6 +123,7 @@ class Rigid:
     lock: tuple = ()  # hinge or slide joint names or patterns: locked where they start
     ctrl: dict = field(default_factory=dict)  # actuator name or pattern -> schedule
     integrator: Optional[str] = param("choice", None, choices=MUJOCO_INTEGRATORS)
+    load_joints: tuple = ()  # joint names: the points the loads' moments are taken about (hybrid.loads)
 
 
 @dataclass(frozen=True)

@@ -25,7 +25,7 @@ LAYERS = (
     ("step", ("step", "readouts", "implicit")),
     ("coupled step", ("coupling",)),
     ("simulation", ("simulation", "builds")),
-    ("observers", ("run", "record", "record.*", "render", "sweep", "grid", "outputs", "provenance")),
+    ("observers", ("run", "loads", "record", "record.*", "render", "sweep", "grid", "outputs", "provenance")),
     ("public API", ("",)),  # hybrid/__init__.py
     ("bench, command line, studies", ("bench", "bench.*", "bench_rigid", "cli", "__main__", "docgen", "inspection", "studies",
                                       "studies.*")),

@@ -11,6 +11,7 @@ import numpy as np
 
 from .encoder import (MAX_DEPTH, OP_BEGIN, OP_CLOUD, OP_CONST, OP_DOUBLE, OP_END, OP_IF_FINITE, OP_POINTS,
                       OP_STAMP, POINT3_BYTES, RECORD_HEAD, _load_encoder, _tag, encode_frames)
+from ..loads import topics as load_topics
 from .mcap_writer import _McapWriter
 from .schemas import (GEOM_BOX, GEOM_CAPSULE, GEOM_CYLINDER, GEOM_ELLIPSOID, GEOM_SPHERE, SCALAR_CHANNELS,
                       _schemas, body_geoms, region_colours)
@@ -26,11 +27,17 @@ def _plan(sim, every_s: float) -> dict:
     return {"scene": model.scene.name, "dt_s": model.dt_s, "every_s": every_s, "nvert": model.mesh.nvert,
             "face_vert": np.asarray(model.mesh.face_vert, np.int64), "regions": names, "vert_label": label,
             "colours": colours, "link_vert": np.asarray(model.link_vert), "rest": np.array(model.mesh.vert_pos, float),
-            "geoms": body_geoms(mj_model) if mj_model is not None else [], "bodies": bodies}
+            "geoms": body_geoms(mj_model) if mj_model is not None else [], "bodies": bodies, "loads": []}
 
 
-def _nslot(nbody: int) -> int:
-    """Number slots of a frame: t, the scalars, then each body's x, y, z and w, x, y, z."""
+def _nslot(nbody: int, nload: int = 0) -> int:
+    """Number slots of a frame: t, the scalars, each body's x, y, z and w, x, y, z, then
+    each load channel's x, y, z (`hybrid.loads`)."""
+    return 1 + len(SCALAR_CHANNELS) + 7 * nbody + 3 * nload
+
+
+def _load_slot(nbody: int) -> int:
+    """The first load slot of a frame (`_nslot`)."""
     return 1 + len(SCALAR_CHANNELS) + 7 * nbody
 
 
@@ -39,7 +46,7 @@ def _frame_bytes_estimate(plan: dict, mesh_every: int) -> int:
     n, nface, nbody = plan["nvert"], len(plan["face_vert"]), len(plan["bodies"])
     mesh = 30 * n + 38 * n + 12 * nface + 200
     cloud = 16 * n + 200 if mesh_every > 1 else 0
-    return mesh // mesh_every + cloud + 130 * nbody + 50 * len(SCALAR_CHANNELS) + 100
+    return mesh // mesh_every + cloud + 130 * nbody + 50 * (len(SCALAR_CHANNELS) + 3 * len(plan["loads"])) + 100
 
 
 
@@ -99,7 +106,7 @@ class _FrameWriter:
             "scene": plan["scene"], "dt_s": plan["dt_s"], "every_s": plan["every_s"], "nvert": n,
             "face_vert": face.tolist(), "regions": plan["regions"], "vert_label": plan["vert_label"].tolist(),
             "vert_rgba": np.round(colours, 4).tolist(), "link_vert": plan["link_vert"].tolist(),
-            "geoms": plan["geoms"], "bodies": bodies, "provenance": plan.get("provenance")})
+            "geoms": plan["geoms"], "bodies": bodies, "loads": plan["loads"], "provenance": plan.get("provenance")})
         # MCAP gives metadata no CRC of its own: the reader checks this one
         w.metadata("hybrid", {"description": description,
                               "description_crc32": f"{zlib.crc32(description.encode()):08x}"})
@@ -173,6 +180,10 @@ class _FrameWriter:
             program(channel("/rigid/transforms", "foxglove.FrameTransforms"), 1, ops)
             w.message(channel("/rigid/geoms", "foxglove.SceneUpdate"), 0, _geom_scene(plan["geoms"]))
             w.flush_chunk()
+        first = _load_slot(len(bodies))
+        for i, topic in enumerate(load_topics(plan["loads"])):  # each load's x, y, z (hybrid.loads)
+            program(channel(topic, "hybrid.Scalar"), 1, [(OP_IF_FINITE, first + i, 0), double(1, 0),
+                                                          double(2, first + i)])
         self._const = np.frombuffer(bytearray(const), np.uint8)  # writable: the type of the cloud's rows
         self._prog = np.array(prog, np.int64).reshape(-1, 3)
         self._programs = np.array(programs, np.int64)

@@ -56,9 +56,10 @@ def _topics(topics) -> set | None:
     if topics is None:
         return None
     names = [topics] if isinstance(topics, str) else list(topics)
-    unknown = [t for t in names if t not in TOPICS]
+    unknown = [t for t in names if t not in TOPICS and not str(t).startswith("/loads/")]
     if unknown:
-        raise HybridError(f"topics: expected names among {', '.join(TOPICS)}; received {unknown[0]!r}")
+        raise HybridError(f"topics: expected names among {', '.join(TOPICS)} or /loads/...; "
+                          f"received {unknown[0]!r}")
     return set(names)
 
 
@@ -130,7 +131,7 @@ class _Decoder:
                 pos.append([(tf.translation.x, tf.translation.y, tf.translation.z) for tf in tfs])
                 quat.append([(tf.rotation.w, tf.rotation.x, tf.rotation.y, tf.rotation.z) for tf in tfs])
             return {"t": t, "pos": np.array(pos, float), "quat": np.array(quat, float)}
-        if topic in SCALAR_CHANNELS:
+        if topic in SCALAR_CHANNELS or topic.startswith("/loads/"):
             return {"t": t, "value": np.array([decode(d).value for d in datas], float)}
         return {"t": t}
 

@@ -15,7 +15,8 @@ import numpy as np
 from ..errors import HybridError
 from ..provenance import run_provenance
 from ..step import F_PRESSURE, F_TIME, F_VOLUME
-from .channels import _frame_bytes_estimate, _FrameWriter, _nslot, _plan
+from ..loads import Loads, LoadsObserver
+from .channels import _frame_bytes_estimate, _FrameWriter, _load_slot, _nslot, _plan
 from .encoder import _load_encoder
 from .schemas import MESH_EVERY_FRAME_MAX, SCALAR_CHANNELS
 from ..run import TRACE_KEYS, scene_parts
@@ -61,7 +62,8 @@ class _Frames:
         """The number slots of the first nframe frames, the bodies' poses filled in."""
         nbody = self.xpos.shape[1]
         if nbody:
-            body = self.number[:nframe, self.number.shape[1] - 7 * nbody:].reshape(nframe, nbody, 7)
+            b0 = 1 + len(SCALAR_CHANNELS)
+            body = self.number[:nframe, b0:b0 + 7 * nbody].reshape(nframe, nbody, 7)
             body[:, :, :3] = self.xpos[:nframe]
             body[:, :, 3:] = self.xquat[:nframe]
         return self.number[:nframe]
@@ -90,18 +92,27 @@ class Recorder:
     `flush()` writes what is held; `close()` writes the rest and finishes the file.
     `provenance`: how the run was made (`hybrid.provenance.run_provenance`; by default
     made here), written in the file's metadata (`read(path)["model"]["provenance"]`).
+    `loads`: True to record the membrane's loads on the skeleton (`hybrid.loads`,
+    channels /loads/...) where the scene has linked bodies or nailed regions (`hybrid
+    run` does), or a `hybrid.loads.LoadsObserver`; False (default) not to. `hybrid.run`
+    then fills this recorder's (`self.loads`, its summary's too) and steps frame by frame.
     """
 
     def __init__(self, path: str | Path, sim, *, every_s: float | None = None, mesh_every: int | None = None,
                  chunk_size: int = 1 << 20, flush_s: float = 1.0, background: bool = True,
-                 provenance: dict | None = None):
+                 provenance: dict | None = None, loads=False):
         self.every_steps = record_steps(every_s, sim.model.dt_s)
+        if loads is True:  # the membrane's loads on the skeleton, where the scene has a skeleton
+            found = Loads(sim)
+            loads = LoadsObserver(found) if found else None
+        self.loads: LoadsObserver | None = loads or None
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._dt_s = sim.model.dt_s
         self.every_s = self.every_steps * self._dt_s if every_s is None else float(every_s)
         plan = _plan(sim, self.every_s)
         plan["provenance"] = provenance if provenance is not None else run_provenance(sim)
+        plan["loads"] = list(self.loads.names) if self.loads is not None else []
         # without the runner's trace: which of volume, volume error and pressure the scene has
         parts = scene_parts(sim.model)
         self._has = np.array(["closed surface" in parts, "volume constraint" in parts, "pressure" in parts])
@@ -119,7 +130,8 @@ class Recorder:
             return _FrameWriter(self._file, plan, chunk_size=chunk_size, mesh_every=mesh_every)
 
         batch = int(min(max(chunk_size // _frame_bytes_estimate(plan, mesh_every), 1), 1000))
-        nslot = _nslot(self.nbody)
+        nslot = _nslot(self.nbody, len(plan["loads"]))
+        self._load0 = _load_slot(self.nbody)
         # frames are held in one buffer while the other is written (double buffering)
         self._free: queue.Queue = queue.Queue()
         for _ in range(2 if background else 1):
@@ -164,6 +176,7 @@ class Recorder:
             row[1:1 + len(SCALAR_CHANNELS)] = np.nan
             row[1], row[2], row[3] = sim.volume, sim.volume_rel_error, sim.pressure
             row[1:4][~self._has] = np.nan  # nothing claimed of a part the scene lacks
+        self._put_loads(sim, row, step)
         self._held = k + 1
         if self._held == len(buf.pos) or time.perf_counter() - self._last_flush > self.flush_s:
             self._hand_over()
@@ -199,6 +212,8 @@ class Recorder:
                 buf.number[held:end, 2] = np.abs(vol - v0) / v0 if v0 else np.nan
                 buf.number[held:end, 3] = frames.scal[part, F_PRESSURE]
                 buf.number[held:end, 1:4][:, ~self._has] = np.nan
+            for j, i in enumerate(part):
+                self._put_loads(sim, buf.number[held + j], int(step[i]))
             self._held = end
             if end == len(buf.pos):
                 self._hand_over()
@@ -206,6 +221,14 @@ class Recorder:
         # goes on rather than after its last call
         if 2 * self._held >= len(self._buf.pos) or time.perf_counter() - self._last_flush > self.flush_s:
             self._hand_over()
+
+    def _put_loads(self, sim, row: np.ndarray, step: int) -> None:
+        """The load slots of a frame's row: the loads of sim's state if the frame is it
+        (runs with loads step frame by frame), else NaN (no message)."""
+        if self.loads is None:
+            return
+        v = self.loads.current(sim) if step == sim.steps_done else None
+        row[self._load0:] = np.nan if v is None else v.ravel()
 
     def _hand_over(self, last: bool = False) -> None:
         """Pass the frames held to the writer (the thread, or now); `last`: no frames follow."""

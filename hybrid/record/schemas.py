@@ -119,14 +119,16 @@ def _message_classes(schemas: dict[str, bytes]) -> dict:
 
 
 def body_geoms(mj_model) -> list[dict]:
-    """Each geom of a body (world geoms too) in its body's frame, for display."""
+    """Each geom of a body (world geoms too) in its body's frame, for display, with its
+    MuJoCo geom group (`hybrid.render.shown_geoms` hides groups 3 and above)."""
     out = []
     for g in range(mj_model.ngeom):
         body = int(mj_model.geom_bodyid[g])
         out.append({"body": mj_model.body(body).name or f"body{body}", "body_id": body,
                     "type": int(mj_model.geom_type[g]), "size": mj_model.geom_size[g].tolist(),
                     "pos": mj_model.geom_pos[g].tolist(), "quat": mj_model.geom_quat[g].tolist(),
-                    "rgba": mj_model.geom_rgba[g].tolist(), "name": mj_model.geom(g).name})
+                    "rgba": mj_model.geom_rgba[g].tolist(), "name": mj_model.geom(g).name,
+                    "group": int(mj_model.geom_group[g])})
     return out
 
 

@@ -20,7 +20,7 @@ lazily, so that a membrane-only scene never loads MuJoCo. By concern:
 
 
 from .compose import add_sites, attach_points, build_rigid, free_body_spec
-from .draw import draw_capsules, empty_world, launch_viewer
+from .draw import draw_capsules, empty_world, launch_viewer, show_geom_groups
 from .mjcf import (BUILTIN_MJCF, PACKAGE_MJCF, TRUNK_XML, compile_spec, load_rigid_spec, load_spec,
                    resolve_mjcf)
 from .references import BareStepper, FlexSphere
@@ -52,6 +52,7 @@ __all__ = [
     "empty_world",
     "launch_viewer",
     "draw_capsules",
+    "show_geom_groups",
     "BareStepper",
     "FlexSphere",
 ]

@@ -50,12 +50,13 @@ class Controls:
     spring_qpos {joint name: start qpos (m or rad; 4 values for a ball joint)} of the held
     joints, for `qpos_spring` of the compiled model; ctrl_actuators (nc,) names and
     ctrl_schedules (nc,) the schedules that drive them; settings: what the summary
-    records (JSON values)."""
+    records (JSON values); load_joints: the joints `hybrid.loads` takes moments about."""
     key_id: int = -1
     spring_qpos: dict = field(default_factory=dict)
     ctrl_actuators: tuple = ()
     ctrl_schedules: tuple = ()
     settings: dict = field(default_factory=dict)
+    load_joints: tuple = ()
 
     def finish(self, model: mujoco.MjModel) -> None:
         """Set the held joints' spring positions in the compiled `model` (a ball joint's
@@ -246,6 +247,14 @@ def apply_controls(spec: mujoco.MjSpec, rig: Rigid, label: str, timestep_s: floa
             owner[a] = pat
             out.ctrl_actuators += (a,)
             out.ctrl_schedules += (sched,)
+
+    # joints the loads' moments are taken about (hybrid.loads): joints of the compiled model
+    for k, name in enumerate(_name_list("rigid.load_joints", rig.load_joints)):
+        if name not in free_names:
+            why = " (removed: its body is fixed)" if name in gone else ""
+            raise RigidError(f"rigid.load_joints[{k}]: no joint named {name!r} in {label}{why}; "
+                             f"{close_names(name, free_names, 'joint')}")
+    out.load_joints = tuple(rig.load_joints)
 
     if rig.integrator is not None:
         name = checks.text("rigid.integrator", rig.integrator, MUJOCO_INTEGRATORS)

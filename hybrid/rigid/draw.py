@@ -13,12 +13,23 @@ def empty_world() -> tuple[mujoco.MjModel, mujoco.MjData]:
     return model, mujoco.MjData(model)
 
 
-def launch_viewer(model: mujoco.MjModel, data: mujoco.MjData):
+def launch_viewer(model: mujoco.MjModel, data: mujoco.MjData, shown_groups=(0, 1, 2)):
     """MuJoCo's passive viewer on (model, data), a context manager (`mujoco.viewer`,
-    imported here: it loads the windowing libraries)."""
+    imported here: it loads the windowing libraries), showing only the geom groups
+    `shown_groups` (wrapping, collision and helper geoms, groups 3-5 in MJCF models,
+    hidden: the membrane stays in view)."""
     import mujoco.viewer
 
-    return mujoco.viewer.launch_passive(model, data)
+    handle = mujoco.viewer.launch_passive(model, data)
+    with handle.lock():
+        show_geom_groups(handle.opt, shown_groups)
+    return handle
+
+
+def show_geom_groups(opt, shown_groups=(0, 1, 2)) -> None:
+    """Set a `mujoco.MjvOption`'s geom groups: those of `shown_groups` on, the others off."""
+    for g in range(len(opt.geomgroup)):
+        opt.geomgroup[g] = 1 if g in shown_groups else 0
 
 
 def draw_capsules(scn, pos: np.ndarray, edges: np.ndarray, edge_rgba: np.ndarray, width_m: float) -> int:

@@ -1,0 +1,220 @@
+"""The loads the membrane puts on the skeleton (README, "Loads"; docs/metrics.md).
+
+For each body the membrane is linked to, and each nailed region, the net force (N)
+and moment (N m) the membrane applies to it, and the moment of the intra-abdominal
+pressure about named joints (`rigid.load_joints`). Read from a `Simulation` after a
+step (an observer: never inside the step, nothing changed):
+
+- a linked body receives, each step, the forces `hybrid.coupling` sends to its
+  attachment sites: each linked point's membrane force plus the volume projection's
+  pressure force p grad_i V (`Coupling.link_forces`), without the correction for
+  the linked point's own weight (that weight is on the body's mass, not a load of
+  the membrane);
+- a nailed region receives what its nail holds: the forces on its points that the
+  nail cancels, each point's membrane force of the last step plus, under the exact
+  volume constraint, p grad_i V of the last projection; the nail's reaction is minus
+  this;
+- the intra-abdominal pressure's moment about a point c is the sum over the points
+  the skeleton holds (linked and nailed) of (x_i - c) x p grad_i V(x), V's gradient
+  at the current positions. Over the whole closed surface this sum is zero (V is
+  invariant under rotations): the pressure's moment on the skeleton is that of the
+  pressure on the held points, which the free membrane's tension balances.
+
+Every moment is M = sum (x_i - c) x F_i, in the scene's frame (right-handed, the
+moment's vector along the axis the load turns the body about, counter-clockwise
+seen from its tip); c is the body's origin (MuJoCo's `xpos`, now), a nailed region's
+rest centroid, or a named joint's anchor (MuJoCo's `xanchor`, now). The arms are
+the points' positions after the step whose forces are given.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .mesh.geometry import volume_gradient
+from .regions import select
+from .step import S_PRESSURE
+from .terms import Nailed, Volume
+
+__all__ = ["Loads", "LoadGroup", "LoadsObserver", "topics"]
+
+
+class LoadGroup:
+    """The points whose forces one part of the skeleton takes: kind "body" (a linked
+    body: rows, its rows in the coupling's link order) or "nail" (a nailed region)."""
+
+    def __init__(self, kind: str, name: str, vert: np.ndarray, rows: np.ndarray | None = None,
+                 body_id: int = -1, centre_m: np.ndarray | None = None):
+        self.kind, self.name, self.vert, self.rows = kind, name, vert, rows
+        self.body_id, self.centre_m = body_id, centre_m
+
+    @property
+    def label(self) -> str:
+        return f"{self.kind}/{self.name}"
+
+    def about(self) -> str:
+        """The point its moment is taken about, in words."""
+        if self.kind == "body":
+            return "the body's origin (MuJoCo xpos)"
+        return f"the region's rest centroid {np.round(self.centre_m, 6).tolist()} m"
+
+
+class Loads:
+    """The loads of a simulation's skeleton (module docstring). `groups`: the linked
+    bodies, then the nailed regions; `joints`: the named joints' (name, id).
+    `sample()` gives the current figures; `channels()` their names."""
+
+    def __init__(self, sim):
+        self.sim = sim
+        model = sim.model
+        self.exact_volume = bool(model.arrays.term_on[Volume.id])
+        self.groups: list[LoadGroup] = []
+        self.joints: list[tuple[str, int]] = []
+        if sim.rigid is not None:
+            system = sim.rigid.system
+            site_body = np.asarray(system.site_body)
+            for b in dict.fromkeys(site_body.tolist()):
+                rows = np.nonzero(site_body == b)[0]
+                name = sim.mj_model.body(b).name or f"body{b}"
+                self.groups.append(LoadGroup("body", name, sim.rigid.link_vert[rows], rows, body_id=int(b)))
+            self.joints = [(n, int(sim.mj_model.joint(n).id)) for n in system.controls.load_joints]
+        rest = model.mesh.vert_pos
+        for k, term in enumerate(model.scene.constraints):
+            if isinstance(term, Nailed):
+                idx = (model.regions[term.region] if isinstance(term.region, str) and term.region in model.regions
+                       else select(term.region, rest, name=term.name, regions=model.regions,
+                                   face_vert=model.mesh.face_vert))
+                idx = np.asarray(idx, np.int64)
+                self.groups.append(LoadGroup("nail", term.name, idx, centre_m=rest[idx].mean(axis=0)))
+        held = [g.vert for g in self.groups]
+        self.held = np.unique(np.concatenate(held)).astype(np.int64) if held else np.zeros(0, np.int64)
+        self.closed = bool(model.mesh.closed)
+        # the linked points' weight correction, a constant of the model (`Coupling.link_extra_force`)
+        self._extra = sim.rigid.link_extra_force() if sim.rigid is not None else None
+
+    def __bool__(self) -> bool:
+        return bool(self.groups)
+
+    def channels(self) -> list[str]:
+        """The names of `sample()`'s rows: per group GROUP/force_n, GROUP/moment_n_m and
+        GROUP/moment_about/JOINT_n_m; under the exact volume constraint, iap/force_n and
+        iap/moment_about/JOINT_n_m (GROUP: body/NAME or nail/NAME). The recording's
+        channels are /loads/CHANNEL/x, /y, /z (`topics`)."""
+        names = []
+        for g in self.groups:
+            names += [f"{g.label}/force_n", f"{g.label}/moment_n_m"]
+            names += [f"{g.label}/moment_about/{j}_n_m" for j, _ in self.joints]
+        if self._has_pressure():
+            names += ["iap/force_n"] + [f"iap/moment_about/{j}_n_m" for j, _ in self.joints]
+        return names
+
+    def _has_pressure(self) -> bool:
+        return self.closed and self.held.size > 0 and self.exact_volume
+
+    def point_forces(self) -> dict:
+        """{group label: (n, 3) N}, the forces each group's points apply to it now."""
+        s = self.sim.state
+        p = float(s.scal[S_PRESSURE])
+        out = {}
+        link_force = None
+        for g in self.groups:
+            if g.kind == "body":
+                if link_force is None:
+                    link_force = self.sim.rigid.link_forces() - self._extra
+                out[g.label] = link_force[g.rows]
+            else:
+                f = np.array(s.vert_force[g.vert])
+                if self.exact_volume:
+                    f += p * s.grad[g.vert]
+                out[g.label] = f
+        return out
+
+    def anchors(self) -> np.ndarray:
+        """(njoint, 3) m: the named joints' anchors now."""
+        d = self.sim.mj_data
+        return np.array([d.xanchor[j] for _, j in self.joints]).reshape(-1, 3)
+
+    def iap_forces(self) -> np.ndarray:
+        """(nheld, 3) N: p grad_i V at the held points (`held`), at the current positions."""
+        pos = self.sim.state.vert_pos
+        grad = volume_gradient(pos, self.sim.model.mesh.face_vert)
+        return float(self.sim.state.scal[S_PRESSURE]) * grad[self.held]
+
+    def sample(self) -> np.ndarray:
+        """(len(channels()), 3): the current figures, in `channels()`'s order."""
+        pos = self.sim.state.vert_pos
+        forces = self.point_forces()
+        anchors = self.anchors()
+        xpos = self.sim.mj_data.xpos if self.sim.rigid is not None else None
+        rows = []
+        for g in self.groups:
+            f = forces[g.label]
+            x = pos[g.vert]
+            c = xpos[g.body_id] if g.kind == "body" else g.centre_m
+            rows += [f.sum(axis=0), np.cross(x - c, f).sum(axis=0)]
+            rows += [np.cross(x - a, f).sum(axis=0) for a in anchors]
+        if self._has_pressure():
+            f = self.iap_forces()
+            x = pos[self.held]
+            rows += [f.sum(axis=0)] + [np.cross(x - a, f).sum(axis=0) for a in anchors]
+        return np.array(rows).reshape(-1, 3)
+
+    def about(self) -> dict:
+        """{group label or "iap": the point its moments are taken about, in words}."""
+        out = {g.label: g.about() for g in self.groups}
+        for name, _ in self.joints:
+            out[f"moment_about/{name}"] = f"joint {name!r}'s anchor (MuJoCo xanchor)"
+        return out
+
+
+def topics(names: list[str]) -> list[str]:
+    """The recording's topics of the channels `names`, three a channel (x, y, z)."""
+    return [f"/loads/{name}/{axis}" for name in names for axis in "xyz"]
+
+
+class LoadsObserver:
+    """A `hybrid.run` observer keeping the loads' range over the run: per channel the
+    componentwise min and max and the largest norm (frames after the first step).
+    `current(sim)` gives the figures of sim's step, sampled once (the recorder's too)."""
+
+    def __init__(self, loads: Loads):
+        self.loads = loads
+        self.names = loads.channels()
+        n = len(self.names)
+        self.lo = np.full((n, 3), np.inf)
+        self.hi = np.full((n, 3), -np.inf)
+        self.norm_max = np.zeros(n)
+        self.t: list[float] = []
+        self.rows: list[np.ndarray] = []
+        self.keep = False
+        self._step = self._counted = -1
+        self._last = None
+
+    def current(self, sim) -> np.ndarray | None:
+        """The figures at sim's current step (sampled once a step), None before the first."""
+        if sim.steps_done == 0:  # no step yet: no force has been transferred
+            return None
+        if sim.steps_done != self._step:
+            self._step, self._last = sim.steps_done, self.loads.sample()
+        return self._last
+
+    def __call__(self, sim, trace=None) -> None:
+        if sim.steps_done == 0 or sim.steps_done == self._counted:
+            return
+        self._counted = sim.steps_done
+        v = self.current(sim)
+        np.minimum(self.lo, v, out=self.lo)
+        np.maximum(self.hi, v, out=self.hi)
+        np.maximum(self.norm_max, np.linalg.norm(v, axis=1), out=self.norm_max)
+        if self.keep:
+            self.t.append(sim.time)
+            self.rows.append(v)
+
+    def summary(self) -> dict:
+        """{"about": ..., CHANNEL: {"min": [x, y, z], "max": [x, y, z], "norm_max": |v|}}."""
+        out = {"about": self.loads.about()}
+        if not np.isfinite(self.lo).all():
+            return out
+        for k, name in enumerate(self.names):
+            out[name] = {"min": self.lo[k].tolist(), "max": self.hi[k].tolist(), "norm_max": float(self.norm_max[k])}
+        return out
