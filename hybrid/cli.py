@@ -103,14 +103,16 @@ def _run_into(args, sim, duration: float, out: Path, provenance: dict) -> int:
         # the trace streamed to an unlinked file in the folder: memory independent of the run's length
         with tempfile.TemporaryFile(dir=out) as spill:
             try:
+                # the membrane's loads on the skeleton (scenes with one) in the summary and the
+                # recording: they are sampled every step, so such a run steps frame by frame
+                loads = sim.model.rigid is not None
                 if not args.no_record:
                     from .record import Recorder
                     recorder = Recorder(out / "run.mcap", sim, every_s=args.record_every, provenance=provenance,
-                                        loads=True)
+                                        loads=loads)
                 try:
-                    # the membrane's loads on the skeleton in the summary (and the recording's, above)
                     result = run(sim, duration, progress=True, observers=[recorder] if recorder else [],
-                                 trace_spill=spill, stop=lambda: bool(caught), provenance=provenance, loads=True)
+                                 trace_spill=spill, stop=lambda: bool(caught), provenance=provenance, loads=loads)
                 except RunFailed as failed:
                     result, failure = failed.result, failed.error
                 except RunInterrupted as interrupted:
