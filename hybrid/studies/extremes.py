@@ -176,7 +176,7 @@ def implicit_variant(case: Case) -> Case:
         if isinstance(built, Model):  # a step set on the compiled model: keep it
             return compile_scene(dataclasses.replace(built.scene, integrator="implicit_euler", dt_s=built.dt_s))
         return dataclasses.replace(built, integrator="implicit_euler")
-    return dataclasses.replace(case, name=f"{case.name}/implicit_euler", build=build, reasonable=True,
+    return dataclasses.replace(case, name=f"{case.name}/implicit_euler", build=build,
                                what=f"{case.what}; implicit Euler at the same step")
 
 
