@@ -28,6 +28,13 @@ Muscle fibres (`hybrid.terms.fibres`): an edge of tension T s pulls with
 energy T s l; its Hessian on (x_i, x_j) is [[K, -K], [-K, K]], K = T s (I - u u^T) / l,
 positive semi-definite for T s >= 0 and projected to 0 otherwise.
 
+Passive fibres (`hybrid.terms.passive_fibres`): a stretched triangle's energy
+A0 E_f e^2 / 2, e = sum_k g_k (|d_k|^2 - L_k^2) / 2 over its edges d_k, has the
+Hessian A0 E_f (grad e (x) grad e + e sum_k g_k D_k), D_k the Laplacian of edge k;
+none where slack (e <= 0). The projection leaves out the edges of negative g_k in
+the second part (the fibre decomposition's coefficients may be negative); the
+rest is positive semi-definite.
+
 Drag (`hybrid.terms.pointwise.Damping`): F = -c v, Jacobian -c I.
 
 The products return the Hessian's sign (positive semi-definite): the force
