@@ -12,6 +12,7 @@ of several repeats, and comparisons are ratios taken in the same run.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import statistics
 import tempfile
@@ -20,16 +21,18 @@ from pathlib import Path
 
 from . import rigid
 from .demo import RADIUS_M
+from .implicit import Info
 from .mesh import icosphere, uv_sphere
 from .model import compile_scene
 from .record import Recorder
 from .regions import HalfSpace
 from .run import run as run_scene
 from .scene import Damping, Gravity, Masses, Membrane, MeshSpec, Nailed, Scene, ShapeMemory, Volume
-from .scenefile import builtin_scene, load_scene
+from .scenefile import apply_overrides, builtin_scene, load_scene
 from .simulation import Simulation
 
-__all__ = ["bench_membrane", "bench_membrane_rows", "bench_continuum", "formulation_rows", "coupled_row", "recording_row", "flex_rows", "run_bench",
+__all__ = ["bench_membrane", "bench_membrane_rows", "bench_continuum", "formulation_rows", "implicit_rows",
+           "realtime_row", "coupled_row", "recording_row", "flex_rows", "run_bench",
            "format_table"]
 
 # mesh (None = the paper's 80-point sphere, else icosphere subdivisions)
@@ -84,6 +87,74 @@ def formulation_rows(meshes=(None, 5), *, repeats: int = 7, work: float = 4e6) -
                      "continuum_over_paper": statistics.median(
                          [c / p for c, p in zip(times["continuum"], times["paper"])])})
     return rows
+
+
+def implicit_rows(meshes=(None, 5), *, repeats: int = 7, work: float = 4e6) -> list[dict]:
+    """The continuum membrane step (`bench_continuum`) with symplectic and implicit
+    Euler on one mesh at one step (a quarter of the paper model's bound, as
+    `formulation_rows`), timed alternately repeat by repeat; medians of the times per
+    step and per vertex-step, of the per-repeat ratio, and implicit Euler's Newton and
+    conjugate-gradient iterations per step."""
+    rows = []
+    for sub in meshes:
+        paper = compile_scene(bench_membrane(sub))
+        h = 0.25 * paper.dt_stable_s
+        scene = bench_continuum(sub, h)
+        sims = {integ: Simulation(compile_scene(dataclasses.replace(scene, integrator=integ)))
+                for integ in ("symplectic_euler", "implicit_euler")}
+        n = paper.nvert
+        nstep = max(20, int(work / n))
+        for sim in sims.values():
+            sim.step(max(1, nstep // 10))  # warm-up
+        info = sims["implicit_euler"].state.implicit.info
+        newton0, cg0, steps0 = info[Info.NEWTON_TOTAL], info[Info.CG_TOTAL], sims["implicit_euler"].steps_done
+        times: dict[str, list] = {k: [] for k in sims}
+        for _ in range(repeats):
+            for k, sim in sims.items():
+                t0 = time.perf_counter()
+                sim.step(nstep)
+                times[k].append((time.perf_counter() - t0) / nstep * 1e6)
+        done = sims["implicit_euler"].steps_done - steps0
+        ex, im = statistics.median(times["symplectic_euler"]), statistics.median(times["implicit_euler"])
+        rows.append({"nvert": n, "dt_s": h, "explicit_us_per_step": ex, "implicit_us_per_step": im,
+                     "explicit_ns_per_vertex_step": ex * 1e3 / n, "implicit_ns_per_vertex_step": im * 1e3 / n,
+                     "implicit_over_explicit": statistics.median(
+                         [i / e for i, e in zip(times["implicit_euler"], times["symplectic_euler"])]),
+                     "newton_per_step": (info[Info.NEWTON_TOTAL] - newton0) / done,
+                     "cg_per_step": (info[Info.CG_TOTAL] - cg0) / done})
+    return rows
+
+
+#: the realtime rows' runs, chosen by measurement (README, "Performance"): at mesh level
+#: 4 implicit Euler stops where the sternal strip's triangles collapse (t = 1.33 s), and
+#: symplectic Euler at 1 ms (0.77 of its bound) gives the breath's metrics within 0.14%
+#: of a 0.1 ms run; the paper's scene at its own step
+REALTIME_RUNS = {"breathing": ("symplectic_euler", 1e-3), "breathing_paper": ("symplectic_euler", 1e-3)}
+
+
+def realtime_row(scene: str = "breathing", level: int | None = 4, *, integrator: str | None = None,
+                 dt_s: float | None = None, duration_s: float = 12.0, repeats: int = 3) -> dict:
+    """`duration_s` of a packaged scene (`hybrid.run.run`, frames every 10 ms, no
+    recording) at mesh `level` (None: the scene's own mesh) with `integrator` at
+    `dt_s` (default `REALTIME_RUNS`); the median wall time of `repeats` runs, each
+    from a new simulation whose compiled step is loaded. realtime_factor = sim_s / wall_s."""
+    default = REALTIME_RUNS.get(scene, ("symplectic_euler", 1e-3))
+    integrator = default[0] if integrator is None else integrator
+    dt_s = default[1] if dt_s is None else dt_s
+    sc = load_scene(builtin_scene(scene))
+    if level is not None:
+        sc = apply_overrides(sc, [f"mesh.level={level}"])
+    model = compile_scene(dataclasses.replace(sc, integrator=integrator, dt_s=dt_s))
+    walls = []
+    for _ in range(repeats):
+        sim = Simulation(model)
+        sim.step(0)
+        t0 = time.perf_counter()
+        run_scene(sim, duration_s)
+        walls.append(time.perf_counter() - t0)
+    wall = statistics.median(walls)
+    return {"scene": scene, "level": level, "nvert": model.nvert, "integrator": integrator, "dt": dt_s,
+            "wall_s": wall, "sim_s": duration_s, "realtime_factor": duration_s / wall}
 
 
 def bench_membrane_rows(meshes=MEMBRANE_MESHES, *, repeats: int = 7, work: float = 4e6) -> list[dict]:
@@ -222,6 +293,13 @@ def run_bench(json_path: Path | None = None, *, quick: bool = False) -> dict:
                                              work=2e5 if quick else 4e6)
     result["formulations"] = formulation_rows((None, 3) if quick else (None, 5), repeats=3 if quick else 7,
                                               work=2e5 if quick else 4e6)
+    if quick:  # a smoke test: the 80-point step, half a second of the breathing scene at level 2
+        result["implicit"] = implicit_rows((None,), repeats=1, work=2e4)
+        result["realtime"] = [realtime_row("breathing", 2, duration_s=0.5, repeats=1),
+                              realtime_row("breathing_paper", None, duration_s=0.5, repeats=1)]
+    else:
+        result["implicit"] = implicit_rows((None, 5))
+        result["realtime"] = [realtime_row("breathing", 4, repeats=5), realtime_row("breathing_paper", None, repeats=5)]
     if quick:
         result.update(coupled=coupled_row(nstep=500, repeats=3), recording=recording_row(duration_s=1.0, repeats=2))
     else:
@@ -246,6 +324,21 @@ def format_table(result: dict) -> str:
         for row in result["formulations"]:
             lines.append(f"{row['nvert']:>8} {row['paper_us_per_step']:>10.2f} "
                          f"{row['continuum_us_per_step']:>13.2f} {row['continuum_over_paper']:>7.2f}")
+    if "implicit" in result:
+        lines += ["", "continuum membrane step, symplectic vs implicit Euler at the same step; medians",
+                  f"{'nvert':>8} {'dt (ms)':>8} {'explicit us':>12} {'implicit us':>12} {'ns/vstep ex':>12} "
+                  f"{'ns/vstep im':>12} {'ratio':>7} {'newton':>7} {'cg':>6}"]
+        for row in result["implicit"]:
+            lines.append(f"{row['nvert']:>8} {row['dt_s'] * 1e3:>8.3f} {row['explicit_us_per_step']:>12.2f} "
+                         f"{row['implicit_us_per_step']:>12.2f} {row['explicit_ns_per_vertex_step']:>12.1f} "
+                         f"{row['implicit_ns_per_vertex_step']:>12.1f} {row['implicit_over_explicit']:>7.2f} "
+                         f"{row['newton_per_step']:>7.2f} {row['cg_per_step']:>6.2f}")
+    if "realtime" in result:
+        lines += ["", "realtime: a packaged scene's run (frames every 10 ms); median wall time"]
+        for r in result["realtime"]:
+            lines.append(f"  {r['scene']} level {r['level']} ({r['nvert']} points), {r['integrator']} at "
+                         f"{r['dt'] * 1e3:g} ms: {r['sim_s']:g} s in {r['wall_s']:.2f} s, "
+                         f"realtime factor {r['realtime_factor']:.2f}")
     if "coupled" in result:
         c = result["coupled"]
         lines += ["", "coupled breathing step vs bare mj_step of the trunk model; medians",

@@ -5,7 +5,7 @@ The step's free points take v+ = v + dv, x+ = x + h v+ with
     M dv = h (f_i(x+, v+) + f_e),
 
 f_i the forces treated implicitly (the continuum membrane with its Kelvin-Voigt
-viscosity, muscle fibres, drag) and f_e the others at the step's start
+viscosity, muscle fibres, passive fibres, drag) and f_e the others at the step's start
 (gravity, applied loads, pressure loads, ...: the step's force pass minus f_i
 there), plus, with a volume constraint, the last step's pressure on the
 volume gradient. Nailed, prescribed and linked points keep their positions
@@ -32,7 +32,10 @@ mass term nearly balances on out-of-plane modes. Each step is then halved until
 the incremental potential (whose dv-gradient is -h r, the viscous part taken at
 the iteration's start) falls by 1e-4 of the predicted decrease, or |r| halves
 (at most 12 halvings). A step has converged when |r| <= implicit_tol (|f_i| +
-|f_e| + |M dv / h|) (2-norms over the free points); one that has not after
+|f_e| + |M dv / h|) (2-norms over the free points), or when a Newton correction
+moves no point by more than a few units in the last place of the positions (the
+round-off floor: a coupled body at rest, its linked points placed by the rigid
+model, has forces of 1e-10 N whose residual cannot fall below 1e-15 N); one that has not after
 implicit_max_iter iterations stops the run (`IMPLICIT_NOT_CONVERGED`), the
 state left at the step's start.
 
@@ -50,12 +53,14 @@ from typing import NamedTuple
 import numpy as np
 
 from .kernel import CHUNK_VERTS, kernel
-from .terms import Damping, Membrane, MuscleFibres, Volume
+from .terms import Damping, Membrane, MuscleFibres, PassiveFibres, Volume
 from .terms.fibres import add_muscle_fibres
+from .terms.passive_fibres import add_passive_fibres
 from .terms.membrane import add_membrane_serial
 from .terms.membrane import membrane_energy
 from .terms.tangents import (NCACHE, fibre_energy, fibre_tangent_diag, fibre_tangent_product, kelvin_voigt_dissipation,
-                             membrane_tangent_cache, membrane_tangent_diag, membrane_tangent_product)
+                             membrane_tangent_cache, membrane_tangent_diag, membrane_tangent_product,
+                             passive_fibres_energy_kernel, passive_fibres_tangent_diag, passive_fibres_tangent_product)
 
 __all__ = ["IMPLICIT_ID", "IMPLICIT_NOT_CONVERGED", "ImplicitWork", "Info", "implicit_work", "implicit_step",
            "implicit_pressure", "implicit_forces", "newton_product"]
@@ -67,9 +72,12 @@ IMPLICIT_NOT_CONVERGED = 4
 EXPLICIT = -1  # implicit_step's answer for the other integrators
 
 T_MEMBRANE, T_FIBRES, T_DAMPING, T_VOLUME = Membrane.id, MuscleFibres.id, Damping.id, Volume.id
+T_PASSIVE = PassiveFibres.id
 CG_MIN_ITER = 50  # the conjugate gradients' cap: 3 x the free coordinates, at least this
 HALVINGS = 12
 ARMIJO = 1e-4  # the fraction of the predicted decrease a step must achieve
+EPS = 2.0 ** -52  # the doubles' relative spacing
+ULPS = 4.0  # a Newton correction at most this many units in the last place of the positions ends the solve
 FORCING = 0.5  # the linear solve: to this fraction of the residual, and of what convergence asks
 
 
@@ -128,7 +136,7 @@ def implicit_work(arrays) -> ImplicitWork | None:
 @kernel
 def implicit_forces(m, sched_val, x, v, out):
     """out = the forces implicit Euler treats implicitly at (x, v): membrane (with its
-    viscosity), muscle fibres, drag.
+    viscosity), muscle fibres, passive fibres, drag.
     # Model: m   # Data in: sched_val (schedules at t), x (m), v (m/s)   # Data out: out (N)
     """
     for i in range(out.shape[0]):
@@ -139,6 +147,8 @@ def implicit_forces(m, sched_val, x, v, out):
         add_membrane_serial(m.mem_vert, m.mem_par, m.kv_on, x, v, out)
     if on[T_FIBRES]:
         add_muscle_fibres(m.fib_edge, m.fib_share, m.fib_sched, sched_val, x, out)
+    if on[T_PASSIVE]:
+        add_passive_fibres(m.pf_vert, m.pf_par, x, out)
     if on[T_DAMPING]:
         for i in range(out.shape[0]):
             c = m.damp_coef[i]
@@ -160,6 +170,8 @@ def newton_product(m, sched_val, x, face, h, project, u, y):
         membrane_tangent_product(m.mem_vert, m.mem_par, face, project, h * h, h, u, y)
     if on[T_FIBRES]:
         fibre_tangent_product(m.fib_edge, m.fib_share, m.fib_sched, sched_val, x, project, h * h, u, y)
+    if on[T_PASSIVE]:
+        passive_fibres_tangent_product(m.pf_vert, m.pf_par, x, project, h * h, u, y)
 
 
 @kernel
@@ -183,6 +195,8 @@ def _preconditioner(m, sched_val, x, face, h, blocks):
         membrane_tangent_diag(m.mem_vert, m.mem_par, face, h * h, h, blocks)
     if on[T_FIBRES]:
         fibre_tangent_diag(m.fib_edge, m.fib_share, m.fib_sched, sched_val, x, h * h, blocks)
+    if on[T_PASSIVE]:
+        passive_fibres_tangent_diag(m.pf_vert, m.pf_par, x, h * h, blocks)
     for i in range(n):
         b = blocks[i]
         if not m.vert_free[i]:
@@ -319,6 +333,8 @@ def _merit(m, sched_val, h, w):
             total += h * kelvin_voigt_dissipation(m.mem_vert, m.mem_par, w.x_kv, w.v_try)
     if on[T_FIBRES]:
         total += fibre_energy(m.fib_edge, m.fib_share, m.fib_sched, sched_val, w.x_try)
+    if on[T_PASSIVE]:
+        total += passive_fibres_energy_kernel(m.pf_vert, m.pf_par, w.x_try)
     return total
 
 
@@ -371,6 +387,12 @@ def implicit_step(m, s, step, imp):
     rn, scale, worst = _residual(m, s.sched_val, pos, vel, h, w)
     it = 0
     cg_total = 0
+    at_roundoff = False
+    x_max = 0.0
+    for i in range(n):
+        for a in range(3):
+            x_max = max(x_max, abs(pos[i, a]))
+    ulp_x = ULPS * EPS * x_max
     while not (rn <= tol * scale) and it < m.implicit_max_iter and rn < np.inf:
         for i in range(n):
             for a in range(3):
@@ -394,6 +416,17 @@ def implicit_step(m, s, step, imp):
             info[I_PROJECTED_TOTAL] += 1
         cg_total += k
         it += 1
+        # a correction below the positions' rounding (ULPS units in the last place of the
+        # body's largest coordinate) cannot move the state: the solve is at its round-off
+        # floor (a body at rest whose forces are themselves round-off, as at a run's start)
+        dx_max = 0.0
+        for i in range(n):
+            if free[i]:
+                for a in range(3):
+                    dx_max = max(dx_max, abs(h * w.cg_x[i, a]))
+        if dx_max <= ulp_x:
+            at_roundoff = True
+            break
         slope = -h * _dot(w.res, w.cg_x)  # the potential's derivative along the step (< 0)
         for i in range(n):
             for a in range(3):
@@ -418,7 +451,7 @@ def implicit_step(m, s, step, imp):
     info[I_NEWTON_TOTAL] += it
     info[I_CG_TOTAL] += cg_total
     info[I_WORST] = worst
-    if not (rn <= tol * scale):
+    if not (rn <= tol * scale or at_roundoff):
         for i in range(n):  # no warm start from a failed solve
             for a in range(3):
                 w.dv[i, a] = 0.0

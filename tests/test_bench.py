@@ -30,3 +30,16 @@ def test_bench_sections_keep_their_keys_and_format():
     assert {"us_per_step", "volume_change", "ours_volume_change"} <= set(result["flex"][0])
     table = bench.format_table(result)
     assert "coupled" in table and "recording" in table and "flex" in table
+
+
+def test_implicit_and_realtime_rows_keep_their_keys():
+    rows = bench.implicit_rows((None,), repeats=1, work=2e3)
+    assert rows[0]["nvert"] == 80
+    assert rows[0]["implicit_us_per_step"] > 0 and rows[0]["explicit_us_per_step"] > 0
+    assert rows[0]["newton_per_step"] >= 0 and rows[0]["cg_per_step"] >= rows[0]["newton_per_step"]
+    rt = bench.realtime_row("breathing", 0, integrator="implicit_euler", dt_s=4e-3, duration_s=0.05, repeats=1)
+    assert {"level", "nvert", "integrator", "dt", "wall_s", "sim_s", "realtime_factor"} <= set(rt)
+    assert rt["level"] == 0 and rt["nvert"] == 80 and rt["integrator"] == "implicit_euler" and rt["dt"] == 4e-3
+    assert rt["realtime_factor"] == rt["sim_s"] / rt["wall_s"]
+    table = bench.format_table({"implicit": rows, "realtime": [rt]})
+    assert "implicit Euler" in table and "realtime factor" in table

@@ -20,7 +20,10 @@ non-finite state that was not detected is a bug too. `reasonable` marks the case
 a user would plausibly run; `reasonable_failures` lists those that do not end
 stable. Membrane cases start from `hybrid.demo.membrane_demo` (80 points, one
 breath); rib cases from the coupled breathing scene, the MJCF modified in a
-temporary folder.
+temporary folder; `continuum_*` cases from `continuum_demo` (the same sphere in the
+continuum formulation). Every stiff case (`STIFF`) is run again with implicit
+Euler at its own step, as the row `<case>/implicit_euler`: refused in the paper
+formulation (implicit Euler needs the continuum one's Hessians).
 """
 
 from __future__ import annotations
@@ -44,12 +47,12 @@ from ..mesh import Mesh, uv_sphere
 from ..model import Model, compile_scene
 from ..regions import HalfSpace
 from ..resolve import resolve_scene
-from ..scene import AppliedForce, MeshSpec, Muscle, Scene, ShapeMemory
+from ..scene import AppliedForce, Damping, Gravity, Membrane, MeshSpec, Muscle, MuscleFibres, Scene, ShapeMemory
 from ..schedule import Breathing
 from ..simulation import Simulation
 from .stability.report import finite, write_json
 
-__all__ = ["run", "cases", "run_case", "Case"]
+__all__ = ["run", "cases", "run_case", "Case", "continuum_demo", "implicit_variant", "STIFF"]
 
 OUTCOMES = ("stable", "diverged", "refused")
 
@@ -141,9 +144,70 @@ def _light_ribs(root):
                 g.set("mass", str(float(g.get("mass")) * 1e-3))
 
 
+def continuum_demo() -> Scene:
+    """membrane_demo in the continuum formulation, the packaged breathing scene's
+    materials on the paper's 80-point sphere without ribs: a sheet of Young's modulus
+    500 N/m (the central tendon's), muscle fibres of peak tension 20 N/m toward the
+    apex, a drag of 200 N s/m^3, gravity, the bottom nailed, incompressible, dt 1 ms
+    (the rigid model's step)."""
+    base = membrane_demo()
+    return Scene(name="continuum_demo", mesh=base.mesh, masses=base.masses, regions=base.regions,
+                 forces=(Gravity(), Membrane(500.0), Damping(drag_n_s_per_m3=200.0),
+                         MuscleFibres("diaphragm", Breathing(period_s=4.0, inspiration_fraction=0.4, peak=20.0),
+                                      toward_m=(0.0, 0.0, base.mesh.radius_m))),
+                 constraints=base.constraints, dt_s=1e-3, integrator="symplectic_euler")
+
+
+def _fibres_x(scene: Scene, factor: float) -> Scene:
+    def scale(f):
+        if not isinstance(f, MuscleFibres):
+            return f
+        t = f.tension_n_per_m
+        return dataclasses.replace(f, tension_n_per_m=dataclasses.replace(t, peak=t.peak * factor)
+                                   if isinstance(t, Breathing) else t * factor)
+    return dataclasses.replace(scene, forces=tuple(scale(f) for f in scene.forces))
+
+
+def implicit_variant(case: Case) -> Case:
+    """The case run with implicit Euler at its own step: `<case>/implicit_euler`. A
+    paper-formulation case is refused (implicit Euler needs the continuum one)."""
+    def build():
+        built = case.build()
+        if isinstance(built, Model):  # a step set on the compiled model: keep it
+            return compile_scene(dataclasses.replace(built.scene, integrator="implicit_euler", dt_s=built.dt_s))
+        return dataclasses.replace(built, integrator="implicit_euler")
+    return dataclasses.replace(case, name=f"{case.name}/implicit_euler", build=build,
+                               what=f"{case.what}; implicit Euler at the same step")
+
+
+#: the stiff cases, each also run with implicit Euler at its own step
+STIFF = ("shape_memory_x100", "shape_memory_x1e4", "dt_at_bound", "dt_2x_bound", "tiny_masses", "mesh_40962",
+         "muscle_x100", "continuum_membrane_x100", "continuum_muscle_x100", "continuum_mesh_40962",
+         "continuum_dt_at_bound", "continuum_dt_2x_bound")
+
+
 def cases(tmp: Path) -> list[Case]:
+    base = _cases(tmp)
+    return base + [implicit_variant(c) for c in base if c.name in STIFF]
+
+
+def _cases(tmp: Path) -> list[Case]:
     demo = membrane_demo
+    cdemo = continuum_demo
     return [
+        Case("continuum_baseline", "continuum_demo as defined (80 points, sheet 500 N/m, dt 1 ms)", cdemo),
+        Case("continuum_membrane_x100", "continuum_demo, Young's modulus 500 -> 5e4 N/m, dt 1 ms",
+             lambda: _scaled(cdemo(), Membrane, "youngs_modulus_n_per_m", 100.0), reasonable=False),
+        Case("continuum_muscle_x100", "continuum_demo, muscle fibres' peak tension 20 -> 2000 N/m, dt 1 ms",
+             lambda: _fibres_x(cdemo(), 100.0), reasonable=False),
+        Case("continuum_mesh_40962", "continuum_demo on an icosphere of 40962 points (same materials, dt 1 ms)",
+             lambda: dataclasses.replace(cdemo(), mesh=MeshSpec(generator="icosphere", subdivisions=6,
+                                                                radius_m=0.12)),
+             duration_s=0.05, small_duration_s=0.005, reasonable=False),
+        Case("continuum_dt_at_bound", "continuum_demo at dt = model.dt_stable_s",
+             lambda: (lambda m: m.with_dt(m.dt_stable_s))(compile_scene(cdemo()))),
+        Case("continuum_dt_2x_bound", "continuum_demo at dt = 2 x model.dt_stable_s",
+             lambda: (lambda m: m.with_dt(2.0 * m.dt_stable_s))(compile_scene(cdemo())), reasonable=False),
         Case("baseline_membrane", "membrane_demo as shipped (80 points, shape memory 3000 N/m, dt 1 ms)",
              lambda: demo()),
         Case("baseline_coupled", "the breathing scene as shipped (membrane + MuJoCo ribs)", _breathing),

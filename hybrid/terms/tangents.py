@@ -28,6 +28,13 @@ Muscle fibres (`hybrid.terms.fibres`): an edge of tension T s pulls with
 energy T s l; its Hessian on (x_i, x_j) is [[K, -K], [-K, K]], K = T s (I - u u^T) / l,
 positive semi-definite for T s >= 0 and projected to 0 otherwise.
 
+Passive fibres (`hybrid.terms.passive_fibres`): a stretched triangle's energy
+A0 E_f e^2 / 2, e = sum_k g_k (|d_k|^2 - L_k^2) / 2 over its edges d_k, has the
+Hessian A0 E_f (grad e (x) grad e + e sum_k g_k D_k), D_k the Laplacian of edge k;
+none where slack (e <= 0). The projection leaves out the edges of negative g_k in
+the second part (the fibre decomposition's coefficients may be negative); the
+rest is positive semi-definite.
+
 Drag (`hybrid.terms.pointwise.Damping`): F = -c v, Jacobian -c I.
 
 The products return the Hessian's sign (positive semi-definite): the force
@@ -42,7 +49,8 @@ from ..kernel import kernel
 from .membrane import P_AREA, P_D00, P_D01, P_D11, P_LAM, P_MU, P_TAU, _edges_and_strain
 
 __all__ = ["NCACHE", "membrane_tangent_cache", "membrane_tangent_product", "membrane_tangent_diag",
-           "fibre_tangent_product", "fibre_tangent_diag", "clamp_stress", "kelvin_voigt_dissipation", "fibre_energy"]
+           "fibre_tangent_product", "fibre_tangent_diag", "clamp_stress", "kelvin_voigt_dissipation", "fibre_energy",
+           "passive_fibres_tangent_product", "passive_fibres_tangent_diag", "passive_fibres_energy_kernel"]
 
 # membrane_tangent_cache columns: F's columns f0, f1 (3 each), the stress S00, S01, S11 (N/m), the
 # projected stress (the same three, its negative eigenvalues clamped)
@@ -250,4 +258,88 @@ def fibre_energy(fib_edge, fib_share, fib_sched, sched_val, vert_pos):
         i, j = fib_edge[k, 0], fib_edge[k, 1]
         dx, dy, dz = vert_pos[j, 0] - vert_pos[i, 0], vert_pos[j, 1] - vert_pos[i, 1], vert_pos[j, 2] - vert_pos[i, 2]
         total += sched_val[fib_sched[k], 0] * fib_share[k] * math.sqrt(dx * dx + dy * dy + dz * dz)
+    return total
+
+
+@kernel(inline="always")
+def _passive_strain(pf_vert, pf_par, vert_pos, f):
+    """The fibre strain e_f of triangle f (`hybrid.terms.passive_fibres`)."""
+    e = 0.0
+    for k in range(3):
+        i, j = pf_vert[f, k], pf_vert[f, (k + 1) % 3]
+        dx, dy, dz = vert_pos[j, 0] - vert_pos[i, 0], vert_pos[j, 1] - vert_pos[i, 1], vert_pos[j, 2] - vert_pos[i, 2]
+        e += 0.5 * pf_par[f, k] * (dx * dx + dy * dy + dz * dz - pf_par[f, 3 + k])
+    return e
+
+
+@kernel
+def passive_fibres_tangent_product(pf_vert, pf_par, vert_pos, project, kx, u, y):
+    """y += kx K u for the passive fibres' Hessian K at vert_pos: per stretched triangle
+    A0 E_f (grad e (x) grad e + e sum_k g_k D_k), D_k edge k's Laplacian; projected
+    (`project`) by leaving out the edges of negative g_k in the second part, the rest
+    being positive semi-definite. Slack triangles (e <= 0) have none.
+    # Model: pf_vert, pf_par   # Data in: vert_pos, u   # Data out: y, added to
+    """
+    for f in range(pf_vert.shape[0]):
+        e = _passive_strain(pf_vert, pf_par, vert_pos, f)
+        if e <= 0.0:
+            continue
+        ae = kx * pf_par[f, 6]
+        gu = 0.0  # grad e . u
+        for k in range(3):
+            i, j = pf_vert[f, k], pf_vert[f, (k + 1) % 3]
+            for a in range(3):
+                gu += pf_par[f, k] * (vert_pos[j, a] - vert_pos[i, a]) * (u[j, a] - u[i, a])
+        for k in range(3):
+            i, j = pf_vert[f, k], pf_vert[f, (k + 1) % 3]
+            g = pf_par[f, k]
+            gl = g if (g > 0.0 or not project) else 0.0
+            for a in range(3):
+                d = ae * (gu * g * (vert_pos[j, a] - vert_pos[i, a]) + e * gl * (u[j, a] - u[i, a]))
+                y[j, a] += d
+                y[i, a] -= d
+
+
+@kernel
+def passive_fibres_tangent_diag(pf_vert, pf_par, vert_pos, kx, blocks):
+    """blocks += kx K at each corner of every stretched triangle (projected)."""
+    for f in range(pf_vert.shape[0]):
+        e = _passive_strain(pf_vert, pf_par, vert_pos, f)
+        if e <= 0.0:
+            continue
+        ae = kx * pf_par[f, 6]
+        for c in range(3):
+            v = pf_vert[f, c]
+            # grad_v e: from edge c (v its start: -g d) and edge c - 1 (v its end: +g d)
+            kp = (c + 2) % 3
+            gx = gy = gz = 0.0
+            lap = 0.0
+            for k, sgn in ((c, -1.0), (kp, 1.0)):
+                i, j = pf_vert[f, k], pf_vert[f, (k + 1) % 3]
+                g = pf_par[f, k]
+                gx += sgn * g * (vert_pos[j, 0] - vert_pos[i, 0])
+                gy += sgn * g * (vert_pos[j, 1] - vert_pos[i, 1])
+                gz += sgn * g * (vert_pos[j, 2] - vert_pos[i, 2])
+                if g > 0.0:
+                    lap += g
+            b = blocks[v]
+            b[0] += ae * (gx * gx + e * lap)
+            b[1] += ae * gx * gy
+            b[2] += ae * gx * gz
+            b[3] += ae * gy * gx
+            b[4] += ae * (gy * gy + e * lap)
+            b[5] += ae * gy * gz
+            b[6] += ae * gz * gx
+            b[7] += ae * gz * gy
+            b[8] += ae * (gz * gz + e * lap)
+
+
+@kernel
+def passive_fibres_energy_kernel(pf_vert, pf_par, vert_pos):
+    """sum over triangles of A0 E_f / 2 max(e_f, 0)^2 (J), compiled."""
+    total = 0.0
+    for f in range(pf_vert.shape[0]):
+        e = _passive_strain(pf_vert, pf_par, vert_pos, f)
+        if e > 0.0:
+            total += 0.5 * pf_par[f, 6] * e * e
     return total

@@ -37,3 +37,15 @@ def test_small_extremes_catalogue(tmp_path, capsys, monkeypatch):
     assert by["baseline_membrane"] == "stable" and by["baseline_coupled"] == "stable"
     assert by["invalid_dt"] == "refused" and by["missing_mjcf"] == "refused"
     assert by["dt_2x_bound"] == "diverged"
+    # implicit Euler at each stiff case's own step: refused in the paper formulation;
+    # the continuum equivalents that diverge with symplectic Euler are stable with it,
+    # the volume exact
+    assert by["shape_memory_x100/implicit_euler"] == "refused" and by["mesh_40962/implicit_euler"] == "refused"
+    assert by["continuum_baseline"] == "stable"
+    rows = {c["name"]: c for c in cases}
+    for name in ("continuum_membrane_x100", "continuum_mesh_40962", "continuum_dt_2x_bound"):
+        assert by[name] == "diverged", name
+        imp = rows[f"{name}/implicit_euler"]
+        assert imp["outcome"] == "stable" and imp["volume_rel_error_max"] <= 1e-12, imp
+        assert imp["dt_s"] == rows[name]["dt_s"]
+    assert rows["continuum_dt_at_bound/implicit_euler"]["outcome"] == "stable"

@@ -192,3 +192,41 @@ def test_the_projected_element_hessian_is_psd_and_exact_where_the_exact_one_is(m
             indefinite += 1
             assert np.abs(proj - exact).max() > 0.0
     assert convex >= 5 and indefinite >= 5, (convex, indefinite)
+
+
+def test_the_passive_fibre_hessian_is_minus_the_force_jacobian_and_its_blocks_and_energy():
+    """Passive fibres around the z axis on the deformed sphere (stretched triangles and
+    slack ones): the exact Hessian against central differences of the compiled force,
+    the projected one positive semi-definite with the diagonal blocks as given, and the
+    compiled energy the numpy one."""
+    from hybrid import PassiveFibres
+    from hybrid.terms.passive_fibres import add_passive_fibres, passive_fibres_energy
+    from hybrid.terms.tangents import (passive_fibres_energy_kernel, passive_fibres_tangent_diag,
+                                       passive_fibres_tangent_product)
+    mesh = irregular_sphere(40, R, seed=2)
+    a = compile_scene(Scene(mesh=mesh, masses=Masses(total_kg=1.0), integrator="implicit_euler", forces=(
+        Membrane(800.0), PassiveFibres(modulus_n_per_m=600.0, around_axis=(0.0, 0.0, 1.0))))).arrays
+    x = deformed(compile_scene(Scene(mesh=mesh, masses=Masses(total_kg=1.0))), 11)
+    n = x.shape[0]
+
+    def force(y):
+        f = np.zeros_like(y)
+        add_passive_fibres(a.pf_vert, a.pf_par, y, f)
+        return f
+
+    def matrix(project):
+        def product(u):
+            y = np.zeros_like(u)
+            passive_fibres_tangent_product(a.pf_vert, a.pf_par, x, project, 1.0, u, y)
+            return y
+        return columns(n, product)
+    exact, proj = matrix(False), matrix(True)
+    assert np.abs(exact).max() > 0
+    assert rel_error(-exact, finite_difference(force, x, 1e-7)) <= 1e-6
+    assert np.linalg.eigvalsh(0.5 * (proj + proj.T)).min() >= -1e-12 * np.abs(proj).max()
+    blocks = np.zeros((n, 9))
+    passive_fibres_tangent_diag(a.pf_vert, a.pf_par, x, 1.0, blocks)
+    want = np.stack([proj[3 * i:3 * i + 3, 3 * i:3 * i + 3].ravel() for i in range(n)])
+    assert np.abs(blocks - want).max() <= 1e-12 * np.abs(want).max()
+    energy = passive_fibres_energy_kernel(a.pf_vert, a.pf_par, x)
+    assert energy > 0 and energy == pytest.approx(passive_fibres_energy(a.pf_vert, a.pf_par, x), rel=1e-12)
