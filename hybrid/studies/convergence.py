@@ -44,7 +44,7 @@ from ..errors import HybridError
 from ..sweep import sweep
 from .stability.report import write_json
 
-__all__ = ["run", "simulate", "richardson", "estimate", "recommend", "DEFAULT_METRICS", "TARGETS"]
+__all__ = ["run", "write", "simulate", "richardson", "fit_space", "estimate", "recommend", "DEFAULT_METRICS", "TARGETS"]
 
 DEFAULT_METRICS = ("rib_lift_mm", "apex_descent_mm", "pressure_pa", "swept_volume_ml")
 TARGETS = (0.10, 0.03, 0.01)
@@ -121,7 +121,9 @@ FIT_ORDERS = np.linspace(0.5, 4.0, 351)
 def fit_space(levels, values, nfit: int = FIT_LEVELS):
     """x_K = limit + C h_K^p over the `nfit` finest levels, h_K = sqrt(2)^-K: for each p of
     FIT_ORDERS the least-squares (limit, C), the p of least residual kept. Returns (limit,
-    p, rms residual, the limit of the same fit without the finest level or None): a fit
+    p or None, rms residual, the limit of the same fit without the finest level or None):
+    p is None when the best order is an end of FIT_ORDERS (no order fits; the limit is
+    then that of p = 1, the formal order of borders that do not follow the mesh). A fit
     over several levels rather than Richardson's three, as the regions' borders
     that do not follow the mesh add an error that is not smooth in h."""
     lv = np.asarray(levels[-nfit:], float)
@@ -135,8 +137,12 @@ def fit_space(levels, values, nfit: int = FIT_LEVELS):
 
     fits = [(solve(p, h, x), p) for p in FIT_ORDERS]
     (coef, rms), p = min(fits, key=lambda f: f[0][1])
+    observed = float(p)
+    if p in (FIT_ORDERS[0], FIT_ORDERS[-1]):  # no order fits: the values are not yet asymptotic
+        observed, p = None, 1.0                # the formal order of the regions' borders
+        coef, rms = solve(p, h, x)
     coarser = solve(p, h[:-1], x[:-1])[0][0] if len(x) >= 3 else None
-    return float(coef[0]), float(p), rms, (float(coarser) if coarser is not None else None)
+    return float(coef[0]), observed, rms, (float(coarser) if coarser is not None else None)
 
 
 def estimate(runs: list, metrics, levels) -> dict:
@@ -161,7 +167,7 @@ def estimate(runs: list, metrics, levels) -> dict:
         lv = [level for level, _ in per_level]
         if len(xs) >= 3:
             limit, p_obs, rms, coarser = fit_space(lv, xs)
-            p = p_obs
+            p = 1.0 if p_obs is None else p_obs
             err_est = max(rms, abs(limit - coarser)) if coarser is not None else rms
         else:
             limit, p_obs, p = richardson(xs, RATIO_SPACE)
@@ -202,10 +208,11 @@ def recommend(runs: list, est: dict, metrics, targets=TARGETS) -> list:
 
 def _predict(e: dict, runs: list, finest: dict, target: float) -> dict:
     """The level and step the error models predict for `target`, half of it to each:
-    space error err_K r^(-p (K - K)) from the finest level's; the step the finest
-    level's smallest, halved per level added (the stable step falls with the
-    spacing, at most as 1/N on UV spheres), and smaller still where its time error
-    (first order) would exceed the half."""
+    space error err_K r^(-p (K - K_last)) from the finest level's; the step the finest
+    level's smallest, times the fall of the scene's own step per level between the
+    two finest levels for each level added (the stable step falls with the spacing:
+    by sqrt(2) on even meshes, by up to 2 on UV spheres), and smaller still where
+    its time error (first order) would exceed the half."""
     levels, err = e["levels"], e["error_by_level"]
     p = e["order_used_space"]
     need = target / 2
@@ -214,7 +221,10 @@ def _predict(e: dict, runs: list, finest: dict, target: float) -> dict:
         k_last + math.ceil(math.log(err[-1] / need) / (p * math.log(RATIO_SPACE)))
     same = sorted((r for r in runs if r["level"] == k_last and r["status"] == "ok"), key=lambda r: r["dt"])
     scale = abs(e["limit"]) or 1.0
-    dt = same[0]["dt"] * 2.0 ** (k_last - level)
+    # the stable step's fall per level, as the two finest levels' own steps show (at most halving)
+    dt0 = {lv: max(r["dt"] for r in runs if r["level"] == lv and r["status"] == "ok") for lv in levels[-2:]}
+    fall = min(max(dt0[levels[-1]] / dt0[levels[-2]], 0.5), 1.0) if len(dt0) == 2 else 0.5
+    dt = same[0]["dt"] * fall ** (level - k_last)
     e_time = abs(same[0]["values"][e["metric"]] - e["value_by_level"][-1]) / scale
     if e_time > need:
         dt *= need / e_time
@@ -258,11 +268,22 @@ def run(out_dir, *, scene: str = "breathing", metrics=DEFAULT_METRICS, small: bo
         if r["status"] != "ok":
             failures.append({"level": g["level"], "dt": g["dt"], "error": r["error"]})
         runs.append(row)
-    est = estimate(runs, metrics, levels)
     res = {"scene": sc.name, "overrides": list(overrides), "metrics": list(metrics), "duration_s": duration,
            "levels": list(levels), "steps_per_level": nstep, "runs": runs, "failures": failures,
-           "estimate": est, "recommendation": recommend(runs, est, metrics),
-           "finest_change": _finest_change(runs, metrics, levels), "runtime_s": time.perf_counter() - t0}
+           "runtime_s": time.perf_counter() - t0}
+    return write(out, res)
+
+
+def write(out, res: dict) -> dict:
+    """The estimates, recommendation and outputs of a study's runs `res` (what
+    convergence.json holds, its estimates recomputed): DIR/convergence.json, .md, .png."""
+    out = Path(out)
+    metrics, levels, runs = tuple(res["metrics"]), tuple(res["levels"]), res["runs"]
+    for r in runs:
+        r.pop("rel_error", None)
+    est = estimate(runs, metrics, levels)
+    res = {**res, "estimate": est, "recommendation": recommend(runs, est, metrics),
+           "finest_change": _finest_change(runs, metrics, levels)}
     write_json(out / "convergence.json", res)
     (out / "convergence.md").write_text(_markdown(res))
     _plot(out / "convergence.png", res)
