@@ -1,7 +1,7 @@
 """The breathing trunk and its ablations: without the volume constraint, and without
-each muscle term in turn.
+each muscle or fibre term in turn (the paper's scene by default; `--scene breathing` for the continuum one).
 
-    python scripts/breathing_ablations.py [--scene breathing] [--duration 4] [--out DIR] [--quick]
+    python scripts/breathing_ablations.py [--scene breathing_paper] [--duration 4] [--out DIR] [--quick]
 
 Writes ablations.csv / ablations.md (per case: the rib lift's range, the largest apex descent,
 the pressure range and the largest relative change of the volume, from the trace) and ablations.png
@@ -18,17 +18,18 @@ from _common import parse, pyplot, write_table
 
 
 def cases(scene: hybrid.Scene) -> list[tuple[str, tuple]]:
-    """(label, terms removed): the full scene, without volume, without each muscle."""
+    """(label, terms removed): the full scene, without volume, without each muscle or fibre term."""
     out = [("full scene", ())]
     if any(isinstance(c, hybrid.Volume) for c in scene.constraints):
         out.append(("without volume", ("volume",)))
-    out += [(f"without {t.name}", (t.name,)) for t in scene.forces if isinstance(t, hybrid.Muscle)]
+    out += [(f"without {t.name}", (t.name,)) for t in scene.forces
+            if isinstance(t, (hybrid.Muscle, hybrid.MuscleFibres, hybrid.PassiveFibres))]
     return out
 
 
 def main(argv=None) -> int:
     args = parse(__doc__, argv, "breathing_ablations", lambda p: (
-        p.add_argument("--scene", default="breathing", help="a scene name or TOML file (default breathing)"),
+        p.add_argument("--scene", default="breathing_paper", help="a scene name or TOML file (default breathing_paper)"),
         p.add_argument("--duration", type=float, default=4.0, help="simulated time (s), default one breath")))
     duration = 0.5 if args.quick else args.duration
     scene = hybrid.load_scene(args.scene)

@@ -3,7 +3,7 @@ the apex descent and the rib lift of the breathing trunk.
 
     python scripts/parameter_sweep.py [--peaks 25,50,75,100,125] [--workers N] [--out DIR] [--quick]
 
-Each case is `hybrid run breathing --set forces.muscle.stiffness.breathing.peak=P`, run
+Each case is `hybrid run breathing_paper --set forces.muscle.stiffness.breathing.peak=P`, run
 in its own process (all local cores by default); a case that fails is a row with its
 error, the others still come back. Writes sweep.csv / sweep.md and sweep.png.
 """
@@ -27,7 +27,7 @@ def one_case(peak: float, duration_s: float, scene: str) -> dict:
 
 def main(argv=None) -> int:
     args = parse(__doc__, argv, "parameter_sweep", lambda p: (
-        p.add_argument("--scene", default="breathing"),
+        p.add_argument("--scene", default="breathing_paper"),
         p.add_argument("--peaks", default="25,50,75,100,125", help="peak muscle stiffnesses (N/m), comma-separated"),
         p.add_argument("--duration", type=float, default=2.0, help="simulated time (s), past the peak inspiration"),
         p.add_argument("--workers", type=int, default=None, help="local processes (default: every core)")))

@@ -1,7 +1,7 @@
 """Validating the rigid part against MuJoCo alone: the breathing trunk's ribs, stepped by
 the coupled loop, against `mujoco.mj_step` driven by the same wrenches.
 
-    python scripts/rigid_vs_mujoco.py [--scene breathing] [--steps 4000] [--out DIR] [--quick]
+    python scripts/rigid_vs_mujoco.py [--scene breathing_paper] [--steps 4000] [--out DIR] [--quick]
 
 Each step of the coupled run applies the membrane's forces on the ribs as wrenches
 (`mj_data.xfrc_applied`); recorded step by step and replayed through a fresh `MjData`
@@ -22,7 +22,7 @@ from _common import parse, pyplot, write_table
 
 def main(argv=None) -> int:
     args = parse(__doc__, argv, "rigid_vs_mujoco", lambda p: (
-        p.add_argument("--scene", default="breathing"),
+        p.add_argument("--scene", default="breathing_paper"),
         p.add_argument("--steps", type=int, default=4000, help="steps (default one breath at 1 ms)")))
     nstep = 300 if args.quick else args.steps
     sim = hybrid.load(args.scene)

@@ -176,7 +176,7 @@ def test_the_viewer_draws_the_membrane_edges_as_user_geoms():
 
     from hybrid.render import draw_membrane, membrane_edges
 
-    sim = hybrid.load()
+    sim = hybrid.load("breathing_paper")
     sim.step(100)
     edges, rgba = membrane_edges(sim.model)
     assert len(edges) == 80 + 156 - 2  # Euler: V - E + F = 2

@@ -52,7 +52,7 @@ def test_read_back_equals_the_simulation_at_the_recorded_times(tmp_path):
 def test_read_back_of_a_run_stepped_in_compiled_frames(tmp_path):
     """The recorder alone: the runner steps in compiled batches of frames and hands
     them over as blocks; equal to a twin run stepped frame by frame."""
-    sim, twin = hybrid.load(), hybrid.load()
+    sim, twin = hybrid.load("breathing_paper"), hybrid.load("breathing_paper")
     copies = FrameCopies()
     with Recorder(tmp_path / "run.mcap", sim, every_s=0.02) as rec:
         result = run(sim, 2.5, observers=[rec])

@@ -132,7 +132,7 @@ def test_a_region_without_triangles_and_a_missing_direction_are_refused():
     mesh = LEVELS["icosphere"][0]
     far = Ball((0.0, 0.0, 0.0), 0.5 * R)  # inside the sphere, no point: refused by the region itself
     near_one = Ball(tuple(mesh.vert_pos[0]), 1e-3 * R)  # one point: no triangle
-    for sel, pattern in ((near_one, r"forces\['muscle_fibres'\]\.region: expected triangles with at least two"),
+    for sel, pattern in ((near_one, r"forces\['muscle_fibres'\]\.region: expected triangles in the region"),
                          (far, r"selects none")):
         with pytest.raises(SceneError, match=pattern):
             compile_scene(Scene(mesh=mesh, masses=Masses(total_kg=1.0),
