@@ -53,8 +53,11 @@ FAST = {"contract", "arcp", "nsz", "afn"}
 # no_cfunc_wrapper: no C-callable copy of each function (nothing here takes a
 # kernel's address); building one for every kernel and callee costs a first run time.
 FLAGS = dict(cache=True, error_model="numpy", _nrt=False, fastmath=FAST, nogil=True, no_cfunc_wrapper=True)
-# below this, a step is too short for threads to pay (their wake-up is microseconds)
-PARALLEL_MIN_VERTS = 500
+# below this, a step is too short for threads to pay (their wake-up is microseconds),
+# and its parallel twins are not even compiled: the breathing scene's 1,219 points step in
+# 101 us serial against 554 us parallel on 2 cores, one of them busy (the run-time choice
+# above this keeps measuring: `hybrid.builds`)
+PARALLEL_MIN_VERTS = 2000
 # points per chunk of the passes that sum over the points: long enough to
 # cost nothing per chunk, short enough that the threads share evenly
 CHUNK_VERTS = 64
