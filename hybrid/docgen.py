@@ -120,7 +120,7 @@ def _valid(kind: str, meta: dict) -> str:
     if kind == "positive":
         return "a number > 0" + (f" and <= {_show(float(meta['hi']))}" if meta.get("hi") is not None else "")
     if kind == "step":
-        return f'a number > 0 and <= {_show(float(meta["hi"]))}, or "auto" (half the stable-step estimate, rounded down to 1, 2 or 5 x 10^k)'
+        return f'a number > 0 and <= {_show(float(meta["hi"]))}, or "auto" (half the stable-step estimate, rounded down to 1, 2 or 5 x 10^k; with implicit Euler 4 times the symplectic Euler estimate, at most 0.01 s)'
     if kind == "floats":
         return "[z, ...], finite numbers"
     if kind == "nonneg":

@@ -136,7 +136,8 @@ class Scene:
     constraints: tuple = ()
     rigid: Optional[Rigid] = None
     # None: the MJCF's own timestep for a scene with a rigid part, else DEFAULT_DT_S;
-    # "auto": half the model's stable-step estimate, rounded down (hybrid.model.auto_dt)
+    # "auto": half the model's stable-step estimate, rounded down (hybrid.model.auto_dt; for
+    # implicit Euler, 4 times symplectic Euler's: auto_dt_implicit)
     dt_s: Optional[float] = param("step", None, hi=checks.MAX_DT_S)
     integrator: str = param("choice", "symplectic_euler", choices=INTEGRATORS)
     formulation: str = param("choice", "continuum", choices=FORMULATIONS)

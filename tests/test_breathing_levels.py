@@ -12,7 +12,7 @@ import pytest
 import hybrid
 from hybrid.errors import MeshError, SceneError
 from hybrid.mesh import fibonacci_sphere, level_counts, uv_sphere, vertex_area
-from hybrid.model import auto_dt, compile_scene, nice_floor
+from hybrid.model import auto_dt, auto_dt_implicit, compile_scene, nice_floor
 from hybrid.regions import select_faces
 from hybrid.resolve import resolve_scene
 from hybrid.run import run
@@ -102,6 +102,10 @@ def test_auto_step_is_half_the_stable_estimate_rounded_down():
         assert m.scene.dt_s == m.dt_s  # the model's scene holds the number the run uses
     with pytest.raises(SceneError, match="dt_s"):
         compile_scene(resolve_scene("breathing", overrides=["dt_s=fast"]))
+    # implicit Euler has no bound of its own: 4 times symplectic Euler's, at most 10 ms
+    m = compile_scene(resolve_scene("breathing", overrides=["integrator=implicit_euler"]))
+    explicit = m.with_dt(m.dt_s, "symplectic_euler").dt_stable_s
+    assert m.dt_s == auto_dt_implicit(explicit) and 2 * explicit < m.dt_s <= min(4 * explicit, 0.01)
 
 
 def test_the_trace_gives_the_diaphragms_swept_volume():
