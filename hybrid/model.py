@@ -107,6 +107,11 @@ class Model:
         return Model(scene, self.mesh, self.regions, arrays, self.terms, self.python_schedules,
                      self.vert_stiffness, dt_stable, self.rigid, self.link_vert, self.vert_viscosity)
 
+    def region_faces(self, name: str) -> np.ndarray:
+        """The faces of the named region, by the rule the terms use (`hybrid.regions.faces_of`)."""
+        return _regions.faces_of(self.scene.regions[name], self.mesh.vert_pos, self.mesh.face_vert,
+                                 self.scene.regions, self.regions[name], name=name)
+
     def without_speed_limit(self) -> "Model":
         """The same model without the runaway test (`max_speed_m_s`): for numerical
         studies of runs that move fast while converging; a run still stops on

@@ -15,10 +15,10 @@ from typing import Union
 import numpy as np
 
 from .errors import SceneError
-from .mesh.geometry import vertex_area
+from .mesh.geometry import region_faces, vertex_area
 
 __all__ = ["Indices", "HalfSpace", "Ball", "Box", "Nearest", "Patch", "All", "Border",
-           "Union_", "Intersection", "Difference", "Selector", "select", "contains", "select_faces"]
+           "Union_", "Intersection", "Difference", "Selector", "select", "contains", "select_faces", "faces_of"]
 
 
 def _vec3(v, name):
@@ -281,3 +281,12 @@ def select_faces(sel: Selector, vert_pos: np.ndarray, face_vert: np.ndarray, sel
         return None
     tri = np.asarray(vert_pos)[np.asarray(face_vert)]
     return np.unique(_select(geo, tri.mean(axis=1), name, {}, (None, None))).astype(np.int64)
+
+
+def faces_of(sel: Selector, vert_pos: np.ndarray, face_vert: np.ndarray, selectors: dict, verts: np.ndarray,
+             *, name: str) -> np.ndarray:
+    """A region's faces, by the one rule the terms and the readouts share: those whose
+    centroid it holds for a region of geometry (`select_faces`), else those with two
+    of their points among its points `verts`."""
+    faces = select_faces(sel, vert_pos, face_vert, selectors, name=name)
+    return faces if faces is not None else region_faces(face_vert, verts, len(vert_pos))

@@ -33,7 +33,6 @@ from .provenance import run_provenance
 from .scene import Muscle, MuscleFibres, SoftVolume, Volume
 from .simulation import Simulation
 from .step import F_KE, F_PRESSURE, F_TIME, F_VOLUME, capture_frame
-from .mesh.geometry import region_faces
 from .readouts import swept_volume
 from .loads import Loads, LoadsObserver
 from .terms.volume import face_volume
@@ -355,8 +354,7 @@ def run(sim: Simulation, duration_s: float, *, frame_dt_s: float = 0.01, progres
     # the muscle stiffness at each frame: its table stacked once, evaluated compiled
     muscle_table, muscle_fns = stack_schedules([muscle_sched]) if muscle_sched is not None else (None, [])
     muscle_val = np.zeros(3)
-    swept_faces = model.mesh.face_vert[region_faces(model.mesh.face_vert, model.regions[SWEPT_REGION],
-                                                    model.nvert)] if "diaphragm" in parts else None
+    swept_faces = model.mesh.face_vert[model.region_faces(SWEPT_REGION)] if "diaphragm" in parts else None
 
     def muscle_at(t):
         if muscle_table is None:

@@ -139,15 +139,15 @@ class Simulation:
         return readouts.net_internal(self.state.vert_pos, f)
 
     def swept_volume_m3(self, region: str) -> float:
-        """Volume (m^3) swept by the faces of the named region (those with at least two
-        of their points in it) since rest, positive outward: for the diaphragm, minus
+        """Volume (m^3) swept by the faces of the named region (`Model.region_faces`)
+        since rest, positive outward: for the diaphragm, minus
         its share of the tidal volume. Over every region of a closed surface the
         swept volumes add up to V - V0."""
         m = self.model
         if region not in m.regions:
             raise SceneError(f"region {region!r}: not a region of scene {m.scene.name!r}; expected one of "
                              f"{sorted(m.regions)}")
-        faces = readouts.region_faces(m.mesh.face_vert, m.regions[region], m.nvert)
+        faces = m.region_faces(region)
         return readouts.swept_volume(m.mesh.face_vert[faces], m.arrays.vert_rest, self.state.vert_pos)
 
     @property

@@ -33,7 +33,6 @@ from .. import checks
 from .. import regions as _regions
 from .. import schedule as _sched
 from ..errors import SceneError
-from ..mesh.geometry import region_faces
 from ..mesh.validate import few
 
 __all__ = ["param", "Rows", "force", "constraint", "order_terms", "Term", "Build", "FORCE_TYPES", "CONSTRAINT_TYPES",
@@ -272,8 +271,7 @@ class Build:
         """The faces of region `sel` (its points `idx`): those whose centroid it holds when
         it is made of geometry (`hybrid.regions.select_faces`), else those with two of
         their points in it."""
-        faces = _regions.select_faces(sel, self.mesh.vert_pos, self.mesh.face_vert, self.selectors, name=what)
-        return faces if faces is not None else region_faces(self.mesh.face_vert, idx, self.mesh.nvert)
+        return _regions.faces_of(sel, self.mesh.vert_pos, self.mesh.face_vert, self.selectors, idx, name=what)
 
     def region(self, sel, what: str) -> np.ndarray:
         """The sorted vertex indices a selector picks (SceneError naming `what` if none)."""
