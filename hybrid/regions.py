@@ -18,7 +18,7 @@ from .errors import SceneError
 from .mesh.geometry import region_faces, vertex_area
 
 __all__ = ["Indices", "HalfSpace", "Ball", "Box", "Nearest", "Patch", "All", "Border",
-           "Union_", "Intersection", "Difference", "Selector", "select", "contains", "select_faces", "faces_of"]
+           "Union_", "Intersection", "Difference", "Selector", "select", "contains", "select_faces"]
 
 
 def _vec3(v, name):
