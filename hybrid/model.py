@@ -157,6 +157,27 @@ def _positive(value, name):
 LEVEL_GENERATORS = ("uv_sphere", "ring_sphere", "fibonacci_sphere")
 
 
+#: how far (of the radius) a file mesh's points may be off a sphere for it to refine by
+#: level (a sphere written with 17 digits is on it to about 1e-16; single-precision STL to 1e-7)
+SPHERE_FIT_REL_TOL = 1e-6
+
+
+def _refine_file_mesh(pos, face, level):
+    """A file mesh's faces split into four `level` times, the new points projected onto
+    the sphere through its points (`MeshSpec`)."""
+    from .mesh.refine import fit_sphere, split_faces
+    npoint = len(pos) + (4 ** level - 1) * len(face) // 2  # closed: E = 3F/2, F x 4 a level
+    if npoint > checks.MAX_POINTS:  # before any array is allocated
+        raise SceneError(f"mesh.level: level {level} splits the file mesh's {len(face)} faces into "
+                         f"{len(face) * 4 ** level} (about {npoint} points); expected at most {checks.MAX_POINTS} points")
+    try:
+        ctr, radius = fit_sphere(pos, SPHERE_FIT_REL_TOL, "mesh.level on a file mesh (new points go onto "
+                                 "the surface it samples, known for a sphere)")
+    except MeshError as exc:
+        raise SceneError(f"{exc}; or no mesh.level") from None
+    return split_faces(pos, face, level, center=ctr, radius_m=radius)
+
+
 def build_mesh(scene: Scene) -> Mesh:
     """The scene's surface: a given Mesh, a mesh file, or a generator."""
     from . import mesh as _mesh
@@ -171,11 +192,12 @@ def build_mesh(scene: Scene) -> Mesh:
            for f in dataclasses.fields(MeshSpec) if getattr(spec, f.name) is not None and f.name != "generator"}
     center = np.asarray(val["center_m"])
     if spec.path is not None:
-        if val.get("level") is not None:
-            raise SceneError(f"mesh.level: a mesh read from a file ({spec.path!r}) has no levels; "
-                             f"expected no level with mesh.path, received level={val['level']!r}")
         m = Mesh.load(scene.resolve(spec.path))
-        return Mesh.from_arrays(m.vert_pos * val["unit_scale"] + center, m.face_vert, name=m.name)
+        pos, face = m.vert_pos * val["unit_scale"] + center, m.face_vert
+        level = val.get("level") or 0
+        if level:
+            pos, face = _refine_file_mesh(pos, face, level)
+        return Mesh.from_arrays(pos, face, name=m.name if not level else f"{m.name}_level{level}")
     radius = val["radius_m"]
     gen = spec.generator
     if val.get("level") is not None and gen not in LEVEL_GENERATORS:

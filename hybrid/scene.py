@@ -59,7 +59,12 @@ class MeshSpec:
     a level). `conform_z_m` (m above the centre): latitudes that are circles of
     the UV or ring sphere at every level, so that regions bounded there (the
     anatomy's parts) are bounded by edges and converge without a mesh-dependent
-    jagged edge.
+    jagged edge (a generator's option: a file mesh keeps its own points).
+    On a file mesh, `level` K splits every face into four K times (about 4^K
+    times the points, the spacing halved a level), the new points projected
+    onto the surface the file samples; that surface is known for a sphere (the
+    one through the file's points), so a level is refused for a file whose
+    points are off a sphere.
     """
     generator: Optional[str] = param("choice", "uv_sphere", choices=MESH_GENERATORS)
     path: Optional[str] = param("text", None)

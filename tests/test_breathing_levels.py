@@ -90,8 +90,9 @@ def test_the_scene_on_a_saved_level_4_mesh_runs_as_on_the_generated_one(tmp_path
     res = [run(hybrid.Simulation(m), 0.05)["summary"]["metrics"] for m in (model, model_file)]
     for key, v in res[0].items():  # 17 digits read back to the same doubles: the same run
         assert res[1][key]["max"] == pytest.approx(v["max"], rel=1e-9, abs=1e-15), key
-    with pytest.raises(SceneError, match="mesh.level: a mesh read from a file"):
-        compile_scene(dataclasses.replace(from_file, mesh=dataclasses.replace(from_file.mesh, level=4)))
+    # a level on a file mesh splits its faces (about 4 times the points)
+    assert compile_scene(dataclasses.replace(from_file, mesh=dataclasses.replace(from_file.mesh, level=1))).nvert > \
+        3 * model.nvert
 
 
 def test_auto_step_is_half_the_stable_estimate_rounded_down():
@@ -116,3 +117,37 @@ def test_the_trace_gives_the_diaphragms_swept_volume():
     assert trace["swept_volume_ml"][-1] > 1.0
     plain = hybrid.load(hybrid.Scene(forces=(hybrid.Membrane(youngs_modulus_n_per_m=100.0),)))
     assert np.isnan(run(plain, 0.01)["trace"].arrays()["swept_volume_ml"]).all()  # no diaphragm region
+
+
+def test_a_sphere_read_from_a_file_refines_onto_its_sphere(tmp_path):
+    from hybrid.mesh.refine import split_faces
+    generated = resolve_scene("breathing", overrides=["mesh.level=1"])
+    path = tmp_path / "level1.obj"
+    compile_scene(generated).mesh.save(path)
+    center = np.asarray(generated.mesh.center_m)
+    areas = []
+    for level in (1, 2, 3):
+        m = compile_scene(dataclasses.replace(generated, mesh=dataclasses.replace(generated.mesh, path=str(path),
+                                                                                  level=level)))
+        r = np.linalg.norm(m.mesh.vert_pos - center, axis=1)
+        np.testing.assert_allclose(r, 0.12, rtol=1e-14)  # every new point on the sphere
+        assert m.mesh.volume() > 0  # faces still outward (and the Mesh validated closed)
+        areas.append(vertex_area(m.mesh.vert_pos, m.mesh.face_vert).sum())
+    # the polyhedron's area tends to 4 pi R^2 at second order in the spacing (halved a level)
+    err = [4 * np.pi * 0.12 ** 2 - a for a in areas]
+    assert all(e > 0 for e in err) and 3.5 < err[0] / err[1] < 4.5 and 3.5 < err[1] / err[2] < 4.5
+    # without a projection the split keeps the polyhedron: the same area, the same volume
+    coarse = compile_scene(generated).mesh
+    pos, face = split_faces(coarse.vert_pos, coarse.face_vert, 2)
+    assert vertex_area(pos, face).sum() == pytest.approx(vertex_area(coarse.vert_pos, coarse.face_vert).sum(), rel=1e-12)
+    assert hybrid.mesh.volume(pos, face) == pytest.approx(coarse.volume(), rel=1e-12)
+
+
+def test_a_level_of_a_file_mesh_off_a_sphere_is_refused(tmp_path):
+    path = tmp_path / "ellipsoid.obj"
+    ico = hybrid.mesh.icosphere(2, 0.1)
+    hybrid.mesh.Mesh.from_arrays(ico.vert_pos * [1.0, 1.0, 1.3], ico.face_vert).save(path)
+    sc = hybrid.Scene(mesh=hybrid.MeshSpec(path=str(path), level=1), forces=(hybrid.Membrane(youngs_modulus_n_per_m=100.0),))
+    with pytest.raises(SceneError, match=r"mesh.level on a file mesh.*off the best-fitting sphere.*or no mesh.level"):
+        compile_scene(sc)
+    assert compile_scene(dataclasses.replace(sc, mesh=hybrid.MeshSpec(path=str(path)))).nvert == ico.nvert

@@ -12,6 +12,7 @@ import numpy as np
 from hybrid.checks import MAX_POINTS
 from hybrid.errors import MeshError
 
+from .refine import split_faces
 from .surface import Mesh
 
 __all__ = ["uv_sphere", "icosahedron", "icosphere", "irregular_sphere", "fibonacci_sphere", "ring_sphere",
@@ -150,22 +151,8 @@ def icosphere(subdivisions: int, radius: float = 1.0, center=(0.0, 0.0, 0.0)) ->
             f"received {subdivisions!r}"
         )
     ctr = _check_sphere_args(radius, center, "icosphere")
-    unit, face = _ICO_VERT.copy(), _ICO_FACE.copy()
-    for _ in range(int(subdivisions)):
-        # One new vertex per unique edge, numbered after the old ones.
-        corner = face[:, [0, 1, 2]], face[:, [1, 2, 0]]
-        lo, hi = np.minimum(*corner), np.maximum(*corner)  # (nface, 3): edges ab, bc, ca
-        key, inverse = np.unique(lo * len(unit) + hi, return_inverse=True)
-        mid_index = len(unit) + inverse.reshape(-1, 3)
-        mid = unit[key // len(unit)] + unit[key % len(unit)]
-        mid /= np.linalg.norm(mid, axis=1, keepdims=True)
-        unit = np.concatenate([unit, mid])
-        a, b, c = face.T
-        ab, bc, ca = mid_index.T
-        face = np.concatenate([
-            np.stack([a, ab, ca], axis=1), np.stack([b, bc, ab], axis=1),
-            np.stack([c, ca, bc], axis=1), np.stack([ab, bc, ca], axis=1),
-        ])
+    # edge midpoints pushed out to the unit sphere at each level
+    unit, face = split_faces(_ICO_VERT, _ICO_FACE, int(subdivisions), center=np.zeros(3), radius_m=1.0)
     return Mesh(ctr + radius * unit, face, name=f"icosphere{int(subdivisions)}")
 
 

@@ -60,7 +60,7 @@ def build_study_parser() -> argparse.ArgumentParser:
             s.add_argument("--metric", action="append", metavar="NAME",
                            help="a trace series whose largest value is studied (repeatable; default: "
                                 "rib_lift_mm, apex_descent_mm, pressure_pa, swept_volume_ml)")
-            s.add_argument("--levels", metavar="K0-K1", help="the mesh levels (default 0-5; --small 0-2)")
+            s.add_argument("--levels", metavar="K0-K1", help="the mesh levels (default 0-5, --small 0-2; a mesh file: 0-2, --small 0-1)")
             s.add_argument("--steps", type=int, metavar="N", help="time steps per level, halving (default 3)")
             s.add_argument("--duration", type=float, metavar="S", help="simulated time per run (s)")
             s.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",

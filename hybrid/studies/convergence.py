@@ -4,8 +4,9 @@ levels x time steps, their limits, and the cheapest run for a target accuracy.
 `run(out_dir, scene=...)` writes `convergence.json`, `convergence.md` and
 `convergence.png`.
 
-Grid       mesh levels K (`mesh.level`: about 80 x 2^K points, the spacing divided
-           by sqrt(2) a level) x time steps dt0(K) / 2^j, j = 0..NSTEP-1, where
+Grid       mesh levels K (`mesh.level`: about 80 x 2^K points of a generator, the
+           spacing divided by sqrt(2) a level; on a mesh read from a file, its faces
+           split into four K times, the spacing halved a level) x time steps dt0(K) / 2^j, j = 0..NSTEP-1, where
            dt0(K) is the scene's own step at that level (`dt_s = "auto"`: half
            the stable-step estimate, rounded down; a numeric dt_s is kept where
            it is below that). Each run is independent (`hybrid.sweep`: the local
@@ -18,7 +19,7 @@ Time       at each level, Richardson extrapolation of the three steps (two when
            NSTEP = 2: first order, the order of both integrators) gives the
            level's value at dt -> 0 and the observed order in time.
 Space      the levels' dt -> 0 values fitted by limit + C h^p over the five
-           finest levels (h = sqrt(2)^-K, `fit_space`): the limit, the observed
+           finest levels (h = r^-K, r the spacing ratio, `fit_space`): the limit, the observed
            order in space p, and the limit's own error estimate (the larger of the
            fit's rms residual and how far the limit moves when the finest level is
            left out). Errors are relative to the limit.
@@ -48,11 +49,14 @@ __all__ = ["run", "write", "simulate", "richardson", "fit_space", "estimate", "r
 
 DEFAULT_METRICS = ("rib_lift_mm", "apex_descent_mm", "pressure_pa", "swept_volume_ml")
 TARGETS = (0.10, 0.03, 0.01)
-RATIO_SPACE = math.sqrt(2.0)  # the spacing ratio between mesh levels
+RATIO_SPACE = math.sqrt(2.0)  # the spacing ratio between a generator's mesh levels
+RATIO_SPACE_FILE = 2.0  # between a file mesh's levels: each face split into four
 RATIO_TIME = 2.0
 #: (levels, steps per level, duration s or None for the scene's) by size
 SIZES = {False: dict(levels=(0, 1, 2, 3, 4, 5), nstep=3, duration_s=None),
          True: dict(levels=(0, 1, 2), nstep=2, duration_s=0.5)}
+#: the default levels of a mesh read from a file (full, small)
+FILE_LEVELS = {False: (0, 1, 2), True: (0, 1)}
 #: an observed order outside this range is not trusted for extrapolation: the
 #: methods' formal order (1 in time; 1 in space for the regions' point membership) is used
 ORDER_RANGE = (0.5, 4.0)
@@ -118,8 +122,8 @@ FIT_LEVELS = 5
 FIT_ORDERS = np.linspace(0.5, 4.0, 351)
 
 
-def fit_space(levels, values, nfit: int = FIT_LEVELS):
-    """x_K = limit + C h_K^p over the `nfit` finest levels, h_K = sqrt(2)^-K: for each p of
+def fit_space(levels, values, nfit: int = FIT_LEVELS, ratio: float = RATIO_SPACE):
+    """x_K = limit + C h_K^p over the `nfit` finest levels, h_K = ratio^-K: for each p of
     FIT_ORDERS the least-squares (limit, C), the p of least residual kept. Returns (limit,
     p or None, rms residual, the limit of the same fit without the finest level or None):
     p is None when the best order is an end of FIT_ORDERS (no order fits; the limit is
@@ -128,7 +132,7 @@ def fit_space(levels, values, nfit: int = FIT_LEVELS):
     that do not follow the mesh add an error that is not smooth in h."""
     lv = np.asarray(levels[-nfit:], float)
     x = np.asarray(values[-nfit:], float)
-    h = RATIO_SPACE ** (-lv)
+    h = ratio ** (-lv)
 
     def solve(p, hh, xx):
         a = np.stack([np.ones_like(hh), hh ** p], axis=1)
@@ -145,7 +149,7 @@ def fit_space(levels, values, nfit: int = FIT_LEVELS):
     return float(coef[0]), observed, rms, (float(coarser) if coarser is not None else None)
 
 
-def estimate(runs: list, metrics, levels) -> dict:
+def estimate(runs: list, metrics, levels, ratio: float = RATIO_SPACE) -> dict:
     """Per metric: each level's dt -> 0 value, the limit in space, the orders, the
     limit's error estimate, each level's relative error; and each run's error."""
     out = {}
@@ -166,11 +170,11 @@ def estimate(runs: list, metrics, levels) -> dict:
         xs = [x for _, x in per_level]
         lv = [level for level, _ in per_level]
         if len(xs) >= 3:
-            limit, p_obs, rms, coarser = fit_space(lv, xs)
+            limit, p_obs, rms, coarser = fit_space(lv, xs, ratio=ratio)
             p = 1.0 if p_obs is None else p_obs
             err_est = max(rms, abs(limit - coarser)) if coarser is not None else rms
         else:
-            limit, p_obs, p = richardson(xs, RATIO_SPACE)
+            limit, p_obs, p = richardson(xs, ratio)
             err_est = None
         scale = abs(limit) if limit != 0 else 1.0
         out[k] = {"metric": k, "limit": limit, "limit_error_estimate": err_est,
@@ -184,7 +188,7 @@ def estimate(runs: list, metrics, levels) -> dict:
     return out
 
 
-def recommend(runs: list, est: dict, metrics, targets=TARGETS) -> list:
+def recommend(runs: list, est: dict, metrics, targets=TARGETS, ratio: float = RATIO_SPACE) -> list:
     """The cheapest (level, dt) per metric and target (module docstring)."""
     rows = []
     ok = [r for r in runs if r["status"] == "ok"]
@@ -202,11 +206,11 @@ def recommend(runs: list, est: dict, metrics, targets=TARGETS) -> list:
                              "wall_s_per_sim_s": best["wall_s_per_sim_s"], "predicted": False})
             elif finest is not None:
                 rows.append({"metric": k, "target_rel_error": target, "predicted": True,
-                             **_predict(e, runs, finest, target)})
+                             **_predict(e, runs, finest, target, ratio)})
     return rows
 
 
-def _predict(e: dict, runs: list, finest: dict, target: float) -> dict:
+def _predict(e: dict, runs: list, finest: dict, target: float, ratio: float = RATIO_SPACE) -> dict:
     """The level and step the error models predict for `target`, half of it to each:
     space error err_K r^(-p (K - K_last)) from the finest level's; the step the finest
     level's smallest, times the fall of the scene's own step per level between the
@@ -218,7 +222,7 @@ def _predict(e: dict, runs: list, finest: dict, target: float) -> dict:
     need = target / 2
     k_last = levels[-1]
     level = k_last if err[-1] <= need else \
-        k_last + math.ceil(math.log(err[-1] / need) / (p * math.log(RATIO_SPACE)))
+        k_last + math.ceil(math.log(err[-1] / need) / (p * math.log(ratio)))
     same = sorted((r for r in runs if r["level"] == k_last and r["status"] == "ok"), key=lambda r: r["dt"])
     scale = abs(e["limit"]) or 1.0
     # the stable step's fall per level, as the two finest levels' own steps show (at most halving)
@@ -228,7 +232,7 @@ def _predict(e: dict, runs: list, finest: dict, target: float) -> dict:
     e_time = abs(same[0]["values"][e["metric"]] - e["value_by_level"][-1]) / scale
     if e_time > need:
         dt *= need / e_time
-    nvert = round(finest["nvert"] * 2 ** (level - finest["level"]))
+    nvert = round(finest["nvert"] * ratio ** (2 * (level - finest["level"])))  # points as spacing^-2
     cost = finest["wall_s_per_sim_s"] * (nvert / finest["nvert"]) * (finest["dt"] / dt)
     return {"level": level, "nvert": nvert, "dt": dt, "rel_error": None, "wall_s_per_sim_s": cost}
 
@@ -242,12 +246,15 @@ def run(out_dir, *, scene: str = "breathing", metrics=DEFAULT_METRICS, small: bo
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     size = SIZES[bool(small)]
-    levels = tuple(size["levels"] if levels is None else levels)
+    sc = resolve_scene(scene, overrides=list(overrides))
+    from_file = bool(getattr(sc.mesh, "path", None))
+    if levels is None:  # a file mesh's points grow 4 times a level
+        levels = FILE_LEVELS[bool(small)] if from_file else size["levels"]
+    levels = tuple(levels)
     nstep = size["nstep"] if nstep is None else int(nstep)
     if nstep < 1 or len(levels) < 2:
         raise HybridError(f"convergence: expected at least two mesh levels and one step per level, "
                           f"received levels {list(levels)} and {nstep} step(s)")
-    sc = resolve_scene(scene, overrides=list(overrides))
     duration = float(size["duration_s"] or sc.duration_s) if duration_s is None else float(duration_s)
     metrics = tuple(metrics)
     grid = []
@@ -268,7 +275,9 @@ def run(out_dir, *, scene: str = "breathing", metrics=DEFAULT_METRICS, small: bo
         if r["status"] != "ok":
             failures.append({"level": g["level"], "dt": g["dt"], "error": r["error"]})
         runs.append(row)
+    ratio = RATIO_SPACE_FILE if from_file else RATIO_SPACE
     res = {"scene": sc.name, "overrides": list(overrides), "metrics": list(metrics), "duration_s": duration,
+           "spacing_ratio": ratio,
            "levels": list(levels), "steps_per_level": nstep, "runs": runs, "failures": failures,
            "runtime_s": time.perf_counter() - t0}
     return write(out, res)
@@ -281,8 +290,9 @@ def write(out, res: dict) -> dict:
     metrics, levels, runs = tuple(res["metrics"]), tuple(res["levels"]), res["runs"]
     for r in runs:
         r.pop("rel_error", None)
-    est = estimate(runs, metrics, levels)
-    res = {**res, "estimate": est, "recommendation": recommend(runs, est, metrics),
+    ratio = res.get("spacing_ratio", RATIO_SPACE)
+    est = estimate(runs, metrics, levels, ratio)
+    res = {**res, "estimate": est, "recommendation": recommend(runs, est, metrics, ratio=ratio),
            "finest_change": _finest_change(runs, metrics, levels)}
     write_json(out / "convergence.json", res)
     (out / "convergence.md").write_text(_markdown(res))

@@ -85,3 +85,19 @@ def test_convergence_refuses_an_unknown_metric_in_one_line(tmp_path, capsys):
                        "--levels", "0-1", "--steps", "1", "--duration", "0.01"])
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1 and "snore_mm" in err and "apex_descent_mm" in err
+
+
+def test_a_mesh_read_from_a_file_refines_by_splitting_its_faces(tmp_path, capsys):
+    """The study's levels on a file mesh: faces split into four a level, the spacing halved."""
+    from hybrid.model import compile_scene
+    from hybrid.resolve import resolve_scene
+    path = tmp_path / "level0.obj"
+    compile_scene(resolve_scene("breathing", overrides=["mesh.level=0"])).mesh.save(path)
+    out = tmp_path / "cv"
+    assert main_study(["convergence", "--out", str(out), "--small", "--steps", "1", "--duration", "0.1",
+                       "--set", f"mesh.path={path}"]) == 0
+    data = strict_load(out / "convergence.json")
+    assert data["spacing_ratio"] == 2.0 and data["levels"] == [0, 1] and not data["failures"]
+    nv = [r["nvert"] for r in data["runs"]]
+    assert nv == [80, 80 + 3 * 156 // 2]  # a closed surface: one new point per edge, E = 3F/2
+    assert all(math.isfinite(v) for r in data["runs"] for v in r["values"].values())
