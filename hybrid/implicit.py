@@ -146,7 +146,7 @@ def implicit_forces(m, sched_val, x, v, out):
     if on[T_MEMBRANE]:
         add_membrane_serial(m.mem_vert, m.mem_par, m.kv_on, x, v, out)
     if on[T_FIBRES]:
-        add_muscle_fibres(m.fib_edge, m.fib_share, m.fib_sched, sched_val, x, out)
+        add_muscle_fibres(m.fib_vert, m.fib_par, m.fib_sched, sched_val, x, out)
     if on[T_PASSIVE]:
         add_passive_fibres(m.pf_vert, m.pf_par, x, out)
     if on[T_DAMPING]:
@@ -169,7 +169,7 @@ def newton_product(m, sched_val, x, face, h, project, u, y):
     if on[T_MEMBRANE]:
         membrane_tangent_product(m.mem_vert, m.mem_par, face, project, h * h, h, u, y)
     if on[T_FIBRES]:
-        fibre_tangent_product(m.fib_edge, m.fib_share, m.fib_sched, sched_val, x, project, h * h, u, y)
+        fibre_tangent_product(m.fib_vert, m.fib_par, m.fib_sched, sched_val, x, project, h * h, u, y)
     if on[T_PASSIVE]:
         passive_fibres_tangent_product(m.pf_vert, m.pf_par, x, project, h * h, u, y)
 
@@ -194,7 +194,7 @@ def _preconditioner(m, sched_val, x, face, h, blocks):
     if on[T_MEMBRANE]:
         membrane_tangent_diag(m.mem_vert, m.mem_par, face, h * h, h, blocks)
     if on[T_FIBRES]:
-        fibre_tangent_diag(m.fib_edge, m.fib_share, m.fib_sched, sched_val, x, h * h, blocks)
+        fibre_tangent_diag(m.fib_vert, m.fib_par, m.fib_sched, sched_val, x, h * h, blocks)
     if on[T_PASSIVE]:
         passive_fibres_tangent_diag(m.pf_vert, m.pf_par, x, h * h, blocks)
     for i in range(n):
@@ -332,7 +332,7 @@ def _merit(m, sched_val, h, w):
         if m.kv_on:
             total += h * kelvin_voigt_dissipation(m.mem_vert, m.mem_par, w.x_kv, w.v_try)
     if on[T_FIBRES]:
-        total += fibre_energy(m.fib_edge, m.fib_share, m.fib_sched, sched_val, w.x_try)
+        total += fibre_energy(m.fib_vert, m.fib_par, m.fib_sched, sched_val, w.x_try)
     if on[T_PASSIVE]:
         total += passive_fibres_energy_kernel(m.pf_vert, m.pf_par, w.x_try)
     return total

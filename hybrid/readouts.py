@@ -43,7 +43,7 @@ def internal_forces(a: MembraneArrays, vert_pos: np.ndarray, sched_val: np.ndarr
     if on[MassSpring.id]:
         add_mass_spring(a.spring_vert, a.spring_stiff, a.spring_rest, vert_pos, f)
     if on[MuscleFibres.id]:
-        add_muscle_fibres(a.fib_edge, a.fib_share, a.fib_sched, sched_val, vert_pos, f)
+        add_muscle_fibres(a.fib_vert, a.fib_par, a.fib_sched, sched_val, vert_pos, f)
     if on[PassiveFibres.id]:
         add_passive_fibres(a.pf_vert, a.pf_par, vert_pos, f)
     return f

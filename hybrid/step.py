@@ -214,7 +214,7 @@ def membrane_forces(m, s, t, par=True, shape_memory=True, membrane=True, applied
         add_pressure(m.ring_ptr, m.ring_vert, m.pres_sched, s.sched_val, s.vert_pos, s.vert_force)
         s.term_calls[T_PRESSURE] += 1
     if fibres is not None and on[T_MUSCLE_FIBRES]:
-        add_muscle_fibres(m.fib_edge, m.fib_share, m.fib_sched, s.sched_val, s.vert_pos, s.vert_force)
+        add_muscle_fibres(m.fib_vert, m.fib_par, m.fib_sched, s.sched_val, s.vert_pos, s.vert_force)
         s.term_calls[T_MUSCLE_FIBRES] += 1
     if passive is not None and on[T_PASSIVE_FIBRES]:
         add_passive_fibres(m.pf_vert, m.pf_par, s.vert_pos, s.vert_force)

@@ -24,9 +24,12 @@ position through F is left to the Newton iteration's residual).
 The nodes enter F through dF_0 = d00 (u_b - u_a), dF_1 = d01 (u_b - u_a) + d11 (u_c - u_a)
 (D upper triangular), so an element product is a few dozen multiplications.
 
-Muscle fibres (`hybrid.terms.fibres`): an edge of tension T s pulls with
-energy T s l; its Hessian on (x_i, x_j) is [[K, -K], [-K, K]], K = T s (I - u u^T) / l,
-positive semi-definite for T s >= 0 and projected to 0 otherwise.
+Muscle fibres (`hybrid.terms.fibres`): a triangle's work function A T Psi(lambda),
+lambda^2 = q = sum_k g_k |d_k|^2 over its edges d_k, Psi' = g the force-length
+relation, has the Hessian A T ((g' - g / lambda) a (x) a + g / lambda sum_k g_k D_k),
+a = grad lambda, D_k the Laplacian of edge k. The projection leaves out a
+negative coefficient of the rank-one part and the edges of negative g_k (or
+negative tension) in the second part; the rest is positive semi-definite.
 
 Passive fibres (`hybrid.terms.passive_fibres`): a stretched triangle's energy
 A0 E_f e^2 / 2, e = sum_k g_k (|d_k|^2 - L_k^2) / 2 over its edges d_k, has the
@@ -46,6 +49,7 @@ from __future__ import annotations
 import math
 
 from ..kernel import kernel
+from .fibres import MIN_STRETCH, force_length
 from .membrane import P_AREA, P_D00, P_D01, P_D11, P_LAM, P_MU, P_TAU, _edges_and_strain
 
 __all__ = ["NCACHE", "membrane_tangent_cache", "membrane_tangent_product", "membrane_tangent_diag",
@@ -173,55 +177,77 @@ def membrane_tangent_diag(mem_vert, mem_par, cache, kx, kv, blocks):
 
 
 @kernel(inline="always")
-def _fibre_stiffness(fib_edge, fib_share, fib_sched, sched_val, vert_pos, k, project):
-    """Edge k's K = T s (I - u u^T) / l as (T s / l, ux, uy, uz); 0 when projected and T s < 0."""
-    i, j = fib_edge[k, 0], fib_edge[k, 1]
-    dx, dy, dz = vert_pos[j, 0] - vert_pos[i, 0], vert_pos[j, 1] - vert_pos[i, 1], vert_pos[j, 2] - vert_pos[i, 2]
-    ln = math.sqrt(dx * dx + dy * dy + dz * dz)
-    ts = sched_val[fib_sched[k], 0] * fib_share[k]
-    if project and ts < 0.0:
-        ts = 0.0
-    return ts / ln, dx / ln, dy / ln, dz / ln
+def _fibre_state(fib_vert, fib_par, fib_sched, sched_val, vert_pos, f):
+    """(lambda, A T, g, g') of muscle triangle f (`hybrid.terms.fibres`)."""
+    sq = 0.0
+    for k in range(3):
+        i, j = fib_vert[f, k], fib_vert[f, (k + 1) % 3]
+        dx, dy, dz = vert_pos[j, 0] - vert_pos[i, 0], vert_pos[j, 1] - vert_pos[i, 1], vert_pos[j, 2] - vert_pos[i, 2]
+        sq += fib_par[f, k] * (dx * dx + dy * dy + dz * dz)
+    lam = max(math.sqrt(max(sq, 0.0)), MIN_STRETCH)
+    g, dg = force_length(lam, fib_par[f, 4])
+    return lam, fib_par[f, 3] * sched_val[fib_sched[f], 0], g, dg
 
 
 @kernel
-def fibre_tangent_product(fib_edge, fib_share, fib_sched, sched_val, vert_pos, project, kx, u, y):
-    """y += kx K u for the fibre edges' Hessian K at vert_pos (projected when `project`).
-    # Model: fib_edge, fib_share, fib_sched   # Data in: sched_val, vert_pos, u   # Data out: y, added to
+def fibre_tangent_product(fib_vert, fib_par, fib_sched, sched_val, vert_pos, project, kx, u, y):
+    """y += kx K u for the muscle triangles' Hessian K at vert_pos (projected when `project`).
+    # Model: fib_vert, fib_par, fib_sched   # Data in: sched_val, vert_pos, u   # Data out: y, added to
     """
-    for k in range(fib_edge.shape[0]):
-        i, j = fib_edge[k, 0], fib_edge[k, 1]
-        c, ux, uy, uz = _fibre_stiffness(fib_edge, fib_share, fib_sched, sched_val, vert_pos, k, project)
-        wx, wy, wz = u[i, 0] - u[j, 0], u[i, 1] - u[j, 1], u[i, 2] - u[j, 2]
-        d = ux * wx + uy * wy + uz * wz
-        c *= kx
-        kx_, ky_, kz_ = c * (wx - d * ux), c * (wy - d * uy), c * (wz - d * uz)
-        y[i, 0] += kx_
-        y[i, 1] += ky_
-        y[i, 2] += kz_
-        y[j, 0] -= kx_
-        y[j, 1] -= ky_
-        y[j, 2] -= kz_
+    for f in range(fib_vert.shape[0]):
+        lam, at, g, dg = _fibre_state(fib_vert, fib_par, fib_sched, sched_val, vert_pos, f)
+        rank1 = at * (dg - g / lam)
+        edges = at * g / lam
+        if project:
+            rank1 = max(rank1, 0.0)
+        au = 0.0  # a . u, a = grad lambda = sum_k g_k d_k / lambda on j, minus on i
+        for k in range(3):
+            i, j = fib_vert[f, k], fib_vert[f, (k + 1) % 3]
+            for c in range(3):
+                au += fib_par[f, k] * (vert_pos[j, c] - vert_pos[i, c]) * (u[j, c] - u[i, c])
+        au /= lam
+        for k in range(3):
+            i, j = fib_vert[f, k], fib_vert[f, (k + 1) % 3]
+            gk = fib_par[f, k]
+            ge = edges * gk
+            if project and ge < 0.0:
+                ge = 0.0
+            for c in range(3):
+                d = kx * (rank1 * au * gk * (vert_pos[j, c] - vert_pos[i, c]) / lam + ge * (u[j, c] - u[i, c]))
+                y[j, c] += d
+                y[i, c] -= d
 
 
 @kernel
-def fibre_tangent_diag(fib_edge, fib_share, fib_sched, sched_val, vert_pos, kx, blocks):
-    """blocks += kx K at both ends of every fibre edge (projected)."""
-    for k in range(fib_edge.shape[0]):
-        c, ux, uy, uz = _fibre_stiffness(fib_edge, fib_share, fib_sched, sched_val, vert_pos, k, True)
-        c *= kx
-        for end in range(2):
-            i = fib_edge[k, end]
-            blocks[i, 0] += c * (1.0 - ux * ux)
-            blocks[i, 1] -= c * ux * uy
-            blocks[i, 2] -= c * ux * uz
-            blocks[i, 3] -= c * ux * uy
-            blocks[i, 4] += c * (1.0 - uy * uy)
-            blocks[i, 5] -= c * uy * uz
-            blocks[i, 6] -= c * ux * uz
-            blocks[i, 7] -= c * uy * uz
-            blocks[i, 8] += c * (1.0 - uz * uz)
-
+def fibre_tangent_diag(fib_vert, fib_par, fib_sched, sched_val, vert_pos, kx, blocks):
+    """blocks += kx K at each corner of every muscle triangle (projected)."""
+    for f in range(fib_vert.shape[0]):
+        lam, at, g, dg = _fibre_state(fib_vert, fib_par, fib_sched, sched_val, vert_pos, f)
+        rank1 = kx * max(at * (dg - g / lam), 0.0)
+        edges = kx * at * g / lam
+        for c in range(3):
+            v = fib_vert[f, c]
+            kp = (c + 2) % 3  # grad_v lambda: edge c starts at v (-g d), edge c - 1 ends there (+g d)
+            gx = gy = gz = 0.0
+            lap = 0.0
+            for k, sgn in ((c, -1.0), (kp, 1.0)):
+                i, j = fib_vert[f, k], fib_vert[f, (k + 1) % 3]
+                gk = fib_par[f, k]
+                gx += sgn * gk * (vert_pos[j, 0] - vert_pos[i, 0]) / lam
+                gy += sgn * gk * (vert_pos[j, 1] - vert_pos[i, 1]) / lam
+                gz += sgn * gk * (vert_pos[j, 2] - vert_pos[i, 2]) / lam
+                if edges * gk > 0.0:
+                    lap += edges * gk
+            b = blocks[v]
+            b[0] += rank1 * gx * gx + lap
+            b[1] += rank1 * gx * gy
+            b[2] += rank1 * gx * gz
+            b[3] += rank1 * gy * gx
+            b[4] += rank1 * gy * gy + lap
+            b[5] += rank1 * gy * gz
+            b[6] += rank1 * gz * gx
+            b[7] += rank1 * gz * gy
+            b[8] += rank1 * gz * gz + lap
 
 
 @kernel
@@ -251,13 +277,17 @@ def kelvin_voigt_dissipation(mem_vert, mem_par, vert_pos, vert_vel):
 
 
 @kernel
-def fibre_energy(fib_edge, fib_share, fib_sched, sched_val, vert_pos):
-    """The fibres' work function T s |x_j - x_i| summed over the edges (J)."""
+def fibre_energy(fib_vert, fib_par, fib_sched, sched_val, vert_pos):
+    """The muscle's work function sum A T Psi(lambda) over its triangles (J), Psi(1) = 0:
+    Psi = lambda - 1 without a force-length relation, w sqrt(pi) / 2 erf((lambda - 1) / w) with."""
     total = 0.0
-    for k in range(fib_edge.shape[0]):
-        i, j = fib_edge[k, 0], fib_edge[k, 1]
-        dx, dy, dz = vert_pos[j, 0] - vert_pos[i, 0], vert_pos[j, 1] - vert_pos[i, 1], vert_pos[j, 2] - vert_pos[i, 2]
-        total += sched_val[fib_sched[k], 0] * fib_share[k] * math.sqrt(dx * dx + dy * dy + dz * dz)
+    for f in range(fib_vert.shape[0]):
+        lam, at, g, dg = _fibre_state(fib_vert, fib_par, fib_sched, sched_val, vert_pos, f)
+        w = fib_par[f, 4]
+        if w > 0.0:
+            total += at * w * 0.5 * math.sqrt(math.pi) * math.erf((lam - 1.0) / w)
+        else:
+            total += at * (lam - 1.0)
     return total
 
 

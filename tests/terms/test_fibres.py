@@ -14,7 +14,9 @@ from hybrid.regions import Ball, HalfSpace
 from hybrid.scene import Masses, MuscleFibres, Scene
 from hybrid.schedule import Breathing, evaluate
 from hybrid.step import membrane_forces, new_state
-from hybrid.terms.fibres import fibre_shares
+from hybrid.mesh import Mesh
+from hybrid.terms.fibres import add_muscle_fibres, fibre_shares
+from hybrid.terms.tangents import fibre_energy
 
 R = 0.1
 LEVELS = {"icosphere": [icosphere(k, R) for k in (1, 2, 3)],
@@ -48,31 +50,56 @@ def test_no_net_force_or_moment_at_any_resolution(family):
         assert np.linalg.norm(moment.sum(axis=0)) <= 1e-12 * np.linalg.norm(moment, axis=1).sum(), mesh.nvert
 
 
-def test_the_force_is_minus_the_gradient_of_the_fibres_work_function():
-    """E = T sum_edges s |x_j - x_i|, by central differences, at a time a breathing
-    schedule gives T(t) = 30 N/m x its waveform."""
+@pytest.mark.parametrize("width", [0.0, 0.5], ids=["no_force_length", "force_length"])
+def test_the_force_is_minus_the_gradient_of_the_fibres_work_function(width):
+    """E = sum over triangles A T Psi(lambda) (Psi' the force-length relation), by central
+    differences at strains of about 10%, at a time a breathing schedule gives T(t) = 30 N/m
+    x its waveform."""
     mesh = LEVELS["uv_sphere"][1]
     model = compile_scene(Scene(mesh=mesh, masses=Masses(total_kg=1.0), forces=(
-        MuscleFibres(DOME, Breathing(4.0, 0.4, 30.0), toward_m=(0.0, 0.0, R)),)))
-    edge, share = model.arrays.fib_edge, model.arrays.fib_share
+        MuscleFibres(DOME, Breathing(4.0, 0.4, 30.0), toward_m=(0.0, 0.0, R), force_length_width=width),)))
+    a = model.arrays
     rng = np.random.default_rng(5)
-    pos = mesh.vert_pos + rng.normal(scale=2e-3, size=mesh.vert_pos.shape)
+    pos = mesh.vert_pos + rng.normal(scale=1e-2 * R, size=mesh.vert_pos.shape)
     t = 0.8
     force = _forces(model, pos, t)
-    tension = float(np.asarray(evaluate(Breathing(4.0, 0.4, 30.0), t)).reshape(-1)[0])
-    assert tension > 1.0
+    sv = np.zeros((a.sched.kind.shape[0], 3))
+    sv[:, 0] = float(np.asarray(evaluate(Breathing(4.0, 0.4, 30.0), t)).reshape(-1)[0])
+    assert sv[0, 0] > 1.0
 
     def energy(x):
-        return tension * np.sum(share * np.linalg.norm(x[edge[:, 1]] - x[edge[:, 0]], axis=1))
+        return fibre_energy(a.fib_vert, a.fib_par, a.fib_sched, sv, x)
 
     eps = 1e-7 * R
-    for i in rng.choice(np.unique(edge), 12, replace=False):
-        for a in range(3):
+    for i in rng.choice(np.unique(a.fib_vert), 12, replace=False):
+        for c in range(3):
             plus, minus = pos.copy(), pos.copy()
-            plus[i, a] += eps
-            minus[i, a] -= eps
+            plus[i, c] += eps
+            minus[i, c] -= eps
             fd = -(energy(plus) - energy(minus)) / (2 * eps)
-            assert fd == pytest.approx(force[i, a], abs=1e-6 * np.abs(force).max())
+            assert fd == pytest.approx(force[i, c], abs=1e-6 * np.abs(force).max())
+
+
+def test_a_shortened_fibre_pulls_by_the_force_length_relation():
+    """A flat sheet with fibres along x, squeezed uniformly along them to stretch 0.8:
+    the force across a cut is T exp(-((0.8 - 1) / w)^2) per unit rest width (none across
+    the fibres), on a regular and a perturbed triangulation."""
+    rng = np.random.default_rng(4)
+    w, stretch = 0.5, 0.8
+    for jitter in (0.0, 0.3):
+        pos, face = _sheet(8, jitter, rng)
+        model = compile_scene(Scene(mesh=Mesh.from_arrays(pos, face), masses=Masses(total_kg=1.0),
+                                    forces=(MuscleFibres("all", 1.0, axis=(1.0, 0.0, 0.0), force_length_width=w),)))
+        squeezed = pos * [stretch, 1.0, 1.0]
+        force = _forces(model, squeezed)
+        left = pos[:, 0] < 0.37
+        # the force on the left part from the triangles across the cut: its net, as the sheet is free
+        inside = np.zeros_like(force)
+        a = model.arrays
+        keep = left[a.fib_vert].all(axis=1)
+        add_muscle_fibres(a.fib_vert[keep], a.fib_par[keep], a.fib_sched[keep], np.ones((1, 3)), squeezed, inside)
+        across = (force - inside)[left].sum(axis=0)
+        np.testing.assert_allclose(across, [np.exp(-((stretch - 1) / w) ** 2), 0.0, 0.0], rtol=0, atol=1e-12)
 
 
 def _cut_force(pos, edge, share, left):

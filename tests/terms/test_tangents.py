@@ -101,19 +101,22 @@ def test_the_kelvin_voigt_damping_matrix_is_minus_the_velocity_jacobian(model):
     assert rel_error(-damp, fd) <= 1e-6
 
 
-def test_the_fibre_hessian_is_minus_the_force_jacobian(model):
+@pytest.mark.parametrize("width", [0.0, 0.5], ids=["no_force_length", "force_length"])
+def test_the_fibre_hessian_is_minus_the_force_jacobian(model, width):
     a = model.arrays
     x = deformed(model, 5)
     sv = sched(model)
+    par = a.fib_par.copy()
+    par[:, 4] = width
 
     def force(y):
         f = np.zeros_like(y)
-        add_muscle_fibres(a.fib_edge, a.fib_share, a.fib_sched, sv, y, f)
+        add_muscle_fibres(a.fib_vert, par, a.fib_sched, sv, y, f)
         return f
 
     def product(u):
         y = np.zeros_like(u)
-        fibre_tangent_product(a.fib_edge, a.fib_share, a.fib_sched, sv, x, False, 1.0, u, y)
+        fibre_tangent_product(a.fib_vert, par, a.fib_sched, sv, x, False, 1.0, u, y)
         return y
     hess = columns(x.shape[0], product)
     assert rel_error(-hess, finite_difference(force, x, 1e-7)) <= 1e-6
@@ -159,12 +162,12 @@ def test_the_diagonal_blocks_are_those_of_the_matrix(model):
 
     def product(u):
         y = np.zeros_like(u)
-        fibre_tangent_product(a.fib_edge, a.fib_share, a.fib_sched, sv, x, True, kx, u, y)
+        fibre_tangent_product(a.fib_vert, a.fib_par, a.fib_sched, sv, x, True, kx, u, y)
         return y
     mat += columns(n, product)
     blocks = np.zeros((n, 9))
     membrane_tangent_diag(a.mem_vert, a.mem_par, cache, kx, kv, blocks)
-    fibre_tangent_diag(a.fib_edge, a.fib_share, a.fib_sched, sv, x, kx, blocks)
+    fibre_tangent_diag(a.fib_vert, a.fib_par, a.fib_sched, sv, x, kx, blocks)
     want = np.stack([mat[3 * i:3 * i + 3, 3 * i:3 * i + 3].ravel() for i in range(n)])
     assert np.abs(blocks - want).max() <= 1e-12 * np.abs(want).max()
 
