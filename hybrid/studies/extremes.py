@@ -148,13 +148,13 @@ def continuum_demo() -> Scene:
     """membrane_demo in the continuum formulation, the packaged breathing scene's
     materials on the paper's 80-point sphere without ribs: a sheet of Young's modulus
     500 N/m (the central tendon's), muscle fibres of peak tension 20 N/m toward the
-    apex, a drag of 200 N s/m^3, gravity, the bottom nailed, incompressible, dt 1 ms
+    apex with the scene's force-length relation (width 0.67), a drag of 200 N s/m^3, gravity, the bottom nailed, incompressible, dt 1 ms
     (the rigid model's step)."""
     base = membrane_demo()
     return Scene(name="continuum_demo", mesh=base.mesh, masses=base.masses, regions=base.regions,
                  forces=(Gravity(), Membrane(500.0), Damping(drag_n_s_per_m3=200.0),
                          MuscleFibres("diaphragm", Breathing(period_s=4.0, inspiration_fraction=0.4, peak=20.0),
-                                      toward_m=(0.0, 0.0, base.mesh.radius_m))),
+                                      toward_m=(0.0, 0.0, base.mesh.radius_m), force_length_width=0.67)),
                  constraints=base.constraints, dt_s=1e-3, integrator="symplectic_euler")
 
 

@@ -49,3 +49,4 @@ def test_small_extremes_catalogue(tmp_path, capsys, monkeypatch):
         assert imp["outcome"] == "stable" and imp["volume_rel_error_max"] <= 1e-12, imp
         assert imp["dt_s"] == rows[name]["dt_s"]
     assert rows["continuum_dt_at_bound/implicit_euler"]["outcome"] == "stable"
+    assert rows["continuum_muscle_x100/implicit_euler"]["outcome"] == "stable"
