@@ -33,7 +33,7 @@ from .provenance import run_provenance
 from .scene import Muscle, MuscleFibres, SoftVolume, Volume
 from .simulation import Simulation
 from .step import F_KE, F_PRESSURE, F_TIME, F_VOLUME, capture_frame
-from .readouts import swept_volume
+from .readouts import pitch_deg, quat_rot, swept_volume
 from .loads import Loads, LoadsObserver
 from .terms.volume import face_volume
 
@@ -229,21 +229,6 @@ def _thorax(model: Model):
     return b - 1, ribs.anterior, ribs.cranial
 
 
-def _quat_rot(q: np.ndarray) -> np.ndarray:
-    """(n, 3, 3) rotation matrices of unit quaternions q (n, 4), w first."""
-    w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
-    return np.stack([np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
-                     np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
-                     np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1)], 1)
-
-
-def _pitch_deg(quat: np.ndarray, axis_body: np.ndarray, anterior: np.ndarray, cranial: np.ndarray) -> np.ndarray:
-    """The pitch (deg) of a body whose orientations are quat (n, 4): the elevation of its
-    anterior axis (axis_body, in its own frame) toward cranial, positive when it turns up."""
-    a = _quat_rot(quat) @ axis_body
-    return np.degrees(np.arctan2(a @ cranial, a @ anterior))
-
-
 def _apex_vertex(model: Model) -> int:
     """The integrated point highest (most cranial) at rest: the diaphragm's apex."""
     z = model.mesh.vert_pos[:, 2].copy()
@@ -436,8 +421,8 @@ def run(sim: Simulation, duration_s: float, *, frame_dt_s: float = 0.01, progres
             nonlocal thorax_axis
             bq = frames.body_quat[:k, thorax[0]]
             if thorax_axis is None:
-                thorax_axis = _quat_rot(bq[:1])[0].T @ thorax[1]
-            rows[:, _COL["thorax_pitch_deg"]] = _pitch_deg(bq, thorax_axis, thorax[1], thorax[2])
+                thorax_axis = quat_rot(bq[:1])[0].T @ thorax[1]
+            rows[:, _COL["thorax_pitch_deg"]] = pitch_deg(bq, thorax_axis, thorax[1], thorax[2])
         else:
             rows[:, _COL["thorax_pitch_deg"]] = np.nan
         if "muscle" in parts:

@@ -240,3 +240,19 @@ def test_ribs_rebuilt_on_the_trunks_spine_breathe_as_its_own():
     assert own["rib_lift_mm"] > 1.0
     assert new["rib_lift_mm"] == pytest.approx(own["rib_lift_mm"], rel=5e-3)
     assert new["apex_descent_mm"] == pytest.approx(own["apex_descent_mm"], rel=5e-3)
+
+
+def test_the_thorax_pitch_is_the_turn_of_its_anterior_axis_toward_cranial():
+    from hybrid.readouts import pitch_deg
+    anterior, cranial = np.array([0.0, -1.0, 0.0]), np.array([0.0, 0.0, 1.0])  # myotorso's frame
+    left = np.cross(cranial, anterior)
+    start = np.array([0.5, 0.5, -0.5, -0.5])  # a body frame turned against the world (myotorso's torso)
+    rot0 = np.empty(9)
+    mujoco.mju_quat2Mat(rot0, start)
+    axis_body = rot0.reshape(3, 3).T @ anterior
+    out = []
+    for deg, about in ((10.0, -left), (-3.0, -left), (20.0, cranial)):  # back, forward, a yaw
+        turn, q = np.r_[np.cos(np.radians(deg) / 2), np.sin(np.radians(deg) / 2) * about], np.empty(4)
+        mujoco.mju_mulQuat(q, turn, start)
+        out.append(pitch_deg(q[None], axis_body, anterior, cranial)[0])
+    np.testing.assert_allclose(out, [10.0, -3.0, 0.0], atol=1e-12)
