@@ -256,3 +256,19 @@ def test_the_thorax_pitch_is_the_turn_of_its_anterior_axis_toward_cranial():
         mujoco.mju_mulQuat(q, turn, start)
         out.append(pitch_deg(q[None], axis_body, anterior, cranial)[0])
     np.testing.assert_allclose(out, [10.0, -3.0, 0.0], atol=1e-12)
+
+
+def test_the_command_line_refuses_a_wrong_ribs_key_in_one_line_with_status_2(tmp_path, capsys):
+    import hybrid
+    from hybrid.cli import main
+    scene = hybrid.load_scene("breathing")
+    path = tmp_path / "ribbed.toml"
+    path.write_text(scene_to_toml(dataclasses.replace(scene, rigid=dataclasses.replace(scene.rigid, ribs=RIBS))))
+    assert main(["run", str(path), "--duration", "0.01", "--out", str(tmp_path / "o"), "--set",
+                 "rigid.ribs.body=spnie"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "rigid.ribs.body: no body named 'spnie'" in err[0] and "spine" in err[0]
+    assert main(["run", str(path), "--duration", "0.01", "--out", str(tmp_path / "o2"), "--set",
+                 "rigid.ribs.pairs.r.axis_angle_deg=95"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "rigid.ribs.pairs[0].axis_angle_deg" in err[0]
