@@ -32,7 +32,8 @@ from .resolve import resolve_scene, scene_names
 # reaches the module). Both modules are light (matplotlib and dask load when used).
 from .run import RunFailed, run
 from .scene import (AppliedForce, Attraction, Damping, Gravity, KeepIn, Masses, MassSpring, MeshSpec, Muscle,
-                    Nailed, Prescribed, Rigid, RigidLink, Scene, ShapeMemory, SoftVolume, Volume, Membrane)
+                    Nailed, Prescribed, RibPair, Ribs, Rigid, RigidLink, Scene, ShapeMemory, SoftVolume, Volume,
+                    Membrane)
 from .scene import MuscleFibres, PassiveFibres, Pressure
 from .schedule import Breathing, Constant, Function, Table
 from .simulation import Simulation
@@ -44,7 +45,7 @@ __all__ = [
     # the scene and its terms
     "Scene", "MeshSpec", "Masses",
     "Gravity", "Damping", "ShapeMemory", "Membrane", "MassSpring", "Muscle", "AppliedForce", "Attraction", "SoftVolume",
-    "Nailed", "KeepIn", "Prescribed", "Volume", "Rigid", "RigidLink",
+    "Nailed", "KeepIn", "Prescribed", "Volume", "Rigid", "RigidLink", "Ribs", "RibPair",
     "Pressure", "MuscleFibres", "PassiveFibres",
     # region selectors
     "All", "Border", "Indices", "HalfSpace", "Ball", "Box", "Nearest", "Patch", "Union_", "Intersection", "Difference",

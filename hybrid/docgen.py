@@ -25,7 +25,7 @@ from pathlib import Path
 from . import regions as R
 from . import scenefile
 from . import schedule as S
-from .scene import Masses, MeshSpec, Rigid, RigidLink, Scene
+from .scene import Masses, MeshSpec, RibPair, Ribs, Rigid, RigidLink, Scene
 from .terms.base import CONSTRAINT_TYPES, FORCE_TYPES, FORMULATIONS
 
 __all__ = ["render", "DOC_PATH", "main"]
@@ -67,7 +67,22 @@ _RIGID = {"mjcf": ("-", "*required*", "\"trunk\" (the packaged two-rib model), a
           "ctrl": ("-", "{}", "{actuator or pattern = schedule}: the actuators' ctrl set before every step "
                               "(a number, a breathing waveform or a table)"),
           "integrator": ("-", "the MJCF's", "MuJoCo's integrator: \"Euler\", \"RK4\", \"implicit\" or "
-                                            "\"implicitfast\"")}
+                                            "\"implicitfast\""),
+          "ribs": ("-", "none", "a [rigid.ribs] table, below: articulated ribs added to the model")}
+_RIBS = {"body": ("-", "*required*", "the thoracic body of the model the ribs hang on"),
+         "pairs": ("-", "*required*", "[[rigid.ribs.pairs]] tables, below; at least one")}
+_PAIRS = {"name": ("-", "*required*", "a name: the bodies NAME_left, NAME_right and their joints, sites and "
+                                      "tendon (new names in the model)"),
+          "head_m": ("m", "*required*", "[x, y, z]: the left rib's costovertebral joint where the model starts, "
+                                        "at least radius_m left of the mid-sagittal plane"),
+          "front_m": ("m", "*required*", "[x, y, z]: the left rib's anterior end, at least radius_m left of the "
+                                         "plane and 4 radius_m from the head"),
+          "half_width_m": ("m", "*required*", "a number > 0, more than the head's and the anterior end's distance "
+                                              "from the mid-sagittal plane"),
+          "stiffness_n_m_per_rad": ("N m/rad", "12.0", "a number > 0 and <= 1e12: the hinge spring"),
+          "damping_n_m_s_per_rad": ("N m s/rad", "0.05", "a number >= 0 and <= 1e12"),
+          "reference_angle_deg": ("deg", "0.0", "a number in [-90, 90]: the spring's rest angle beyond the pose "
+                                                "that holds the rib's weight where drawn (positive lifts)")}
 _LINKS = {"region": ("-", "*required*", "a selector (see Regions)"),
           "body": ("-", "*required*", "the name of a body of the MJCF model"),
           "name": ("-", "the body's name", "a string (what --without and --set refer to)")}
@@ -373,11 +388,23 @@ def render() -> str:
         "",
         *_hand_rows(RigidLink, _LINKS),
         "",
+        "### `[rigid.ribs]` (Ribs)",
+        "",
+        _doc(Ribs),
+        "",
+        *_hand_rows(Ribs, _RIBS),
+        "",
+        "### `[[rigid.ribs.pairs]]` (RibPair)",
+        "",
+        _doc(RibPair),
+        "",
+        *_hand_rows(RibPair, _PAIRS),
+        "",
         "## Overrides: `--set KEY=VALUE`",
         "",
         "`hybrid run SCENE --set KEY=VALUE` (and `hybrid.load(SCENE, overrides=[...])`) changes",
         "one key: KEY is a dotted path in this structure, an element of `forces`, `constraints`",
-        "or `rigid.links` chosen by its `name` or its index; VALUE is a TOML value (a bare word",
+        "or `rigid.links` (or `rigid.ribs.pairs`) chosen by its `name` or its index; VALUE is a TOML value (a bare word",
         "is a string). Examples: `dt_s=5e-4`, `forces.muscle.stiffness.breathing.peak=80`,",
         "`forces.2.region=all`, `mesh.radius_m=0.1`. `--without NAME` removes a term or a",
         "rigid link by name.",

@@ -1,5 +1,6 @@
 """What a state says beyond positions: the membrane's internal forces and their
-net force and moment, its elastic energy, and the volume a region swept.
+net force and moment, its elastic energy, the volume a region swept, and a rigid
+body's pitch from its recorded orientations.
 
 Read on demand by `Simulation` (never inside the step): each sums the same
 compiled kernels the step calls, on the state's positions.
@@ -19,7 +20,7 @@ from .terms.muscle import add_muscle
 from .terms.shape_memory import add_shape_memory
 from .terms.springs import add_mass_spring
 
-__all__ = ["internal_forces", "net_internal", "elastic_energy", "region_faces", "swept_volume"]
+__all__ = ["internal_forces", "net_internal", "elastic_energy", "region_faces", "swept_volume", "quat_rot", "pitch_deg"]
 
 #: terms whose forces are internal to the membrane (between its points)
 INTERNAL_TERMS = (Membrane, ShapeMemory, Muscle, MassSpring, MuscleFibres, PassiveFibres)
@@ -89,3 +90,18 @@ def swept_volume(face_vert: np.ndarray, rest: np.ndarray, pos: np.ndarray) -> fl
     # the area vector N(s) = (E1 + s d1) x (E2 + s d2) / 2 integrated over s in [0, 1]
     n = 0.5 * (np.cross(E1, E2) + 0.5 * (np.cross(E1, d2) + np.cross(d1, E2)) + np.cross(d1, d2) / 3.0)
     return float(np.einsum("ij,ij->", d.mean(axis=1), n))
+
+
+def quat_rot(q: np.ndarray) -> np.ndarray:
+    """(n, 3, 3) rotation matrices of unit quaternions q (n, 4), w first."""
+    w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+    return np.stack([np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+                     np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+                     np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1)], 1)
+
+
+def pitch_deg(quat: np.ndarray, axis_body: np.ndarray, anterior: np.ndarray, cranial: np.ndarray) -> np.ndarray:
+    """The pitch (deg) of a body whose orientations are quat (n, 4): the elevation of its
+    anterior axis (axis_body, in its own frame) toward cranial, positive when it turns up."""
+    a = quat_rot(quat) @ axis_body
+    return np.degrees(np.arctan2(a @ cranial, a @ anterior))

@@ -3,9 +3,10 @@
 `hybrid.scenefile` calls these with its own readers of selectors, schedules and
 kind-checked fields (passed in, so that this module imports nothing of it). The
 control keys (`keyframe`, `fix`, `fix_root`, `weld`, `hold`, `lock`, `ctrl`,
-`integrator`, ...) and `load_joints` (the joints `hybrid.loads` takes moments about) are
-checked here for their form; the names they give are checked against the model when it
-is compiled (`hybrid.rigid.controls`).
+`integrator`, ...), `load_joints` (the joints `hybrid.loads` takes moments about) and the
+`[rigid.ribs]` table (articulated ribs, `[[rigid.ribs.pairs]]`) are checked here for their
+form; the names they give are checked against the model when it is compiled
+(`hybrid.rigid.controls`, `hybrid.rigid.ribs`).
 """
 
 from __future__ import annotations
@@ -14,15 +15,20 @@ import dataclasses
 
 from . import checks
 from .errors import SceneError
-from .scene import Rigid, RigidLink
+from .scene import RibPair, Ribs, Rigid, RigidLink
 
-__all__ = ["RIGID_KEYS", "NAME_LISTS", "rigid_from_table", "rigid_to_table"]
+__all__ = ["RIGID_KEYS", "RIBS_KEYS", "RIB_PAIR_KEYS", "NAME_LISTS", "rigid_from_table", "rigid_to_table", "reference_angle"]
 
 #: the keys of [rigid]: the fields of Rigid
 RIGID_KEYS = tuple(f.name for f in dataclasses.fields(Rigid))
 #: the keys that hold lists of names (bodies, joint name patterns, or joint names)
 NAME_LISTS = ("fix", "weld", "hold", "lock", "load_joints")
 _KINDED = {f.name: f for f in dataclasses.fields(Rigid) if "kind" in f.metadata}
+#: the keys of [rigid.ribs] and of each [[rigid.ribs.pairs]] table
+RIBS_KEYS = tuple(f.name for f in dataclasses.fields(Ribs))
+RIB_PAIR_KEYS = tuple(f.name for f in dataclasses.fields(RibPair))
+#: a rib's hinge spring rests within a right angle of where it is drawn (deg)
+MAX_REFERENCE_ANGLE_DEG = 90.0
 
 
 def _fail(where: str, msg: str):
@@ -72,7 +78,53 @@ def rigid_from_table(source: str, rig, selector, schedule, field_value) -> Rigid
             _fail(f"{where}.ctrl", f"expected a table {{actuator name or pattern = schedule}}, received "
                                    f"{checks.show(ctrl)}")
         kw["ctrl"] = {name: schedule(f"rigid.ctrl.{name}", v, 1) for name, v in ctrl.items()}
+    if "ribs" in rig:
+        kw["ribs"] = _ribs(source, rig["ribs"], field_value)
     return Rigid(**kw)
+
+
+def _kinded_table(source: str, path: str, tbl, cls, field_value) -> dict:
+    """The keyword arguments of dataclass `cls` from TOML table `tbl` at `path`: unknown
+    and missing keys refused, each kinded field checked by its kind."""
+    keys = [f.name for f in dataclasses.fields(cls)]
+    if not isinstance(tbl, dict):
+        _fail(f"{source}: {path}", f"expected a table, received {checks.show(tbl)}")
+    unknown = [k for k in tbl if k not in keys]
+    if unknown:
+        _fail(f"{source}: {path}.{unknown[0]}", f"unknown key; valid keys here: {sorted(keys)}")
+    kw = {}
+    for f in dataclasses.fields(cls):
+        if f.name not in tbl:
+            if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
+                _fail(f"{source}: {path}", f"missing required key {f.name!r}; valid keys here: {sorted(keys)}")
+            continue
+        if "kind" in f.metadata:
+            kw[f.name] = field_value(f"{path}.{f.name}", f, tbl[f.name])
+    return kw
+
+
+def _ribs(source: str, tbl, field_value) -> Ribs:
+    """The `Ribs` of a [rigid.ribs] table and its [[rigid.ribs.pairs]]."""
+    kw = _kinded_table(source, "rigid.ribs", tbl, Ribs, field_value)
+    pairs = tbl.get("pairs", [])
+    if not isinstance(pairs, list) or not pairs or not all(isinstance(x, dict) for x in pairs):
+        _fail(f"{source}: rigid.ribs.pairs", f"expected a non-empty array of tables ([[rigid.ribs.pairs]]), "
+                                             f"received {checks.show(pairs)}")
+    out = []
+    for k, p in enumerate(pairs):
+        path = f"rigid.ribs.pairs[{k}]"
+        pk = _kinded_table(source, path, p, RibPair, field_value)
+        if "reference_angle_deg" in p:
+            pk["reference_angle_deg"] = reference_angle(f"{source}: {path}.reference_angle_deg",
+                                                        p["reference_angle_deg"])
+        out.append(RibPair(**pk))
+    return Ribs(pairs=tuple(out), **kw)
+
+
+def reference_angle(where: str, v) -> float:
+    """A rib hinge's spring reference (deg), checked: a number in [-90, 90]."""
+    return checks.number(where, v, lo=-MAX_REFERENCE_ANGLE_DEG, lo_open=False, hi=MAX_REFERENCE_ANGLE_DEG,
+                         hi_open=False)
 
 
 def _names(where: str, v) -> tuple:
@@ -94,4 +146,15 @@ def rigid_to_table(r: Rigid, selector_to, schedule_to) -> dict:
         if getattr(r, key) is not None:
             d[key] = getattr(r, key)
     d["ctrl"] = {name: schedule_to(s, f"rigid.ctrl.{name}") for name, s in r.ctrl.items()}
+    if r.ribs is not None:
+        d["ribs"] = _plain(r.ribs)
     return d
+
+
+def _plain(obj):
+    """A Ribs or RibPair as TOML values (tuples as lists, nested pairs as tables)."""
+    if dataclasses.is_dataclass(obj):
+        return {f.name: _plain(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
+    if isinstance(obj, (tuple, list)):
+        return [_plain(x) for x in obj]
+    return obj

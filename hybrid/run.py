@@ -33,7 +33,7 @@ from .provenance import run_provenance
 from .scene import Muscle, MuscleFibres, SoftVolume, Volume
 from .simulation import Simulation
 from .step import F_KE, F_PRESSURE, F_TIME, F_VOLUME, capture_frame
-from .readouts import swept_volume
+from .readouts import pitch_deg, quat_rot, swept_volume
 from .loads import Loads, LoadsObserver
 from .terms.volume import face_volume
 
@@ -54,6 +54,7 @@ TRACE_KEYS = (
     "kinetic_energy_j",
     "volume_rel_change",  # |V - V0| / V0 whatever keeps the volume (closed surfaces)
     "swept_volume_ml",    # volume the region named "diaphragm" swept inward from rest (scenes with one)
+    "thorax_pitch_deg",   # the thoracic body's pitch change from its start (scenes with rigid.ribs)
 )
 #: the series a summary gives min, max and their times of (all but the time)
 METRIC_KEYS = TRACE_KEYS[1:]
@@ -211,7 +212,21 @@ def _headline(trace: Trace) -> dict:
     if "rib_lift_mm" in table:
         head["rib_lift_mm"] = table["rib_lift_mm"]["max"]
     head["apex_descent_mm"] = table["apex_descent_mm"]["max"]
+    if "thorax_pitch_deg" in table:
+        pitch = table["thorax_pitch_deg"]
+        head["thorax_pitch_change_deg_max"] = max(abs(pitch["min"]), abs(pitch["max"]))
     return head
+
+
+def _thorax(model: Model):
+    """(body index among the frames' bodies, anterior, cranial: unit vectors of the scene's
+    frame) of the thoracic body the scene's ribs hang on (`rigid.ribs.body`), or None."""
+    rigid = model.rigid
+    ribs = getattr(rigid, "ribs", None) if rigid is not None else None
+    if ribs is None:
+        return None
+    b = int(rigid.model.body(ribs.body).id)
+    return b - 1, ribs.anterior, ribs.cranial
 
 
 def _apex_vertex(model: Model) -> int:
@@ -355,6 +370,8 @@ def run(sim: Simulation, duration_s: float, *, frame_dt_s: float = 0.01, progres
     muscle_table, muscle_fns = stack_schedules([muscle_sched]) if muscle_sched is not None else (None, [])
     muscle_val = np.zeros(3)
     swept_faces = model.mesh.face_vert[model.region_faces(SWEPT_REGION)] if "diaphragm" in parts else None
+    thorax = _thorax(model)
+    thorax_axis = None  # the thorax's anterior axis in its own frame, from its pose at the first frame
 
     def muscle_at(t):
         if muscle_table is None:
@@ -400,6 +417,14 @@ def run(sim: Simulation, duration_s: float, *, frame_dt_s: float = 0.01, progres
         rows[:, _COL["kinetic_energy_j"]] = scal[:, F_KE]
         rows[:, _COL["swept_volume_ml"]] = [-swept_volume(swept_faces, rest, p) * 1e6 for p in pos] \
             if swept_faces is not None else np.nan
+        if thorax is not None:
+            nonlocal thorax_axis
+            bq = frames.body_quat[:k, thorax[0]]
+            if thorax_axis is None:
+                thorax_axis = quat_rot(bq[:1])[0].T @ thorax[1]
+            rows[:, _COL["thorax_pitch_deg"]] = pitch_deg(bq, thorax_axis, thorax[1], thorax[2])
+        else:
+            rows[:, _COL["thorax_pitch_deg"]] = np.nan
         if "muscle" in parts:
             for j, t in enumerate(scal[:, F_TIME].tolist()):
                 rows[j, _COL["muscle_n_per_m"]] = muscle_at(t)

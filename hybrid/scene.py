@@ -26,7 +26,7 @@ from .terms import MuscleFibres, PassiveFibres, Pressure
 __all__ = [
     "MeshSpec", "Masses",
     "Gravity", "Damping", "ShapeMemory", "Membrane", "MassSpring", "Muscle", "AppliedForce", "Attraction",
-    "SoftVolume", "Nailed", "KeepIn", "Prescribed", "Volume", "RigidLink", "Rigid", "Scene",
+    "SoftVolume", "Nailed", "KeepIn", "Prescribed", "Volume", "RigidLink", "RibPair", "Ribs", "Rigid", "Scene",
     "INTEGRATORS", "FORMULATIONS",
     "Pressure", "MuscleFibres", "PassiveFibres",
 ]
@@ -102,6 +102,53 @@ class RigidLink:
     name: str = "rigid_link"
 
 
+@dataclass(frozen=True)
+class RibPair:
+    """A left rib and its mirror image in the mid-sagittal plane, each a body hinged at its
+    costovertebral joint (`head_m`) on the thoracic body, drawn as capsules along an arc
+    from the head out to `half_width_m` from the midline and forward to its anterior end
+    (`front_m`), the two anterior ends joined by a sternal spring (`Ribs`). Positions are
+    the left rib's, in the world where the model starts. The hinge axis lies in the
+    transverse plane at `axis_angle_deg` to the mid-sagittal plane (Wilson et al. 1987:
+    about 35 degrees at the upper ribs): 90 turns the rib about a transverse axis, a pure
+    pump handle (the anterior end rises), 0 about an antero-posterior axis, a pure bucket
+    handle (the lateral part rises); a positive joint angle lifts the rib. The hinge spring
+    holds the rib's own weight (MuJoCo's gravity) where it is drawn, and rests
+    `reference_angle_deg` beyond that. Bodies `NAME_left`, `NAME_right`, joints
+    `NAME_left_hinge`, `NAME_right_hinge`, sites `NAME_left_front`, `NAME_right_front`,
+    tendon `NAME_sternum`."""
+    name: str = param("name")
+    head_m: tuple = param("vec3")
+    front_m: tuple = param("vec3")
+    half_width_m: float = param("positive", hi=checks.MAX_LENGTH_M)
+    axis_angle_deg: float = param("nonneg", 35.0, hi=90.0)
+    stiffness_n_m_per_rad: float = param("positive", 12.0, hi=checks.MAX_STIFFNESS_N_PER_M)
+    damping_n_m_s_per_rad: float = param("nonneg", 0.05, hi=checks.MAX_STIFFNESS_N_PER_M)
+    reference_angle_deg: float = 0.0  # the hinge spring's rest angle beyond the drawn pose, in [-90, 90]
+    mass_kg: float = param("positive", 0.2, hi=1e3)
+
+
+@dataclass(frozen=True)
+class Ribs:
+    """Articulated ribs added to the loaded model (`hybrid.rigid.ribs`, through MjSpec; the
+    model's files are only read): pairs of rib bodies hinged on the thoracic body `body`,
+    added after the control keys (so that `hold`/`lock` patterns name the model's own
+    joints) and before the membrane's links, which may name the rib bodies. `anterior` and
+    `cranial`: the model's directions (perpendicular); left is cranial x anterior. The
+    mid-sagittal plane passes through `body`'s origin where the model starts. Each pair's
+    anterior ends are joined by a spatial tendon, a spring of `sternum_stiffness_n_per_m` at
+    its rest length (the costal cartilage and sternum): a compliant link, as a rigid one
+    (an equality) would lock two hinges whose axes differ. The thorax's pitch change is
+    reported for this body (`thorax_pitch_change_deg_max`)."""
+    body: str = param("text")
+    pairs: tuple = ()  # RibPair tables ([[rigid.ribs.pairs]])
+    anterior: tuple = param("vec3", (1.0, 0.0, 0.0))
+    cranial: tuple = param("vec3", (0.0, 0.0, 1.0))
+    radius_m: float = param("positive", 0.006, hi=checks.MAX_LENGTH_M)
+    sternum_stiffness_n_per_m: float = param("positive", 1000.0, hi=checks.MAX_STIFFNESS_N_PER_M)
+    sternum_damping_n_s_per_m: float = param("nonneg", 0.5, hi=checks.MAX_STIFFNESS_N_PER_M)
+
+
 #: MuJoCo's integrators, as `rigid.integrator` names them
 MUJOCO_INTEGRATORS = ("Euler", "RK4", "implicit", "implicitfast")
 
@@ -129,6 +176,7 @@ class Rigid:
     ctrl: dict = field(default_factory=dict)  # actuator name or pattern -> schedule
     integrator: Optional[str] = param("choice", None, choices=MUJOCO_INTEGRATORS)
     load_joints: tuple = ()  # joint names: the points the loads' moments are taken about (hybrid.loads)
+    ribs: Optional[Ribs] = None  # articulated ribs added to the model (hybrid.rigid.ribs)
 
 
 @dataclass(frozen=True)

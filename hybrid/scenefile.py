@@ -40,7 +40,8 @@ The format (SI units; every key optional unless marked *required*)::
     type = "volume"
 
     [rigid]         # mjcf (required): "trunk" (the packaged model) or a path; prefix; add_link_mass;
-    mjcf = "trunk"  #   keyframe, fix, fix_root, weld, hold, lock, ctrl, integrator (hybrid.rigidfile)
+    mjcf = "trunk"  #   keyframe, fix, fix_root, weld, hold, lock, ctrl, integrator, load_joints,
+                    #   [rigid.ribs] with [[rigid.ribs.pairs]] (hybrid.rigidfile)
     [[rigid.links]] # region and body required; name defaults to the body's
     region = "ribs"
     body = "rib_left"

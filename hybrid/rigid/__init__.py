@@ -8,7 +8,8 @@ lazily, so that a membrane-only scene never loads MuJoCo. By concern:
   compiling with readable errors, MuJoCo's warnings sent to the log;
 - `controls`: what a scene changes in its model (`rigid.fix`, `weld`, `hold`, `lock`,
   `keyframe`, `ctrl`, `integrator`), each name checked against the model;
-- `compose`: what hybrid adds to a spec (attachment sites, link masses), the
+- `ribs`: articulated rib pairs added to a thoracic body (`rigid.ribs`);
+- `compose`: what hybrid adds to a spec (ribs, attachment sites, link masses), the
   scene's rigid part (`build_rigid`) and the free body of the rigid study;
 - `system`: the compiled system driven by point forces (`RigidSystem`,
   `CoupledRigid`) and the compiled site kernels the coupled step shares;

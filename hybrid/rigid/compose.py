@@ -1,5 +1,5 @@
 """Spec composition: what hybrid adds to a loaded `mujoco.MjSpec` before compiling it
-once — an attachment site per linked membrane point on its body, at the point's rest
+once — articulated ribs (`rigid.ribs`, `hybrid.rigid.ribs`), an attachment site per linked membrane point on its body, at the point's rest
 position, and optionally the points' masses on their bodies (`build_rigid`, called by
 `compile_scene` for scenes with a `Rigid` part) — and the free body of the rigid
 validation study (`free_body_spec`).
@@ -26,6 +26,7 @@ from hybrid.terms.base import claim_points
 
 from .controls import apply_controls, start_data
 from .mjcf import compile_spec, load_rigid_spec
+from .ribs import add_ribs
 from .system import CoupledRigid
 
 _SITE_STEM = "hybrid_link_"
@@ -127,6 +128,9 @@ def build_rigid(scene: Scene, mesh, regions: dict, vert_mass: np.ndarray) -> tup
         raise SceneError(f"rigid.add_link_mass: expected true or false, received {rig.add_link_mass!r}")
     spec, label, source = load_rigid_spec(scene)
     controls = apply_controls(spec, rig, label, scene.dt_s)
+    # the ribs after the control keys (their patterns name the model's own joints), before
+    # the links (which may name the rib bodies)
+    ribs = add_ribs(spec, rig.ribs, label, controls.key_id) if rig.ribs is not None else None
     bodies = _body_names(spec)
     sites = [s.name for s in spec.sites if s.name]
 
@@ -171,7 +175,7 @@ def build_rigid(scene: Scene, mesh, regions: dict, vert_mass: np.ndarray) -> tup
     # MuJoCo keeps the MJCF's own timestep unless the scene sets dt_s
     system = CoupledRigid(spec, site_names, timestep=scene.dt_s, link_vert=link_vert,
                           link_body=body_names, link_mass=link_mass, mass_added=mass_added,
-                          mjcf_path=source, controls=controls)
+                          mjcf_path=source, controls=controls, ribs=ribs)
     return system, link_vert
 
 

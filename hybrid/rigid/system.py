@@ -293,7 +293,7 @@ class CoupledRigid(RigidSystem):
     """
 
     def __init__(self, spec, site_names, *, timestep, link_vert, link_body, link_mass, mass_added,
-                 mjcf_path, controls: Controls | None = None):
+                 mjcf_path, controls: Controls | None = None, ribs=None):
         super().__init__(spec, site_names, timestep=timestep)
         self.controls = Controls() if controls is None else controls
         self.controls.finish(self._model)
@@ -307,6 +307,8 @@ class CoupledRigid(RigidSystem):
         self.link_mass = np.asarray(link_mass, float)
         self.mass_added = np.asarray(mass_added, bool)
         self.mjcf_path = mjcf_path
+        #: the ribs added to the model (`hybrid.rigid.ribs.RibsAdded`), or None
+        self.ribs = ribs
         for arr in (self.link_vert, self.link_mass, self.mass_added, self.site_id, self.site_body,
                     self.site_root, self.body_id, self.ctrl_act):
             arr.flags.writeable = False
@@ -314,7 +316,10 @@ class CoupledRigid(RigidSystem):
     def settings(self) -> dict:
         """What the scene changed in the model and what MuJoCo integrates with (JSON values,
         for the summary; `hybrid.rigid.controls`)."""
-        return {**self.controls.settings, "timestep_s": float(self._model.opt.timestep)}
+        out = {**self.controls.settings, "timestep_s": float(self._model.opt.timestep)}
+        if self.ribs is not None:
+            out["ribs"] = self.ribs.settings()
+        return out
 
     def reset(self) -> None:
         """`RigidSystem.reset`, then the driven actuators at their schedules' values at t = 0."""
