@@ -60,9 +60,9 @@ def build_study_parser() -> argparse.ArgumentParser:
             s.add_argument("--metric", action="append", metavar="NAME",
                            help="a trace series whose largest value is studied (repeatable; default: "
                                 "rib_lift_mm, apex_descent_mm, pressure_pa, swept_volume_ml)")
-            s.add_argument("--levels", metavar="K0-K1", help="the mesh levels (default 0-5, --small 0-2; a mesh file: 0-2, --small 0-1)")
+            s.add_argument("--levels", metavar="K0-K1", help="the mesh levels (default 0-7, --small 0-2; a mesh file: 0-2, --small 0-1)")
             s.add_argument("--steps", type=int, metavar="N", help="time steps per level, halving (default 3)")
-            s.add_argument("--duration", type=float, metavar="S", help="simulated time per run (s)")
+            s.add_argument("--duration", type=float, metavar="S", help="simulated time per run (s; default 4, one breath; --small 0.5)")
             s.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                            help="a scene override for every run (e.g. mesh.generator=fibonacci_sphere)")
     r = sub.add_parser("rigid", help="a scene's rigid part: recorded wrenches replayed through MuJoCo alone, "

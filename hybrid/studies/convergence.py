@@ -10,8 +10,8 @@ Grid       mesh levels K (`mesh.level`: about 80 x 2^K points of a generator, th
            dt0(K) is the scene's own step at that level (`dt_s = "auto"`: half
            the stable-step estimate, rounded down; a numeric dt_s is kept where
            it is below that). Each run is independent (`hybrid.sweep`: the local
-           cores or a Dask cluster) and simulates `duration_s` (default: the
-           scene's duration).
+           cores or a Dask cluster) and simulates `duration_s` (default 4 s, one
+           breath of the packaged scenes).
 Metrics    each the largest value of a trace series over the run (`hybrid.run`,
            docs/metrics.md): for the breathing scene the rib lift, apex descent,
            peak pressure and the diaphragm's swept volume.
@@ -53,7 +53,9 @@ RATIO_SPACE = math.sqrt(2.0)  # the spacing ratio between a generator's mesh lev
 RATIO_SPACE_FILE = 2.0  # between a file mesh's levels: each face split into four
 RATIO_TIME = 2.0
 #: (levels, steps per level, duration s or None for the scene's) by size
-SIZES = {False: dict(levels=(0, 1, 2, 3, 4, 5), nstep=3, duration_s=None),
+#: (the full size: levels 0-7, whose two finest change by under 2% on the breathing scene, over
+#: one breath of the packaged scenes, 4 s)
+SIZES = {False: dict(levels=(0, 1, 2, 3, 4, 5, 6, 7), nstep=3, duration_s=4.0),
          True: dict(levels=(0, 1, 2), nstep=2, duration_s=0.5)}
 #: the default levels of a mesh read from a file (full, small)
 FILE_LEVELS = {False: (0, 1, 2), True: (0, 1)}
