@@ -510,9 +510,16 @@ def apply_overrides(scene: Scene, overrides) -> Scene:
             node[idx] = _parse_value(text)
         elif isinstance(node, dict):
             node[last] = _parse_value(text)
+            if parts[0] == "mesh" and len(parts) == 2 and last in _MESH_SOURCES:
+                # a mesh file replaces the scene's generator, a generator its file
+                node.pop(_MESH_SOURCES[last], None)
         else:
             raise SceneError(f"--set {item!r}: {'.'.join(parts[:-1])} is a value, not a table")
     return scene_from_dict(d, source=f"{scene.name} (with --set)", base_dir=scene.base_dir)
+
+
+#: the two sources of a mesh, each the other's alternative
+_MESH_SOURCES = {"path": "generator", "generator": "path"}
 
 
 def _descend(node, part, item, where):
