@@ -63,6 +63,9 @@ def build_study_parser() -> argparse.ArgumentParser:
             s.add_argument("--levels", metavar="K0-K1", help="the mesh levels (default 0-7, --small 0-2; a mesh file: 0-2, --small 0-1)")
             s.add_argument("--steps", type=int, metavar="N", help="time steps per level, halving (default 3)")
             s.add_argument("--duration", type=float, metavar="S", help="simulated time per run (s; default 4, one breath; --small 0.5)")
+            s.add_argument("--integrator", metavar="NAME",
+                           help="the membrane's integrator (as --set integrator=NAME; implicit_euler steps from its own "
+                                "step, not the explicit bound)")
             s.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                            help="a scene override for every run (e.g. mesh.generator=fibonacci_sphere)")
     r = sub.add_parser("rigid", help="a scene's rigid part: recorded wrenches replayed through MuJoCo alone, "
@@ -91,7 +94,8 @@ def _convergence(args) -> None:
     from .convergence import DEFAULT_METRICS
     r = convergence.run(args.out, scene=args.scene, metrics=tuple(args.metric or DEFAULT_METRICS),
                         small=args.small, levels=_levels(args.levels), nstep=args.steps,
-                        duration_s=args.duration, overrides=tuple(args.set), scheduler=args.scheduler)
+                        duration_s=args.duration, scheduler=args.scheduler,
+                        overrides=tuple(args.set) + ((f"integrator={args.integrator}",) if args.integrator else ()))
     order = ", ".join(f"{k} {_num(e['observed_order_space'], '.2f')}" for k, e in r["estimate"].items() if e)
     change = ", ".join(f"{k} {v:.2%}" for k, v in r["finest_change"].items())
     print(f"convergence: {len(r['runs'])} runs, {len(r['failures'])} failed; order in space: {order}; "

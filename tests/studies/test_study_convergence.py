@@ -101,3 +101,18 @@ def test_a_mesh_read_from_a_file_refines_by_splitting_its_faces(tmp_path, capsys
     nv = [r["nvert"] for r in data["runs"]]
     assert nv == [80, 80 + 3 * 156 // 2]  # a closed surface: one new point per edge, E = 3F/2
     assert all(math.isfinite(v) for r in data["runs"] for v in r["values"].values())
+
+
+def test_convergence_with_implicit_euler_steps_from_its_own_step(tmp_path):
+    """`--integrator implicit_euler`: each level's steps halve from implicit Euler's own
+    "auto" step (4x symplectic Euler's), not from the explicit bound."""
+    from hybrid.studies.convergence import base_step
+    assert main_study(["convergence", "--out", str(tmp_path), "--integrator", "implicit_euler",
+                       "--levels", "0-1", "--steps", "2", "--duration", "0.2"]) == 0
+    data = strict_load(tmp_path / "convergence.json")
+    assert data["overrides"] == ["integrator=implicit_euler"] and not data["failures"]
+    for level in (0, 1):
+        dt0, _ = base_step("breathing", ("integrator=implicit_euler",), level)
+        explicit, _ = base_step("breathing", (), level)
+        assert dt0 >= 2 * explicit
+        assert sorted(r["dt"] for r in data["runs"] if r["level"] == level) == [dt0 / 2, dt0]
