@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import statistics
 import tempfile
 import time
@@ -125,25 +126,38 @@ def implicit_rows(meshes=(None, 5), *, repeats: int = 7, work: float = 4e6) -> l
     return rows
 
 
-#: the realtime rows' runs, chosen by measurement (README, "Performance"): at mesh level
-#: 4 implicit Euler stops where the sternal strip's triangles collapse (t = 1.33 s), and
-#: symplectic Euler at 1 ms (0.77 of its bound) gives the breath's metrics within 0.14%
-#: of a 0.1 ms run; the paper's scene at its own step
-REALTIME_RUNS = {"breathing": ("symplectic_euler", 1e-3), "breathing_paper": ("symplectic_euler", 1e-3)}
+#: the realtime rows' runs, chosen by measurement (README, "Performance"): at mesh level 4
+#: symplectic Euler at 1 ms (0.77 of its bound) gives the breath's metrics within 0.14% of a
+#: 0.1 ms run and is faster than implicit Euler; the paper's scene at its own step. Other levels:
+#: `realtime_step`
+REALTIME_RUNS = {("breathing", 4): ("symplectic_euler", 1e-3), ("breathing_paper", None): ("symplectic_euler", 1e-3)}
+#: the fraction of the stable-step estimate `realtime_step` takes (README: keep h below 0.8 of it)
+REALTIME_BOUND_FRACTION = 0.7
+
+
+def realtime_step(model) -> float:
+    """Symplectic Euler's step for a realtime row at a level `REALTIME_RUNS` lacks: the largest
+    step that divides the 10 ms frame and is at most REALTIME_BOUND_FRACTION of the stable-step
+    estimate (at level 7, 1/3 ms, 0.70 of its 0.478 ms bound; its time error is below 0.1%, and
+    implicit Euler costs more per simulated second there: README, "Implicit Euler")."""
+    return 0.01 / math.ceil(0.01 / (REALTIME_BOUND_FRACTION * model.dt_stable_s))
 
 
 def realtime_row(scene: str = "breathing", level: int | None = 4, *, integrator: str | None = None,
                  dt_s: float | None = None, duration_s: float = 12.0, repeats: int = 3) -> dict:
     """`duration_s` of a packaged scene (`hybrid.run.run`, frames every 10 ms, no
     recording) at mesh `level` (None: the scene's own mesh) with `integrator` at
-    `dt_s` (default `REALTIME_RUNS`); the median wall time of `repeats` runs, each
-    from a new simulation whose compiled step is loaded. realtime_factor = sim_s / wall_s."""
-    default = REALTIME_RUNS.get(scene, ("symplectic_euler", 1e-3))
-    integrator = default[0] if integrator is None else integrator
-    dt_s = default[1] if dt_s is None else dt_s
+    `dt_s` (default `REALTIME_RUNS`, else symplectic Euler at `realtime_step`); the median
+    wall time of `repeats` runs, each from a new simulation whose compiled step is loaded.
+    realtime_factor = sim_s / wall_s."""
     sc = load_scene(builtin_scene(scene))
     if level is not None:
         sc = apply_overrides(sc, [f"mesh.level={level}"])
+    default = REALTIME_RUNS.get((scene, level))
+    if default is None:
+        default = ("symplectic_euler", realtime_step(compile_scene(dataclasses.replace(sc, dt_s=1e-3))))
+    integrator = default[0] if integrator is None else integrator
+    dt_s = default[1] if dt_s is None else dt_s
     model = compile_scene(dataclasses.replace(sc, integrator=integrator, dt_s=dt_s))
     walls = []
     for _ in range(repeats):
@@ -285,25 +299,38 @@ def _our_volume_change(nvert: int, duration_s: float) -> float:
     return (sim.volume - model.arrays.vol0) / model.arrays.vol0
 
 
-def run_bench(json_path: Path | None = None, *, quick: bool = False) -> dict:
-    """All benchmark sections; writes them to json_path if given."""
+#: the benchmark's sections, in the order they run (`run_bench(only=...)`)
+SECTIONS = ("membrane", "formulations", "implicit", "realtime", "coupled", "recording", "flex")
+
+
+def run_bench(json_path: Path | None = None, *, quick: bool = False, realtime_level: int = 4,
+              only: tuple | None = None) -> dict:
+    """The benchmark's sections (`only` a subset of SECTIONS; all by default), the
+    breathing scene's realtime row at mesh `realtime_level`; writes them to json_path if given."""
+    bad = sorted(set(only or ()) - set(SECTIONS))
+    if bad:
+        raise ValueError(f"only: expected sections among {list(SECTIONS)}, received {bad}")
+    want = set(only or SECTIONS)
     result: dict = {}
     meshes = (None, 3) if quick else MEMBRANE_MESHES
-    result["membrane"] = bench_membrane_rows(meshes, repeats=3 if quick else 7,
-                                             work=2e5 if quick else 4e6)
-    result["formulations"] = formulation_rows((None, 3) if quick else (None, 5), repeats=3 if quick else 7,
-                                              work=2e5 if quick else 4e6)
-    if quick:  # a smoke test: the 80-point step, half a second of the breathing scene at level 2
-        result["implicit"] = implicit_rows((None,), repeats=1, work=2e4)
-        result["realtime"] = [realtime_row("breathing", 2, duration_s=0.5, repeats=1),
-                              realtime_row("breathing_paper", None, duration_s=0.5, repeats=1)]
-    else:
-        result["implicit"] = implicit_rows((None, 5))
-        result["realtime"] = [realtime_row("breathing", 4, repeats=5), realtime_row("breathing_paper", None, repeats=5)]
-    if quick:
-        result.update(coupled=coupled_row(nstep=500, repeats=3), recording=recording_row(duration_s=1.0, repeats=2))
-    else:
-        result.update(coupled=coupled_row(), recording=recording_row(), flex=flex_rows())
+    if "membrane" in want:
+        result["membrane"] = bench_membrane_rows(meshes, repeats=3 if quick else 7, work=2e5 if quick else 4e6)
+    if "formulations" in want:
+        result["formulations"] = formulation_rows((None, 3) if quick else (None, 5), repeats=3 if quick else 7,
+                                                  work=2e5 if quick else 4e6)
+    if "implicit" in want:  # quick: a smoke test, the 80-point step
+        result["implicit"] = implicit_rows((None,), repeats=1, work=2e4) if quick else implicit_rows((None, 5))
+    if "realtime" in want:  # quick: half a second of the breathing scene at level 2
+        result["realtime"] = ([realtime_row("breathing", 2, duration_s=0.5, repeats=1),
+                               realtime_row("breathing_paper", None, duration_s=0.5, repeats=1)] if quick else
+                              [realtime_row("breathing", realtime_level, repeats=5 if realtime_level <= 5 else 3),
+                               realtime_row("breathing_paper", None, repeats=5)])
+    if "coupled" in want:
+        result["coupled"] = coupled_row(nstep=500, repeats=3) if quick else coupled_row()
+    if "recording" in want:
+        result["recording"] = recording_row(duration_s=1.0, repeats=2) if quick else recording_row()
+    if "flex" in want and not quick:
+        result["flex"] = flex_rows()
     if json_path is not None:
         Path(json_path).write_text(json.dumps(result, indent=2) + "\n")
     return result

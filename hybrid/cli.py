@@ -190,8 +190,15 @@ def _cmd_view(args) -> int:
 
 
 def _cmd_bench(args) -> int:
-    from .bench import format_table, run_bench
-    result = run_bench(Path(args.json) if args.json else None, quick=args.quick)
+    from .bench import SECTIONS, format_table, run_bench
+    only = tuple(s for s in args.only.split(",") if s) if args.only else None
+    bad = sorted(set(only or ()) - set(SECTIONS))
+    if bad:
+        raise HybridError(f"--only: expected sections among {', '.join(SECTIONS)}, received {', '.join(bad)}")
+    if args.realtime_level < 0:
+        raise HybridError(f"--realtime-level: expected a mesh level >= 0, received {args.realtime_level}")
+    result = run_bench(Path(args.json) if args.json else None, quick=args.quick, realtime_level=args.realtime_level,
+                       only=only)
     print(format_table(result))
     return 0
 
@@ -266,6 +273,11 @@ def build_parser() -> argparse.ArgumentParser:
     b = sub.add_parser("bench", help="time the full step; medians of repeated runs")
     b.add_argument("--json", metavar="FILE", help="also write the figures as JSON")
     b.add_argument("--quick", action="store_true", help="small sizes only (a smoke test)")
+    b.add_argument("--only", metavar="SECTION[,SECTION]", help="these sections only: membrane, formulations, "
+                   "implicit, realtime, coupled, recording, flex")
+    b.add_argument("--realtime-level", type=int, default=4, metavar="K",
+                   help="the breathing scene's mesh level in the realtime row (default 4; 7, the level the "
+                        "convergence study recommends for 1%% error, takes minutes)")
     b.set_defaults(func=_cmd_bench)
     i = sub.add_parser("inspect", help="what a scene or an MJCF model holds: bodies at qpos0, joints, actuators, "
                                        "keyframes; regions, links, nails, terms and the stable step")

@@ -43,3 +43,22 @@ def test_implicit_and_realtime_rows_keep_their_keys():
     assert rt["realtime_factor"] == rt["sim_s"] / rt["wall_s"]
     table = bench.format_table({"implicit": rows, "realtime": [rt]})
     assert "implicit Euler" in table and "realtime factor" in table
+
+
+def test_realtime_row_at_a_level_without_a_measured_run_takes_symplectic_euler_below_its_bound():
+    rt = bench.realtime_row("breathing", 1, duration_s=0.05, repeats=1)
+    assert rt["integrator"] == "symplectic_euler"
+    assert abs(0.01 / rt["dt"] - round(0.01 / rt["dt"])) < 1e-9  # divides the 10 ms frame
+    model = bench.compile_scene(bench.apply_overrides(bench.load_scene(bench.builtin_scene("breathing")),
+                                                      ["mesh.level=1"]))
+    assert 0.5 * model.dt_stable_s < rt["dt"] <= bench.REALTIME_BOUND_FRACTION * model.dt_stable_s
+
+
+def test_bench_only_some_sections_and_bad_names_in_one_line(capsys):
+    from hybrid.cli import main
+    assert main(["bench", "--only", "snore,realtime"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "snore" in err and "realtime" in err
+    assert main(["bench", "--realtime-level", "-1"]) == 2
+    assert "--realtime-level" in capsys.readouterr().err
+    assert set(bench.run_bench(quick=True, only=("realtime",))) == {"realtime"}
