@@ -27,7 +27,9 @@ The nodes enter F through dF_0 = d00 (u_b - u_a), dF_1 = d01 (u_b - u_a) + d11 (
 Muscle fibres (`hybrid.terms.fibres`): a triangle's work function A T Psi(lambda),
 lambda^2 = q = sum_k g_k |d_k|^2 over its edges d_k, Psi' = g the force-length
 relation, has the Hessian A T ((g' - g / lambda) a (x) a + g / lambda sum_k g_k D_k),
-a = grad lambda, D_k the Laplacian of edge k. The projection leaves out a
+a = grad lambda, D_k the Laplacian of edge k; below the stretch MIN_STRETCH s, where the
+work function is the quadratic A T (Psi(s) + g(s) (lambda^2 - s^2) / (2 s)), the second part
+alone with lambda = s. The projection leaves out a
 negative coefficient of the rank-one part and the edges of negative g_k (or
 negative tension) in the second part; the rest is positive semi-definite.
 
@@ -178,13 +180,17 @@ def membrane_tangent_diag(mem_vert, mem_par, cache, kx, kv, blocks):
 
 @kernel(inline="always")
 def _fibre_state(fib_vert, fib_par, fib_sched, sched_val, vert_pos, f):
-    """(lambda, A T, g, g') of muscle triangle f (`hybrid.terms.fibres`)."""
+    """(lambda, A T, g, g') of muscle triangle f (`hybrid.terms.fibres`); below MIN_STRETCH
+    (MIN_STRETCH, A T, g(MIN_STRETCH), g(MIN_STRETCH) / MIN_STRETCH): the Hessian of its quadratic."""
     sq = 0.0
     for k in range(3):
         i, j = fib_vert[f, k], fib_vert[f, (k + 1) % 3]
         dx, dy, dz = vert_pos[j, 0] - vert_pos[i, 0], vert_pos[j, 1] - vert_pos[i, 1], vert_pos[j, 2] - vert_pos[i, 2]
         sq += fib_par[f, k] * (dx * dx + dy * dy + dz * dz)
-    lam = max(math.sqrt(max(sq, 0.0)), MIN_STRETCH)
+    lam = math.sqrt(max(sq, 0.0))
+    if lam < MIN_STRETCH:  # the quadratic below MIN_STRETCH: no rank-one part (g' = g / lambda)
+        g, _ = force_length(MIN_STRETCH, fib_par[f, 4])
+        return MIN_STRETCH, fib_par[f, 3] * sched_val[fib_sched[f], 0], g, g / MIN_STRETCH
     g, dg = force_length(lam, fib_par[f, 4])
     return lam, fib_par[f, 3] * sched_val[fib_sched[f], 0], g, dg
 
@@ -279,7 +285,8 @@ def kelvin_voigt_dissipation(mem_vert, mem_par, vert_pos, vert_vel):
 @kernel
 def fibre_energy(fib_vert, fib_par, fib_sched, sched_val, vert_pos):
     """The muscle's work function sum A T Psi(lambda) over its triangles (J), Psi(1) = 0:
-    Psi = lambda - 1 without a force-length relation, w sqrt(pi) / 2 erf((lambda - 1) / w) with."""
+    Psi = lambda - 1 without a force-length relation, w sqrt(pi) / 2 erf((lambda - 1) / w) with;
+    below MIN_STRETCH s, Psi(s) + g(s) (lambda^2 - s^2) / (2 s)."""
     total = 0.0
     for f in range(fib_vert.shape[0]):
         lam, at, g, dg = _fibre_state(fib_vert, fib_par, fib_sched, sched_val, vert_pos, f)
@@ -288,6 +295,14 @@ def fibre_energy(fib_vert, fib_par, fib_sched, sched_val, vert_pos):
             total += at * w * 0.5 * math.sqrt(math.pi) * math.erf((lam - 1.0) / w)
         else:
             total += at * (lam - 1.0)
+        if lam == MIN_STRETCH:  # possibly below it: add the quadratic's part
+            sq = 0.0
+            for k in range(3):
+                i, j = fib_vert[f, k], fib_vert[f, (k + 1) % 3]
+                for c in range(3):
+                    sq += fib_par[f, k] * (vert_pos[j, c] - vert_pos[i, c]) ** 2
+            if sq < lam * lam:
+                total += at * g * (sq - lam * lam) / (2.0 * lam)
     return total
 
 

@@ -9,10 +9,10 @@ from hybrid import Damping, HalfSpace, Masses, Membrane, MuscleFibres, Scene
 from hybrid.implicit import implicit_forces, newton_product
 from hybrid.mesh import irregular_sphere
 from hybrid.model import compile_scene
-from hybrid.terms.fibres import add_muscle_fibres
+from hybrid.terms.fibres import MIN_STRETCH, add_muscle_fibres
 from hybrid.terms.membrane import add_membrane_serial
-from hybrid.terms.tangents import (NCACHE, fibre_tangent_diag, fibre_tangent_product, membrane_tangent_cache,
-                                   membrane_tangent_diag, membrane_tangent_product)
+from hybrid.terms.tangents import (NCACHE, fibre_energy, fibre_tangent_diag, fibre_tangent_product,
+                                   membrane_tangent_cache, membrane_tangent_diag, membrane_tangent_product)
 
 R = 0.12
 TENSION = 40.0  # N/m
@@ -120,6 +120,64 @@ def test_the_fibre_hessian_is_minus_the_force_jacobian(model, width):
         return y
     hess = columns(x.shape[0], product)
     assert rel_error(-hess, finite_difference(force, x, 1e-7)) <= 1e-6
+
+
+@pytest.mark.parametrize("width", [0.0, 0.5], ids=["no_force_length", "force_length"])
+def test_triangles_collapsed_along_their_fibres_pull_in_proportion(model, width):
+    """Triangles shrunk to 2% (fibre stretch below MIN_STRETCH): the force is minus the work
+    function's gradient and the Hessian minus its Jacobian there; a point triangle pulls nothing."""
+    a = model.arrays
+    sv = sched(model)
+    par = a.fib_par.copy()
+    par[:, 4] = width
+    x = deformed(model, 9, scale=0.002)
+    used = set()
+    for f in range(0, a.fib_vert.shape[0], 3):
+        tri = [int(v) for v in a.fib_vert[f]]
+        if used.isdisjoint(tri):
+            c = x[tri].mean(axis=0)
+            x[tri] = c + 0.02 * (x[tri] - c)
+            used.update(tri)
+    sq = np.zeros(a.fib_vert.shape[0])
+    for k in range(3):
+        d = x[a.fib_vert[:, (k + 1) % 3]] - x[a.fib_vert[:, k]]
+        sq += par[:, k] * np.sum(d * d, axis=1)
+    assert (np.sqrt(sq) < 0.5 * MIN_STRETCH).sum() >= 3
+
+    def force(y):
+        f = np.zeros_like(y)
+        add_muscle_fibres(a.fib_vert, par, a.fib_sched, sv, y, f)
+        return f
+
+    def energy(y):
+        return fibre_energy(a.fib_vert, par, a.fib_sched, sv, y)
+
+    def product(u):
+        y = np.zeros_like(u)
+        fibre_tangent_product(a.fib_vert, par, a.fib_sched, sv, x, False, 1.0, u, y)
+        return y
+    assert rel_error(-columns(x.shape[0], product), finite_difference(force, x, 1e-8)) <= 1e-6
+    grad = np.zeros(x.size)
+    for j in range(x.size):
+        xp, xm = x.copy(), x.copy()
+        xp.flat[j] += 1e-7
+        xm.flat[j] -= 1e-7
+        grad[j] = (energy(xp) - energy(xm)) / 2e-7
+    assert rel_error(-grad.reshape(x.shape), force(x)) <= 1e-6
+    tri = a.fib_vert[0]
+    one = []  # triangle 0 alone, shrunk to 2% and 1%: its pull halves (a constant pull would not)
+    for s in (0.02, 0.01):
+        y = x.copy()
+        c = model.mesh.vert_pos[tri].mean(axis=0)
+        y[tri] = c + s * (model.mesh.vert_pos[tri] - c)
+        f = np.zeros_like(y)
+        add_muscle_fibres(a.fib_vert[:1], par[:1], a.fib_sched[:1], sv, y, f)
+        one.append(np.abs(f).max())
+    assert abs(one[1] / one[0] - 0.5) < 1e-9
+    x[tri] = x[tri].mean(axis=0)  # a point: no direction, no pull from this triangle
+    f_point = force(x)
+    x[tri[1]] += 1e-12
+    assert np.isfinite(f_point).all() and np.abs(f_point - force(x)).max() < 1e-9
 
 
 def test_the_newton_matrix_against_finite_differences_of_the_implicit_forces(model):
