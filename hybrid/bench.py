@@ -126,11 +126,15 @@ def implicit_rows(meshes=(None, 5), *, repeats: int = 7, work: float = 4e6) -> l
     return rows
 
 
-#: the realtime rows' runs, chosen by measurement (README, "Performance"): at mesh level 4
-#: symplectic Euler at 1 ms (0.77 of its bound) gives the breath's metrics within 0.14% of a
-#: 0.1 ms run and is faster than implicit Euler; the paper's scene at its own step. Other levels:
-#: `realtime_step`
-REALTIME_RUNS = {("breathing", 4): ("symplectic_euler", 1e-3), ("breathing_paper", None): ("symplectic_euler", 1e-3)}
+#: the realtime rows' runs (integrator, step s, overrides), chosen by measurement (README,
+#: "Performance"): at mesh level 4 symplectic Euler at 1 ms (0.77 of its bound) gives the breath's
+#: metrics within 0.14% of a 0.1 ms run and is faster than implicit Euler; at level 7 implicit Euler
+#: at 10 ms solved to 1e-3 of the forces gives the 12 s run's metrics within 0.09% of symplectic
+#: Euler at 0.2 ms in 0.6 of the time symplectic Euler takes at 1/3 ms; the paper's scene at its
+#: own step. Other levels: `realtime_step`
+REALTIME_RUNS = {("breathing", 4): ("symplectic_euler", 1e-3, ()),
+                 ("breathing", 7): ("implicit_euler", 1e-2, ("implicit_tol=1e-3",)),
+                 ("breathing_paper", None): ("symplectic_euler", 1e-3, ())}
 #: the fraction of the stable-step estimate `realtime_step` takes (README: keep h below 0.8 of it)
 REALTIME_BOUND_FRACTION = 0.7
 
@@ -139,25 +143,32 @@ def realtime_step(model) -> float:
     """Symplectic Euler's step for a realtime row at a level `REALTIME_RUNS` lacks: the largest
     step that divides the 10 ms frame and is at most REALTIME_BOUND_FRACTION of the stable-step
     estimate (at level 7, 1/3 ms, 0.70 of its 0.478 ms bound: the 12 s run's metrics the same as at
-    0.2 ms to 1e-5, and implicit Euler costs more per simulated second there: README, "Implicit Euler")."""
+    0.2 ms to 1e-5)."""
     return 0.01 / math.ceil(0.01 / (REALTIME_BOUND_FRACTION * model.dt_stable_s))
 
 
 def realtime_row(scene: str = "breathing", level: int | None = 4, *, integrator: str | None = None,
-                 dt_s: float | None = None, duration_s: float = 12.0, repeats: int = 3) -> dict:
+                 dt_s: float | None = None, overrides: tuple | None = None, duration_s: float = 12.0,
+                 repeats: int = 3) -> dict:
     """`duration_s` of a packaged scene (`hybrid.run.run`, frames every 10 ms, no
-    recording) at mesh `level` (None: the scene's own mesh) with `integrator` at
-    `dt_s` (default `REALTIME_RUNS`, else symplectic Euler at `realtime_step`); the median
-    wall time of `repeats` runs, each from a new simulation whose compiled step is loaded.
+    recording) at mesh `level` (None: the scene's own mesh) with `integrator` at `dt_s`
+    with `overrides` ("KEY=VALUE"); each not given is `REALTIME_RUNS`'s (the overrides only
+    with its integrator), else symplectic Euler at `realtime_step`. The median wall time of
+    `repeats` runs, each from a new simulation whose compiled step is loaded.
     realtime_factor = sim_s / wall_s."""
     sc = load_scene(builtin_scene(scene))
     if level is not None:
         sc = apply_overrides(sc, [f"mesh.level={level}"])
     default = REALTIME_RUNS.get((scene, level))
     if default is None:
-        default = ("symplectic_euler", realtime_step(compile_scene(dataclasses.replace(sc, dt_s=1e-3))))
+        default = ("symplectic_euler", realtime_step(compile_scene(dataclasses.replace(sc, dt_s=1e-3))), ())
+    if overrides is None:
+        overrides = default[2] if integrator in (None, default[0]) else ()
     integrator = default[0] if integrator is None else integrator
     dt_s = default[1] if dt_s is None else dt_s
+    overrides = tuple(overrides)
+    if overrides:
+        sc = apply_overrides(sc, list(overrides))
     model = compile_scene(dataclasses.replace(sc, integrator=integrator, dt_s=dt_s))
     walls = []
     for _ in range(repeats):
@@ -168,7 +179,7 @@ def realtime_row(scene: str = "breathing", level: int | None = 4, *, integrator:
         walls.append(time.perf_counter() - t0)
     wall = statistics.median(walls)
     return {"scene": scene, "level": level, "nvert": model.nvert, "integrator": integrator, "dt": dt_s,
-            "wall_s": wall, "sim_s": duration_s, "realtime_factor": duration_s / wall}
+            "overrides": list(overrides), "wall_s": wall, "sim_s": duration_s, "realtime_factor": duration_s / wall}
 
 
 def bench_membrane_rows(meshes=MEMBRANE_MESHES, *, repeats: int = 7, work: float = 4e6) -> list[dict]:
@@ -370,8 +381,9 @@ def format_table(result: dict) -> str:
     if "realtime" in result:
         lines += ["", "realtime: a packaged scene's run (frames every 10 ms); median wall time"]
         for r in result["realtime"]:
+            extra = f" ({', '.join(r['overrides'])})" if r.get("overrides") else ""
             lines.append(f"  {r['scene']} level {r['level']} ({r['nvert']} points), {r['integrator']} at "
-                         f"{r['dt'] * 1e3:g} ms: {r['sim_s']:g} s in {r['wall_s']:.2f} s, "
+                         f"{r['dt'] * 1e3:g} ms{extra}: {r['sim_s']:g} s in {r['wall_s']:.2f} s, "
                          f"realtime factor {r['realtime_factor']:.2f}")
     if "coupled" in result:
         c = result["coupled"]

@@ -62,3 +62,12 @@ def test_bench_only_some_sections_and_bad_names_in_one_line(capsys):
     assert main(["bench", "--realtime-level", "-1"]) == 2
     assert "--realtime-level" in capsys.readouterr().err
     assert set(bench.run_bench(quick=True, only=("realtime",))) == {"realtime"}
+
+
+def test_the_recommended_levels_realtime_run_is_implicit_euler_solved_to_a_looser_tolerance():
+    integrator, dt, overrides = bench.REALTIME_RUNS[("breathing", bench.RECOMMENDED_LEVEL)]
+    assert integrator == "implicit_euler" and abs(0.01 / dt - round(0.01 / dt)) < 1e-9
+    rt = bench.realtime_row("breathing", 1, integrator="implicit_euler", dt_s=1e-2, overrides=overrides,
+                            duration_s=0.05, repeats=1)
+    assert rt["overrides"] == list(overrides) == ["implicit_tol=1e-3"]
+    assert "implicit_tol=1e-3" in bench.format_table({"realtime": [rt]})
