@@ -277,8 +277,7 @@ def build_parser() -> argparse.ArgumentParser:
                    "implicit, realtime, coupled, recording, flex")
     b.add_argument("--realtime-level", type=int, default=7, metavar="K",
                    help="the breathing scene's mesh level in the realtime row besides its default level 4 "
-                        "(default 7, the level the convergence study recommends for 1%% error: 12 s of it take "
-                        "about a minute a run here; 4 for none)")
+                        "(default 7, the convergence study's finest: 12 s of it take 20-40 s a run here; 4 for none)")
     b.set_defaults(func=_cmd_bench)
     i = sub.add_parser("inspect", help="what a scene or an MJCF model holds: bodies at qpos0, joints, actuators, "
                                        "keyframes; regions, links, nails, terms and the stable step")
