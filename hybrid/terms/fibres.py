@@ -144,16 +144,11 @@ def fibre_shares(vert_pos, face_vert, *, toward=None, axis=None):
     direction is normal to them (or that hold the point `toward`) carry none.
     """
     pos = np.asarray(vert_pos, float)
-    face = np.asarray(face_vert, np.int64).reshape(-1, 3)
+    face, par = fibre_rows(pos, face_vert, 0.0, toward=toward, axis=axis)
+    face = face.astype(np.int64)
     p = pos[face]
-    d = (np.asarray(toward, float) - p.mean(axis=1)) if toward is not None else np.tile(np.asarray(axis, float),
-                                                                                      (len(face), 1))
-    ok, c = fibre_coefficients(pos, face, d)
-    face, p = face[ok], p[ok]
-    e = np.stack([p[:, 1] - p[:, 0], p[:, 2] - p[:, 1], p[:, 0] - p[:, 2]], axis=1)
-    length = np.linalg.norm(e, axis=2)
-    area = 0.5 * np.linalg.norm(np.cross(e[:, 0], -e[:, 2]), axis=1)
-    share = c * area[:, None] / length
+    length = np.linalg.norm(np.roll(p, -1, axis=1) - p, axis=2)
+    share = par[:, :3] * par[:, 3:4] * length  # c_k A / L_k = g_k A L_k
     i = face
     j = np.roll(face, -1, axis=1)  # edge k runs from corner k to corner k+1
     lo, hi = np.minimum(i, j).ravel(), np.maximum(i, j).ravel()
