@@ -143,8 +143,9 @@ def test_muscle_fibres_x100_contract_without_collapse_at_the_rigid_models_step()
     force-length relation stops the fibres' shortening, so no triangle collapses (before
     it, Newton stopped at 0.51 s on collapsed triangles); the volume exact."""
     from hybrid.run import run
-    from hybrid.studies.extremes import _fibres_x, continuum_demo
-    sc = dataclasses.replace(_fibres_x(continuum_demo(), 100.0), integrator="implicit_euler")
+    from hybrid.studies.extremes import _schedule_x, continuum_demo
+    sc = dataclasses.replace(_schedule_x(continuum_demo(), MuscleFibres, "tension_n_per_m", 100.0),
+                             integrator="implicit_euler")
     sim = Simulation(compile_scene(sc))
     summary = run(sim, 1.7)["summary"]
     assert summary["status"] == "ok" and summary["volume_rel_error_max"] <= 1e-12

@@ -79,13 +79,15 @@ def _scaled(scene: Scene, kind, field: str, factor: float) -> Scene:
         for f in scene.forces))
 
 
-def _muscle_x(scene: Scene, factor: float) -> Scene:
+def _schedule_x(scene: Scene, kind, field: str, factor: float) -> Scene:
+    """The scene with the schedule `field` of its `kind` terms times factor (a
+    Breathing waveform's peak, or a number)."""
     def scale(f):
-        if not isinstance(f, Muscle):
+        if not isinstance(f, kind):
             return f
-        s = f.stiffness
-        return dataclasses.replace(f, stiffness=dataclasses.replace(s, peak=s.peak * factor)
-                                   if isinstance(s, Breathing) else s * factor)
+        s = getattr(f, field)
+        return dataclasses.replace(f, **{field: dataclasses.replace(s, peak=s.peak * factor)
+                                         if isinstance(s, Breathing) else s * factor})
     return dataclasses.replace(scene, forces=tuple(scale(f) for f in scene.forces))
 
 
@@ -158,16 +160,6 @@ def continuum_demo() -> Scene:
                  constraints=base.constraints, dt_s=1e-3, integrator="symplectic_euler")
 
 
-def _fibres_x(scene: Scene, factor: float) -> Scene:
-    def scale(f):
-        if not isinstance(f, MuscleFibres):
-            return f
-        t = f.tension_n_per_m
-        return dataclasses.replace(f, tension_n_per_m=dataclasses.replace(t, peak=t.peak * factor)
-                                   if isinstance(t, Breathing) else t * factor)
-    return dataclasses.replace(scene, forces=tuple(scale(f) for f in scene.forces))
-
-
 def implicit_variant(case: Case) -> Case:
     """The case run with implicit Euler at its own step: `<case>/implicit_euler`. A
     paper-formulation case is refused (implicit Euler needs the continuum one)."""
@@ -199,7 +191,7 @@ def _cases(tmp: Path) -> list[Case]:
         Case("continuum_membrane_x100", "continuum_demo, Young's modulus 500 -> 5e4 N/m, dt 1 ms",
              lambda: _scaled(cdemo(), Membrane, "youngs_modulus_n_per_m", 100.0), reasonable=False),
         Case("continuum_muscle_x100", "continuum_demo, muscle fibres' peak tension 20 -> 2000 N/m, dt 1 ms",
-             lambda: _fibres_x(cdemo(), 100.0), reasonable=False),
+             lambda: _schedule_x(cdemo(), MuscleFibres, "tension_n_per_m", 100.0), reasonable=False),
         Case("continuum_mesh_40962", "continuum_demo on an icosphere of 40962 points (same materials, dt 1 ms)",
              lambda: dataclasses.replace(cdemo(), mesh=MeshSpec(generator="icosphere", subdivisions=6,
                                                                 radius_m=0.12)),
@@ -245,7 +237,7 @@ def _cases(tmp: Path) -> list[Case]:
                                                                radius_m=0.12)),
              duration_s=0.05, small_duration_s=0.005),
         Case("muscle_x100", "membrane_demo, muscle peak 60 -> 6000 N/m",
-             lambda: _muscle_x(demo(), 100.0), reasonable=False),
+             lambda: _schedule_x(demo(), Muscle, "stiffness", 100.0), reasonable=False),
         Case("rib_springs_x1000", "breathing scene, rib hinge stiffness 12 -> 1.2e4 N m/rad, sternum "
              "1000 -> 1e6 N/m", _rib_variant(tmp, "stiff", _stiff_ribs)),
         Case("rib_springs_x1e4", "breathing scene, rib hinge stiffness 12 -> 1.2e5 N m/rad, sternum "

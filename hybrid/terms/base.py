@@ -156,6 +156,8 @@ class Term:
     finish_last: ClassVar[bool] = False
     #: the formulations whose scenes may hold this term (FORMULATIONS)
     formulations: ClassVar[tuple] = FORMULATIONS
+    #: the array whose rows are triangles (n, 3): each row kept when any of its corners moves
+    triangle_rows: ClassVar[str | None] = None
 
     def check_formulation(self, formulation: str, what: str) -> None:
         """Refuse, in one SceneError line, a term or a field of a formulation other
@@ -205,7 +207,11 @@ class Term:
         force's rows on points that do not move are left out."""
         names = [n for n, spec in cls.arrays.items() if isinstance(spec, Rows)]
         columns = [b.rows[n] for n in names]
-        if cls.section == "forces" and names:
+        if cls.triangle_rows is not None:  # rows are triangles: kept when any corner moves
+            tri = np.asarray(b.rows[cls.triangle_rows], np.int64).reshape(-1, 3)
+            keep = b.moving[tri].any(axis=1)
+            columns = [np.asarray(col)[keep] if keep.size else [] for col in columns]
+        elif cls.section == "forces" and names:
             columns = b.keep_moving(*columns)
         for n, col in zip(names, columns):
             b.out[n] = cls.arrays[n].build(col)

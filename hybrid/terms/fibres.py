@@ -66,6 +66,7 @@ class MuscleFibres(Term):
     # fib_vert (n, 3) int32: each muscle triangle; fib_par (n, NPAR): its g_k, area, width;
     # fib_sched (n,) int64: the tension's schedule row
     arrays = {"fib_vert": Rows(np.int32, 3), "fib_par": Rows(float, NPAR), "fib_sched": Rows(np.int64)}
+    triangle_rows = "fib_vert"
     region: object = param("selector")
     tension_n_per_m: object = param("schedule", ncomp=1)
     toward_m: tuple = param("vec3", None)
@@ -99,12 +100,6 @@ class MuscleFibres(Term):
             np.add.at(b.vert_stiffness, tri[:, corner], k)
         b.add_rows(fib_vert=tri, fib_par=par, fib_sched=np.full(len(tri), s))
 
-    @classmethod
-    def finish(cls, b):  # rows are triangles: kept when any corner moves
-        tri = np.asarray(b.rows["fib_vert"], np.int64).reshape(-1, 3)
-        keep = b.moving[tri].any(axis=1) if tri.size else np.zeros(0, bool)
-        for name in cls.arrays:
-            b.out[name] = cls.arrays[name].build(np.asarray(b.rows[name])[keep] if keep.size else [])
 
 
 def fibre_coefficients(vert_pos, face_vert, direction):

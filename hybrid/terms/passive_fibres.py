@@ -42,6 +42,7 @@ class PassiveFibres(Term):
     `toward_m` (m), or along `axis`, projected on the surface."""
     formulations = ("continuum",)
     arrays = {"pf_vert": Rows(np.int32, 3), "pf_par": Rows(float, NPAR)}
+    triangle_rows = "pf_vert"
     modulus_n_per_m: float = param("positive", hi=checks.MAX_STIFFNESS_N_PER_M)
     region: object = param("selector", "all")
     around_axis: tuple = param("vec3", None)
@@ -89,12 +90,6 @@ class PassiveFibres(Term):
             raise SceneError(f"{what}.axis: expected a non-zero vector, received {self.axis!r}")
         return np.tile(a, (len(centroid), 1))
 
-    @classmethod
-    def finish(cls, b):  # rows are triangles: kept when any corner moves
-        tri = np.asarray(b.rows["pf_vert"], np.int64).reshape(-1, 3)
-        keep = b.moving[tri].any(axis=1) if tri.size else np.zeros(0, bool)
-        for name in cls.arrays:
-            b.out[name] = cls.arrays[name].build(np.asarray(b.rows[name])[keep] if keep.size else [])
 
 
 @kernel
