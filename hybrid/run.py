@@ -14,20 +14,16 @@ is interrupted still returns what it recorded, with its status in the summary.
 
 from __future__ import annotations
 
-import json
 import math
 import sys
-import tempfile
 import time
-from pathlib import Path
 
 import numpy as np
 
-from . import checks
 from .errors import HybridError, reduce_exception
 from .model import Model
 from .schedule import Breathing, schedule_eval, stack_schedules
-from .outputs import (LOCK_NAME, FolderLock, claim_folder, default_out, holds_run, out_folder, plot_trace,
+from .outputs import (FolderLock, claim_folder, default_out, holds_run, out_folder, plot_trace,
                       write_outputs, write_summary)
 from .provenance import run_provenance
 from .scene import Muscle, MuscleFibres, SoftVolume, Volume

@@ -10,7 +10,6 @@ import pytest
 from hybrid.errors import SceneError
 from hybrid.mesh import fibonacci_sphere, ring_sphere, uv_sphere
 from hybrid.model import compile_scene
-from hybrid.regions import HalfSpace
 from hybrid.scene import Masses, PassiveFibres, Scene
 from hybrid.step import membrane_forces, new_state
 from hybrid.terms.passive_fibres import passive_fibres_energy
