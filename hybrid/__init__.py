@@ -25,7 +25,7 @@ from typing import Sequence
 from .errors import (ConstraintError, HybridError, MeshError, RigidError, SceneError,
                      SimulationDiverged)
 from .model import Model, compile_scene
-from .regions import All, Ball, Border, Box, Difference, HalfSpace, Indices, Intersection, Nearest, Patch, Union_
+from .regions import All, Ball, Border, Box, Difference, HalfSpace, Indices, Intersection, Nearest, Patch, Union_, Wedge
 from .resolve import resolve_scene, scene_names
 # `run` and `sweep` are both a module and its function: importing the function here
 # makes `hybrid.run` / `hybrid.sweep` the function (`from hybrid.run import ...` still
@@ -48,7 +48,7 @@ __all__ = [
     "Nailed", "KeepIn", "Prescribed", "Volume", "Rigid", "RigidLink", "Ribs", "RibPair",
     "Pressure", "MuscleFibres", "PassiveFibres",
     # region selectors
-    "All", "Border", "Indices", "HalfSpace", "Ball", "Box", "Nearest", "Patch", "Union_", "Intersection", "Difference",
+    "All", "Border", "Indices", "HalfSpace", "Ball", "Box", "Wedge", "Nearest", "Patch", "Union_", "Intersection", "Difference",
     # schedules
     "Constant", "Table", "Breathing", "Function",
     # errors

@@ -93,7 +93,8 @@ _SELECTOR_FIELDS = {"indices": ("-", "[i, j, ...], vertex indices >= 0"),
                     "radius_m": ("m", "a number > 0"),
                     "lo": ("m", "[x, y, z], lo <= hi"), "hi": ("m", "[x, y, z]"),
                     "points": ("m", "[[x, y, z], ...]"), "parts": ("-", "[selector, ...], not empty"),
-                    "base": ("-", "a selector"), "minus": ("-", "a selector")}
+                    "base": ("-", "a selector"), "minus": ("-", "a selector"),
+                    "from_deg": ("deg", "a number in [-360, 360]"), "to_deg": ("deg", "a number in [-360, 360]")}
 _SCHEDULES = {"breathing": S.Breathing, "table": S.Table}
 _SCHEDULE_FIELDS = {"period_s": ("s", "a number > 0"), "inspiration_fraction": ("-", "a number in (0, 1)"),
                     "peak": ("the field's", "a number; *required* in a file"),
@@ -137,7 +138,7 @@ def _valid(kind: str, meta: dict) -> str:
     if kind == "step":
         return f'a number > 0 and <= {_show(float(meta["hi"]))}, or "auto" (half the stable-step estimate, rounded down to 1, 2 or 5 x 10^k; with implicit Euler 4 times the symplectic Euler estimate, at most 0.01 s)'
     if kind == "floats":
-        return "[z, ...], finite numbers"
+        return "[value, ...], finite numbers"
     if kind == "nonneg":
         return "a number >= 0" + (f" and <= {_show(float(meta['hi']))}" if meta.get("hi") is not None else "")
     if kind == "angle_deg":

@@ -207,12 +207,18 @@ def build_mesh(scene: Scene) -> Mesh:
     if conform and gen not in ("uv_sphere", "ring_sphere"):
         raise SceneError(f"mesh.conform_z_m: expected a generator with circles of latitude (uv_sphere or "
                          f"ring_sphere), received generator={gen!r}; or no latitudes (--set mesh.conform_z_m=[])")
+    azimuths = val.get("conform_azimuth_deg", ())
+    if azimuths and gen not in ("uv_sphere", "ring_sphere"):
+        raise SceneError(f"mesh.conform_azimuth_deg: expected a generator with circles of latitude (uv_sphere or "
+                         f"ring_sphere), received generator={gen!r}; or no azimuths "
+                         f"(--set mesh.conform_azimuth_deg=[])")
     npoint = _mesh.level_counts(val.get("level") or 0)[2]
     try:
         if gen == "fibonacci_sphere":
             return _mesh.fibonacci_sphere(npoint, radius, center=tuple(center))
         if gen == "ring_sphere":
-            return _mesh.ring_sphere(npoint, radius, center=tuple(center), conform_z=conform)
+            return _mesh.ring_sphere(npoint, radius, center=tuple(center), conform_z=conform,
+                                     conform_azimuth_deg=azimuths)
     except MeshError as exc:
         raise SceneError(f"mesh: {exc}") from None
     if gen == "uv_sphere":
@@ -223,7 +229,8 @@ def build_mesh(scene: Scene) -> Mesh:
             raise SceneError(f"mesh: segments = {val['segments']} x rings = {val['rings']} gives {npoint} points; "
                              f"expected at most {checks.MAX_POINTS}")
         try:
-            return _mesh.uv_sphere(radius, val["segments"], val["rings"], center=tuple(center), conform_z=conform)
+            return _mesh.uv_sphere(radius, val["segments"], val["rings"], center=tuple(center), conform_z=conform,
+                                  conform_azimuth_deg=azimuths)
         except MeshError as exc:
             raise SceneError(f"mesh: {exc}") from None
     if gen == "icosphere":

@@ -17,7 +17,7 @@ import numpy as np
 from .errors import SceneError
 from .mesh.geometry import region_faces, vertex_area
 
-__all__ = ["Indices", "HalfSpace", "Ball", "Box", "Nearest", "Patch", "All", "Border",
+__all__ = ["Indices", "HalfSpace", "Ball", "Box", "Wedge", "Nearest", "Patch", "All", "Border",
            "Union_", "Intersection", "Difference", "Selector", "select", "contains", "select_faces"]
 
 
@@ -65,6 +65,21 @@ class Box:
     hi: tuple[float, float, float]
 
 
+#: angular tolerance (rad) of a wedge's borders: a mesh conforming to them
+#: (`mesh.conform_azimuth_deg`) has its border columns in the wedges on both sides
+WEDGE_TOL_RAD = 1e-9
+
+
+@dataclass(frozen=True)
+class Wedge:
+    """Vertices whose azimuth about the vertical (z) axis through `center` (m) lies
+    from `from_deg` to `to_deg` (degrees from +x toward +y, counter-clockwise seen
+    from +z; the wedge may cross 180), borders included."""
+    from_deg: float
+    to_deg: float
+    center: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+
 @dataclass(frozen=True)
 class Nearest:
     """For each given point (m), the nearest vertex."""
@@ -99,7 +114,7 @@ class Difference:
     minus: object
 
 
-Selector = Union[All, Border, Indices, HalfSpace, Ball, Box, Nearest, Patch, Union_, Intersection,
+Selector = Union[All, Border, Indices, HalfSpace, Ball, Box, Wedge, Nearest, Patch, Union_, Intersection,
                  Difference, str]
 
 
@@ -176,6 +191,8 @@ def _select(sel, vert_pos, name, regions, surface, depth=0) -> np.ndarray:
         if np.any(hi < lo):
             raise SceneError(f"region {name!r}: expected lo <= hi componentwise, received lo={sel.lo!r} hi={sel.hi!r}")
         return np.nonzero(np.all((vert_pos >= lo) & (vert_pos <= hi), axis=1))[0]
+    if isinstance(sel, Wedge):
+        return _wedge(sel, vert_pos, name)
     if isinstance(sel, Nearest):
         pts = np.asarray(sel.points, dtype=float)
         if pts.ndim != 2 or pts.shape[1] != 3 or not np.all(np.isfinite(pts)):
@@ -194,8 +211,24 @@ def _select(sel, vert_pos, name, regions, surface, depth=0) -> np.ndarray:
         a = _select(sel.base, vert_pos, name, regions, surface, depth + 1)
         b = _select(sel.minus, vert_pos, name, regions, surface, depth + 1)
         return np.setdiff1d(a, b)
-    raise SceneError(f"region {name!r}: expected a selector (indices, half_space, ball, box, nearest, patch, "
+    raise SceneError(f"region {name!r}: expected a selector (indices, half_space, ball, box, wedge, nearest, patch, "
                      f"all, border, union, intersection, difference or a region name), received {sel!r}")
+
+
+def _wedge(sel: Wedge, vert_pos: np.ndarray, name: str) -> np.ndarray:
+    c = _vec3(sel.center, f"region {name!r}.center")
+    lo, hi = float(sel.from_deg), float(sel.to_deg)
+    if not (np.isfinite(lo) and np.isfinite(hi) and abs(lo) <= 360.0 and abs(hi) <= 360.0):
+        raise SceneError(f"region {name!r}: expected from_deg and to_deg in [-360, 360] degrees, "
+                         f"received from_deg={sel.from_deg!r} to_deg={sel.to_deg!r}")
+    d = vert_pos - c
+    az = np.arctan2(d[:, 1], d[:, 0])
+    # the angle turned counter-clockwise from the wedge's first border, in [0, 2 pi)
+    span = np.deg2rad(np.mod(hi - lo, 360.0) if np.mod(hi - lo, 360.0) or hi == lo else 360.0)
+    turn = np.mod(az - np.deg2rad(lo), 2.0 * np.pi)
+    turn = np.where(turn > 2.0 * np.pi - WEDGE_TOL_RAD, turn - 2.0 * np.pi, turn)  # just below the first border
+    on_axis = np.hypot(d[:, 0], d[:, 1]) == 0.0  # no azimuth
+    return np.nonzero((turn <= span + WEDGE_TOL_RAD) & ~on_axis)[0]
 
 
 def _patch(sel: Patch, vert_pos, face_vert, name) -> np.ndarray:

@@ -60,6 +60,12 @@ class MeshSpec:
     the UV or ring sphere at every level, so that regions bounded there (the
     anatomy's parts) are bounded by edges and converge without a mesh-dependent
     jagged edge (a generator's option: a file mesh keeps its own points).
+    `conform_azimuth_deg` (degrees from +x toward +y about the vertical axis
+    through the centre): azimuths that are columns of points of the UV or ring
+    sphere, so that wedges bounded there (`wedge` regions) are bounded by edges;
+    a set symmetric about 0 makes the mesh there mirror-symmetric about the
+    x-z plane. A ring sphere's circles too small to hold them (near the poles,
+    and every circle of the coarsest levels) keep their own points.
     On a file mesh, `level` K splits every face into four K times (about 4^K
     times the points, the spacing halved a level), the new points projected
     onto the surface the file samples; that surface is known for a sphere (the
@@ -74,6 +80,7 @@ class MeshSpec:
     subdivisions: int = param("integer", 3, lo=0, hi=7)
     level: Optional[int] = param("integer", None, lo=0, hi=16)
     conform_z_m: tuple = param("floats", ())
+    conform_azimuth_deg: tuple = param("floats", ())
     center_m: tuple[float, float, float] = param("vec3", (0.0, 0.0, 0.0))
     unit_scale: float = param("positive", 1.0, hi=checks.MAX_LENGTH_M, unit="m per file unit")
 

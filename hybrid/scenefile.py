@@ -143,7 +143,7 @@ def _join(path, key):
 
 # ------------------------------------------------------------------ selectors and schedules
 
-_SELECTOR_KINDS = ("border", "indices", "half_space", "ball", "box", "nearest", "patch", "union",
+_SELECTOR_KINDS = ("border", "indices", "half_space", "ball", "box", "wedge", "nearest", "patch", "union",
                    "intersection", "difference")
 
 
@@ -182,6 +182,12 @@ def _selector(ctx, path, v, depth=0):
         _table(ctx, p, arg)
         _keys(ctx, p, arg, ("lo", "hi"), ("lo", "hi"))
         return R.Box(_vec3(ctx, f"{p}.lo", arg["lo"]), _vec3(ctx, f"{p}.hi", arg["hi"]))
+    if kind == "wedge":
+        _table(ctx, p, arg)
+        _keys(ctx, p, arg, ("from_deg", "to_deg", "center"), ("from_deg", "to_deg"))
+        return R.Wedge(_num(ctx, f"{p}.from_deg", arg["from_deg"], lo=-360.0, hi=360.0),
+                       _num(ctx, f"{p}.to_deg", arg["to_deg"], lo=-360.0, hi=360.0),
+                       _vec3(ctx, f"{p}.center", arg["center"]) if "center" in arg else (0.0, 0.0, 0.0))
     if kind == "nearest":
         return R.Nearest(_vec3_list(ctx, p, arg))
     if kind == "patch":
@@ -380,6 +386,8 @@ def _sel_to(sel):
         return {"ball": {"center": list(sel.center), "radius": sel.radius}}
     if isinstance(sel, R.Box):
         return {"box": {"lo": list(sel.lo), "hi": list(sel.hi)}}
+    if isinstance(sel, R.Wedge):
+        return {"wedge": {"from_deg": sel.from_deg, "to_deg": sel.to_deg, "center": list(sel.center)}}
     if isinstance(sel, R.Nearest):
         return {"nearest": [list(p) for p in sel.points]}
     if isinstance(sel, R.Patch):

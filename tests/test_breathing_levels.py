@@ -46,7 +46,7 @@ def test_fibonacci_sphere_is_closed_outward_and_even():
 @pytest.mark.parametrize("generator", ["ring_sphere", "uv_sphere", "fibonacci_sphere"])
 def test_the_breathing_anatomy_exists_at_every_level(generator):
     # the fibonacci sphere has no circles to conform to: its regions' borders are jagged
-    conform = ["mesh.conform_z_m=[]"] if generator == "fibonacci_sphere" else []
+    conform = ["mesh.conform_z_m=[]", "mesh.conform_azimuth_deg=[]"] if generator == "fibonacci_sphere" else []
     base = resolve_scene("breathing")
     area_mm2 = {}
     for level in range(6):
@@ -58,6 +58,12 @@ def test_the_breathing_anatomy_exists_at_every_level(generator):
                 assert np.count_nonzero(m.mesh.vert_pos[:, 2] == z) >= 3, (level, z)
         for name in ANATOMY:
             assert m.regions[name].size >= 1, (level, name)
+        if generator == "ring_sphere" and level >= 2:
+            # the ribs' attachments are mirror images (the mesh is symmetric where the columns are)
+            left = m.mesh.vert_pos[m.regions["rib_left_points"]] * [1.0, -1.0, 1.0]
+            right = m.mesh.vert_pos[m.regions["rib_right_points"]]
+            assert left.shape == right.shape, (level, left.shape, right.shape)
+            assert np.abs(left[np.lexsort(left.T)] - right[np.lexsort(right.T)]).max() < 1e-12, level
         # the regions are of physical size: the areas of their faces converge as the mesh refines
         p = m.mesh.vert_pos[m.mesh.face_vert]
         face_area = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
@@ -77,6 +83,8 @@ def test_a_level_needs_a_generator_that_refines(tmp_path):
         compile_scene(resolve_scene("breathing", overrides=["mesh.generator=icosphere"]))
     with pytest.raises(SceneError, match="mesh.conform_z_m: expected a generator with circles.*fibonacci_sphere"):
         compile_scene(resolve_scene("breathing", overrides=["mesh.generator=fibonacci_sphere"]))
+    with pytest.raises(SceneError, match="mesh.conform_azimuth_deg: expected a generator with circles.*fibonacci"):
+        compile_scene(resolve_scene("breathing", overrides=["mesh.generator=fibonacci_sphere", "mesh.conform_z_m=[]"]))
 
 
 def test_the_scene_on_a_saved_level_4_mesh_runs_as_on_the_generated_one(tmp_path):
@@ -106,7 +114,8 @@ def test_auto_step_is_half_the_stable_estimate_rounded_down():
     # implicit Euler has no bound of its own: 4 times symplectic Euler's, at most 10 ms
     m = compile_scene(resolve_scene("breathing", overrides=["integrator=implicit_euler"]))
     explicit = m.with_dt(m.dt_s, "symplectic_euler").dt_stable_s
-    assert m.dt_s == auto_dt_implicit(explicit) and 2 * explicit < m.dt_s <= min(4 * explicit, 0.01)
+    # (rounded down to 1, 2 or 5 x 10^k, which loses at most a factor 2.5 of the 4)
+    assert m.dt_s == auto_dt_implicit(explicit) and 1.6 * explicit <= m.dt_s <= min(4 * explicit, 0.01)
 
 
 def test_the_trace_gives_the_diaphragms_swept_volume():
@@ -153,19 +162,17 @@ def test_a_level_of_a_file_mesh_off_a_sphere_is_refused(tmp_path):
     assert compile_scene(dataclasses.replace(sc, mesh=hybrid.MeshSpec(path=str(path)))).nvert == ico.nvert
 
 
-def test_the_uv_and_ring_families_agree_within_their_discretisation_error():
+def test_the_uv_and_ring_families_close_in_on_each_other():
     """The same anatomy on the UV family and on the pole-free ring family through the
-    first inspiration at level 3: they differ by less than level 3 differs from level 5
-    of the ring family (the size of level 3's own error). Measured: 1.1, 0.2, 1.0 and
-    2.7% apart against 2.4, 3.0, 1.5 and 5.4%. At level 7 (README) they are 0.72, 0.08,
-    0.42 and 0.05% apart."""
+    first inspiration: refined from level 2 to level 5 (8 times the points), the two
+    families' metrics come closer, by at least half for every metric, and at level 5
+    they are within 2% (the size of level 5's own error, README). Measured: 3.8, 4.6,
+    4.7 and 9.1% apart at level 2; 1.1, 0.7, 0.9 and 1.6% at level 5."""
     keys = ("rib_lift_mm", "apex_descent_mm", "pressure_pa", "swept_volume_ml")
 
     def maxima(*sets):
         table = run(hybrid.load("breathing", overrides=list(sets)), 1.7)["summary"]["metrics"]
         return np.array([table[k]["max"] for k in keys])
-    ring3, uv3 = maxima("mesh.level=3"), maxima("mesh.level=3", "mesh.generator=uv_sphere")
-    ring5 = maxima("mesh.level=5")
-    apart = np.abs(uv3 - ring3) / ring5
-    error3 = np.abs(ring3 - ring5) / ring5
-    assert np.all(apart < error3), dict(zip(keys, zip(apart, error3)))
+    apart = {lv: np.abs(maxima(f"mesh.level={lv}", "mesh.generator=uv_sphere") / maxima(f"mesh.level={lv}") - 1.0)
+             for lv in (2, 5)}
+    assert np.all(apart[5] < 0.5 * apart[2]) and np.all(apart[5] < 0.02), dict(zip(keys, zip(apart[2], apart[5])))

@@ -28,6 +28,7 @@ def selectors(depth: int = 2):
         st.just("all"), st.just(R.Border()),
         st.builds(R.Indices, st.lists(st.integers(0, 500), min_size=1, max_size=5).map(tuple)),
         st.builds(R.HalfSpace, vec3, vec3), st.builds(R.Ball, vec3, positive), st.builds(R.Box, vec3, vec3),
+        st.builds(R.Wedge, st.floats(-360, 360), st.floats(-360, 360), vec3),
         st.builds(R.Nearest, st.lists(vec3, min_size=1, max_size=3).map(tuple)),
         st.builds(R.Patch, vec3, positive))
     if depth == 0:

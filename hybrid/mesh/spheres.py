@@ -66,8 +66,26 @@ def _place_conforming(pos: np.ndarray, ctr: np.ndarray, radius: float, conform_z
     return pos
 
 
+def _segment_azimuths(segments: int, azim: np.ndarray, who: str) -> np.ndarray:
+    """`segments` azimuths (rad) around a circle: evenly spaced from +x, or, with
+    conforming azimuths, one at each and the others evenly spaced in each arc between
+    them (each arc gets its share of the segments by its angle, at least one)."""
+    if not azim.size:
+        return 2.0 * np.pi * np.arange(segments) / segments
+    if segments < azim.size:
+        raise MeshError(f"{who}: {azim.size} azimuths to conform to need segments >= {azim.size}; "
+                        f"received {segments}")
+    arc = np.diff(np.concatenate([azim, [azim[0] + 2.0 * np.pi]]))
+    n = np.maximum(1, np.round(arc / (2.0 * np.pi) * segments).astype(int))
+    while n.sum() > segments:  # one fewer where the spacing is finest
+        n[int(np.argmax(np.where(n > 1, n / arc, -1.0)))] -= 1
+    while n.sum() < segments:  # one more where it is coarsest
+        n[int(np.argmax(arc / n))] += 1
+    return np.concatenate([azim[i] + arc[i] * np.arange(n[i]) / n[i] for i in range(azim.size)])
+
+
 def uv_sphere(radius: float = 1.0, segments: int = 13, rings: int = 7,
-              center=(0.0, 0.0, 0.0), conform_z=()) -> Mesh:
+              center=(0.0, 0.0, 0.0), conform_z=(), conform_azimuth_deg=()) -> Mesh:
     """The paper's sphere: two poles and rings - 1 latitude circles of `segments` points.
 
     radius (m), center (3,) m. Vertex 0 is the north pole (+z), the last the
@@ -77,7 +95,8 @@ def uv_sphere(radius: float = 1.0, segments: int = 13, rings: int = 7,
     vertices and 2 segments (rings - 1) faces. Faces point outward.
     `conform_z` (m from the centre): latitudes that are circles of the mesh (a
     region bounded there is then bounded by edges), the circles evenly spaced
-    between them (`_polar_angles`).
+    between them (`_polar_angles`). `conform_azimuth_deg` (degrees from +x toward +y):
+    azimuths that are meridians of the mesh, the segments evenly spaced between them.
     """
     if int(segments) != segments or segments < 3:
         raise MeshError(f"uv_sphere: segments must be an integer >= 3; received {segments!r}")
@@ -92,7 +111,7 @@ def uv_sphere(radius: float = 1.0, segments: int = 13, rings: int = 7,
                         f"points; expected at most {MAX_POINTS}")
 
     theta = _polar_angles(rings, conform_z, "uv_sphere")  # polar angle of each circle
-    phi = 2.0 * np.pi * np.arange(segments) / segments
+    phi = _segment_azimuths(segments, _conform_azimuths(conform_azimuth_deg, "uv_sphere"), "uv_sphere")
     st, ct = np.sin(theta)[:, None], np.cos(theta)[:, None]
     circle = np.stack(
         [st * np.cos(phi), st * np.sin(phi), np.broadcast_to(ct, (rings - 1, segments))],
@@ -208,14 +227,46 @@ def irregular_sphere(npoint: int, radius: float = 1.0, seed: int = 0, center=(0.
     return _hull_mesh(p, radius, ctr, f"irregular_sphere_{npoint}")
 
 
-def ring_sphere(npoint: int, radius: float = 1.0, center=(0.0, 0.0, 0.0), conform_z=()) -> Mesh:
+def _conform_azimuths(conform_azimuth_deg, who: str) -> np.ndarray:
+    """The azimuths (rad in [0, 2 pi), increasing, distinct) of conform_azimuth_deg."""
+    a = np.asarray(conform_azimuth_deg, float).reshape(-1)
+    if a.size and not (np.all(np.isfinite(a)) and np.all(np.abs(a) <= 360.0)):
+        raise MeshError(f"{who}: conform_azimuth_deg must be angles in [-360, 360] degrees; "
+                        f"received {list(conform_azimuth_deg)!r}")
+    a = np.unique(np.round(np.mod(np.deg2rad(a), 2.0 * np.pi), 12) % (2.0 * np.pi))
+    if a.size == 1:
+        raise MeshError(f"{who}: conform_azimuth_deg needs at least two distinct azimuths (the borders of a "
+                        f"wedge); received {list(conform_azimuth_deg)!r}")
+    return a
+
+
+def _circle_azimuths(m: int, azim: np.ndarray, per_rad: float):
+    """The azimuths (rad) of a circle of about m points with a point at each of `azim`
+    and the others evenly spaced in each arc between them (per_rad points a radian of
+    azimuth, the arc's share); None where there are no azimuths or an arc is shorter
+    than half a spacing (a circle too small to hold them: it keeps its own points)."""
+    if not azim.size:
+        return None
+    arc = np.diff(np.concatenate([azim, [azim[0] + 2.0 * np.pi]]))
+    if arc.min() * per_rad < 0.5:
+        return None
+    n = np.maximum(1, np.round(arc * per_rad).astype(int))
+    return np.concatenate([azim[i] + arc[i] * np.arange(n[i]) / n[i] for i in range(azim.size)])
+
+
+def ring_sphere(npoint: int, radius: float = 1.0, center=(0.0, 0.0, 0.0), conform_z=(),
+                conform_azimuth_deg=()) -> Mesh:
     """A pole-free sphere of about `npoint` evenly spaced points on circles of latitude:
     each circle has as many points as its length holds at the spacing h of an even
     triangle lattice of npoint points (h^2 sqrt(3) / 2 per point), none at the poles
     (the first circle is h/2 from each), and the convex hull's triangles. `conform_z`
     (m from the centre): latitudes that are circles (their points at exactly those
     heights), so that regions bounded there are bounded by edges; the circles are
-    evenly spaced between them. radius (m), center (3,) m."""
+    evenly spaced between them. `conform_azimuth_deg` (degrees from +x toward +y about
+    the z axis through the centre): azimuths that are columns of points on every circle
+    large enough to hold them (an arc between two at least half a spacing), so that
+    wedges bounded there are bounded by edges; a symmetric set about 0 degrees makes
+    those circles mirror-symmetric about the x-z plane. radius (m), center (3,) m."""
     ctr = _check_sphere_args(radius, center, "ring_sphere")
     npoint = _check_npoint(npoint, "ring_sphere")
     conform_m = np.asarray(conform_z, float).reshape(-1)
@@ -240,11 +291,14 @@ def ring_sphere(npoint: int, radius: float = 1.0, center=(0.0, 0.0, 0.0), confor
             n = max(1, int(round((b - a) / h)))
             theta += list(a + (b - a) * np.arange(1, n) / n)
     theta = np.sort(np.asarray(theta))
+    azim = _conform_azimuths(conform_azimuth_deg, "ring_sphere")
     pts = []
     for j, t in enumerate(theta):
         m = max(3, int(round(2.0 * np.pi * np.sin(t) / h)))
-        phi = 2.0 * np.pi * (np.arange(m) + (j * 0.6180339887498949) % 1.0) / m  # circles turned apart
-        pts.append(np.stack([np.sin(t) * np.cos(phi), np.sin(t) * np.sin(phi), np.full(m, np.cos(t))], axis=1))
+        phi = _circle_azimuths(m, azim, np.sin(t) / h)
+        if phi is None:
+            phi = 2.0 * np.pi * (np.arange(m) + (j * 0.6180339887498949) % 1.0) / m  # circles turned apart
+        pts.append(np.stack([np.sin(t) * np.cos(phi), np.sin(t) * np.sin(phi), np.full(phi.size, np.cos(t))], axis=1))
     p = np.concatenate(pts)
     mesh = _hull_mesh(p, radius, ctr, f"ring_sphere_{p.shape[0]}")
     if not conform_m.size:
