@@ -58,12 +58,13 @@ from .terms.fibres import add_muscle_fibres
 from .terms.passive_fibres import add_passive_fibres
 from .terms.membrane import add_membrane_serial
 from .terms.membrane import membrane_energy
-from .terms.tangents import (NCACHE, fibre_energy, fibre_tangent_diag, fibre_tangent_product, kelvin_voigt_dissipation,
-                             membrane_tangent_cache, membrane_tangent_diag, membrane_tangent_product,
-                             passive_fibres_energy_kernel, passive_fibres_tangent_diag, passive_fibres_tangent_product)
+from .terms.tangents import (NCACHE, NFIB_CACHE, NPF_CACHE, fibre_cached_product, fibre_energy, fibre_tangent_cache,
+                             fibre_tangent_diag, kelvin_voigt_dissipation, membrane_tangent_cache,
+                             membrane_tangent_diag, membrane_tangent_product, passive_fibres_cached_product,
+                             passive_fibres_energy_kernel, passive_fibres_tangent_cache, passive_fibres_tangent_diag)
 
 __all__ = ["IMPLICIT_ID", "IMPLICIT_NOT_CONVERGED", "ImplicitWork", "Info", "implicit_work", "implicit_step",
-           "implicit_pressure", "implicit_forces", "newton_product"]
+           "implicit_pressure", "implicit_forces", "newton_caches", "newton_product"]
 
 #: `MembraneArrays.integrator` of implicit Euler
 IMPLICIT_ID = 2
@@ -103,8 +104,9 @@ class ImplicitWork(NamedTuple):
     (warm start); x_try, v_try, f, f_expl, res, x_kv (the positions the line search's
     viscous dissipation is taken at) and the conjugate gradients' cg_* (nvert, 3):
     scratch; grad (nvert, 3) m^2: the volume gradient at the step's start; blocks
-    (nvert, 9): the inverse diagonal blocks; face (nface_m, NCACHE): the membrane's
-    tangent cache; info (len(Info),): the `Info` slots."""
+    (nvert, 9): the inverse diagonal blocks; face (nface_m, NCACHE), fib (nfib, NFIB_CACHE),
+    pf (npf, NPF_CACHE): the membrane's, muscle fibres' and passive fibres' tangent caches
+    (`newton_caches`); info (len(Info),): the `Info` slots."""
     dv: np.ndarray
     x_try: np.ndarray
     v_try: np.ndarray
@@ -120,6 +122,8 @@ class ImplicitWork(NamedTuple):
     cg_q: np.ndarray
     blocks: np.ndarray
     face: np.ndarray
+    fib: np.ndarray
+    pf: np.ndarray
     info: np.ndarray
 
 
@@ -130,7 +134,8 @@ def implicit_work(arrays) -> ImplicitWork | None:
     n = arrays.vert_rest.shape[0]
     vec = [np.zeros((n, 3)) for _ in range(13)]
     return ImplicitWork(*vec, blocks=np.zeros((n, 9)), face=np.zeros((arrays.mem_vert.shape[0], NCACHE)),
-                        info=np.zeros(len(Info)))
+                        fib=np.zeros((arrays.fib_vert.shape[0], NFIB_CACHE)),
+                        pf=np.zeros((arrays.pf_vert.shape[0], NPF_CACHE)), info=np.zeros(len(Info)))
 
 
 @kernel
@@ -157,9 +162,22 @@ def implicit_forces(m, sched_val, x, v, out):
 
 
 @kernel
-def newton_product(m, sched_val, x, face, h, project, u, y):
-    """y = (M + h^2 K + h C) u on every point (no rows zeroed): the Newton matrix at x,
-    `face` its membrane tangent cache (`membrane_tangent_cache` at x); the Hessian
+def newton_caches(m, sched_val, x, face, fib, pf):
+    """The terms' tangent caches at x, what `newton_product` reads: once per Newton
+    iteration, not once per conjugate-gradient iteration."""
+    on = m.term_on
+    if on[T_MEMBRANE]:
+        membrane_tangent_cache(m.mem_vert, m.mem_par, x, face)
+    if on[T_FIBRES]:
+        fibre_tangent_cache(m.fib_vert, m.fib_par, m.fib_sched, sched_val, x, fib)
+    if on[T_PASSIVE]:
+        passive_fibres_tangent_cache(m.pf_vert, m.pf_par, x, pf)
+
+
+@kernel
+def newton_product(m, face, fib, pf, h, project, u, y):
+    """y = (M + h^2 K + h C) u on every point (no rows zeroed): the Newton matrix at the
+    positions the caches face, fib, pf were taken at (`newton_caches`); the Hessian
     projected per element when `project`."""
     on = m.term_on
     for i in range(y.shape[0]):
@@ -169,14 +187,14 @@ def newton_product(m, sched_val, x, face, h, project, u, y):
     if on[T_MEMBRANE]:
         membrane_tangent_product(m.mem_vert, m.mem_par, face, project, h * h, h, u, y)
     if on[T_FIBRES]:
-        fibre_tangent_product(m.fib_vert, m.fib_par, m.fib_sched, sched_val, x, project, h * h, u, y)
+        fibre_cached_product(m.fib_vert, fib, project, h * h, u, y)
     if on[T_PASSIVE]:
-        passive_fibres_tangent_product(m.pf_vert, m.pf_par, x, project, h * h, u, y)
+        passive_fibres_cached_product(m.pf_vert, pf, project, h * h, u, y)
 
 
 @kernel
-def _masked_product(m, sched_val, x, face, h, project, u, y):
-    newton_product(m, sched_val, x, face, h, project, u, y)
+def _masked_product(m, w, h, project, u, y):
+    newton_product(m, w.face, w.fib, w.pf, h, project, u, y)
     for i in range(y.shape[0]):
         if not m.vert_free[i]:
             y[i, 0] = y[i, 1] = y[i, 2] = 0.0
@@ -242,7 +260,7 @@ def _dot(a, b):
 
 
 @kernel
-def _solve(m, sched_val, w, h, project, target, cg_max):
+def _solve(m, w, h, project, target, cg_max):
     """w.cg_x = the preconditioned conjugate gradients' solution of (Newton matrix) x = w.cg_r
     (rows of fixed points zero), to |residual| <= target or cg_max iterations. Returns the iterations."""
     x, r, z, p, q = w.cg_x, w.cg_r, w.cg_z, w.cg_p, w.cg_q
@@ -255,7 +273,7 @@ def _solve(m, sched_val, w, h, project, target, cg_max):
             p[i, a] = z[i, a]
     rz = _dot(r, z)
     for k in range(cg_max):
-        _masked_product(m, sched_val, w.x_try, w.face, h, project, p, q)
+        _masked_product(m, w, h, project, p, q)
         pq = _dot(p, q)
         if not pq > 0.0:  # negative curvature (or p = 0): stop with what we have (truncated Newton)
             return -1 if k == 0 else k
@@ -398,7 +416,7 @@ def implicit_step(m, s, step, imp):
             for a in range(3):
                 w.x_kv[i, a] = w.x_try[i, a]
         phi = _merit(m, s.sched_val, h, w)
-        membrane_tangent_cache(m.mem_vert, m.mem_par, w.x_try, w.face)
+        newton_caches(m, s.sched_val, w.x_try, w.face, w.fib, w.pf)
         _preconditioner(m, s.sched_val, w.x_try, w.face, h, w.blocks)
         # the exact Hessian, its negative curvature ending the conjugate gradients early
         # (truncated Newton); when met at once, the Hessian projected per element instead
@@ -407,12 +425,12 @@ def implicit_step(m, s, step, imp):
                 w.cg_r[i, a] = h * w.res[i, a]
         # solve just accurately enough: FORCING of what convergence asks, at most FORCING of the residual
         eta = min(FORCING, FORCING * tol * scale / rn)
-        k = _solve(m, s.sched_val, w, h, False, eta * h * rn, cg_max)
+        k = _solve(m, w, h, False, eta * h * rn, cg_max)
         if k < 0:
             for i in range(n):
                 for a in range(3):
                     w.cg_r[i, a] = h * w.res[i, a]
-            k = 1 + _solve(m, s.sched_val, w, h, True, eta * h * rn, cg_max)
+            k = 1 + _solve(m, w, h, True, eta * h * rn, cg_max)
             info[I_PROJECTED_TOTAL] += 1
         cg_total += k
         it += 1

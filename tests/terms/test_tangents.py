@@ -6,12 +6,13 @@ import numpy as np
 import pytest
 
 from hybrid import Damping, HalfSpace, Masses, Membrane, MuscleFibres, Scene
-from hybrid.implicit import implicit_forces, newton_product
+from hybrid.implicit import implicit_forces, newton_caches, newton_product
 from hybrid.mesh import irregular_sphere
 from hybrid.model import compile_scene
 from hybrid.terms.fibres import MIN_STRETCH, add_muscle_fibres
 from hybrid.terms.membrane import add_membrane_serial
-from hybrid.terms.tangents import (NCACHE, fibre_energy, fibre_tangent_diag, fibre_tangent_product,
+from hybrid.terms.tangents import (NCACHE, NFIB_CACHE, NPF_CACHE, fibre_cached_product, fibre_energy,
+                                   fibre_tangent_cache, fibre_tangent_diag, fibre_tangent_product,
                                    membrane_tangent_cache, membrane_tangent_diag, membrane_tangent_product)
 
 R = 0.12
@@ -191,11 +192,13 @@ def test_the_newton_matrix_against_finite_differences_of_the_implicit_forces(mod
     zero = np.zeros_like(x)
     v = 0.05 * np.random.default_rng(7).standard_normal(x.shape)
     face = np.zeros((a.mem_vert.shape[0], NCACHE))
-    membrane_tangent_cache(a.mem_vert, a.mem_par, x, face)
+    fib = np.zeros((a.fib_vert.shape[0], NFIB_CACHE))
+    pf = np.zeros((a.pf_vert.shape[0], NPF_CACHE))
+    newton_caches(a, sv, x, face, fib, pf)
 
     def product(u):
         y = np.zeros_like(u)
-        newton_product(a, sv, x, face, h, False, u, y)
+        newton_product(a, face, fib, pf, h, False, u, y)
         return y
 
     def forces(y, w):
@@ -291,3 +294,50 @@ def test_the_passive_fibre_hessian_is_minus_the_force_jacobian_and_its_blocks_an
     assert np.abs(blocks - want).max() <= 1e-12 * np.abs(want).max()
     energy = passive_fibres_energy_kernel(a.pf_vert, a.pf_par, x)
     assert energy > 0 and energy == pytest.approx(passive_fibres_energy(a.pf_vert, a.pf_par, x), rel=1e-12)
+
+
+@pytest.mark.parametrize("project", [False, True], ids=["exact", "projected"])
+def test_the_cached_fibre_products_are_the_direct_ones(model, project):
+    """The conjugate gradients' products from the per-triangle caches against the
+    products computed from the positions: muscle fibres with and without the force-length
+    relation (some triangles below MIN_STRETCH, a schedule row at zero tension), passive
+    fibres stretched and slack; to 1e-12 of the largest entry."""
+    from hybrid import PassiveFibres
+    from hybrid.terms.tangents import (passive_fibres_cached_product, passive_fibres_tangent_cache,
+                                       passive_fibres_tangent_product)
+    a = model.arrays
+    x = deformed(model, 12)
+    for f in range(0, a.fib_vert.shape[0], 7):  # a few triangles shrunk below MIN_STRETCH
+        tri = a.fib_vert[f]
+        x[tri] = x[tri].mean(axis=0) + 0.02 * (x[tri] - x[tri].mean(axis=0))
+    rng = np.random.default_rng(13)
+    u = rng.standard_normal(x.shape)
+    sv = sched(model)
+    kx = 3e-5
+    for width, tension in ((0.0, TENSION), (0.5, TENSION), (0.5, 0.0)):
+        par = a.fib_par.copy()
+        par[:, 4] = width
+        sv[:, 0] = tension
+        cache = np.zeros((a.fib_vert.shape[0], NFIB_CACHE))
+        fibre_tangent_cache(a.fib_vert, par, a.fib_sched, sv, x, cache)
+        want, got = np.zeros_like(u), np.zeros_like(u)
+        fibre_tangent_product(a.fib_vert, par, a.fib_sched, sv, x, project, kx, u, want)
+        fibre_cached_product(a.fib_vert, cache, project, kx, u, got)
+        if tension == 0.0:
+            assert np.abs(want).max() == 0.0 and np.abs(got).max() == 0.0
+        else:
+            assert np.abs(want).max() > 0.0
+            assert np.abs(got - want).max() <= 1e-12 * np.abs(want).max()
+    mesh = irregular_sphere(40, R, seed=2)
+    p = compile_scene(Scene(mesh=mesh, masses=Masses(total_kg=1.0), integrator="implicit_euler", forces=(
+        Membrane(800.0), PassiveFibres(modulus_n_per_m=600.0, around_axis=(0.0, 0.0, 1.0))))).arrays
+    x = deformed(model, 14)
+    cache = np.zeros((p.pf_vert.shape[0], NPF_CACHE))
+    passive_fibres_tangent_cache(p.pf_vert, p.pf_par, x, cache)
+    slack = int((cache[:, 9] == 0.0).sum())
+    assert 0 < slack < p.pf_vert.shape[0]
+    want, got = np.zeros_like(u), np.zeros_like(u)
+    passive_fibres_tangent_product(p.pf_vert, p.pf_par, x, project, kx, u, want)
+    passive_fibres_cached_product(p.pf_vert, cache, project, kx, u, got)
+    assert np.abs(want).max() > 0.0
+    assert np.abs(got - want).max() <= 1e-12 * np.abs(want).max()
