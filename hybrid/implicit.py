@@ -64,7 +64,7 @@ from .terms.tangents import (NCACHE, NFIB_CACHE, NPF_CACHE, fibre_cached_product
                              passive_fibres_energy_kernel, passive_fibres_tangent_cache, passive_fibres_tangent_diag)
 
 __all__ = ["IMPLICIT_ID", "IMPLICIT_NOT_CONVERGED", "ImplicitWork", "Info", "implicit_work", "implicit_step",
-           "implicit_pressure", "implicit_forces", "newton_caches", "newton_product"]
+           "implicit_pressure", "implicit_forces", "NewtonRows", "newton_rows", "newton_caches", "newton_product"]
 
 #: `MembraneArrays.integrator` of implicit Euler
 IMPLICIT_ID = 2
@@ -99,14 +99,40 @@ class Info(IntEnum):
  I_PROJECTED_TOTAL) = (int(k) for k in Info)
 
 
+class NewtonRows(NamedTuple):
+    """The membrane's, muscle fibres' and passive fibres' rows (`MembraneArrays`) of the
+    triangles with a free corner: the others add only to the Newton matrix's fixed rows,
+    which the solve zeroes, so its products and blocks skip them."""
+    mem_vert: np.ndarray
+    mem_par: np.ndarray
+    fib_vert: np.ndarray
+    fib_par: np.ndarray
+    fib_sched: np.ndarray
+    pf_vert: np.ndarray
+    pf_par: np.ndarray
+
+
+def newton_rows(arrays) -> NewtonRows:
+    """The `NewtonRows` of a model's arrays (in their order)."""
+    free = np.asarray(arrays.vert_free) != 0
+    mem = free[arrays.mem_vert].any(axis=1) if arrays.mem_vert.shape[0] else np.zeros(0, bool)
+    fib = free[arrays.fib_vert].any(axis=1) if arrays.fib_vert.shape[0] else np.zeros(0, bool)
+    pf = free[arrays.pf_vert].any(axis=1) if arrays.pf_vert.shape[0] else np.zeros(0, bool)
+    return NewtonRows(np.ascontiguousarray(arrays.mem_vert[mem]), np.ascontiguousarray(arrays.mem_par[mem]),
+                      np.ascontiguousarray(arrays.fib_vert[fib]), np.ascontiguousarray(arrays.fib_par[fib]),
+                      np.ascontiguousarray(arrays.fib_sched[fib]), np.ascontiguousarray(arrays.pf_vert[pf]),
+                      np.ascontiguousarray(arrays.pf_par[pf]))
+
+
 class ImplicitWork(NamedTuple):
     """The implicit step's arrays: dv (nvert, 3) m/s, the last step's velocity change
     (warm start); x_try, v_try, f, f_expl, res, x_kv (the positions the line search's
     viscous dissipation is taken at) and the conjugate gradients' cg_* (nvert, 3):
     scratch; grad (nvert, 3) m^2: the volume gradient at the step's start; blocks
-    (nvert, 9): the inverse diagonal blocks; face (nface_m, NCACHE), fib (nfib, NFIB_CACHE),
-    pf (npf, NPF_CACHE): the membrane's, muscle fibres' and passive fibres' tangent caches
-    (`newton_caches`); info (len(Info),): the `Info` slots."""
+    (nvert, 9): the inverse diagonal blocks; rows: the triangles the Newton matrix reads
+    (`newton_rows`); face (NCACHE), fib (NFIB_CACHE), pf (NPF_CACHE) per row of rows: the
+    membrane's, muscle fibres' and passive fibres' tangent caches (`newton_caches`);
+    info (len(Info),): the `Info` slots."""
     dv: np.ndarray
     x_try: np.ndarray
     v_try: np.ndarray
@@ -121,6 +147,7 @@ class ImplicitWork(NamedTuple):
     cg_p: np.ndarray
     cg_q: np.ndarray
     blocks: np.ndarray
+    rows: NewtonRows
     face: np.ndarray
     fib: np.ndarray
     pf: np.ndarray
@@ -133,9 +160,10 @@ def implicit_work(arrays) -> ImplicitWork | None:
         return None
     n = arrays.vert_rest.shape[0]
     vec = [np.zeros((n, 3)) for _ in range(13)]
-    return ImplicitWork(*vec, blocks=np.zeros((n, 9)), face=np.zeros((arrays.mem_vert.shape[0], NCACHE)),
-                        fib=np.zeros((arrays.fib_vert.shape[0], NFIB_CACHE)),
-                        pf=np.zeros((arrays.pf_vert.shape[0], NPF_CACHE)), info=np.zeros(len(Info)))
+    rows = newton_rows(arrays)
+    return ImplicitWork(*vec, blocks=np.zeros((n, 9)), rows=rows, face=np.zeros((rows.mem_vert.shape[0], NCACHE)),
+                        fib=np.zeros((rows.fib_vert.shape[0], NFIB_CACHE)),
+                        pf=np.zeros((rows.pf_vert.shape[0], NPF_CACHE)), info=np.zeros(len(Info)))
 
 
 @kernel
@@ -162,46 +190,47 @@ def implicit_forces(m, sched_val, x, v, out):
 
 
 @kernel
-def newton_caches(m, sched_val, x, face, fib, pf):
-    """The terms' tangent caches at x, what `newton_product` reads: once per Newton
-    iteration, not once per conjugate-gradient iteration."""
+def newton_caches(m, rows, sched_val, x, face, fib, pf):
+    """The tangent caches of the triangles `rows` at x, what `newton_product` reads: once
+    per Newton iteration, not once per conjugate-gradient iteration."""
     on = m.term_on
     if on[T_MEMBRANE]:
-        membrane_tangent_cache(m.mem_vert, m.mem_par, x, face)
+        membrane_tangent_cache(rows.mem_vert, rows.mem_par, x, face)
     if on[T_FIBRES]:
-        fibre_tangent_cache(m.fib_vert, m.fib_par, m.fib_sched, sched_val, x, fib)
+        fibre_tangent_cache(rows.fib_vert, rows.fib_par, rows.fib_sched, sched_val, x, fib)
     if on[T_PASSIVE]:
-        passive_fibres_tangent_cache(m.pf_vert, m.pf_par, x, pf)
+        passive_fibres_tangent_cache(rows.pf_vert, rows.pf_par, x, pf)
 
 
 @kernel
-def newton_product(m, face, fib, pf, h, project, u, y):
-    """y = (M + h^2 K + h C) u on every point (no rows zeroed): the Newton matrix at the
-    positions the caches face, fib, pf were taken at (`newton_caches`); the Hessian
-    projected per element when `project`."""
+def newton_product(m, rows, face, fib, pf, h, project, u, y):
+    """y = (M + h^2 K + h C) u on every point (no rows zeroed) with the triangles `rows`
+    (all of the model's: the Newton matrix; `newton_rows`: its free points' rows): the
+    matrix at the positions the caches face, fib, pf were taken at (`newton_caches`);
+    the Hessian projected per element when `project`."""
     on = m.term_on
     for i in range(y.shape[0]):
         c = m.vert_mass[i] + (h * m.damp_coef[i] if on[T_DAMPING] else 0.0)
         for a in range(3):
             y[i, a] = c * u[i, a]
     if on[T_MEMBRANE]:
-        membrane_tangent_product(m.mem_vert, m.mem_par, face, project, h * h, h, u, y)
+        membrane_tangent_product(rows.mem_vert, rows.mem_par, face, project, h * h, h, u, y)
     if on[T_FIBRES]:
-        fibre_cached_product(m.fib_vert, fib, project, h * h, u, y)
+        fibre_cached_product(rows.fib_vert, fib, project, h * h, u, y)
     if on[T_PASSIVE]:
-        passive_fibres_cached_product(m.pf_vert, pf, project, h * h, u, y)
+        passive_fibres_cached_product(rows.pf_vert, pf, project, h * h, u, y)
 
 
 @kernel
 def _masked_product(m, w, h, project, u, y):
-    newton_product(m, w.face, w.fib, w.pf, h, project, u, y)
+    newton_product(m, w.rows, w.face, w.fib, w.pf, h, project, u, y)
     for i in range(y.shape[0]):
         if not m.vert_free[i]:
             y[i, 0] = y[i, 1] = y[i, 2] = 0.0
 
 
 @kernel
-def _preconditioner(m, sched_val, x, face, h, blocks):
+def _preconditioner(m, rows, sched_val, x, face, h, blocks):
     """blocks = the inverse 3 x 3 diagonal blocks of the Newton matrix (identity on fixed points)."""
     on = m.term_on
     n = blocks.shape[0]
@@ -210,11 +239,11 @@ def _preconditioner(m, sched_val, x, face, h, blocks):
         for r in range(9):
             blocks[i, r] = c if r % 4 == 0 else 0.0
     if on[T_MEMBRANE]:
-        membrane_tangent_diag(m.mem_vert, m.mem_par, face, h * h, h, blocks)
+        membrane_tangent_diag(rows.mem_vert, rows.mem_par, face, h * h, h, blocks)
     if on[T_FIBRES]:
-        fibre_tangent_diag(m.fib_vert, m.fib_par, m.fib_sched, sched_val, x, h * h, blocks)
+        fibre_tangent_diag(rows.fib_vert, rows.fib_par, rows.fib_sched, sched_val, x, h * h, blocks)
     if on[T_PASSIVE]:
-        passive_fibres_tangent_diag(m.pf_vert, m.pf_par, x, h * h, blocks)
+        passive_fibres_tangent_diag(rows.pf_vert, rows.pf_par, x, h * h, blocks)
     for i in range(n):
         b = blocks[i]
         if not m.vert_free[i]:
@@ -416,8 +445,8 @@ def implicit_step(m, s, step, imp):
             for a in range(3):
                 w.x_kv[i, a] = w.x_try[i, a]
         phi = _merit(m, s.sched_val, h, w)
-        newton_caches(m, s.sched_val, w.x_try, w.face, w.fib, w.pf)
-        _preconditioner(m, s.sched_val, w.x_try, w.face, h, w.blocks)
+        newton_caches(m, w.rows, s.sched_val, w.x_try, w.face, w.fib, w.pf)
+        _preconditioner(m, w.rows, s.sched_val, w.x_try, w.face, h, w.blocks)
         # the exact Hessian, its negative curvature ending the conjugate gradients early
         # (truncated Newton); when met at once, the Hessian projected per element instead
         for i in range(n):

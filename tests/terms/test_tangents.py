@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from hybrid import Damping, HalfSpace, Masses, Membrane, MuscleFibres, Scene
-from hybrid.implicit import implicit_forces, newton_caches, newton_product
+from hybrid.implicit import implicit_forces, newton_caches, newton_product, newton_rows
 from hybrid.mesh import irregular_sphere
 from hybrid.model import compile_scene
 from hybrid.terms.fibres import MIN_STRETCH, add_muscle_fibres
@@ -194,11 +194,11 @@ def test_the_newton_matrix_against_finite_differences_of_the_implicit_forces(mod
     face = np.zeros((a.mem_vert.shape[0], NCACHE))
     fib = np.zeros((a.fib_vert.shape[0], NFIB_CACHE))
     pf = np.zeros((a.pf_vert.shape[0], NPF_CACHE))
-    newton_caches(a, sv, x, face, fib, pf)
+    newton_caches(a, a, sv, x, face, fib, pf)
 
     def product(u):
         y = np.zeros_like(u)
-        newton_product(a, face, fib, pf, h, False, u, y)
+        newton_product(a, a, face, fib, pf, h, False, u, y)
         return y
 
     def forces(y, w):
@@ -341,3 +341,36 @@ def test_the_cached_fibre_products_are_the_direct_ones(model, project):
     passive_fibres_cached_product(p.pf_vert, cache, project, kx, u, got)
     assert np.abs(want).max() > 0.0
     assert np.abs(got - want).max() <= 1e-12 * np.abs(want).max()
+
+
+def test_the_newton_rows_skip_only_triangles_of_fixed_points():
+    """With the points below z = 0.04 m not integrated (as points linked to a rigid body: their
+    triangles kept), the Newton matrix's product from `newton_rows` (the triangles with a free
+    corner) is the product from every triangle on the free points."""
+    from hybrid import PassiveFibres
+    mesh = irregular_sphere(40, R, seed=2)
+    a = compile_scene(Scene(mesh=mesh, masses=Masses(total_kg=1.0), integrator="implicit_euler", forces=(
+        Membrane(800.0, damping_time_s=0.02), PassiveFibres(modulus_n_per_m=600.0, around_axis=(0.0, 0.0, 1.0)),
+        MuscleFibres(HalfSpace((0.0, 0.0, -0.03), (0.0, 0.0, 1.0)), TENSION, toward_m=(0.0, 0.0, R)),
+        Damping(drag_n_s_per_m3=30.0)))).arrays
+    a = a._replace(vert_free=(a.vert_rest[:, 2] >= 0.04).astype(np.uint8))
+    rows = newton_rows(a)
+    free = a.vert_free != 0
+    assert 0 < free.sum() < free.size
+    kept = [getattr(rows, name).shape[0] for name in ("mem_vert", "fib_vert", "pf_vert")]
+    every = [getattr(a, name).shape[0] for name in ("mem_vert", "fib_vert", "pf_vert")]
+    assert min(kept) > 0 and sum(kept) < sum(every), (kept, every)
+    x = a.vert_rest + 0.01 * np.random.default_rng(15).standard_normal(a.vert_rest.shape)
+    u = np.random.default_rng(16).standard_normal(x.shape)
+    sv = np.full((a.sched.kind.shape[0], 3), TENSION)
+    out = []
+    for r in (a, rows):
+        face = np.zeros((r.mem_vert.shape[0], NCACHE))
+        fib = np.zeros((r.fib_vert.shape[0], NFIB_CACHE))
+        pf = np.zeros((r.pf_vert.shape[0], NPF_CACHE))
+        newton_caches(a, r, sv, x, face, fib, pf)
+        y = np.zeros_like(u)
+        newton_product(a, r, face, fib, pf, 2e-3, False, u, y)
+        out.append(y[free])
+    assert np.abs(out[0]).max() > 0.0
+    assert np.abs(out[1] - out[0]).max() <= 1e-12 * np.abs(out[0]).max()
