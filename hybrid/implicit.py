@@ -19,9 +19,11 @@ direction, reading a pressure too small by 1 + h^2 k/m).
 Newton's method on dv, warm-started from the last step's dv. Each iteration
 solves (M + h^2 K + h C) ddv = h r, r = f_i + f_e - M dv / h (N) the residual,
 C the damping matrix and K the forces' exact Hessian (`hybrid.terms.tangents`),
-by conjugate gradients preconditioned with the inverse 3 x 3 diagonal blocks of
-the matrix with K made positive semi-definite per element, applied element by
-element (no matrix is assembled). Where the exact matrix has negative curvature
+by conjugate gradients, their products applied element by element from the
+terms' per-triangle tangent caches (computed once per Newton iteration), and
+preconditioned with a symmetric Gauss-Seidel sweep of the matrix with K made
+positive semi-definite per element (`hybrid.implicit_sgs`: its off-diagonal
+blocks assembled once per Newton iteration). Where the exact matrix has negative curvature
 (a membrane under compression: it has no bending stiffness) the conjugate
 gradients stop there (truncated Newton); met at the first iteration, the solve
 is repeated with the per-element projected Hessian (projected Newton). Solving
@@ -52,6 +54,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .implicit_sgs import SgsPattern, sgs_apply, sgs_assemble, sgs_pattern
 from .kernel import CHUNK_VERTS, kernel
 from .terms import Damping, Membrane, MuscleFibres, PassiveFibres, Volume
 from .terms.fibres import add_muscle_fibres
@@ -132,7 +135,7 @@ class ImplicitWork(NamedTuple):
     (nvert, 9): the inverse diagonal blocks; rows: the triangles the Newton matrix reads
     (`newton_rows`); face (NCACHE), fib (NFIB_CACHE), pf (NPF_CACHE) per row of rows: the
     membrane's, muscle fibres' and passive fibres' tangent caches (`newton_caches`);
-    info (len(Info),): the `Info` slots."""
+    sgs: the preconditioner's assembled blocks (`hybrid.implicit_sgs`); info (len(Info),): the `Info` slots."""
     dv: np.ndarray
     x_try: np.ndarray
     v_try: np.ndarray
@@ -151,6 +154,7 @@ class ImplicitWork(NamedTuple):
     face: np.ndarray
     fib: np.ndarray
     pf: np.ndarray
+    sgs: SgsPattern
     info: np.ndarray
 
 
@@ -163,7 +167,9 @@ def implicit_work(arrays) -> ImplicitWork | None:
     rows = newton_rows(arrays)
     return ImplicitWork(*vec, blocks=np.zeros((n, 9)), rows=rows, face=np.zeros((rows.mem_vert.shape[0], NCACHE)),
                         fib=np.zeros((rows.fib_vert.shape[0], NFIB_CACHE)),
-                        pf=np.zeros((rows.pf_vert.shape[0], NPF_CACHE)), info=np.zeros(len(Info)))
+                        pf=np.zeros((rows.pf_vert.shape[0], NPF_CACHE)),
+                        sgs=sgs_pattern(n, arrays.vert_free, rows.mem_vert, rows.fib_vert, rows.pf_vert),
+                        info=np.zeros(len(Info)))
 
 
 @kernel
@@ -271,16 +277,6 @@ def _preconditioner(m, rows, sched_val, x, face, h, blocks):
 
 
 @kernel
-def _apply_blocks(blocks, r, z):
-    for i in range(r.shape[0]):
-        b = blocks[i]
-        rx, ry, rz = r[i, 0], r[i, 1], r[i, 2]
-        z[i, 0] = b[0] * rx + b[1] * ry + b[2] * rz
-        z[i, 1] = b[3] * rx + b[4] * ry + b[5] * rz
-        z[i, 2] = b[6] * rx + b[7] * ry + b[8] * rz
-
-
-@kernel
 def _dot(a, b):
     s = 0.0
     for i in range(a.shape[0]):
@@ -296,7 +292,7 @@ def _solve(m, w, h, project, target, cg_max):
     for i in range(x.shape[0]):
         for a in range(3):
             x[i, a] = 0.0
-    _apply_blocks(w.blocks, r, z)
+    sgs_apply(w.sgs, w.blocks, r, z)
     for i in range(p.shape[0]):
         for a in range(3):
             p[i, a] = z[i, a]
@@ -313,7 +309,7 @@ def _solve(m, w, h, project, target, cg_max):
                 r[i, a] -= alpha * q[i, a]
         if math.sqrt(_dot(r, r)) <= target:
             return k + 1
-        _apply_blocks(w.blocks, r, z)
+        sgs_apply(w.sgs, w.blocks, r, z)
         rz_new = _dot(r, z)
         beta = rz_new / rz
         rz = rz_new
@@ -447,6 +443,7 @@ def implicit_step(m, s, step, imp):
         phi = _merit(m, s.sched_val, h, w)
         newton_caches(m, w.rows, s.sched_val, w.x_try, w.face, w.fib, w.pf)
         _preconditioner(m, w.rows, s.sched_val, w.x_try, w.face, h, w.blocks)
+        sgs_assemble(m, w.rows, w.face, w.fib, w.pf, h, w.sgs)
         # the exact Hessian, its negative curvature ending the conjugate gradients early
         # (truncated Newton); when met at once, the Hessian projected per element instead
         for i in range(n):
