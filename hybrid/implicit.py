@@ -54,7 +54,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .implicit_sgs import SgsPattern, sgs_apply, sgs_assemble, sgs_pattern
+from .implicit_matrix import NewtonMatrix, assemble, matrix_product, newton_matrix, sgs_sweep
 from .kernel import CHUNK_VERTS, kernel
 from .terms import Damping, Membrane, MuscleFibres, PassiveFibres, Volume
 from .terms.fibres import add_muscle_fibres
@@ -62,9 +62,8 @@ from .terms.passive_fibres import add_passive_fibres
 from .terms.membrane import add_membrane_serial
 from .terms.membrane import membrane_energy
 from .terms.tangents import (NCACHE, NFIB_CACHE, NPF_CACHE, fibre_cached_product, fibre_energy, fibre_tangent_cache,
-                             fibre_tangent_diag, kelvin_voigt_dissipation, membrane_tangent_cache,
-                             membrane_tangent_diag, membrane_tangent_product, passive_fibres_cached_product,
-                             passive_fibres_energy_kernel, passive_fibres_tangent_cache, passive_fibres_tangent_diag)
+                             kelvin_voigt_dissipation, membrane_tangent_cache, membrane_tangent_product,
+                             passive_fibres_cached_product, passive_fibres_energy_kernel, passive_fibres_tangent_cache)
 
 __all__ = ["IMPLICIT_ID", "IMPLICIT_NOT_CONVERGED", "ImplicitWork", "Info", "implicit_work", "implicit_step",
            "implicit_pressure", "implicit_forces", "NewtonRows", "newton_rows", "newton_caches", "newton_product"]
@@ -131,11 +130,11 @@ class ImplicitWork(NamedTuple):
     """The implicit step's arrays: dv (nvert, 3) m/s, the last step's velocity change
     (warm start); x_try, v_try, f, f_expl, res, x_kv (the positions the line search's
     viscous dissipation is taken at) and the conjugate gradients' cg_* (nvert, 3):
-    scratch; grad (nvert, 3) m^2: the volume gradient at the step's start; blocks
-    (nvert, 9): the inverse diagonal blocks; rows: the triangles the Newton matrix reads
-    (`newton_rows`); face (NCACHE), fib (NFIB_CACHE), pf (NPF_CACHE) per row of rows: the
-    membrane's, muscle fibres' and passive fibres' tangent caches (`newton_caches`);
-    sgs: the preconditioner's assembled blocks (`hybrid.implicit_sgs`); info (len(Info),): the `Info` slots."""
+    scratch; grad (nvert, 3) m^2: the volume gradient at the step's start; rows: the
+    triangles the Newton matrix reads (`newton_rows`); face (NCACHE), fib (NFIB_CACHE),
+    pf (NPF_CACHE) per row of rows: the membrane's, muscle fibres' and passive fibres'
+    tangent caches (`newton_caches`); mat: the assembled Newton matrix
+    (`hybrid.implicit_matrix`); info (len(Info),): the `Info` slots."""
     dv: np.ndarray
     x_try: np.ndarray
     v_try: np.ndarray
@@ -149,12 +148,11 @@ class ImplicitWork(NamedTuple):
     cg_z: np.ndarray
     cg_p: np.ndarray
     cg_q: np.ndarray
-    blocks: np.ndarray
     rows: NewtonRows
     face: np.ndarray
     fib: np.ndarray
     pf: np.ndarray
-    sgs: SgsPattern
+    mat: NewtonMatrix
     info: np.ndarray
 
 
@@ -165,10 +163,10 @@ def implicit_work(arrays) -> ImplicitWork | None:
     n = arrays.vert_rest.shape[0]
     vec = [np.zeros((n, 3)) for _ in range(13)]
     rows = newton_rows(arrays)
-    return ImplicitWork(*vec, blocks=np.zeros((n, 9)), rows=rows, face=np.zeros((rows.mem_vert.shape[0], NCACHE)),
+    return ImplicitWork(*vec, rows=rows, face=np.zeros((rows.mem_vert.shape[0], NCACHE)),
                         fib=np.zeros((rows.fib_vert.shape[0], NFIB_CACHE)),
                         pf=np.zeros((rows.pf_vert.shape[0], NPF_CACHE)),
-                        sgs=sgs_pattern(n, arrays.vert_free, rows.mem_vert, rows.fib_vert, rows.pf_vert),
+                        mat=newton_matrix(n, arrays.vert_free, rows.mem_vert, rows.fib_vert, rows.pf_vert),
                         info=np.zeros(len(Info)))
 
 
@@ -228,55 +226,6 @@ def newton_product(m, rows, face, fib, pf, h, project, u, y):
 
 
 @kernel
-def _masked_product(m, w, h, project, u, y):
-    newton_product(m, w.rows, w.face, w.fib, w.pf, h, project, u, y)
-    for i in range(y.shape[0]):
-        if not m.vert_free[i]:
-            y[i, 0] = y[i, 1] = y[i, 2] = 0.0
-
-
-@kernel
-def _preconditioner(m, rows, sched_val, x, face, h, blocks):
-    """blocks = the inverse 3 x 3 diagonal blocks of the Newton matrix (identity on fixed points)."""
-    on = m.term_on
-    n = blocks.shape[0]
-    for i in range(n):
-        c = m.vert_mass[i] + (h * m.damp_coef[i] if on[T_DAMPING] else 0.0)
-        for r in range(9):
-            blocks[i, r] = c if r % 4 == 0 else 0.0
-    if on[T_MEMBRANE]:
-        membrane_tangent_diag(rows.mem_vert, rows.mem_par, face, h * h, h, blocks)
-    if on[T_FIBRES]:
-        fibre_tangent_diag(rows.fib_vert, rows.fib_par, rows.fib_sched, sched_val, x, h * h, blocks)
-    if on[T_PASSIVE]:
-        passive_fibres_tangent_diag(rows.pf_vert, rows.pf_par, x, h * h, blocks)
-    for i in range(n):
-        b = blocks[i]
-        if not m.vert_free[i]:
-            for r in range(9):
-                b[r] = 1.0 if r % 4 == 0 else 0.0
-            continue
-        c00 = b[4] * b[8] - b[5] * b[7]
-        c01 = b[2] * b[7] - b[1] * b[8]
-        c02 = b[1] * b[5] - b[2] * b[4]
-        det = b[0] * c00 + b[3] * c01 + b[6] * c02
-        if not det > 0.0:  # cannot happen for a positive definite block; Jacobi then
-            b[0], b[4], b[8] = 1.0 / b[0], 1.0 / b[4], 1.0 / b[8]
-            b[1] = b[2] = b[3] = b[5] = b[6] = b[7] = 0.0
-            continue
-        inv = 1.0 / det
-        c11 = b[0] * b[8] - b[2] * b[6]
-        c12 = b[2] * b[3] - b[0] * b[5]
-        c22 = b[0] * b[4] - b[1] * b[3]
-        c10 = b[5] * b[6] - b[3] * b[8]
-        c20 = b[3] * b[7] - b[4] * b[6]
-        c21 = b[1] * b[6] - b[0] * b[7]
-        b[0], b[1], b[2] = c00 * inv, c01 * inv, c02 * inv
-        b[3], b[4], b[5] = c10 * inv, c11 * inv, c12 * inv
-        b[6], b[7], b[8] = c20 * inv, c21 * inv, c22 * inv
-
-
-@kernel
 def _dot(a, b):
     s = 0.0
     for i in range(a.shape[0]):
@@ -285,20 +234,20 @@ def _dot(a, b):
 
 
 @kernel
-def _solve(m, w, h, project, target, cg_max):
+def _solve(w, project, target, cg_max):
     """w.cg_x = the preconditioned conjugate gradients' solution of (Newton matrix) x = w.cg_r
     (rows of fixed points zero), to |residual| <= target or cg_max iterations. Returns the iterations."""
     x, r, z, p, q = w.cg_x, w.cg_r, w.cg_z, w.cg_p, w.cg_q
     for i in range(x.shape[0]):
         for a in range(3):
             x[i, a] = 0.0
-    sgs_apply(w.sgs, w.blocks, r, z)
+    sgs_sweep(w.mat, r, z)
     for i in range(p.shape[0]):
         for a in range(3):
             p[i, a] = z[i, a]
     rz = _dot(r, z)
     for k in range(cg_max):
-        _masked_product(m, w, h, project, p, q)
+        matrix_product(w.mat, project, p, q)
         pq = _dot(p, q)
         if not pq > 0.0:  # negative curvature (or p = 0): stop with what we have (truncated Newton)
             return -1 if k == 0 else k
@@ -309,7 +258,7 @@ def _solve(m, w, h, project, target, cg_max):
                 r[i, a] -= alpha * q[i, a]
         if math.sqrt(_dot(r, r)) <= target:
             return k + 1
-        sgs_apply(w.sgs, w.blocks, r, z)
+        sgs_sweep(w.mat, r, z)
         rz_new = _dot(r, z)
         beta = rz_new / rz
         rz = rz_new
@@ -442,8 +391,7 @@ def implicit_step(m, s, step, imp):
                 w.x_kv[i, a] = w.x_try[i, a]
         phi = _merit(m, s.sched_val, h, w)
         newton_caches(m, w.rows, s.sched_val, w.x_try, w.face, w.fib, w.pf)
-        _preconditioner(m, w.rows, s.sched_val, w.x_try, w.face, h, w.blocks)
-        sgs_assemble(m, w.rows, w.face, w.fib, w.pf, h, w.sgs)
+        assemble(m, w.rows, w.face, w.fib, w.pf, h, w.mat)
         # the exact Hessian, its negative curvature ending the conjugate gradients early
         # (truncated Newton); when met at once, the Hessian projected per element instead
         for i in range(n):
@@ -451,12 +399,12 @@ def implicit_step(m, s, step, imp):
                 w.cg_r[i, a] = h * w.res[i, a]
         # solve just accurately enough: FORCING of what convergence asks, at most FORCING of the residual
         eta = min(FORCING, FORCING * tol * scale / rn)
-        k = _solve(m, w, h, False, eta * h * rn, cg_max)
+        k = _solve(w, False, eta * h * rn, cg_max)
         if k < 0:
             for i in range(n):
                 for a in range(3):
                     w.cg_r[i, a] = h * w.res[i, a]
-            k = 1 + _solve(m, w, h, True, eta * h * rn, cg_max)
+            k = 1 + _solve(w, True, eta * h * rn, cg_max)
             info[I_PROJECTED_TOTAL] += 1
         cg_total += k
         it += 1

@@ -1,17 +1,18 @@
-"""The off-diagonal 3 x 3 blocks of the projected element Hessians (`hybrid.terms.tangents`),
-added into an assembled block-sparse matrix: what implicit Euler's symmetric Gauss-Seidel
-preconditioner sweeps with (`hybrid.implicit_sgs`).
+"""The 3 x 3 blocks of the element Hessians (`hybrid.terms.tangents`), exact and
+projected, added into assembled block-sparse matrices: what implicit Euler's
+conjugate gradients multiply by and precondition with (`hybrid.implicit_matrix`).
 
-Each element adds, for each ordered pair of its corners (m, n), m != n, its block K_mn
-to the matrix slot `slot[element, 3 m + n]` (-1: a corner is fixed, no slot). With the
-corner weights w_n of F = sum_n x_n w_n^T (`membrane_tangent_diag`), q_n = F w_n:
+Each element adds, for each ordered pair of its corners (m, n), its block K_mn to the
+matrix slot `slot[element, 3 m + n]` (-1: a corner is fixed, no slot). With the
+corner weights w_n of F = sum_n x_n w_n^T (w_0 = -(d00, d01 + d11), w_1 = (d00, d01),
+w_2 = (0, d11)) and q_n = F w_n:
 
-    membrane  A0 [kx (w_m^T S+ w_n) I + cm (lambda q_m q_n^T + mu q_n q_m^T + mu (w_m . w_n) F F^T)],
-    fibres    kx (r+ G_m G_n^T - c+_k I), G_n = grad_n lambda (or grad_n e), k the edge m-n,
+    membrane  A0 [kx (w_m^T S w_n) I + cm (lambda q_m q_n^T + mu q_n q_m^T + mu (w_m . w_n) F F^T)],
+    fibres    kx (r G_m G_n^T + L_mn I), G_n = grad_n lambda (or grad_n e),
 
-S+ the clamped stress, r+ and c+_k the projected rank-one and edge coefficients (the
-tangent caches' projected columns), cm = kx + kv tau. The diagonal blocks are
-`hybrid.terms.tangents`' *_tangent_diag.
+cm = kx + kv tau, S the stress (the clamped one projected), r the rank-one coefficient
+and L the edges' Laplacian with their coefficients (the tangent caches' exact or
+projected columns). K_nm = K_mn^T: each pair is computed once.
 """
 
 from __future__ import annotations
@@ -20,6 +21,34 @@ from ..kernel import kernel
 from .membrane import P_AREA, P_D00, P_D01, P_D11, P_LAM, P_MU, P_TAU
 
 __all__ = ["membrane_tangent_blocks", "fibre_tangent_blocks", "passive_fibres_tangent_blocks"]
+
+
+@kernel(inline="always")
+def _add_block(mat, s, t, v0, v1, v2, v3, v4, v5, v6, v7, v8, diag):
+    """mat[s] += v + diag I (v row-major) and mat[t] += its transpose (t < 0: no slot;
+    t == s: a diagonal block, added once)."""
+    b = mat[s]
+    b[0] += v0 + diag
+    b[1] += v1
+    b[2] += v2
+    b[3] += v3
+    b[4] += v4 + diag
+    b[5] += v5
+    b[6] += v6
+    b[7] += v7
+    b[8] += v8 + diag
+    if t < 0 or t == s:
+        return
+    b = mat[t]
+    b[0] += v0 + diag
+    b[1] += v3
+    b[2] += v6
+    b[3] += v1
+    b[4] += v4 + diag
+    b[5] += v7
+    b[6] += v2
+    b[7] += v5
+    b[8] += v8 + diag
 
 
 @kernel(inline="always")
@@ -32,86 +61,96 @@ def _corner_weights(d00, d01, d11, n):
 
 
 @kernel
-def membrane_tangent_blocks(mem_vert, mem_par, cache, kx, kv, slot, amat):
-    """amat[slot] += the membrane's off-diagonal blocks of kx K + kv C, K projected.
+def membrane_tangent_blocks(mem_vert, mem_par, cache, kx, kv, slot, amat, pmat):
+    """amat[slot] += the blocks of kx K + kv C, pmat[slot] += those with K projected.
     # Model: mem_vert, mem_par   # Data in: cache (membrane_tangent_cache), slot (nf, 9) int64
-    # Data out: amat (nblocks, 9) row-major blocks, added to
+    # Data out: amat, pmat (nblocks, 9) row-major blocks, added to
     """
     for k in range(mem_vert.shape[0]):
         p = mem_par[k]
-        q = cache[k]
+        c = cache[k]
         d00, d01, d11 = p[P_D00], p[P_D01], p[P_D11]
         lam, mu, area = p[P_LAM], p[P_MU], p[P_AREA]
         cm = (kx + kv * p[P_TAU]) * area
         kg = kx * area
+        cl, cu = cm * lam, cm * mu
+        f0x, f0y, f0z, f1x, f1y, f1z = c[0], c[1], c[2], c[3], c[4], c[5]
+        # F F^T
+        a00, a01, a02 = f0x * f0x + f1x * f1x, f0x * f0y + f1x * f1y, f0x * f0z + f1x * f1z
+        a11, a12, a22 = f0y * f0y + f1y * f1y, f0y * f0z + f1y * f1z, f0z * f0z + f1z * f1z
         for m in range(3):
             wm0, wm1 = _corner_weights(d00, d01, d11, m)
-            for n in range(3):
+            qmx, qmy, qmz = wm0 * f0x + wm1 * f1x, wm0 * f0y + wm1 * f1y, wm0 * f0z + wm1 * f1z
+            for n in range(m, 3):
                 s = slot[k, 3 * m + n]
-                if m == n or s < 0:
+                if s < 0:
                     continue
                 wn0, wn1 = _corner_weights(d00, d01, d11, n)
-                geo = kg * (wm0 * wn0 * q[9] + (wm0 * wn1 + wm1 * wn0) * q[10] + wm1 * wn1 * q[11])
-                ww = mu * (wm0 * wn0 + wm1 * wn1)
-                b = amat[s]
-                for r in range(3):
-                    qmr = wm0 * q[r] + wm1 * q[3 + r]
-                    qnr = wn0 * q[r] + wn1 * q[3 + r]
-                    for c in range(3):
-                        qmc = wm0 * q[c] + wm1 * q[3 + c]
-                        qnc = wn0 * q[c] + wn1 * q[3 + c]
-                        v = cm * (lam * qmr * qnc + mu * qnr * qmc + ww * (q[r] * q[c] + q[3 + r] * q[3 + c]))
-                        if r == c:
-                            v += geo
-                        b[3 * r + c] += v
+                qnx, qny, qnz = wn0 * f0x + wn1 * f1x, wn0 * f0y + wn1 * f1y, wn0 * f0z + wn1 * f1z
+                w00, w01, w11 = wm0 * wn0, wm0 * wn1 + wm1 * wn0, wm1 * wn1
+                geo_e = kg * (w00 * c[6] + w01 * c[7] + w11 * c[8])
+                geo_p = kg * (w00 * c[9] + w01 * c[10] + w11 * c[11])
+                ww = cu * (w00 + w11)
+                v0 = cl * qmx * qnx + cu * qnx * qmx + ww * a00
+                v1 = cl * qmx * qny + cu * qnx * qmy + ww * a01
+                v2 = cl * qmx * qnz + cu * qnx * qmz + ww * a02
+                v3 = cl * qmy * qnx + cu * qny * qmx + ww * a01
+                v4 = cl * qmy * qny + cu * qny * qmy + ww * a11
+                v5 = cl * qmy * qnz + cu * qny * qmz + ww * a12
+                v6 = cl * qmz * qnx + cu * qnz * qmx + ww * a02
+                v7 = cl * qmz * qny + cu * qnz * qmy + ww * a12
+                v8 = cl * qmz * qnz + cu * qnz * qmz + ww * a22
+                t = slot[k, 3 * n + m]
+                _add_block(amat, s, t, v0, v1, v2, v3, v4, v5, v6, v7, v8, geo_e)
+                _add_block(pmat, s, t, v0, v1, v2, v3, v4, v5, v6, v7, v8, geo_p)
 
 
 @kernel(inline="always")
-def _edge_gradient(c, n):
-    """Corner n's part of sum_k +-(edge vector k) from columns 0..8 (edge k: corner k to k + 1)."""
-    kp = (n + 2) % 3  # the edge that ends at n
-    return (c[3 * kp] - c[3 * n], c[3 * kp + 1] - c[3 * n + 1], c[3 * kp + 2] - c[3 * n + 2])
-
-
-@kernel(inline="always")
-def _edge_blocks(c, scale, rank1, e0, slot, amat):
+def _edge_blocks(c, slot, scale, rank_e, rank_p, e_col, p_col, amat, pmat):
+    """The blocks of scale (rank G_m G_n^T + L_mn I) of a fibre triangle from its cache row c:
+    columns 0..8 the edge vectors (edge k from corner k to k + 1), e_col / p_col the first
+    of the edges' exact / projected Laplacian coefficients."""
+    re, rp = scale * rank_e, scale * rank_p
     for m in range(3):
-        gmx, gmy, gmz = _edge_gradient(c, m)
-        for n in range(3):
+        mp = (m + 2) % 3  # the edge that ends at m
+        gmx, gmy, gmz = c[3 * mp] - c[3 * m], c[3 * mp + 1] - c[3 * m + 1], c[3 * mp + 2] - c[3 * m + 2]
+        for n in range(m, 3):
             s = slot[3 * m + n]
-            if m == n or s < 0:
+            if s < 0:
                 continue
-            gnx, gny, gnz = _edge_gradient(c, n)
-            k = m if n == (m + 1) % 3 else n  # the edge joining m and n
-            lap = -scale * c[e0 + k]
-            r1 = scale * rank1
-            b = amat[s]
-            b[0] += r1 * gmx * gnx + lap
-            b[1] += r1 * gmx * gny
-            b[2] += r1 * gmx * gnz
-            b[3] += r1 * gmy * gnx
-            b[4] += r1 * gmy * gny + lap
-            b[5] += r1 * gmy * gnz
-            b[6] += r1 * gmz * gnx
-            b[7] += r1 * gmz * gny
-            b[8] += r1 * gmz * gnz + lap
+            nq = (n + 2) % 3
+            gnx, gny, gnz = c[3 * nq] - c[3 * n], c[3 * nq + 1] - c[3 * n + 1], c[3 * nq + 2] - c[3 * n + 2]
+            if m == n:  # edges m and m - 1 meet at m
+                lap_e = scale * (c[e_col + m] + c[e_col + mp])
+                lap_p = scale * (c[p_col + m] + c[p_col + mp])
+            else:
+                k = m if n == (m + 1) % 3 else n  # the edge joining m and n
+                lap_e, lap_p = -scale * c[e_col + k], -scale * c[p_col + k]
+            t = slot[3 * n + m]
+            g0, g1, g2 = gmx * gnx, gmx * gny, gmx * gnz
+            g3, g4, g5 = gmy * gnx, gmy * gny, gmy * gnz
+            g6, g7, g8 = gmz * gnx, gmz * gny, gmz * gnz
+            _add_block(amat, s, t, re * g0, re * g1, re * g2, re * g3, re * g4, re * g5, re * g6, re * g7, re * g8,
+                       lap_e)
+            _add_block(pmat, s, t, rp * g0, rp * g1, rp * g2, rp * g3, rp * g4, rp * g5, rp * g6, rp * g7, rp * g8,
+                       lap_p)
 
 
 @kernel
-def fibre_tangent_blocks(fib_vert, cache, kx, slot, amat):
-    """amat[slot] += the muscle fibres' off-diagonal blocks of kx K, K projected, from
-    `fibre_tangent_cache`."""
+def fibre_tangent_blocks(fib_vert, cache, kx, slot, amat, pmat):
+    """amat[slot] += the muscle fibres' blocks of kx K, pmat[slot] += those of K projected,
+    from `fibre_tangent_cache`."""
     for f in range(fib_vert.shape[0]):
         c = cache[f]
         if c[17] != 0.0:
-            _edge_blocks(c, kx, c[10], 14, slot[f], amat)
+            _edge_blocks(c, slot[f], kx, c[9], c[10], 11, 14, amat, pmat)
 
 
 @kernel
-def passive_fibres_tangent_blocks(pf_vert, cache, kx, slot, amat):
-    """amat[slot] += the passive fibres' off-diagonal blocks of kx K, K projected, from
-    `passive_fibres_tangent_cache`."""
+def passive_fibres_tangent_blocks(pf_vert, cache, kx, slot, amat, pmat):
+    """amat[slot] += the passive fibres' blocks of kx K, pmat[slot] += those of K projected,
+    from `passive_fibres_tangent_cache`."""
     for f in range(pf_vert.shape[0]):
         c = cache[f]
         if c[9] != 0.0:
-            _edge_blocks(c, kx * c[9], 1.0, 13, slot[f], amat)
+            _edge_blocks(c, slot[f], kx * c[9], 1.0, 1.0, 10, 13, amat, pmat)
