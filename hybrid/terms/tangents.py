@@ -64,9 +64,9 @@ from .fibres import MIN_STRETCH, force_length
 from .membrane import P_AREA, P_D00, P_D01, P_D11, P_LAM, P_MU, P_TAU, _edges_and_strain
 
 __all__ = ["NCACHE", "NFIB_CACHE", "NPF_CACHE", "fibre_tangent_cache", "fibre_cached_product",
-           "passive_fibres_tangent_cache", "passive_fibres_cached_product", "membrane_tangent_cache", "membrane_tangent_product", "membrane_tangent_diag",
-           "fibre_tangent_product", "fibre_tangent_diag", "clamp_stress", "kelvin_voigt_dissipation", "fibre_energy",
-           "passive_fibres_tangent_product", "passive_fibres_tangent_diag", "passive_fibres_energy_kernel"]
+           "passive_fibres_tangent_cache", "passive_fibres_cached_product", "membrane_tangent_cache",
+           "membrane_tangent_product", "fibre_tangent_product", "clamp_stress", "kelvin_voigt_dissipation",
+           "fibre_energy", "passive_fibres_tangent_product", "passive_fibres_energy_kernel"]
 
 # membrane_tangent_cache columns: F's columns f0, f1 (3 each), the stress S00, S01, S11 (N/m), the
 # projected stress (the same three, its negative eigenvalues clamped)
@@ -160,39 +160,6 @@ def membrane_tangent_product(mem_vert, mem_par, cache, project, kx, kv, u, y):
         y[c, 0] += cx
         y[c, 1] += cy
         y[c, 2] += cz
-
-
-@kernel
-def membrane_tangent_diag(mem_vert, mem_par, cache, kx, kv, blocks):
-    """blocks += each point's 3 x 3 diagonal block of kx K + kv C, K projected (row-major, (nvert, 9)):
-    per triangle and corner n with weights w = (g_n0, g_n1), q = F w,
-    A0 [kx w^T S w I + cm ((lambda + mu) q q^T + mu |w|^2 F F^T)].
-    """
-    for k in range(mem_vert.shape[0]):
-        p = mem_par[k]
-        q = cache[k]
-        d00, d01, d11 = p[P_D00], p[P_D01], p[P_D11]
-        lam, mu = p[P_LAM], p[P_MU]
-        cm = (kx + kv * p[P_TAU]) * p[P_AREA]
-        kg = kx * p[P_AREA]
-        for corner in range(3):
-            if corner == 0:
-                w0, w1 = -d00, -(d01 + d11)
-            elif corner == 1:
-                w0, w1 = d00, d01
-            else:
-                w0, w1 = 0.0, d11
-            geo = kg * (w0 * w0 * q[9] + 2.0 * w0 * w1 * q[10] + w1 * w1 * q[11])
-            ww = mu * (w0 * w0 + w1 * w1)
-            i = mem_vert[k, corner]
-            for r in range(3):
-                qr = w0 * q[r] + w1 * q[3 + r]
-                for s in range(3):
-                    qs = w0 * q[s] + w1 * q[3 + s]
-                    v = cm * ((lam + mu) * qr * qs + ww * (q[r] * q[s] + q[3 + r] * q[3 + s]))
-                    if r == s:
-                        v += geo
-                    blocks[i, 3 * r + s] += v
 
 
 @kernel(inline="always")
@@ -296,38 +263,6 @@ def fibre_cached_product(fib_vert, cache, project, kx, u, y):
         y[i2, 0] += t1x - t2x
         y[i2, 1] += t1y - t2y
         y[i2, 2] += t1z - t2z
-
-
-@kernel
-def fibre_tangent_diag(fib_vert, fib_par, fib_sched, sched_val, vert_pos, kx, blocks):
-    """blocks += kx K at each corner of every muscle triangle (projected)."""
-    for f in range(fib_vert.shape[0]):
-        lam, at, g, dg = _fibre_state(fib_vert, fib_par, fib_sched, sched_val, vert_pos, f)
-        rank1 = kx * max(at * (dg - g / lam), 0.0)
-        edges = kx * at * g / lam
-        for c in range(3):
-            v = fib_vert[f, c]
-            kp = (c + 2) % 3  # grad_v lambda: edge c starts at v (-g d), edge c - 1 ends there (+g d)
-            gx = gy = gz = 0.0
-            lap = 0.0
-            for k, sgn in ((c, -1.0), (kp, 1.0)):
-                i, j = fib_vert[f, k], fib_vert[f, (k + 1) % 3]
-                gk = fib_par[f, k]
-                gx += sgn * gk * (vert_pos[j, 0] - vert_pos[i, 0]) / lam
-                gy += sgn * gk * (vert_pos[j, 1] - vert_pos[i, 1]) / lam
-                gz += sgn * gk * (vert_pos[j, 2] - vert_pos[i, 2]) / lam
-                if edges * gk > 0.0:
-                    lap += edges * gk
-            b = blocks[v]
-            b[0] += rank1 * gx * gx + lap
-            b[1] += rank1 * gx * gy
-            b[2] += rank1 * gx * gz
-            b[3] += rank1 * gy * gx
-            b[4] += rank1 * gy * gy + lap
-            b[5] += rank1 * gy * gz
-            b[6] += rank1 * gz * gx
-            b[7] += rank1 * gz * gy
-            b[8] += rank1 * gz * gz + lap
 
 
 @kernel
@@ -470,40 +405,6 @@ def passive_fibres_cached_product(pf_vert, cache, project, kx, u, y):
         y[i2, 0] += t1x - t2x
         y[i2, 1] += t1y - t2y
         y[i2, 2] += t1z - t2z
-
-
-@kernel
-def passive_fibres_tangent_diag(pf_vert, pf_par, vert_pos, kx, blocks):
-    """blocks += kx K at each corner of every stretched triangle (projected)."""
-    for f in range(pf_vert.shape[0]):
-        e = _passive_strain(pf_vert, pf_par, vert_pos, f)
-        if e <= 0.0:
-            continue
-        ae = kx * pf_par[f, 6]
-        for c in range(3):
-            v = pf_vert[f, c]
-            # grad_v e: from edge c (v its start: -g d) and edge c - 1 (v its end: +g d)
-            kp = (c + 2) % 3
-            gx = gy = gz = 0.0
-            lap = 0.0
-            for k, sgn in ((c, -1.0), (kp, 1.0)):
-                i, j = pf_vert[f, k], pf_vert[f, (k + 1) % 3]
-                g = pf_par[f, k]
-                gx += sgn * g * (vert_pos[j, 0] - vert_pos[i, 0])
-                gy += sgn * g * (vert_pos[j, 1] - vert_pos[i, 1])
-                gz += sgn * g * (vert_pos[j, 2] - vert_pos[i, 2])
-                if g > 0.0:
-                    lap += g
-            b = blocks[v]
-            b[0] += ae * (gx * gx + e * lap)
-            b[1] += ae * gx * gy
-            b[2] += ae * gx * gz
-            b[3] += ae * gy * gx
-            b[4] += ae * (gy * gy + e * lap)
-            b[5] += ae * gy * gz
-            b[6] += ae * gz * gx
-            b[7] += ae * gz * gy
-            b[8] += ae * (gz * gz + e * lap)
 
 
 @kernel

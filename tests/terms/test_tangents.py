@@ -12,8 +12,8 @@ from hybrid.model import compile_scene
 from hybrid.terms.fibres import MIN_STRETCH, add_muscle_fibres
 from hybrid.terms.membrane import add_membrane_serial
 from hybrid.terms.tangents import (NCACHE, NFIB_CACHE, NPF_CACHE, fibre_cached_product, fibre_energy,
-                                   fibre_tangent_cache, fibre_tangent_diag, fibre_tangent_product,
-                                   membrane_tangent_cache, membrane_tangent_diag, membrane_tangent_product)
+                                   fibre_tangent_cache, fibre_tangent_product, membrane_tangent_cache,
+                                   membrane_tangent_product)
 
 R = 0.12
 TENSION = 40.0  # N/m
@@ -213,26 +213,6 @@ def test_the_newton_matrix_against_finite_differences_of_the_implicit_forces(mod
     assert rel_error(newton - mass, expected - mass) <= 1e-6
 
 
-def test_the_diagonal_blocks_are_those_of_the_matrix(model):
-    a = model.arrays
-    x = deformed(model, 8)
-    sv = sched(model)
-    n = x.shape[0]
-    kx, kv = 4e-6, 2e-3
-    mat, cache = membrane_matrix(a, x, kx, kv, True)
-
-    def product(u):
-        y = np.zeros_like(u)
-        fibre_tangent_product(a.fib_vert, a.fib_par, a.fib_sched, sv, x, True, kx, u, y)
-        return y
-    mat += columns(n, product)
-    blocks = np.zeros((n, 9))
-    membrane_tangent_diag(a.mem_vert, a.mem_par, cache, kx, kv, blocks)
-    fibre_tangent_diag(a.fib_vert, a.fib_par, a.fib_sched, sv, x, kx, blocks)
-    want = np.stack([mat[3 * i:3 * i + 3, 3 * i:3 * i + 3].ravel() for i in range(n)])
-    assert np.abs(blocks - want).max() <= 1e-12 * np.abs(want).max()
-
-
 def test_the_projected_element_hessian_is_psd_and_exact_where_the_exact_one_is(model):
     """Compressed and stretched triangles both: each element's 9 x 9 Hessian, exact
     and projected. The projected one has no negative eigenvalue; where the exact one
@@ -258,15 +238,14 @@ def test_the_projected_element_hessian_is_psd_and_exact_where_the_exact_one_is(m
     assert convex >= 5 and indefinite >= 5, (convex, indefinite)
 
 
-def test_the_passive_fibre_hessian_is_minus_the_force_jacobian_and_its_blocks_and_energy():
+def test_the_passive_fibre_hessian_is_minus_the_force_jacobian_and_its_energy():
     """Passive fibres around the z axis on the deformed sphere (stretched triangles and
     slack ones): the exact Hessian against central differences of the compiled force,
-    the projected one positive semi-definite with the diagonal blocks as given, and the
-    compiled energy the numpy one."""
+    the projected one positive semi-definite, and the compiled energy the numpy one
+    (the assembled blocks: tests/test_implicit_matrix.py)."""
     from hybrid import PassiveFibres
     from hybrid.terms.passive_fibres import add_passive_fibres, passive_fibres_energy
-    from hybrid.terms.tangents import (passive_fibres_energy_kernel, passive_fibres_tangent_diag,
-                                       passive_fibres_tangent_product)
+    from hybrid.terms.tangents import passive_fibres_energy_kernel, passive_fibres_tangent_product
     mesh = irregular_sphere(40, R, seed=2)
     a = compile_scene(Scene(mesh=mesh, masses=Masses(total_kg=1.0), integrator="implicit_euler", forces=(
         Membrane(800.0), PassiveFibres(modulus_n_per_m=600.0, around_axis=(0.0, 0.0, 1.0))))).arrays
@@ -288,10 +267,6 @@ def test_the_passive_fibre_hessian_is_minus_the_force_jacobian_and_its_blocks_an
     assert np.abs(exact).max() > 0
     assert rel_error(-exact, finite_difference(force, x, 1e-7)) <= 1e-6
     assert np.linalg.eigvalsh(0.5 * (proj + proj.T)).min() >= -1e-12 * np.abs(proj).max()
-    blocks = np.zeros((n, 9))
-    passive_fibres_tangent_diag(a.pf_vert, a.pf_par, x, 1.0, blocks)
-    want = np.stack([proj[3 * i:3 * i + 3, 3 * i:3 * i + 3].ravel() for i in range(n)])
-    assert np.abs(blocks - want).max() <= 1e-12 * np.abs(want).max()
     energy = passive_fibres_energy_kernel(a.pf_vert, a.pf_par, x)
     assert energy > 0 and energy == pytest.approx(passive_fibres_energy(a.pf_vert, a.pf_par, x), rel=1e-12)
 
