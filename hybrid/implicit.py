@@ -19,11 +19,10 @@ direction, reading a pressure too small by 1 + h^2 k/m).
 Newton's method on dv, warm-started from the last step's dv. Each iteration
 solves (M + h^2 K + h C) ddv = h r, r = f_i + f_e - M dv / h (N) the residual,
 C the damping matrix and K the forces' exact Hessian (`hybrid.terms.tangents`),
-by conjugate gradients, their products applied element by element from the
-terms' per-triangle tangent caches (computed once per Newton iteration), and
-preconditioned with a symmetric Gauss-Seidel sweep of the matrix with K made
-positive semi-definite per element (`hybrid.implicit_sgs`: its off-diagonal
-blocks assembled once per Newton iteration). Where the exact matrix has negative curvature
+by conjugate gradients with the matrix assembled once per Newton iteration from
+the terms' per-triangle tangent caches (`hybrid.implicit_matrix`), preconditioned
+with its symmetric Gauss-Seidel sweep whose diagonal blocks are those of the matrix
+with K made positive semi-definite per element. Where the exact matrix has negative curvature
 (a membrane under compression: it has no bending stiffness) the conjugate
 gradients stop there (truncated Newton); met at the first iteration, the solve
 is repeated with the per-element projected Hessian (projected Newton). Solving
@@ -226,6 +225,19 @@ def newton_product(m, rows, face, fib, pf, h, project, u, y):
 
 
 @kernel
+def _product(m, w, h, project, u, y):
+    """y = the Newton matrix times u, 0 on fixed points: assembled, or with the Hessian
+    projected element by element (the rare projected Newton iteration)."""
+    if not project:
+        matrix_product(w.mat, u, y)
+        return
+    newton_product(m, w.rows, w.face, w.fib, w.pf, h, True, u, y)
+    for i in range(y.shape[0]):
+        if not m.vert_free[i]:
+            y[i, 0] = y[i, 1] = y[i, 2] = 0.0
+
+
+@kernel
 def _dot(a, b):
     s = 0.0
     for i in range(a.shape[0]):
@@ -234,7 +246,7 @@ def _dot(a, b):
 
 
 @kernel
-def _solve(w, project, target, cg_max):
+def _solve(m, w, h, project, target, cg_max):
     """w.cg_x = the preconditioned conjugate gradients' solution of (Newton matrix) x = w.cg_r
     (rows of fixed points zero), to |residual| <= target or cg_max iterations. Returns the iterations."""
     x, r, z, p, q = w.cg_x, w.cg_r, w.cg_z, w.cg_p, w.cg_q
@@ -247,7 +259,7 @@ def _solve(w, project, target, cg_max):
             p[i, a] = z[i, a]
     rz = _dot(r, z)
     for k in range(cg_max):
-        matrix_product(w.mat, project, p, q)
+        _product(m, w, h, project, p, q)
         pq = _dot(p, q)
         if not pq > 0.0:  # negative curvature (or p = 0): stop with what we have (truncated Newton)
             return -1 if k == 0 else k
@@ -399,12 +411,12 @@ def implicit_step(m, s, step, imp):
                 w.cg_r[i, a] = h * w.res[i, a]
         # solve just accurately enough: FORCING of what convergence asks, at most FORCING of the residual
         eta = min(FORCING, FORCING * tol * scale / rn)
-        k = _solve(w, False, eta * h * rn, cg_max)
+        k = _solve(m, w, h, False, eta * h * rn, cg_max)
         if k < 0:
             for i in range(n):
                 for a in range(3):
                     w.cg_r[i, a] = h * w.res[i, a]
-            k = 1 + _solve(w, True, eta * h * rn, cg_max)
+            k = 1 + _solve(m, w, h, True, eta * h * rn, cg_max)
             info[I_PROJECTED_TOTAL] += 1
         cg_total += k
         it += 1

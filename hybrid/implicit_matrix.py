@@ -2,16 +2,16 @@
 products and their preconditioner, a symmetric Gauss-Seidel sweep.
 
 Once per Newton iteration the free points' 3 x 3 blocks of M + h^2 K + h C are
-assembled into a block-sparse matrix (`NewtonMatrix`: its rows, built once per model,
-and each element's slots) from the terms' tangent caches
-(`hybrid.terms.tangent_blocks`), with K exact (`amat`, what the conjugate gradients
-solve with) and projected per element (`pmat`, positive definite). A product with the
+assembled into a block-sparse matrix A (`NewtonMatrix`: its rows, built once per
+model, and each element's slots) from the terms' tangent caches
+(`hybrid.terms.tangent_blocks`), K the exact Hessian, with the diagonal blocks D of
+the matrix whose K is projected per element (positive definite). A product with the
 assembled matrix reads each block once, where the element-by-element product
 (`hybrid.implicit.newton_product`) computes each element's part anew. The
-preconditioner is the sweep z = (D + U)^-1 D (D + L)^-1 r of the projected matrix
-(L, U its lower and upper blocks, D the diagonal ones), symmetric positive definite,
-about one product's cost: on the breathing scene it took about a third of the
-conjugate-gradient iterations of the inverse diagonal blocks alone.
+preconditioner is the symmetric Gauss-Seidel sweep z = (D + U)^-1 D (D + L)^-1 r, L and
+U the lower and upper blocks of A: symmetric positive definite for any symmetric L = U^T
+since D is, and about one product's cost. On the breathing scene it took about a third
+of the conjugate-gradient iterations of D^-1 alone.
 """
 
 from __future__ import annotations
@@ -33,9 +33,9 @@ class NewtonMatrix(NamedTuple):
     """The free points' blocks: row_ptr (nvert + 1,), col (nblocks,) sorted in each row,
     diag (nvert,): each row's diagonal block (a fixed point's row has it alone);
     mem_slot, fib_slot, pf_slot (nrows, 9): the block of each element's corner pair
-    (m, n) at 3 m + n, -1 with a fixed corner; amat, pmat (nblocks, 9): the blocks
-    (row-major) with K exact and projected; dinv (nvert, 9): pmat's inverse diagonal
-    blocks (the identity at fixed points)."""
+    (m, n) at 3 m + n, -1 with a fixed corner; amat (nblocks, 9): the blocks (row-major,
+    zero at fixed points); pdiag (nvert, 9): the diagonal blocks with K projected; dinv
+    (nvert, 9): their inverses (the identity at fixed points)."""
     row_ptr: np.ndarray
     col: np.ndarray
     diag: np.ndarray
@@ -43,7 +43,7 @@ class NewtonMatrix(NamedTuple):
     fib_slot: np.ndarray
     pf_slot: np.ndarray
     amat: np.ndarray
-    pmat: np.ndarray
+    pdiag: np.ndarray
     dinv: np.ndarray
 
 
@@ -74,39 +74,37 @@ def newton_matrix(nvert: int, vert_free, mem_vert, fib_vert, pf_vert) -> NewtonM
         slots.append(slot)
     nb = keys.size
     return NewtonMatrix(row_ptr, col.astype(np.int64), np.searchsorted(keys, every * nvert + every), *slots,
-                        amat=np.zeros((nb, 9)), pmat=np.zeros((nb, 9)), dinv=np.zeros((nvert, 9)))
+                        amat=np.zeros((nb, 9)), pdiag=np.zeros((nvert, 9)), dinv=np.zeros((nvert, 9)))
 
 
 @kernel
 def assemble(m, rows, face, fib, pf, h, mat):
-    """mat.amat, mat.pmat = M + h^2 K + h C on the free points, K exact and projected, from
-    the tangent caches of `rows` (`hybrid.implicit.newton_caches`); mat.dinv."""
-    amat, pmat = mat.amat, mat.pmat
+    """mat.amat = M + h^2 K + h C on the free points, mat.pdiag its diagonal blocks with K
+    projected, from the tangent caches of `rows` (`hybrid.implicit.newton_caches`); mat.dinv."""
+    amat, pdiag = mat.amat, mat.pdiag
     for k in range(amat.shape[0]):
         for r in range(9):
             amat[k, r] = 0.0
-            pmat[k, r] = 0.0
     on = m.term_on
-    for i in range(mat.diag.shape[0]):
-        if m.vert_free[i]:
-            c = m.vert_mass[i] + (h * m.damp_coef[i] if on[T_DAMPING] else 0.0)
-            d = mat.diag[i]
-            for r in (0, 4, 8):
-                amat[d, r] = c
-                pmat[d, r] = c
+    for i in range(pdiag.shape[0]):
+        c = m.vert_mass[i] + (h * m.damp_coef[i] if on[T_DAMPING] else 0.0) if m.vert_free[i] else 0.0
+        d = mat.diag[i]
+        for r in range(9):
+            pdiag[i, r] = c if r % 4 == 0 else 0.0
+            amat[d, r] = pdiag[i, r]
     if on[T_MEMBRANE]:
-        membrane_tangent_blocks(rows.mem_vert, rows.mem_par, face, h * h, h, mat.mem_slot, amat, pmat)
+        membrane_tangent_blocks(rows.mem_vert, rows.mem_par, face, h * h, h, mat.mem_slot, amat, pdiag)
     if on[T_FIBRES]:
-        fibre_tangent_blocks(rows.fib_vert, fib, h * h, mat.fib_slot, amat, pmat)
+        fibre_tangent_blocks(rows.fib_vert, fib, h * h, mat.fib_slot, amat, pdiag)
     if on[T_PASSIVE]:
-        passive_fibres_tangent_blocks(rows.pf_vert, pf, h * h, mat.pf_slot, amat, pmat)
-    for i in range(mat.diag.shape[0]):
+        passive_fibres_tangent_blocks(rows.pf_vert, pf, h * h, mat.pf_slot, amat, pdiag)
+    for i in range(pdiag.shape[0]):
         b = mat.dinv[i]
         if not m.vert_free[i]:
             for r in range(9):
                 b[r] = 1.0 if r % 4 == 0 else 0.0
             continue
-        _invert(pmat[mat.diag[i]], b)
+        _invert(pdiag[i], b)
 
 
 @kernel(inline="always")
@@ -129,9 +127,9 @@ def _invert(a, b):
 
 
 @kernel
-def matrix_product(mat, project, u, y):
-    """y = A u, A the assembled matrix (pmat if `project`, else amat); 0 on fixed points."""
-    a = mat.pmat if project else mat.amat
+def matrix_product(mat, u, y):
+    """y = A u, A the assembled matrix; 0 on fixed points."""
+    a = mat.amat
     col, ptr = mat.col, mat.row_ptr
     for i in range(y.shape[0]):
         sx = sy = sz = 0.0
@@ -146,8 +144,8 @@ def matrix_product(mat, project, u, y):
 
 @kernel
 def sgs_sweep(mat, r, z):
-    """z = (D + U)^-1 D (D + L)^-1 r of the projected matrix (z = r at fixed points)."""
-    a, col, ptr, diag, dinv = mat.pmat, mat.col, mat.row_ptr, mat.diag, mat.dinv
+    """z = (D + U)^-1 D (D + L)^-1 r (z = r at fixed points)."""
+    a, col, ptr, diag, dinv = mat.amat, mat.col, mat.row_ptr, mat.diag, mat.dinv
     n = r.shape[0]
     for i in range(n):  # forward: (D + L) z = r
         sx, sy, sz = r[i, 0], r[i, 1], r[i, 2]

@@ -1,9 +1,11 @@
-"""The 3 x 3 blocks of the element Hessians (`hybrid.terms.tangents`), exact and
-projected, added into assembled block-sparse matrices: what implicit Euler's
-conjugate gradients multiply by and precondition with (`hybrid.implicit_matrix`).
+"""The 3 x 3 blocks of the element Hessians (`hybrid.terms.tangents`), added into an
+assembled block-sparse matrix, and the diagonal blocks of the projected ones: what
+implicit Euler's conjugate gradients multiply by and precondition with
+(`hybrid.implicit_matrix`).
 
 Each element adds, for each ordered pair of its corners (m, n), its block K_mn to the
-matrix slot `slot[element, 3 m + n]` (-1: a corner is fixed, no slot). With the
+matrix slot `slot[element, 3 m + n]` (-1: a corner is fixed, no slot), and its
+projected K_nn to the row of corner n in `pdiag`. With the
 corner weights w_n of F = sum_n x_n w_n^T (w_0 = -(d00, d01 + d11), w_1 = (d00, d01),
 w_2 = (0, d11)) and q_n = F w_n:
 
@@ -61,10 +63,10 @@ def _corner_weights(d00, d01, d11, n):
 
 
 @kernel
-def membrane_tangent_blocks(mem_vert, mem_par, cache, kx, kv, slot, amat, pmat):
-    """amat[slot] += the blocks of kx K + kv C, pmat[slot] += those with K projected.
+def membrane_tangent_blocks(mem_vert, mem_par, cache, kx, kv, slot, amat, pdiag):
+    """amat[slot] += the blocks of kx K + kv C; pdiag[corner] += the diagonal ones with K projected.
     # Model: mem_vert, mem_par   # Data in: cache (membrane_tangent_cache), slot (nf, 9) int64
-    # Data out: amat, pmat (nblocks, 9) row-major blocks, added to
+    # Data out: amat (nblocks, 9), pdiag (nvert, 9) row-major blocks, added to
     """
     for k in range(mem_vert.shape[0]):
         p = mem_par[k]
@@ -89,7 +91,6 @@ def membrane_tangent_blocks(mem_vert, mem_par, cache, kx, kv, slot, amat, pmat):
                 qnx, qny, qnz = wn0 * f0x + wn1 * f1x, wn0 * f0y + wn1 * f1y, wn0 * f0z + wn1 * f1z
                 w00, w01, w11 = wm0 * wn0, wm0 * wn1 + wm1 * wn0, wm1 * wn1
                 geo_e = kg * (w00 * c[6] + w01 * c[7] + w11 * c[8])
-                geo_p = kg * (w00 * c[9] + w01 * c[10] + w11 * c[11])
                 ww = cu * (w00 + w11)
                 v0 = cl * qmx * qnx + cu * qnx * qmx + ww * a00
                 v1 = cl * qmx * qny + cu * qnx * qmy + ww * a01
@@ -102,11 +103,13 @@ def membrane_tangent_blocks(mem_vert, mem_par, cache, kx, kv, slot, amat, pmat):
                 v8 = cl * qmz * qnz + cu * qnz * qmz + ww * a22
                 t = slot[k, 3 * n + m]
                 _add_block(amat, s, t, v0, v1, v2, v3, v4, v5, v6, v7, v8, geo_e)
-                _add_block(pmat, s, t, v0, v1, v2, v3, v4, v5, v6, v7, v8, geo_p)
+                if m == n:
+                    geo_p = kg * (w00 * c[9] + w01 * c[10] + w11 * c[11])
+                    _add_block(pdiag, mem_vert[k, m], -1, v0, v1, v2, v3, v4, v5, v6, v7, v8, geo_p)
 
 
 @kernel(inline="always")
-def _edge_blocks(c, slot, scale, rank_e, rank_p, e_col, p_col, amat, pmat):
+def _edge_blocks(tri, c, slot, scale, rank_e, rank_p, e_col, p_col, amat, pdiag):
     """The blocks of scale (rank G_m G_n^T + L_mn I) of a fibre triangle from its cache row c:
     columns 0..8 the edge vectors (edge k from corner k to k + 1), e_col / p_col the first
     of the edges' exact / projected Laplacian coefficients."""
@@ -122,35 +125,35 @@ def _edge_blocks(c, slot, scale, rank_e, rank_p, e_col, p_col, amat, pmat):
             gnx, gny, gnz = c[3 * nq] - c[3 * n], c[3 * nq + 1] - c[3 * n + 1], c[3 * nq + 2] - c[3 * n + 2]
             if m == n:  # edges m and m - 1 meet at m
                 lap_e = scale * (c[e_col + m] + c[e_col + mp])
-                lap_p = scale * (c[p_col + m] + c[p_col + mp])
             else:
                 k = m if n == (m + 1) % 3 else n  # the edge joining m and n
-                lap_e, lap_p = -scale * c[e_col + k], -scale * c[p_col + k]
-            t = slot[3 * n + m]
+                lap_e = -scale * c[e_col + k]
             g0, g1, g2 = gmx * gnx, gmx * gny, gmx * gnz
             g3, g4, g5 = gmy * gnx, gmy * gny, gmy * gnz
             g6, g7, g8 = gmz * gnx, gmz * gny, gmz * gnz
-            _add_block(amat, s, t, re * g0, re * g1, re * g2, re * g3, re * g4, re * g5, re * g6, re * g7, re * g8,
-                       lap_e)
-            _add_block(pmat, s, t, rp * g0, rp * g1, rp * g2, rp * g3, rp * g4, rp * g5, rp * g6, rp * g7, rp * g8,
-                       lap_p)
+            _add_block(amat, s, slot[3 * n + m], re * g0, re * g1, re * g2, re * g3, re * g4, re * g5, re * g6,
+                       re * g7, re * g8, lap_e)
+            if m == n:
+                lap_p = scale * (c[p_col + m] + c[p_col + mp])
+                _add_block(pdiag, tri[m], -1, rp * g0, rp * g1, rp * g2, rp * g3, rp * g4, rp * g5, rp * g6, rp * g7,
+                           rp * g8, lap_p)
 
 
 @kernel
-def fibre_tangent_blocks(fib_vert, cache, kx, slot, amat, pmat):
-    """amat[slot] += the muscle fibres' blocks of kx K, pmat[slot] += those of K projected,
-    from `fibre_tangent_cache`."""
+def fibre_tangent_blocks(fib_vert, cache, kx, slot, amat, pdiag):
+    """amat[slot] += the muscle fibres' blocks of kx K, pdiag[corner] += the diagonal ones of K
+    projected, from `fibre_tangent_cache`."""
     for f in range(fib_vert.shape[0]):
         c = cache[f]
         if c[17] != 0.0:
-            _edge_blocks(c, slot[f], kx, c[9], c[10], 11, 14, amat, pmat)
+            _edge_blocks(fib_vert[f], c, slot[f], kx, c[9], c[10], 11, 14, amat, pdiag)
 
 
 @kernel
-def passive_fibres_tangent_blocks(pf_vert, cache, kx, slot, amat, pmat):
-    """amat[slot] += the passive fibres' blocks of kx K, pmat[slot] += those of K projected,
-    from `passive_fibres_tangent_cache`."""
+def passive_fibres_tangent_blocks(pf_vert, cache, kx, slot, amat, pdiag):
+    """amat[slot] += the passive fibres' blocks of kx K, pdiag[corner] += the diagonal ones of
+    K projected, from `passive_fibres_tangent_cache`."""
     for f in range(pf_vert.shape[0]):
         c = cache[f]
         if c[9] != 0.0:
-            _edge_blocks(c, slot[f], kx * c[9], 1.0, 1.0, 10, 13, amat, pmat)
+            _edge_blocks(pf_vert[f], c, slot[f], kx * c[9], 1.0, 1.0, 10, 13, amat, pdiag)
