@@ -238,9 +238,10 @@ def _product(m, w, h, project, u, y):
 
 
 @kernel
-def _dot(a, b):
+def _dot(free, a, b):
+    """a . b over the points `free` (in order: the other points' rows are zero)."""
     s = 0.0
-    for i in range(a.shape[0]):
+    for i in free:
         s += a[i, 0] * b[i, 0] + a[i, 1] * b[i, 1] + a[i, 2] * b[i, 2]
     return s
 
@@ -248,33 +249,37 @@ def _dot(a, b):
 @kernel
 def _solve(m, w, h, project, target, cg_max):
     """w.cg_x = the preconditioned conjugate gradients' solution of (Newton matrix) x = w.cg_r
-    (rows of fixed points zero), to |residual| <= target or cg_max iterations. Returns the iterations."""
+    (rows of fixed points zero), to |residual| <= target or cg_max iterations. Returns the iterations.
+    The iterations visit the free points alone; x, z, p stay zero on the others."""
     x, r, z, p, q = w.cg_x, w.cg_r, w.cg_z, w.cg_p, w.cg_q
+    free = w.mat.free
     for i in range(x.shape[0]):
         for a in range(3):
-            x[i, a] = 0.0
+            x[i, a] = z[i, a] = p[i, a] = 0.0
     sgs_sweep(w.mat, r, z)
-    for i in range(p.shape[0]):
+    for i in free:
         for a in range(3):
             p[i, a] = z[i, a]
-    rz = _dot(r, z)
+    rz = _dot(free, r, z)
     for k in range(cg_max):
         _product(m, w, h, project, p, q)
-        pq = _dot(p, q)
+        pq = _dot(free, p, q)
         if not pq > 0.0:  # negative curvature (or p = 0): stop with what we have (truncated Newton)
             return -1 if k == 0 else k
         alpha = rz / pq
-        for i in range(x.shape[0]):
+        rr = 0.0
+        for i in free:
             for a in range(3):
                 x[i, a] += alpha * p[i, a]
                 r[i, a] -= alpha * q[i, a]
-        if math.sqrt(_dot(r, r)) <= target:
+            rr += r[i, 0] * r[i, 0] + r[i, 1] * r[i, 1] + r[i, 2] * r[i, 2]
+        if math.sqrt(rr) <= target:
             return k + 1
         sgs_sweep(w.mat, r, z)
-        rz_new = _dot(r, z)
+        rz_new = _dot(free, r, z)
         beta = rz_new / rz
         rz = rz_new
-        for i in range(p.shape[0]):
+        for i in free:
             for a in range(3):
                 p[i, a] = z[i, a] + beta * p[i, a]
     return cg_max
@@ -431,7 +436,7 @@ def implicit_step(m, s, step, imp):
         if dx_max <= ulp_x:
             at_roundoff = True
             break
-        slope = -h * _dot(w.res, w.cg_x)  # the potential's derivative along the step (< 0)
+        slope = -h * _dot(w.mat.free, w.res, w.cg_x)  # the potential's derivative along the step (< 0)
         for i in range(n):
             for a in range(3):
                 w.dv[i, a] += w.cg_x[i, a]

@@ -30,12 +30,14 @@ T_MEMBRANE, T_FIBRES, T_PASSIVE, T_DAMPING = Membrane.id, MuscleFibres.id, Passi
 
 
 class NewtonMatrix(NamedTuple):
-    """The free points' blocks: row_ptr (nvert + 1,), col (nblocks,) sorted in each row,
-    diag (nvert,): each row's diagonal block (a fixed point's row has it alone);
+    """The free points' blocks: free (nfree,): the free points (the rows the products and
+    sweeps visit); row_ptr (nvert + 1,), col (nblocks,) sorted in each row, diag
+    (nvert,): each row's diagonal block (a fixed point's row has it alone);
     mem_slot, fib_slot, pf_slot (nrows, 9): the block of each element's corner pair
     (m, n) at 3 m + n, -1 with a fixed corner; amat (nblocks, 9): the blocks (row-major,
     zero at fixed points); pdiag (nvert, 9): the diagonal blocks with K projected; dinv
     (nvert, 9): their inverses (the identity at fixed points)."""
+    free: np.ndarray
     row_ptr: np.ndarray
     col: np.ndarray
     diag: np.ndarray
@@ -73,7 +75,7 @@ def newton_matrix(nvert: int, vert_free, mem_vert, fib_vert, pf_vert) -> NewtonM
                 slot[ok, 3 * m + n] = np.searchsorted(keys, i[ok] * nvert + j[ok])
         slots.append(slot)
     nb = keys.size
-    return NewtonMatrix(row_ptr, col.astype(np.int64), np.searchsorted(keys, every * nvert + every), *slots,
+    return NewtonMatrix(np.flatnonzero(free).astype(np.int64), row_ptr, col.astype(np.int64), np.searchsorted(keys, every * nvert + every), *slots,
                         amat=np.zeros((nb, 9)), pdiag=np.zeros((nvert, 9)), dinv=np.zeros((nvert, 9)))
 
 
@@ -128,10 +130,11 @@ def _invert(a, b):
 
 @kernel
 def matrix_product(mat, u, y):
-    """y = A u, A the assembled matrix; 0 on fixed points."""
+    """y = A u on the free points, A the assembled matrix (the fixed points' rows of y
+    left as they are: A's are zero)."""
     a = mat.amat
     col, ptr = mat.col, mat.row_ptr
-    for i in range(y.shape[0]):
+    for i in mat.free:
         sx = sy = sz = 0.0
         for k in range(ptr[i], ptr[i + 1]):
             b, j = a[k], col[k]
@@ -144,10 +147,11 @@ def matrix_product(mat, u, y):
 
 @kernel
 def sgs_sweep(mat, r, z):
-    """z = (D + U)^-1 D (D + L)^-1 r (z = r at fixed points)."""
-    a, col, ptr, diag, dinv = mat.amat, mat.col, mat.row_ptr, mat.diag, mat.dinv
-    n = r.shape[0]
-    for i in range(n):  # forward: (D + L) z = r
+    """z = (D + U)^-1 D (D + L)^-1 r on the free points (the fixed points' rows of z left
+    as they are: no block couples them)."""
+    a, col, ptr, diag, dinv, free = mat.amat, mat.col, mat.row_ptr, mat.diag, mat.dinv, mat.free
+    for f in range(free.shape[0]):  # forward: (D + L) z = r
+        i = free[f]
         sx, sy, sz = r[i, 0], r[i, 1], r[i, 2]
         for k in range(ptr[i], diag[i]):
             b, j = a[k], col[k]
@@ -159,7 +163,8 @@ def sgs_sweep(mat, r, z):
         z[i, 0] = b[0] * sx + b[1] * sy + b[2] * sz
         z[i, 1] = b[3] * sx + b[4] * sy + b[5] * sz
         z[i, 2] = b[6] * sx + b[7] * sy + b[8] * sz
-    for i in range(n - 1, -1, -1):  # backward: (D + U) z' = D z
+    for f in range(free.shape[0] - 1, -1, -1):  # backward: (D + U) z' = D z
+        i = free[f]
         if diag[i] + 1 == ptr[i + 1]:
             continue
         sx = sy = sz = 0.0
