@@ -19,9 +19,10 @@ direction, reading a pressure too small by 1 + h^2 k/m).
 Newton's method on dv, warm-started from the last step's dv. Each iteration
 solves (M + h^2 K + h C) ddv = h r, r = f_i + f_e - M dv / h (N) the residual,
 C the damping matrix and K the forces' exact Hessian (`hybrid.terms.tangents`),
-by conjugate gradients preconditioned with the inverse 3 x 3 diagonal blocks of
-the matrix with K made positive semi-definite per element, applied element by
-element (no matrix is assembled). Where the exact matrix has negative curvature
+by conjugate gradients with the matrix assembled once per Newton iteration from
+the terms' per-triangle tangent caches (`hybrid.implicit_matrix`), preconditioned
+with its symmetric Gauss-Seidel sweep whose diagonal blocks are those of the matrix
+with K made positive semi-definite per element. Where the exact matrix has negative curvature
 (a membrane under compression: it has no bending stiffness) the conjugate
 gradients stop there (truncated Newton); met at the first iteration, the solve
 is repeated with the per-element projected Hessian (projected Newton). Solving
@@ -52,18 +53,19 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .implicit_matrix import NewtonMatrix, assemble, matrix_product, newton_matrix, sgs_sweep
 from .kernel import CHUNK_VERTS, kernel
 from .terms import Damping, Membrane, MuscleFibres, PassiveFibres, Volume
 from .terms.fibres import add_muscle_fibres
 from .terms.passive_fibres import add_passive_fibres
 from .terms.membrane import add_membrane_serial
 from .terms.membrane import membrane_energy
-from .terms.tangents import (NCACHE, fibre_energy, fibre_tangent_diag, fibre_tangent_product, kelvin_voigt_dissipation,
-                             membrane_tangent_cache, membrane_tangent_diag, membrane_tangent_product,
-                             passive_fibres_energy_kernel, passive_fibres_tangent_diag, passive_fibres_tangent_product)
+from .terms.tangents import (NCACHE, NFIB_CACHE, NPF_CACHE, fibre_cached_product, fibre_energy, fibre_tangent_cache,
+                             kelvin_voigt_dissipation, membrane_tangent_cache, membrane_tangent_product,
+                             passive_fibres_cached_product, passive_fibres_energy_kernel, passive_fibres_tangent_cache)
 
 __all__ = ["IMPLICIT_ID", "IMPLICIT_NOT_CONVERGED", "ImplicitWork", "Info", "implicit_work", "implicit_step",
-           "implicit_pressure", "implicit_forces", "newton_product"]
+           "implicit_pressure", "implicit_forces", "NewtonRows", "newton_rows", "newton_caches", "newton_product"]
 
 #: `MembraneArrays.integrator` of implicit Euler
 IMPLICIT_ID = 2
@@ -98,13 +100,40 @@ class Info(IntEnum):
  I_PROJECTED_TOTAL) = (int(k) for k in Info)
 
 
+class NewtonRows(NamedTuple):
+    """The membrane's, muscle fibres' and passive fibres' rows (`MembraneArrays`) of the
+    triangles with a free corner: the others add only to the Newton matrix's fixed rows,
+    which the solve zeroes, so its products and blocks skip them."""
+    mem_vert: np.ndarray
+    mem_par: np.ndarray
+    fib_vert: np.ndarray
+    fib_par: np.ndarray
+    fib_sched: np.ndarray
+    pf_vert: np.ndarray
+    pf_par: np.ndarray
+
+
+def newton_rows(arrays) -> NewtonRows:
+    """The `NewtonRows` of a model's arrays (in their order)."""
+    free = np.asarray(arrays.vert_free) != 0
+    mem = free[arrays.mem_vert].any(axis=1) if arrays.mem_vert.shape[0] else np.zeros(0, bool)
+    fib = free[arrays.fib_vert].any(axis=1) if arrays.fib_vert.shape[0] else np.zeros(0, bool)
+    pf = free[arrays.pf_vert].any(axis=1) if arrays.pf_vert.shape[0] else np.zeros(0, bool)
+    return NewtonRows(np.ascontiguousarray(arrays.mem_vert[mem]), np.ascontiguousarray(arrays.mem_par[mem]),
+                      np.ascontiguousarray(arrays.fib_vert[fib]), np.ascontiguousarray(arrays.fib_par[fib]),
+                      np.ascontiguousarray(arrays.fib_sched[fib]), np.ascontiguousarray(arrays.pf_vert[pf]),
+                      np.ascontiguousarray(arrays.pf_par[pf]))
+
+
 class ImplicitWork(NamedTuple):
     """The implicit step's arrays: dv (nvert, 3) m/s, the last step's velocity change
     (warm start); x_try, v_try, f, f_expl, res, x_kv (the positions the line search's
     viscous dissipation is taken at) and the conjugate gradients' cg_* (nvert, 3):
-    scratch; grad (nvert, 3) m^2: the volume gradient at the step's start; blocks
-    (nvert, 9): the inverse diagonal blocks; face (nface_m, NCACHE): the membrane's
-    tangent cache; info (len(Info),): the `Info` slots."""
+    scratch; grad (nvert, 3) m^2: the volume gradient at the step's start; rows: the
+    triangles the Newton matrix reads (`newton_rows`); face (NCACHE), fib (NFIB_CACHE),
+    pf (NPF_CACHE) per row of rows: the membrane's, muscle fibres' and passive fibres'
+    tangent caches (`newton_caches`); mat: the assembled Newton matrix
+    (`hybrid.implicit_matrix`); info (len(Info),): the `Info` slots."""
     dv: np.ndarray
     x_try: np.ndarray
     v_try: np.ndarray
@@ -118,8 +147,11 @@ class ImplicitWork(NamedTuple):
     cg_z: np.ndarray
     cg_p: np.ndarray
     cg_q: np.ndarray
-    blocks: np.ndarray
+    rows: NewtonRows
     face: np.ndarray
+    fib: np.ndarray
+    pf: np.ndarray
+    mat: NewtonMatrix
     info: np.ndarray
 
 
@@ -129,7 +161,11 @@ def implicit_work(arrays) -> ImplicitWork | None:
         return None
     n = arrays.vert_rest.shape[0]
     vec = [np.zeros((n, 3)) for _ in range(13)]
-    return ImplicitWork(*vec, blocks=np.zeros((n, 9)), face=np.zeros((arrays.mem_vert.shape[0], NCACHE)),
+    rows = newton_rows(arrays)
+    return ImplicitWork(*vec, rows=rows, face=np.zeros((rows.mem_vert.shape[0], NCACHE)),
+                        fib=np.zeros((rows.fib_vert.shape[0], NFIB_CACHE)),
+                        pf=np.zeros((rows.pf_vert.shape[0], NPF_CACHE)),
+                        mat=newton_matrix(n, arrays.vert_free, rows.mem_vert, rows.fib_vert, rows.pf_vert),
                         info=np.zeros(len(Info)))
 
 
@@ -157,120 +193,93 @@ def implicit_forces(m, sched_val, x, v, out):
 
 
 @kernel
-def newton_product(m, sched_val, x, face, h, project, u, y):
-    """y = (M + h^2 K + h C) u on every point (no rows zeroed): the Newton matrix at x,
-    `face` its membrane tangent cache (`membrane_tangent_cache` at x); the Hessian
-    projected per element when `project`."""
+def newton_caches(m, rows, sched_val, x, face, fib, pf):
+    """The tangent caches of the triangles `rows` at x, what `newton_product` reads: once
+    per Newton iteration, not once per conjugate-gradient iteration."""
+    on = m.term_on
+    if on[T_MEMBRANE]:
+        membrane_tangent_cache(rows.mem_vert, rows.mem_par, x, face)
+    if on[T_FIBRES]:
+        fibre_tangent_cache(rows.fib_vert, rows.fib_par, rows.fib_sched, sched_val, x, fib)
+    if on[T_PASSIVE]:
+        passive_fibres_tangent_cache(rows.pf_vert, rows.pf_par, x, pf)
+
+
+@kernel
+def newton_product(m, rows, face, fib, pf, h, project, u, y):
+    """y = (M + h^2 K + h C) u on every point (no rows zeroed) with the triangles `rows`
+    (all of the model's: the Newton matrix; `newton_rows`: its free points' rows): the
+    matrix at the positions the caches face, fib, pf were taken at (`newton_caches`);
+    the Hessian projected per element when `project`."""
     on = m.term_on
     for i in range(y.shape[0]):
         c = m.vert_mass[i] + (h * m.damp_coef[i] if on[T_DAMPING] else 0.0)
         for a in range(3):
             y[i, a] = c * u[i, a]
     if on[T_MEMBRANE]:
-        membrane_tangent_product(m.mem_vert, m.mem_par, face, project, h * h, h, u, y)
+        membrane_tangent_product(rows.mem_vert, rows.mem_par, face, project, h * h, h, u, y)
     if on[T_FIBRES]:
-        fibre_tangent_product(m.fib_vert, m.fib_par, m.fib_sched, sched_val, x, project, h * h, u, y)
+        fibre_cached_product(rows.fib_vert, fib, project, h * h, u, y)
     if on[T_PASSIVE]:
-        passive_fibres_tangent_product(m.pf_vert, m.pf_par, x, project, h * h, u, y)
+        passive_fibres_cached_product(rows.pf_vert, pf, project, h * h, u, y)
 
 
 @kernel
-def _masked_product(m, sched_val, x, face, h, project, u, y):
-    newton_product(m, sched_val, x, face, h, project, u, y)
+def _product(m, w, h, project, u, y):
+    """y = the Newton matrix times u, 0 on fixed points: assembled, or with the Hessian
+    projected element by element (the rare projected Newton iteration)."""
+    if not project:
+        matrix_product(w.mat, u, y)
+        return
+    newton_product(m, w.rows, w.face, w.fib, w.pf, h, True, u, y)
     for i in range(y.shape[0]):
         if not m.vert_free[i]:
             y[i, 0] = y[i, 1] = y[i, 2] = 0.0
 
 
 @kernel
-def _preconditioner(m, sched_val, x, face, h, blocks):
-    """blocks = the inverse 3 x 3 diagonal blocks of the Newton matrix (identity on fixed points)."""
-    on = m.term_on
-    n = blocks.shape[0]
-    for i in range(n):
-        c = m.vert_mass[i] + (h * m.damp_coef[i] if on[T_DAMPING] else 0.0)
-        for r in range(9):
-            blocks[i, r] = c if r % 4 == 0 else 0.0
-    if on[T_MEMBRANE]:
-        membrane_tangent_diag(m.mem_vert, m.mem_par, face, h * h, h, blocks)
-    if on[T_FIBRES]:
-        fibre_tangent_diag(m.fib_vert, m.fib_par, m.fib_sched, sched_val, x, h * h, blocks)
-    if on[T_PASSIVE]:
-        passive_fibres_tangent_diag(m.pf_vert, m.pf_par, x, h * h, blocks)
-    for i in range(n):
-        b = blocks[i]
-        if not m.vert_free[i]:
-            for r in range(9):
-                b[r] = 1.0 if r % 4 == 0 else 0.0
-            continue
-        c00 = b[4] * b[8] - b[5] * b[7]
-        c01 = b[2] * b[7] - b[1] * b[8]
-        c02 = b[1] * b[5] - b[2] * b[4]
-        det = b[0] * c00 + b[3] * c01 + b[6] * c02
-        if not det > 0.0:  # cannot happen for a positive definite block; Jacobi then
-            b[0], b[4], b[8] = 1.0 / b[0], 1.0 / b[4], 1.0 / b[8]
-            b[1] = b[2] = b[3] = b[5] = b[6] = b[7] = 0.0
-            continue
-        inv = 1.0 / det
-        c11 = b[0] * b[8] - b[2] * b[6]
-        c12 = b[2] * b[3] - b[0] * b[5]
-        c22 = b[0] * b[4] - b[1] * b[3]
-        c10 = b[5] * b[6] - b[3] * b[8]
-        c20 = b[3] * b[7] - b[4] * b[6]
-        c21 = b[1] * b[6] - b[0] * b[7]
-        b[0], b[1], b[2] = c00 * inv, c01 * inv, c02 * inv
-        b[3], b[4], b[5] = c10 * inv, c11 * inv, c12 * inv
-        b[6], b[7], b[8] = c20 * inv, c21 * inv, c22 * inv
-
-
-@kernel
-def _apply_blocks(blocks, r, z):
-    for i in range(r.shape[0]):
-        b = blocks[i]
-        rx, ry, rz = r[i, 0], r[i, 1], r[i, 2]
-        z[i, 0] = b[0] * rx + b[1] * ry + b[2] * rz
-        z[i, 1] = b[3] * rx + b[4] * ry + b[5] * rz
-        z[i, 2] = b[6] * rx + b[7] * ry + b[8] * rz
-
-
-@kernel
-def _dot(a, b):
+def _dot(free, a, b):
+    """a . b over the points `free` (in order: the other points' rows are zero)."""
     s = 0.0
-    for i in range(a.shape[0]):
+    for i in free:
         s += a[i, 0] * b[i, 0] + a[i, 1] * b[i, 1] + a[i, 2] * b[i, 2]
     return s
 
 
 @kernel
-def _solve(m, sched_val, w, h, project, target, cg_max):
+def _solve(m, w, h, project, target, cg_max):
     """w.cg_x = the preconditioned conjugate gradients' solution of (Newton matrix) x = w.cg_r
-    (rows of fixed points zero), to |residual| <= target or cg_max iterations. Returns the iterations."""
+    (rows of fixed points zero), to |residual| <= target or cg_max iterations. Returns the iterations.
+    The iterations visit the free points alone; x, z, p stay zero on the others."""
     x, r, z, p, q = w.cg_x, w.cg_r, w.cg_z, w.cg_p, w.cg_q
+    free = w.mat.free
     for i in range(x.shape[0]):
         for a in range(3):
-            x[i, a] = 0.0
-    _apply_blocks(w.blocks, r, z)
-    for i in range(p.shape[0]):
+            x[i, a] = z[i, a] = p[i, a] = 0.0
+    sgs_sweep(w.mat, r, z)
+    for i in free:
         for a in range(3):
             p[i, a] = z[i, a]
-    rz = _dot(r, z)
+    rz = _dot(free, r, z)
     for k in range(cg_max):
-        _masked_product(m, sched_val, w.x_try, w.face, h, project, p, q)
-        pq = _dot(p, q)
+        _product(m, w, h, project, p, q)
+        pq = _dot(free, p, q)
         if not pq > 0.0:  # negative curvature (or p = 0): stop with what we have (truncated Newton)
             return -1 if k == 0 else k
         alpha = rz / pq
-        for i in range(x.shape[0]):
+        rr = 0.0
+        for i in free:
             for a in range(3):
                 x[i, a] += alpha * p[i, a]
                 r[i, a] -= alpha * q[i, a]
-        if math.sqrt(_dot(r, r)) <= target:
+            rr += r[i, 0] * r[i, 0] + r[i, 1] * r[i, 1] + r[i, 2] * r[i, 2]
+        if math.sqrt(rr) <= target:
             return k + 1
-        _apply_blocks(w.blocks, r, z)
-        rz_new = _dot(r, z)
+        sgs_sweep(w.mat, r, z)
+        rz_new = _dot(free, r, z)
         beta = rz_new / rz
         rz = rz_new
-        for i in range(p.shape[0]):
+        for i in free:
             for a in range(3):
                 p[i, a] = z[i, a] + beta * p[i, a]
     return cg_max
@@ -398,8 +407,8 @@ def implicit_step(m, s, step, imp):
             for a in range(3):
                 w.x_kv[i, a] = w.x_try[i, a]
         phi = _merit(m, s.sched_val, h, w)
-        membrane_tangent_cache(m.mem_vert, m.mem_par, w.x_try, w.face)
-        _preconditioner(m, s.sched_val, w.x_try, w.face, h, w.blocks)
+        newton_caches(m, w.rows, s.sched_val, w.x_try, w.face, w.fib, w.pf)
+        assemble(m, w.rows, w.face, w.fib, w.pf, h, w.mat)
         # the exact Hessian, its negative curvature ending the conjugate gradients early
         # (truncated Newton); when met at once, the Hessian projected per element instead
         for i in range(n):
@@ -407,12 +416,12 @@ def implicit_step(m, s, step, imp):
                 w.cg_r[i, a] = h * w.res[i, a]
         # solve just accurately enough: FORCING of what convergence asks, at most FORCING of the residual
         eta = min(FORCING, FORCING * tol * scale / rn)
-        k = _solve(m, s.sched_val, w, h, False, eta * h * rn, cg_max)
+        k = _solve(m, w, h, False, eta * h * rn, cg_max)
         if k < 0:
             for i in range(n):
                 for a in range(3):
                     w.cg_r[i, a] = h * w.res[i, a]
-            k = 1 + _solve(m, s.sched_val, w, h, True, eta * h * rn, cg_max)
+            k = 1 + _solve(m, w, h, True, eta * h * rn, cg_max)
             info[I_PROJECTED_TOTAL] += 1
         cg_total += k
         it += 1
@@ -427,7 +436,7 @@ def implicit_step(m, s, step, imp):
         if dx_max <= ulp_x:
             at_roundoff = True
             break
-        slope = -h * _dot(w.res, w.cg_x)  # the potential's derivative along the step (< 0)
+        slope = -h * _dot(w.mat.free, w.res, w.cg_x)  # the potential's derivative along the step (< 0)
         for i in range(n):
             for a in range(3):
                 w.dv[i, a] += w.cg_x[i, a]

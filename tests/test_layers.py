@@ -22,7 +22,7 @@ LAYERS = (
     ("terms", ("terms", "terms.*")),
     ("scene", ("scene", "scenefile", "rigidfile", "demo", "resolve")),
     ("model, rigid", ("model", "rigid", "rigid.*")),
-    ("step", ("step", "readouts", "implicit")),
+    ("step", ("step", "readouts", "implicit", "implicit_matrix")),
     ("coupled step", ("coupling",)),
     ("simulation", ("simulation", "builds")),
     ("observers", ("run", "loads", "record", "record.*", "render", "sweep", "grid", "outputs", "provenance")),

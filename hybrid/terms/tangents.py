@@ -42,6 +42,15 @@ rest is positive semi-definite.
 
 Drag (`hybrid.terms.pointwise.Damping`): F = -c v, Jacobian -c I.
 
+The conjugate gradients multiply by the same matrix dozens of times per Newton
+iteration: the fibre terms' per-triangle data (the stretch, the force-length
+relation, the gradient's edge vectors and the coefficients, exact and projected)
+are computed once per iteration by `fibre_tangent_cache` and
+`passive_fibres_tangent_cache`, and `fibre_cached_product` and
+`passive_fibres_cached_product` read them (as `membrane_tangent_cache` does for the
+membrane). `fibre_tangent_product` and `passive_fibres_tangent_product` compute
+the same products from the positions (the formulas the cached ones are tested against).
+
 The products return the Hessian's sign (positive semi-definite): the force
 Jacobian is minus it.
 """
@@ -54,13 +63,21 @@ from ..kernel import kernel
 from .fibres import MIN_STRETCH, force_length
 from .membrane import P_AREA, P_D00, P_D01, P_D11, P_LAM, P_MU, P_TAU, _edges_and_strain
 
-__all__ = ["NCACHE", "membrane_tangent_cache", "membrane_tangent_product", "membrane_tangent_diag",
-           "fibre_tangent_product", "fibre_tangent_diag", "clamp_stress", "kelvin_voigt_dissipation", "fibre_energy",
-           "passive_fibres_tangent_product", "passive_fibres_tangent_diag", "passive_fibres_energy_kernel"]
+__all__ = ["NCACHE", "NFIB_CACHE", "NPF_CACHE", "fibre_tangent_cache", "fibre_cached_product",
+           "passive_fibres_tangent_cache", "passive_fibres_cached_product", "membrane_tangent_cache",
+           "membrane_tangent_product", "fibre_tangent_product", "clamp_stress", "kelvin_voigt_dissipation",
+           "fibre_energy", "passive_fibres_tangent_product", "passive_fibres_energy_kernel"]
 
 # membrane_tangent_cache columns: F's columns f0, f1 (3 each), the stress S00, S01, S11 (N/m), the
 # projected stress (the same three, its negative eigenvalues clamped)
 NCACHE = 12
+# fibre_tangent_cache columns: per edge k the vector g_k d_k / lambda (9; their sum with signs is
+# grad lambda), the rank-one coefficient exact and projected, the edges' coefficients A T g / lambda g_k
+# exact (3) and projected (3), and A T (0: the triangle pulls nothing, no Hessian)
+NFIB_CACHE = 18
+# passive_fibres_tangent_cache columns: per edge k the vector g_k d_k (9), A0 E_f (0 where slack: no
+# Hessian), e g_k exact (3) and projected (3)
+NPF_CACHE = 16
 
 
 @kernel(inline="always")
@@ -145,39 +162,6 @@ def membrane_tangent_product(mem_vert, mem_par, cache, project, kx, kv, u, y):
         y[c, 2] += cz
 
 
-@kernel
-def membrane_tangent_diag(mem_vert, mem_par, cache, kx, kv, blocks):
-    """blocks += each point's 3 x 3 diagonal block of kx K + kv C, K projected (row-major, (nvert, 9)):
-    per triangle and corner n with weights w = (g_n0, g_n1), q = F w,
-    A0 [kx w^T S w I + cm ((lambda + mu) q q^T + mu |w|^2 F F^T)].
-    """
-    for k in range(mem_vert.shape[0]):
-        p = mem_par[k]
-        q = cache[k]
-        d00, d01, d11 = p[P_D00], p[P_D01], p[P_D11]
-        lam, mu = p[P_LAM], p[P_MU]
-        cm = (kx + kv * p[P_TAU]) * p[P_AREA]
-        kg = kx * p[P_AREA]
-        for corner in range(3):
-            if corner == 0:
-                w0, w1 = -d00, -(d01 + d11)
-            elif corner == 1:
-                w0, w1 = d00, d01
-            else:
-                w0, w1 = 0.0, d11
-            geo = kg * (w0 * w0 * q[9] + 2.0 * w0 * w1 * q[10] + w1 * w1 * q[11])
-            ww = mu * (w0 * w0 + w1 * w1)
-            i = mem_vert[k, corner]
-            for r in range(3):
-                qr = w0 * q[r] + w1 * q[3 + r]
-                for s in range(3):
-                    qs = w0 * q[s] + w1 * q[3 + s]
-                    v = cm * ((lam + mu) * qr * qs + ww * (q[r] * q[s] + q[3 + r] * q[3 + s]))
-                    if r == s:
-                        v += geo
-                    blocks[i, 3 * r + s] += v
-
-
 @kernel(inline="always")
 def _fibre_state(fib_vert, fib_par, fib_sched, sched_val, vert_pos, f):
     """(lambda, A T, g, g') of muscle triangle f (`hybrid.terms.fibres`); below MIN_STRETCH
@@ -225,35 +209,60 @@ def fibre_tangent_product(fib_vert, fib_par, fib_sched, sched_val, vert_pos, pro
 
 
 @kernel
-def fibre_tangent_diag(fib_vert, fib_par, fib_sched, sched_val, vert_pos, kx, blocks):
-    """blocks += kx K at each corner of every muscle triangle (projected)."""
+def fibre_tangent_cache(fib_vert, fib_par, fib_sched, sched_val, vert_pos, cache):
+    """Per muscle triangle, what `fibre_cached_product` reads at vert_pos (NFIB_CACHE columns).
+    # Model: fib_vert, fib_par, fib_sched   # Data in: sched_val, vert_pos   # Data out: cache (nf, NFIB_CACHE)
+    """
     for f in range(fib_vert.shape[0]):
         lam, at, g, dg = _fibre_state(fib_vert, fib_par, fib_sched, sched_val, vert_pos, f)
-        rank1 = kx * max(at * (dg - g / lam), 0.0)
-        edges = kx * at * g / lam
-        for c in range(3):
-            v = fib_vert[f, c]
-            kp = (c + 2) % 3  # grad_v lambda: edge c starts at v (-g d), edge c - 1 ends there (+g d)
-            gx = gy = gz = 0.0
-            lap = 0.0
-            for k, sgn in ((c, -1.0), (kp, 1.0)):
-                i, j = fib_vert[f, k], fib_vert[f, (k + 1) % 3]
-                gk = fib_par[f, k]
-                gx += sgn * gk * (vert_pos[j, 0] - vert_pos[i, 0]) / lam
-                gy += sgn * gk * (vert_pos[j, 1] - vert_pos[i, 1]) / lam
-                gz += sgn * gk * (vert_pos[j, 2] - vert_pos[i, 2]) / lam
-                if edges * gk > 0.0:
-                    lap += edges * gk
-            b = blocks[v]
-            b[0] += rank1 * gx * gx + lap
-            b[1] += rank1 * gx * gy
-            b[2] += rank1 * gx * gz
-            b[3] += rank1 * gy * gx
-            b[4] += rank1 * gy * gy + lap
-            b[5] += rank1 * gy * gz
-            b[6] += rank1 * gz * gx
-            b[7] += rank1 * gz * gy
-            b[8] += rank1 * gz * gz + lap
+        c = cache[f]
+        rank1 = at * (dg - g / lam)
+        edges = at * g / lam
+        c[9], c[10] = rank1, max(rank1, 0.0)
+        c[17] = at
+        for k in range(3):
+            i, j = fib_vert[f, k], fib_vert[f, (k + 1) % 3]
+            gk = fib_par[f, k]
+            for x in range(3):
+                c[3 * k + x] = gk * (vert_pos[j, x] - vert_pos[i, x]) / lam
+            ge = edges * gk
+            c[11 + k], c[14 + k] = ge, max(ge, 0.0)
+
+
+@kernel
+def fibre_cached_product(fib_vert, cache, project, kx, u, y):
+    """y += kx K u for the muscle triangles' Hessian K (projected when `project`), from
+    `fibre_tangent_cache`: `fibre_tangent_product` without recomputing the triangles.
+    # Model: fib_vert   # Data in: cache, u   # Data out: y, added to
+    """
+    r1 = 10 if project else 9
+    e0 = 14 if project else 11
+    for f in range(fib_vert.shape[0]):
+        c = cache[f]
+        if c[17] == 0.0:  # no tension
+            continue
+        i0, i1, i2 = fib_vert[f, 0], fib_vert[f, 1], fib_vert[f, 2]
+        # edge k's du = u_(k+1) - u_k
+        d0x, d0y, d0z = u[i1, 0] - u[i0, 0], u[i1, 1] - u[i0, 1], u[i1, 2] - u[i0, 2]
+        d1x, d1y, d1z = u[i2, 0] - u[i1, 0], u[i2, 1] - u[i1, 1], u[i2, 2] - u[i1, 2]
+        d2x, d2y, d2z = u[i0, 0] - u[i2, 0], u[i0, 1] - u[i2, 1], u[i0, 2] - u[i2, 2]
+        au = (c[0] * d0x + c[1] * d0y + c[2] * d0z + c[3] * d1x + c[4] * d1y + c[5] * d1z
+              + c[6] * d2x + c[7] * d2y + c[8] * d2z)
+        s = kx * c[r1] * au
+        g0, g1, g2 = kx * c[e0], kx * c[e0 + 1], kx * c[e0 + 2]
+        # edge k pushes its end j by t_k and its start i by -t_k
+        t0x, t0y, t0z = s * c[0] + g0 * d0x, s * c[1] + g0 * d0y, s * c[2] + g0 * d0z
+        t1x, t1y, t1z = s * c[3] + g1 * d1x, s * c[4] + g1 * d1y, s * c[5] + g1 * d1z
+        t2x, t2y, t2z = s * c[6] + g2 * d2x, s * c[7] + g2 * d2y, s * c[8] + g2 * d2z
+        y[i0, 0] += t2x - t0x
+        y[i0, 1] += t2y - t0y
+        y[i0, 2] += t2z - t0z
+        y[i1, 0] += t0x - t1x
+        y[i1, 1] += t0y - t1y
+        y[i1, 2] += t0z - t1z
+        y[i2, 0] += t1x - t2x
+        y[i2, 1] += t1y - t2y
+        y[i2, 2] += t1z - t2z
 
 
 @kernel
@@ -346,37 +355,56 @@ def passive_fibres_tangent_product(pf_vert, pf_par, vert_pos, project, kx, u, y)
 
 
 @kernel
-def passive_fibres_tangent_diag(pf_vert, pf_par, vert_pos, kx, blocks):
-    """blocks += kx K at each corner of every stretched triangle (projected)."""
+def passive_fibres_tangent_cache(pf_vert, pf_par, vert_pos, cache):
+    """Per passive-fibre triangle, what `passive_fibres_cached_product` reads at vert_pos (NPF_CACHE columns).
+    # Model: pf_vert, pf_par   # Data in: vert_pos   # Data out: cache (nf, NPF_CACHE)
+    """
     for f in range(pf_vert.shape[0]):
         e = _passive_strain(pf_vert, pf_par, vert_pos, f)
+        c = cache[f]
         if e <= 0.0:
+            c[9] = 0.0
             continue
-        ae = kx * pf_par[f, 6]
-        for c in range(3):
-            v = pf_vert[f, c]
-            # grad_v e: from edge c (v its start: -g d) and edge c - 1 (v its end: +g d)
-            kp = (c + 2) % 3
-            gx = gy = gz = 0.0
-            lap = 0.0
-            for k, sgn in ((c, -1.0), (kp, 1.0)):
-                i, j = pf_vert[f, k], pf_vert[f, (k + 1) % 3]
-                g = pf_par[f, k]
-                gx += sgn * g * (vert_pos[j, 0] - vert_pos[i, 0])
-                gy += sgn * g * (vert_pos[j, 1] - vert_pos[i, 1])
-                gz += sgn * g * (vert_pos[j, 2] - vert_pos[i, 2])
-                if g > 0.0:
-                    lap += g
-            b = blocks[v]
-            b[0] += ae * (gx * gx + e * lap)
-            b[1] += ae * gx * gy
-            b[2] += ae * gx * gz
-            b[3] += ae * gy * gx
-            b[4] += ae * (gy * gy + e * lap)
-            b[5] += ae * gy * gz
-            b[6] += ae * gz * gx
-            b[7] += ae * gz * gy
-            b[8] += ae * (gz * gz + e * lap)
+        c[9] = pf_par[f, 6]
+        for k in range(3):
+            i, j = pf_vert[f, k], pf_vert[f, (k + 1) % 3]
+            g = pf_par[f, k]
+            for x in range(3):
+                c[3 * k + x] = g * (vert_pos[j, x] - vert_pos[i, x])
+            c[10 + k], c[13 + k] = e * g, e * max(g, 0.0)
+
+
+@kernel
+def passive_fibres_cached_product(pf_vert, cache, project, kx, u, y):
+    """y += kx K u for the passive fibres' Hessian K (projected when `project`), from
+    `passive_fibres_tangent_cache`: `passive_fibres_tangent_product` without recomputing the triangles.
+    # Model: pf_vert   # Data in: cache, u   # Data out: y, added to
+    """
+    e0 = 13 if project else 10
+    for f in range(pf_vert.shape[0]):
+        c = cache[f]
+        if c[9] == 0.0:  # slack
+            continue
+        i0, i1, i2 = pf_vert[f, 0], pf_vert[f, 1], pf_vert[f, 2]
+        d0x, d0y, d0z = u[i1, 0] - u[i0, 0], u[i1, 1] - u[i0, 1], u[i1, 2] - u[i0, 2]
+        d1x, d1y, d1z = u[i2, 0] - u[i1, 0], u[i2, 1] - u[i1, 1], u[i2, 2] - u[i1, 2]
+        d2x, d2y, d2z = u[i0, 0] - u[i2, 0], u[i0, 1] - u[i2, 1], u[i0, 2] - u[i2, 2]
+        ae = kx * c[9]
+        s = ae * (c[0] * d0x + c[1] * d0y + c[2] * d0z + c[3] * d1x + c[4] * d1y + c[5] * d1z
+                  + c[6] * d2x + c[7] * d2y + c[8] * d2z)
+        g0, g1, g2 = ae * c[e0], ae * c[e0 + 1], ae * c[e0 + 2]
+        t0x, t0y, t0z = s * c[0] + g0 * d0x, s * c[1] + g0 * d0y, s * c[2] + g0 * d0z
+        t1x, t1y, t1z = s * c[3] + g1 * d1x, s * c[4] + g1 * d1y, s * c[5] + g1 * d1z
+        t2x, t2y, t2z = s * c[6] + g2 * d2x, s * c[7] + g2 * d2y, s * c[8] + g2 * d2z
+        y[i0, 0] += t2x - t0x
+        y[i0, 1] += t2y - t0y
+        y[i0, 2] += t2z - t0z
+        y[i1, 0] += t0x - t1x
+        y[i1, 1] += t0y - t1y
+        y[i1, 2] += t0z - t1z
+        y[i2, 0] += t1x - t2x
+        y[i2, 1] += t1y - t2y
+        y[i2, 2] += t1z - t2z
 
 
 @kernel

@@ -6,13 +6,14 @@ import numpy as np
 import pytest
 
 from hybrid import Damping, HalfSpace, Masses, Membrane, MuscleFibres, Scene
-from hybrid.implicit import implicit_forces, newton_product
+from hybrid.implicit import implicit_forces, newton_caches, newton_product, newton_rows
 from hybrid.mesh import irregular_sphere
 from hybrid.model import compile_scene
 from hybrid.terms.fibres import MIN_STRETCH, add_muscle_fibres
 from hybrid.terms.membrane import add_membrane_serial
-from hybrid.terms.tangents import (NCACHE, fibre_energy, fibre_tangent_diag, fibre_tangent_product,
-                                   membrane_tangent_cache, membrane_tangent_diag, membrane_tangent_product)
+from hybrid.terms.tangents import (NCACHE, NFIB_CACHE, NPF_CACHE, fibre_cached_product, fibre_energy,
+                                   fibre_tangent_cache, fibre_tangent_product, membrane_tangent_cache,
+                                   membrane_tangent_product)
 
 R = 0.12
 TENSION = 40.0  # N/m
@@ -191,11 +192,13 @@ def test_the_newton_matrix_against_finite_differences_of_the_implicit_forces(mod
     zero = np.zeros_like(x)
     v = 0.05 * np.random.default_rng(7).standard_normal(x.shape)
     face = np.zeros((a.mem_vert.shape[0], NCACHE))
-    membrane_tangent_cache(a.mem_vert, a.mem_par, x, face)
+    fib = np.zeros((a.fib_vert.shape[0], NFIB_CACHE))
+    pf = np.zeros((a.pf_vert.shape[0], NPF_CACHE))
+    newton_caches(a, a, sv, x, face, fib, pf)
 
     def product(u):
         y = np.zeros_like(u)
-        newton_product(a, sv, x, face, h, False, u, y)
+        newton_product(a, a, face, fib, pf, h, False, u, y)
         return y
 
     def forces(y, w):
@@ -208,26 +211,6 @@ def test_the_newton_matrix_against_finite_differences_of_the_implicit_forces(mod
     mass = np.diag(np.repeat(a.vert_mass, 3))
     expected = mass - h * h * dfdx - h * dfdv
     assert rel_error(newton - mass, expected - mass) <= 1e-6
-
-
-def test_the_diagonal_blocks_are_those_of_the_matrix(model):
-    a = model.arrays
-    x = deformed(model, 8)
-    sv = sched(model)
-    n = x.shape[0]
-    kx, kv = 4e-6, 2e-3
-    mat, cache = membrane_matrix(a, x, kx, kv, True)
-
-    def product(u):
-        y = np.zeros_like(u)
-        fibre_tangent_product(a.fib_vert, a.fib_par, a.fib_sched, sv, x, True, kx, u, y)
-        return y
-    mat += columns(n, product)
-    blocks = np.zeros((n, 9))
-    membrane_tangent_diag(a.mem_vert, a.mem_par, cache, kx, kv, blocks)
-    fibre_tangent_diag(a.fib_vert, a.fib_par, a.fib_sched, sv, x, kx, blocks)
-    want = np.stack([mat[3 * i:3 * i + 3, 3 * i:3 * i + 3].ravel() for i in range(n)])
-    assert np.abs(blocks - want).max() <= 1e-12 * np.abs(want).max()
 
 
 def test_the_projected_element_hessian_is_psd_and_exact_where_the_exact_one_is(model):
@@ -255,15 +238,14 @@ def test_the_projected_element_hessian_is_psd_and_exact_where_the_exact_one_is(m
     assert convex >= 5 and indefinite >= 5, (convex, indefinite)
 
 
-def test_the_passive_fibre_hessian_is_minus_the_force_jacobian_and_its_blocks_and_energy():
+def test_the_passive_fibre_hessian_is_minus_the_force_jacobian_and_its_energy():
     """Passive fibres around the z axis on the deformed sphere (stretched triangles and
     slack ones): the exact Hessian against central differences of the compiled force,
-    the projected one positive semi-definite with the diagonal blocks as given, and the
-    compiled energy the numpy one."""
+    the projected one positive semi-definite, and the compiled energy the numpy one
+    (the assembled blocks: tests/test_implicit_matrix.py)."""
     from hybrid import PassiveFibres
     from hybrid.terms.passive_fibres import add_passive_fibres, passive_fibres_energy
-    from hybrid.terms.tangents import (passive_fibres_energy_kernel, passive_fibres_tangent_diag,
-                                       passive_fibres_tangent_product)
+    from hybrid.terms.tangents import passive_fibres_energy_kernel, passive_fibres_tangent_product
     mesh = irregular_sphere(40, R, seed=2)
     a = compile_scene(Scene(mesh=mesh, masses=Masses(total_kg=1.0), integrator="implicit_euler", forces=(
         Membrane(800.0), PassiveFibres(modulus_n_per_m=600.0, around_axis=(0.0, 0.0, 1.0))))).arrays
@@ -285,9 +267,85 @@ def test_the_passive_fibre_hessian_is_minus_the_force_jacobian_and_its_blocks_an
     assert np.abs(exact).max() > 0
     assert rel_error(-exact, finite_difference(force, x, 1e-7)) <= 1e-6
     assert np.linalg.eigvalsh(0.5 * (proj + proj.T)).min() >= -1e-12 * np.abs(proj).max()
-    blocks = np.zeros((n, 9))
-    passive_fibres_tangent_diag(a.pf_vert, a.pf_par, x, 1.0, blocks)
-    want = np.stack([proj[3 * i:3 * i + 3, 3 * i:3 * i + 3].ravel() for i in range(n)])
-    assert np.abs(blocks - want).max() <= 1e-12 * np.abs(want).max()
     energy = passive_fibres_energy_kernel(a.pf_vert, a.pf_par, x)
     assert energy > 0 and energy == pytest.approx(passive_fibres_energy(a.pf_vert, a.pf_par, x), rel=1e-12)
+
+
+@pytest.mark.parametrize("project", [False, True], ids=["exact", "projected"])
+def test_the_cached_fibre_products_are_the_direct_ones(model, project):
+    """The conjugate gradients' products from the per-triangle caches against the
+    products computed from the positions: muscle fibres with and without the force-length
+    relation (some triangles below MIN_STRETCH, a schedule row at zero tension), passive
+    fibres stretched and slack; to 1e-12 of the largest entry."""
+    from hybrid import PassiveFibres
+    from hybrid.terms.tangents import (passive_fibres_cached_product, passive_fibres_tangent_cache,
+                                       passive_fibres_tangent_product)
+    a = model.arrays
+    x = deformed(model, 12)
+    for f in range(0, a.fib_vert.shape[0], 7):  # a few triangles shrunk below MIN_STRETCH
+        tri = a.fib_vert[f]
+        x[tri] = x[tri].mean(axis=0) + 0.02 * (x[tri] - x[tri].mean(axis=0))
+    rng = np.random.default_rng(13)
+    u = rng.standard_normal(x.shape)
+    sv = sched(model)
+    kx = 3e-5
+    for width, tension in ((0.0, TENSION), (0.5, TENSION), (0.5, 0.0)):
+        par = a.fib_par.copy()
+        par[:, 4] = width
+        sv[:, 0] = tension
+        cache = np.zeros((a.fib_vert.shape[0], NFIB_CACHE))
+        fibre_tangent_cache(a.fib_vert, par, a.fib_sched, sv, x, cache)
+        want, got = np.zeros_like(u), np.zeros_like(u)
+        fibre_tangent_product(a.fib_vert, par, a.fib_sched, sv, x, project, kx, u, want)
+        fibre_cached_product(a.fib_vert, cache, project, kx, u, got)
+        if tension == 0.0:
+            assert np.abs(want).max() == 0.0 and np.abs(got).max() == 0.0
+        else:
+            assert np.abs(want).max() > 0.0
+            assert np.abs(got - want).max() <= 1e-12 * np.abs(want).max()
+    mesh = irregular_sphere(40, R, seed=2)
+    p = compile_scene(Scene(mesh=mesh, masses=Masses(total_kg=1.0), integrator="implicit_euler", forces=(
+        Membrane(800.0), PassiveFibres(modulus_n_per_m=600.0, around_axis=(0.0, 0.0, 1.0))))).arrays
+    x = deformed(model, 14)
+    cache = np.zeros((p.pf_vert.shape[0], NPF_CACHE))
+    passive_fibres_tangent_cache(p.pf_vert, p.pf_par, x, cache)
+    slack = int((cache[:, 9] == 0.0).sum())
+    assert 0 < slack < p.pf_vert.shape[0]
+    want, got = np.zeros_like(u), np.zeros_like(u)
+    passive_fibres_tangent_product(p.pf_vert, p.pf_par, x, project, kx, u, want)
+    passive_fibres_cached_product(p.pf_vert, cache, project, kx, u, got)
+    assert np.abs(want).max() > 0.0
+    assert np.abs(got - want).max() <= 1e-12 * np.abs(want).max()
+
+
+def test_the_newton_rows_skip_only_triangles_of_fixed_points():
+    """With the points below z = 0.04 m not integrated (as points linked to a rigid body: their
+    triangles kept), the Newton matrix's product from `newton_rows` (the triangles with a free
+    corner) is the product from every triangle on the free points."""
+    from hybrid import PassiveFibres
+    mesh = irregular_sphere(40, R, seed=2)
+    a = compile_scene(Scene(mesh=mesh, masses=Masses(total_kg=1.0), integrator="implicit_euler", forces=(
+        Membrane(800.0, damping_time_s=0.02), PassiveFibres(modulus_n_per_m=600.0, around_axis=(0.0, 0.0, 1.0)),
+        MuscleFibres(HalfSpace((0.0, 0.0, -0.03), (0.0, 0.0, 1.0)), TENSION, toward_m=(0.0, 0.0, R)),
+        Damping(drag_n_s_per_m3=30.0)))).arrays
+    a = a._replace(vert_free=(a.vert_rest[:, 2] >= 0.04).astype(np.uint8))
+    rows = newton_rows(a)
+    free = a.vert_free != 0
+    assert 0 < free.sum() < free.size
+    kept = [getattr(rows, name).shape[0] for name in ("mem_vert", "fib_vert", "pf_vert")]
+    every = [getattr(a, name).shape[0] for name in ("mem_vert", "fib_vert", "pf_vert")]
+    assert min(kept) > 0 and sum(kept) < sum(every), (kept, every)
+    x = a.vert_rest + 0.01 * np.random.default_rng(15).standard_normal(a.vert_rest.shape)
+    u = np.random.default_rng(16).standard_normal(x.shape)
+    sv = np.full((a.sched.kind.shape[0], 3), TENSION)
+    out = []
+    for r in (a, rows):
+        face = np.zeros((r.mem_vert.shape[0], NCACHE))
+        fib = np.zeros((r.fib_vert.shape[0], NFIB_CACHE))
+        pf = np.zeros((r.pf_vert.shape[0], NPF_CACHE))
+        newton_caches(a, r, sv, x, face, fib, pf)
+        y = np.zeros_like(u)
+        newton_product(a, r, face, fib, pf, 2e-3, False, u, y)
+        out.append(y[free])
+    assert np.abs(out[0]).max() > 0.0
+    assert np.abs(out[1] - out[0]).max() <= 1e-12 * np.abs(out[0]).max()

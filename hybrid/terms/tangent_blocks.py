@@ -1,0 +1,159 @@
+"""The 3 x 3 blocks of the element Hessians (`hybrid.terms.tangents`), added into an
+assembled block-sparse matrix, and the diagonal blocks of the projected ones: what
+implicit Euler's conjugate gradients multiply by and precondition with
+(`hybrid.implicit_matrix`).
+
+Each element adds, for each ordered pair of its corners (m, n), its block K_mn to the
+matrix slot `slot[element, 3 m + n]` (-1: a corner is fixed, no slot), and its
+projected K_nn to the row of corner n in `pdiag`. With the
+corner weights w_n of F = sum_n x_n w_n^T (w_0 = -(d00, d01 + d11), w_1 = (d00, d01),
+w_2 = (0, d11)) and q_n = F w_n:
+
+    membrane  A0 [kx (w_m^T S w_n) I + cm (lambda q_m q_n^T + mu q_n q_m^T + mu (w_m . w_n) F F^T)],
+    fibres    kx (r G_m G_n^T + L_mn I), G_n = grad_n lambda (or grad_n e),
+
+cm = kx + kv tau, S the stress (the clamped one projected), r the rank-one coefficient
+and L the edges' Laplacian with their coefficients (the tangent caches' exact or
+projected columns). K_nm = K_mn^T: each pair is computed once.
+"""
+
+from __future__ import annotations
+
+from ..kernel import kernel
+from .membrane import P_AREA, P_D00, P_D01, P_D11, P_LAM, P_MU, P_TAU
+
+__all__ = ["membrane_tangent_blocks", "fibre_tangent_blocks", "passive_fibres_tangent_blocks"]
+
+
+@kernel(inline="always")
+def _add_block(mat, s, t, v0, v1, v2, v3, v4, v5, v6, v7, v8, diag):
+    """mat[s] += v + diag I (v row-major) and mat[t] += its transpose (t < 0: no slot;
+    t == s: a diagonal block, added once)."""
+    b = mat[s]
+    b[0] += v0 + diag
+    b[1] += v1
+    b[2] += v2
+    b[3] += v3
+    b[4] += v4 + diag
+    b[5] += v5
+    b[6] += v6
+    b[7] += v7
+    b[8] += v8 + diag
+    if t < 0 or t == s:
+        return
+    b = mat[t]
+    b[0] += v0 + diag
+    b[1] += v3
+    b[2] += v6
+    b[3] += v1
+    b[4] += v4 + diag
+    b[5] += v7
+    b[6] += v2
+    b[7] += v5
+    b[8] += v8 + diag
+
+
+@kernel(inline="always")
+def _corner_weights(d00, d01, d11, n):
+    if n == 0:
+        return -d00, -(d01 + d11)
+    if n == 1:
+        return d00, d01
+    return 0.0, d11
+
+
+@kernel
+def membrane_tangent_blocks(mem_vert, mem_par, cache, kx, kv, slot, amat, pdiag):
+    """amat[slot] += the blocks of kx K + kv C; pdiag[corner] += the diagonal ones with K projected.
+    # Model: mem_vert, mem_par   # Data in: cache (membrane_tangent_cache), slot (nf, 9) int64
+    # Data out: amat (nblocks, 9), pdiag (nvert, 9) row-major blocks, added to
+    """
+    for k in range(mem_vert.shape[0]):
+        p = mem_par[k]
+        c = cache[k]
+        d00, d01, d11 = p[P_D00], p[P_D01], p[P_D11]
+        lam, mu, area = p[P_LAM], p[P_MU], p[P_AREA]
+        cm = (kx + kv * p[P_TAU]) * area
+        kg = kx * area
+        cl, cu = cm * lam, cm * mu
+        f0x, f0y, f0z, f1x, f1y, f1z = c[0], c[1], c[2], c[3], c[4], c[5]
+        # F F^T
+        a00, a01, a02 = f0x * f0x + f1x * f1x, f0x * f0y + f1x * f1y, f0x * f0z + f1x * f1z
+        a11, a12, a22 = f0y * f0y + f1y * f1y, f0y * f0z + f1y * f1z, f0z * f0z + f1z * f1z
+        for m in range(3):
+            wm0, wm1 = _corner_weights(d00, d01, d11, m)
+            qmx, qmy, qmz = wm0 * f0x + wm1 * f1x, wm0 * f0y + wm1 * f1y, wm0 * f0z + wm1 * f1z
+            for n in range(m, 3):
+                s = slot[k, 3 * m + n]
+                if s < 0:
+                    continue
+                wn0, wn1 = _corner_weights(d00, d01, d11, n)
+                qnx, qny, qnz = wn0 * f0x + wn1 * f1x, wn0 * f0y + wn1 * f1y, wn0 * f0z + wn1 * f1z
+                w00, w01, w11 = wm0 * wn0, wm0 * wn1 + wm1 * wn0, wm1 * wn1
+                geo_e = kg * (w00 * c[6] + w01 * c[7] + w11 * c[8])
+                ww = cu * (w00 + w11)
+                v0 = cl * qmx * qnx + cu * qnx * qmx + ww * a00
+                v1 = cl * qmx * qny + cu * qnx * qmy + ww * a01
+                v2 = cl * qmx * qnz + cu * qnx * qmz + ww * a02
+                v3 = cl * qmy * qnx + cu * qny * qmx + ww * a01
+                v4 = cl * qmy * qny + cu * qny * qmy + ww * a11
+                v5 = cl * qmy * qnz + cu * qny * qmz + ww * a12
+                v6 = cl * qmz * qnx + cu * qnz * qmx + ww * a02
+                v7 = cl * qmz * qny + cu * qnz * qmy + ww * a12
+                v8 = cl * qmz * qnz + cu * qnz * qmz + ww * a22
+                t = slot[k, 3 * n + m]
+                _add_block(amat, s, t, v0, v1, v2, v3, v4, v5, v6, v7, v8, geo_e)
+                if m == n:
+                    geo_p = kg * (w00 * c[9] + w01 * c[10] + w11 * c[11])
+                    _add_block(pdiag, mem_vert[k, m], -1, v0, v1, v2, v3, v4, v5, v6, v7, v8, geo_p)
+
+
+@kernel(inline="always")
+def _edge_blocks(tri, c, slot, scale, rank_e, rank_p, e_col, p_col, amat, pdiag):
+    """The blocks of scale (rank G_m G_n^T + L_mn I) of a fibre triangle from its cache row c:
+    columns 0..8 the edge vectors (edge k from corner k to k + 1), e_col / p_col the first
+    of the edges' exact / projected Laplacian coefficients."""
+    re, rp = scale * rank_e, scale * rank_p
+    for m in range(3):
+        mp = (m + 2) % 3  # the edge that ends at m
+        gmx, gmy, gmz = c[3 * mp] - c[3 * m], c[3 * mp + 1] - c[3 * m + 1], c[3 * mp + 2] - c[3 * m + 2]
+        for n in range(m, 3):
+            s = slot[3 * m + n]
+            if s < 0:
+                continue
+            nq = (n + 2) % 3
+            gnx, gny, gnz = c[3 * nq] - c[3 * n], c[3 * nq + 1] - c[3 * n + 1], c[3 * nq + 2] - c[3 * n + 2]
+            if m == n:  # edges m and m - 1 meet at m
+                lap_e = scale * (c[e_col + m] + c[e_col + mp])
+            else:
+                k = m if n == (m + 1) % 3 else n  # the edge joining m and n
+                lap_e = -scale * c[e_col + k]
+            g0, g1, g2 = gmx * gnx, gmx * gny, gmx * gnz
+            g3, g4, g5 = gmy * gnx, gmy * gny, gmy * gnz
+            g6, g7, g8 = gmz * gnx, gmz * gny, gmz * gnz
+            _add_block(amat, s, slot[3 * n + m], re * g0, re * g1, re * g2, re * g3, re * g4, re * g5, re * g6,
+                       re * g7, re * g8, lap_e)
+            if m == n:
+                lap_p = scale * (c[p_col + m] + c[p_col + mp])
+                _add_block(pdiag, tri[m], -1, rp * g0, rp * g1, rp * g2, rp * g3, rp * g4, rp * g5, rp * g6, rp * g7,
+                           rp * g8, lap_p)
+
+
+@kernel
+def fibre_tangent_blocks(fib_vert, cache, kx, slot, amat, pdiag):
+    """amat[slot] += the muscle fibres' blocks of kx K, pdiag[corner] += the diagonal ones of K
+    projected, from `fibre_tangent_cache`."""
+    for f in range(fib_vert.shape[0]):
+        c = cache[f]
+        if c[17] != 0.0:
+            _edge_blocks(fib_vert[f], c, slot[f], kx, c[9], c[10], 11, 14, amat, pdiag)
+
+
+@kernel
+def passive_fibres_tangent_blocks(pf_vert, cache, kx, slot, amat, pdiag):
+    """amat[slot] += the passive fibres' blocks of kx K, pdiag[corner] += the diagonal ones of
+    K projected, from `passive_fibres_tangent_cache`."""
+    for f in range(pf_vert.shape[0]):
+        c = cache[f]
+        if c[9] != 0.0:
+            _edge_blocks(pf_vert[f], c, slot[f], kx * c[9], 1.0, 1.0, 10, 13, amat, pdiag)

@@ -1,0 +1,107 @@
+"""Implicit Euler's assembled Newton matrix (hybrid.implicit_matrix): its blocks are those
+of the element-by-element product, its product is theirs, its diagonal blocks D those of
+the projected product, and the preconditioner's sweep is (D + U)^-1 D (D + L)^-1; on a
+small irregular mesh with every tangent term and points that are not integrated."""
+
+import numpy as np
+import pytest
+
+from hybrid import Damping, HalfSpace, Masses, Membrane, MuscleFibres, PassiveFibres, Scene
+from hybrid.implicit import newton_caches, newton_product, newton_rows
+from hybrid.implicit_matrix import assemble, matrix_product, newton_matrix, sgs_sweep
+from hybrid.mesh import irregular_sphere
+from hybrid.model import compile_scene
+from hybrid.terms.tangents import NCACHE, NFIB_CACHE, NPF_CACHE
+
+R = 0.12
+H = 2e-3
+
+
+@pytest.fixture(scope="module")
+def setup():
+    mesh = irregular_sphere(40, R, seed=3)
+    a = compile_scene(Scene(mesh=mesh, masses=Masses(total_kg=1.0), integrator="implicit_euler", forces=(
+        Membrane(800.0, damping_time_s=0.02), PassiveFibres(modulus_n_per_m=600.0, around_axis=(0.0, 0.0, 1.0)),
+        MuscleFibres(HalfSpace((0.0, 0.0, -0.03), (0.0, 0.0, 1.0)), 40.0, toward_m=(0.0, 0.0, R),
+                     force_length_width=0.5),
+        Damping(drag_n_s_per_m3=30.0)))).arrays
+    # points below z = -0.06 m not integrated (as linked ones): their rows and columns are not assembled
+    a = a._replace(vert_free=(a.vert_rest[:, 2] >= -0.06).astype(np.uint8))
+    n = a.vert_rest.shape[0]
+    # compressed (negative stress: the projection matters) and stretched triangles
+    x = a.vert_rest + 0.01 * np.random.default_rng(4).standard_normal((n, 3))
+    sv = np.full((a.sched.kind.shape[0], 3), 40.0)
+    rows = newton_rows(a)
+    face, fib = np.zeros((rows.mem_vert.shape[0], NCACHE)), np.zeros((rows.fib_vert.shape[0], NFIB_CACHE))
+    pf = np.zeros((rows.pf_vert.shape[0], NPF_CACHE))
+    newton_caches(a, rows, sv, x, face, fib, pf)
+    assert (face[:, 6:9] != face[:, 9:12]).any(axis=1).sum() > 0  # clamped stresses
+    assert 0 < (pf[:, 9] != 0.0).sum() < pf.shape[0]  # stretched and slack passive fibres
+    assert (fib[:, 9] != fib[:, 10]).any() or (fib[:, 11:14] != fib[:, 14:17]).any()  # projected fibres
+    mat = newton_matrix(n, a.vert_free, rows.mem_vert, rows.fib_vert, rows.pf_vert)
+    assemble(a, rows, face, fib, pf, H, mat)
+    return a, rows, face, fib, pf, mat
+
+
+def dense(n, product):
+    out = np.zeros((3 * n, 3 * n))
+    for j in range(3 * n):
+        u, y = np.zeros((n, 3)), np.zeros((n, 3))
+        u.flat[j] = 1.0
+        product(u, y)
+        out[:, j] = y.ravel()
+    return out
+
+
+def blocks_of(mat, n, blocks):
+    out = np.zeros((3 * n, 3 * n))
+    for i in range(n):
+        for k in range(mat.row_ptr[i], mat.row_ptr[i + 1]):
+            j = mat.col[k]
+            out[3 * i:3 * i + 3, 3 * j:3 * j + 3] = blocks[k].reshape(3, 3)
+    return out
+
+
+def test_the_assembled_blocks_are_the_element_products(setup):
+    a, rows, face, fib, pf, mat = setup
+    n = a.vert_rest.shape[0]
+    free = np.repeat(a.vert_free != 0, 3)
+    want, proj = (dense(n, lambda u, y: newton_product(a, rows, face, fib, pf, H, project, u, y))
+                  for project in (False, True))
+    for m_ in (want, proj):
+        m_[~free, :] = 0.0
+        m_[:, ~free] = 0.0
+    scale = np.abs(want).max()
+    assert np.abs(blocks_of(mat, n, mat.amat) - want).max() <= 1e-12 * scale
+    one = np.kron(np.eye(n), np.ones((3, 3)))
+    assert np.abs(want - one * want).max() > 1e-3 * scale  # the blocks couple points
+    assert np.abs(dense(n, lambda u, y: matrix_product(mat, u, y)) - want).max() <= 1e-12 * scale
+    pdiag = np.stack([proj[3 * i:3 * i + 3, 3 * i:3 * i + 3].ravel() for i in range(n)])
+    exact_diag = np.stack([want[3 * i:3 * i + 3, 3 * i:3 * i + 3].ravel() for i in range(n)])
+    assert np.abs(pdiag - exact_diag).max() > 0.0  # the projection changes some
+    fr = a.vert_free != 0
+    assert np.abs(mat.pdiag[fr] - pdiag[fr]).max() <= 1e-12 * scale
+
+
+def test_the_sweep_is_symmetric_gauss_seidel_with_the_projected_diagonal(setup):
+    a, rows, face, fib, pf, mat = setup
+    n = a.vert_rest.shape[0]
+    fr = a.vert_free != 0
+    free = np.repeat(fr, 3)
+    exact = blocks_of(mat, n, mat.amat)
+    one = np.kron(np.eye(n), np.ones((3, 3)))
+    diag = np.zeros((3 * n, 3 * n))
+    for i in range(n):
+        diag[3 * i:3 * i + 3, 3 * i:3 * i + 3] = mat.pdiag[i].reshape(3, 3)
+    off = exact - one * exact
+    lower = (np.tril(off) + diag)[np.ix_(free, free)]
+    upper = (np.triu(off) + diag)[np.ix_(free, free)]
+    d = diag[np.ix_(free, free)]
+    assert np.linalg.eigvalsh(d).min() > 0.0
+    r = np.random.default_rng(5).standard_normal((n, 3))
+    r[~fr] = 0.0
+    z = np.zeros_like(r)
+    sgs_sweep(mat, r, z)
+    want = np.linalg.solve(upper, d @ np.linalg.solve(lower, r[fr].ravel()))
+    assert np.abs(z[fr].ravel() - want).max() <= 1e-10 * np.abs(want).max()
+    assert np.abs(z[~fr]).max() == 0.0
