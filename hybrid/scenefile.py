@@ -185,8 +185,9 @@ def _selector(ctx, path, v, depth=0):
     if kind == "wedge":
         _table(ctx, p, arg)
         _keys(ctx, p, arg, ("from_deg", "to_deg", "center"), ("from_deg", "to_deg"))
-        return R.Wedge(_num(ctx, f"{p}.from_deg", arg["from_deg"], lo=-360.0, hi=360.0),
-                       _num(ctx, f"{p}.to_deg", arg["to_deg"], lo=-360.0, hi=360.0),
+        turn = dict(lo=-360.0, hi=360.0, lo_open=False, hi_open=False)
+        return R.Wedge(_num(ctx, f"{p}.from_deg", arg["from_deg"], **turn),
+                       _num(ctx, f"{p}.to_deg", arg["to_deg"], **turn),
                        _vec3(ctx, f"{p}.center", arg["center"]) if "center" in arg else (0.0, 0.0, 0.0))
     if kind == "nearest":
         return R.Nearest(_vec3_list(ctx, p, arg))

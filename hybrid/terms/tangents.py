@@ -229,6 +229,31 @@ def fibre_tangent_cache(fib_vert, fib_par, fib_sched, sched_val, vert_pos, cache
             c[11 + k], c[14 + k] = ge, max(ge, 0.0)
 
 
+@kernel(inline="always")
+def _edge_product(c, e0, s_scale, g_scale, i0, i1, i2, u, y):
+    """One fibre triangle's cached Hessian product, added to y: with a = c[0:9] . du (du
+    the edges' u_(k+1) - u_k), edge k pushes its end by t_k = s_scale a c[3k:3k+3] +
+    g_scale c[e0 + k] du_k and its start by -t_k."""
+    d0x, d0y, d0z = u[i1, 0] - u[i0, 0], u[i1, 1] - u[i0, 1], u[i1, 2] - u[i0, 2]
+    d1x, d1y, d1z = u[i2, 0] - u[i1, 0], u[i2, 1] - u[i1, 1], u[i2, 2] - u[i1, 2]
+    d2x, d2y, d2z = u[i0, 0] - u[i2, 0], u[i0, 1] - u[i2, 1], u[i0, 2] - u[i2, 2]
+    s = s_scale * (c[0] * d0x + c[1] * d0y + c[2] * d0z + c[3] * d1x + c[4] * d1y + c[5] * d1z
+                   + c[6] * d2x + c[7] * d2y + c[8] * d2z)
+    g0, g1, g2 = g_scale * c[e0], g_scale * c[e0 + 1], g_scale * c[e0 + 2]
+    t0x, t0y, t0z = s * c[0] + g0 * d0x, s * c[1] + g0 * d0y, s * c[2] + g0 * d0z
+    t1x, t1y, t1z = s * c[3] + g1 * d1x, s * c[4] + g1 * d1y, s * c[5] + g1 * d1z
+    t2x, t2y, t2z = s * c[6] + g2 * d2x, s * c[7] + g2 * d2y, s * c[8] + g2 * d2z
+    y[i0, 0] += t2x - t0x
+    y[i0, 1] += t2y - t0y
+    y[i0, 2] += t2z - t0z
+    y[i1, 0] += t0x - t1x
+    y[i1, 1] += t0y - t1y
+    y[i1, 2] += t0z - t1z
+    y[i2, 0] += t1x - t2x
+    y[i2, 1] += t1y - t2y
+    y[i2, 2] += t1z - t2z
+
+
 @kernel
 def fibre_cached_product(fib_vert, cache, project, kx, u, y):
     """y += kx K u for the muscle triangles' Hessian K (projected when `project`), from
@@ -241,28 +266,7 @@ def fibre_cached_product(fib_vert, cache, project, kx, u, y):
         c = cache[f]
         if c[17] == 0.0:  # no tension
             continue
-        i0, i1, i2 = fib_vert[f, 0], fib_vert[f, 1], fib_vert[f, 2]
-        # edge k's du = u_(k+1) - u_k
-        d0x, d0y, d0z = u[i1, 0] - u[i0, 0], u[i1, 1] - u[i0, 1], u[i1, 2] - u[i0, 2]
-        d1x, d1y, d1z = u[i2, 0] - u[i1, 0], u[i2, 1] - u[i1, 1], u[i2, 2] - u[i1, 2]
-        d2x, d2y, d2z = u[i0, 0] - u[i2, 0], u[i0, 1] - u[i2, 1], u[i0, 2] - u[i2, 2]
-        au = (c[0] * d0x + c[1] * d0y + c[2] * d0z + c[3] * d1x + c[4] * d1y + c[5] * d1z
-              + c[6] * d2x + c[7] * d2y + c[8] * d2z)
-        s = kx * c[r1] * au
-        g0, g1, g2 = kx * c[e0], kx * c[e0 + 1], kx * c[e0 + 2]
-        # edge k pushes its end j by t_k and its start i by -t_k
-        t0x, t0y, t0z = s * c[0] + g0 * d0x, s * c[1] + g0 * d0y, s * c[2] + g0 * d0z
-        t1x, t1y, t1z = s * c[3] + g1 * d1x, s * c[4] + g1 * d1y, s * c[5] + g1 * d1z
-        t2x, t2y, t2z = s * c[6] + g2 * d2x, s * c[7] + g2 * d2y, s * c[8] + g2 * d2z
-        y[i0, 0] += t2x - t0x
-        y[i0, 1] += t2y - t0y
-        y[i0, 2] += t2z - t0z
-        y[i1, 0] += t0x - t1x
-        y[i1, 1] += t0y - t1y
-        y[i1, 2] += t0z - t1z
-        y[i2, 0] += t1x - t2x
-        y[i2, 1] += t1y - t2y
-        y[i2, 2] += t1z - t2z
+        _edge_product(c, e0, kx * c[r1], kx, fib_vert[f, 0], fib_vert[f, 1], fib_vert[f, 2], u, y)
 
 
 @kernel
@@ -385,26 +389,8 @@ def passive_fibres_cached_product(pf_vert, cache, project, kx, u, y):
         c = cache[f]
         if c[9] == 0.0:  # slack
             continue
-        i0, i1, i2 = pf_vert[f, 0], pf_vert[f, 1], pf_vert[f, 2]
-        d0x, d0y, d0z = u[i1, 0] - u[i0, 0], u[i1, 1] - u[i0, 1], u[i1, 2] - u[i0, 2]
-        d1x, d1y, d1z = u[i2, 0] - u[i1, 0], u[i2, 1] - u[i1, 1], u[i2, 2] - u[i1, 2]
-        d2x, d2y, d2z = u[i0, 0] - u[i2, 0], u[i0, 1] - u[i2, 1], u[i0, 2] - u[i2, 2]
         ae = kx * c[9]
-        s = ae * (c[0] * d0x + c[1] * d0y + c[2] * d0z + c[3] * d1x + c[4] * d1y + c[5] * d1z
-                  + c[6] * d2x + c[7] * d2y + c[8] * d2z)
-        g0, g1, g2 = ae * c[e0], ae * c[e0 + 1], ae * c[e0 + 2]
-        t0x, t0y, t0z = s * c[0] + g0 * d0x, s * c[1] + g0 * d0y, s * c[2] + g0 * d0z
-        t1x, t1y, t1z = s * c[3] + g1 * d1x, s * c[4] + g1 * d1y, s * c[5] + g1 * d1z
-        t2x, t2y, t2z = s * c[6] + g2 * d2x, s * c[7] + g2 * d2y, s * c[8] + g2 * d2z
-        y[i0, 0] += t2x - t0x
-        y[i0, 1] += t2y - t0y
-        y[i0, 2] += t2z - t0z
-        y[i1, 0] += t0x - t1x
-        y[i1, 1] += t0y - t1y
-        y[i1, 2] += t0z - t1z
-        y[i2, 0] += t1x - t2x
-        y[i2, 1] += t1y - t2y
-        y[i2, 2] += t1z - t2z
+        _edge_product(c, e0, ae, ae, pf_vert[f, 0], pf_vert[f, 1], pf_vert[f, 2], u, y)
 
 
 @kernel
