@@ -116,13 +116,12 @@ class NewtonRows(NamedTuple):
 def newton_rows(arrays) -> NewtonRows:
     """The `NewtonRows` of a model's arrays (in their order)."""
     free = np.asarray(arrays.vert_free) != 0
-    mem = free[arrays.mem_vert].any(axis=1) if arrays.mem_vert.shape[0] else np.zeros(0, bool)
-    fib = free[arrays.fib_vert].any(axis=1) if arrays.fib_vert.shape[0] else np.zeros(0, bool)
-    pf = free[arrays.pf_vert].any(axis=1) if arrays.pf_vert.shape[0] else np.zeros(0, bool)
-    return NewtonRows(np.ascontiguousarray(arrays.mem_vert[mem]), np.ascontiguousarray(arrays.mem_par[mem]),
-                      np.ascontiguousarray(arrays.fib_vert[fib]), np.ascontiguousarray(arrays.fib_par[fib]),
-                      np.ascontiguousarray(arrays.fib_sched[fib]), np.ascontiguousarray(arrays.pf_vert[pf]),
-                      np.ascontiguousarray(arrays.pf_par[pf]))
+    out = []
+    for tri, *more in ((arrays.mem_vert, arrays.mem_par), (arrays.fib_vert, arrays.fib_par, arrays.fib_sched),
+                       (arrays.pf_vert, arrays.pf_par)):
+        keep = free[tri.reshape(-1, 3)].any(axis=1)
+        out += [np.ascontiguousarray(a[keep]) for a in (tri, *more)]
+    return NewtonRows(*out)
 
 
 class ImplicitWork(NamedTuple):

@@ -52,28 +52,18 @@ class NewtonMatrix(NamedTuple):
 def newton_matrix(nvert: int, vert_free, mem_vert, fib_vert, pf_vert) -> NewtonMatrix:
     """The pattern of the blocks coupling free points through the given triangles' (nf, 3) corners."""
     free = np.asarray(vert_free) != 0
-    tris = [np.asarray(t, np.int64).reshape(-1, 3) for t in (mem_vert, fib_vert, pf_vert)]
     every = np.arange(nvert, dtype=np.int64)
-    pairs = [every * nvert + every]
-    for t in tris:
-        for m in range(3):
-            for n in range(3):
-                i, j = t[:, m], t[:, n]
-                ok = free[i] & free[j]
-                pairs.append(i[ok] * nvert + j[ok])
-    keys = np.unique(np.concatenate(pairs))
+    # each triangle's corner pairs (m, n) at 3 m + n, as row * nvert + column, -1 with a fixed corner
+    pair_keys = []
+    for t in (mem_vert, fib_vert, pf_vert):
+        t = np.asarray(t, np.int64).reshape(-1, 3)
+        i, j = np.repeat(t, 3, axis=1), np.tile(t, (1, 3))
+        pair_keys.append(np.where(free[i] & free[j], i * nvert + j, -1))
+    keys = np.unique(np.concatenate([every * nvert + every] + [k[k >= 0] for k in pair_keys]))
     row, col = keys // nvert, keys % nvert
     row_ptr = np.zeros(nvert + 1, np.int64)
     np.cumsum(np.bincount(row, minlength=nvert), out=row_ptr[1:])
-    slots = []
-    for t in tris:
-        slot = np.full((t.shape[0], 9), -1, np.int64)
-        for m in range(3):
-            for n in range(3):
-                i, j = t[:, m], t[:, n]
-                ok = free[i] & free[j]
-                slot[ok, 3 * m + n] = np.searchsorted(keys, i[ok] * nvert + j[ok])
-        slots.append(slot)
+    slots = [np.where(k >= 0, np.searchsorted(keys, k), -1) for k in pair_keys]
     nb = keys.size
     return NewtonMatrix(np.flatnonzero(free).astype(np.int64), row_ptr, col.astype(np.int64), np.searchsorted(keys, every * nvert + every), *slots,
                         amat=np.zeros((nb, 9)), pdiag=np.zeros((nvert, 9)), dinv=np.zeros((nvert, 9)))

@@ -203,15 +203,11 @@ def build_mesh(scene: Scene) -> Mesh:
     if val.get("level") is not None and gen not in LEVEL_GENERATORS:
         raise SceneError(f"mesh.level: expected a generator that refines by level ({', '.join(LEVEL_GENERATORS)}), "
                          f"received generator={gen!r}")
-    conform = val.get("conform_z_m", ())
-    if conform and gen not in ("uv_sphere", "ring_sphere"):
-        raise SceneError(f"mesh.conform_z_m: expected a generator with circles of latitude (uv_sphere or "
-                         f"ring_sphere), received generator={gen!r}; or no latitudes (--set mesh.conform_z_m=[])")
-    azimuths = val.get("conform_azimuth_deg", ())
-    if azimuths and gen not in ("uv_sphere", "ring_sphere"):
-        raise SceneError(f"mesh.conform_azimuth_deg: expected a generator with circles of latitude (uv_sphere or "
-                         f"ring_sphere), received generator={gen!r}; or no azimuths "
-                         f"(--set mesh.conform_azimuth_deg=[])")
+    for key, what in (("conform_z_m", "latitudes"), ("conform_azimuth_deg", "azimuths")):
+        if val.get(key) and gen not in ("uv_sphere", "ring_sphere"):
+            raise SceneError(f"mesh.{key}: expected a generator with circles of latitude (uv_sphere or "
+                             f"ring_sphere), received generator={gen!r}; or no {what} (--set mesh.{key}=[])")
+    conform, azimuths = val.get("conform_z_m", ()), val.get("conform_azimuth_deg", ())
     npoint = _mesh.level_counts(val.get("level") or 0)[2]
     try:
         if gen == "fibonacci_sphere":

@@ -38,6 +38,18 @@ def _conform_angles(conform_z, who: str) -> np.ndarray:
     return np.unique(np.arccos(z))
 
 
+def _share(count: int, span: np.ndarray) -> np.ndarray:
+    """`count` intervals shared among spans by their lengths, at least one each (count >=
+    len(span)): rounded, then one fewer where the spacing is finest or one more where it
+    is coarsest until they add up."""
+    n = np.maximum(1, np.round(span / span.sum() * count).astype(int))
+    while n.sum() > count:
+        n[int(np.argmax(np.where(n > 1, n / span, -1.0)))] -= 1
+    while n.sum() < count:
+        n[int(np.argmax(span / n))] += 1
+    return n
+
+
 def _polar_angles(rings: int, conform_z, who: str) -> np.ndarray:
     """rings - 1 polar angles in (0, pi): evenly spaced, or, with latitudes conform_z
     (in radii), evenly spaced in each span between them with every latitude a circle
@@ -49,11 +61,7 @@ def _polar_angles(rings: int, conform_z, who: str) -> np.ndarray:
     if rings < span.size:
         raise MeshError(f"{who}: {span.size - 1} latitudes to conform to need rings >= {span.size}; "
                         f"received {rings}")
-    gaps = np.maximum(1, np.round(span / np.pi * rings).astype(int))
-    while gaps.sum() > rings:  # one gap fewer where the spacing is finest
-        gaps[int(np.argmax(np.where(gaps > 1, gaps / span, -1.0)))] -= 1
-    while gaps.sum() < rings:  # one more where it is coarsest
-        gaps[int(np.argmax(span / gaps))] += 1
+    gaps = _share(rings, span)
     return np.concatenate([brk[i] + span[i] * np.arange(1, gaps[i] + 1) / gaps[i] for i in range(span.size)])[:-1]
 
 
@@ -76,11 +84,7 @@ def _segment_azimuths(segments: int, azim: np.ndarray, who: str) -> np.ndarray:
         raise MeshError(f"{who}: {azim.size} azimuths to conform to need segments >= {azim.size}; "
                         f"received {segments}")
     arc = np.diff(np.concatenate([azim, [azim[0] + 2.0 * np.pi]]))
-    n = np.maximum(1, np.round(arc / (2.0 * np.pi) * segments).astype(int))
-    while n.sum() > segments:  # one fewer where the spacing is finest
-        n[int(np.argmax(np.where(n > 1, n / arc, -1.0)))] -= 1
-    while n.sum() < segments:  # one more where it is coarsest
-        n[int(np.argmax(arc / n))] += 1
+    n = _share(segments, arc)
     return np.concatenate([azim[i] + arc[i] * np.arange(n[i]) / n[i] for i in range(azim.size)])
 
 
