@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .mesh.geometry import volume_gradient
+from .mesh.geometry import cross_rows, volume_gradient
 from .regions import select
 from .step import S_PRESSURE
 from .terms import Nailed, Volume
@@ -89,6 +89,14 @@ class Loads:
         held = [g.vert for g in self.groups]
         self.held = np.unique(np.concatenate(held)).astype(np.int64) if held else np.zeros(0, np.int64)
         self.closed = bool(model.mesh.closed)
+        # the faces round the held points: their fans give V's gradient there (a closed fan's
+        # sum does not depend on the origin), at a fraction of the whole surface's cost
+        touches = np.zeros(model.nvert, bool)
+        touches[self.held] = True
+        fans = model.mesh.face_vert[touches[model.mesh.face_vert].any(axis=1)]
+        self._fan_vert, fans_local = np.unique(fans, return_inverse=True)  # the fans' points, numbered anew
+        self._fans = fans_local.reshape(fans.shape)
+        self._held_in_fans = np.searchsorted(self._fan_vert, self.held)
         # the linked points' weight correction, a constant of the model (`Coupling.link_extra_force`)
         self._extra = sim.rigid.link_extra_force() if sim.rigid is not None else None
 
@@ -137,8 +145,8 @@ class Loads:
     def iap_forces(self) -> np.ndarray:
         """(nheld, 3) N: p grad_i V at the held points (`held`), at the current positions."""
         pos = self.sim.state.vert_pos
-        grad = volume_gradient(pos, self.sim.model.mesh.face_vert)
-        return float(self.sim.state.scal[S_PRESSURE]) * grad[self.held]
+        grad = volume_gradient(pos[self._fan_vert], self._fans)
+        return float(self.sim.state.scal[S_PRESSURE]) * grad[self._held_in_fans]
 
     def sample(self) -> np.ndarray:
         """(len(channels()), 3): the current figures, in `channels()`'s order."""
@@ -148,16 +156,11 @@ class Loads:
         xpos = self.sim.mj_data.xpos if self.sim.rigid is not None else None
         rows = []
         for g in self.groups:
-            f = forces[g.label]
-            x = pos[g.vert]
             c = xpos[g.body_id] if g.kind == "body" else g.centre_m
-            rows += [f.sum(axis=0), np.cross(x - c, f).sum(axis=0)]
-            rows += [np.cross(x - a, f).sum(axis=0) for a in anchors]
+            rows += [*_net_and_moments(pos[g.vert], forces[g.label], np.vstack([c, anchors]))]
         if self._has_pressure():
-            f = self.iap_forces()
-            x = pos[self.held]
-            rows += [f.sum(axis=0)] + [np.cross(x - a, f).sum(axis=0) for a in anchors]
-        return np.array(rows).reshape(-1, 3)
+            rows += [*_net_and_moments(pos[self.held], self.iap_forces(), anchors)]
+        return np.concatenate(rows).reshape(-1, 3)
 
     def about(self) -> dict:
         """{group label or "iap": the point its moments are taken about, in words}."""
@@ -165,6 +168,13 @@ class Loads:
         for name, _ in self.joints:
             out[f"moment_about/{name}"] = f"joint {name!r}'s anchor (MuJoCo xanchor)"
         return out
+
+
+def _net_and_moments(x: np.ndarray, f: np.ndarray, about: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The net force (1, 3) N of forces f at points x, and their moments (n, 3) N m about
+    the points `about` (n, 3): sum (x_i - c) x f_i = sum x_i x f_i - c x (the net force)."""
+    net = f.sum(axis=0, keepdims=True)
+    return net, cross_rows(x, f).sum(axis=0) - cross_rows(about, np.broadcast_to(net, about.shape))
 
 
 def topics(names: list[str]) -> list[str]:

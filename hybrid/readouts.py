@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .kernel import jit
 from .mesh.geometry import region_faces
 from .model import MembraneArrays
 from .terms import Membrane, MassSpring, Muscle, MuscleFibres, PassiveFibres, ShapeMemory
@@ -20,7 +21,7 @@ from .terms.muscle import add_muscle
 from .terms.shape_memory import add_shape_memory
 from .terms.springs import add_mass_spring
 
-__all__ = ["internal_forces", "net_internal", "elastic_energy", "region_faces", "swept_volume", "quat_rot", "pitch_deg"]
+__all__ = ["internal_forces", "net_internal", "elastic_energy", "region_faces", "swept_volume", "swept_volumes", "quat_rot", "pitch_deg"]
 
 #: terms whose forces are internal to the membrane (between its points)
 INTERNAL_TERMS = (Membrane, ShapeMemory, Muscle, MassSpring, MuscleFibres, PassiveFibres)
@@ -83,13 +84,48 @@ def swept_volume(face_vert: np.ndarray, rest: np.ndarray, pos: np.ndarray) -> fl
     positive outward: sum over faces of the mean displacement dotted with the
     time integral of the area vector, exact for straight paths, independent of
     the origin; over a closed surface it is V(pos) - V(rest) exactly."""
-    X, x = rest[face_vert], pos[face_vert]
-    d = x - X
-    E1, E2 = X[:, 1] - X[:, 0], X[:, 2] - X[:, 0]
-    d1, d2 = d[:, 1] - d[:, 0], d[:, 2] - d[:, 0]
-    # the area vector N(s) = (E1 + s d1) x (E2 + s d2) / 2 integrated over s in [0, 1]
-    n = 0.5 * (np.cross(E1, E2) + 0.5 * (np.cross(E1, d2) + np.cross(d1, E2)) + np.cross(d1, d2) / 3.0)
-    return float(np.einsum("ij,ij->", d.mean(axis=1), n))
+    return float(swept_volumes(face_vert, rest, pos[None])[0])
+
+
+def swept_volumes(face_vert: np.ndarray, rest: np.ndarray, pos_frames: np.ndarray) -> np.ndarray:
+    """`swept_volume` of each frame of pos_frames (nframe, nvert, 3): (nframe,) m^3.
+    Compiled: a run reads it every frame, where numpy's temporaries cost a quarter
+    of an implicit step at 5,000 points."""
+    return _swept_volumes(np.ascontiguousarray(face_vert, np.int64), np.ascontiguousarray(rest, float),
+                          np.ascontiguousarray(pos_frames, float))
+
+
+@jit
+def _cross(ax, ay, az, bx, by, bz):
+    return ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
+
+
+@jit
+def _swept_volumes(face_vert, rest, pos_frames):
+    out = np.zeros(pos_frames.shape[0])
+    for f in range(pos_frames.shape[0]):
+        pos = pos_frames[f]
+        total = 0.0
+        for k in range(face_vert.shape[0]):
+            a, b, c = face_vert[k, 0], face_vert[k, 1], face_vert[k, 2]
+            dax, day, daz = pos[a, 0] - rest[a, 0], pos[a, 1] - rest[a, 1], pos[a, 2] - rest[a, 2]
+            dbx, dby, dbz = pos[b, 0] - rest[b, 0], pos[b, 1] - rest[b, 1], pos[b, 2] - rest[b, 2]
+            dcx, dcy, dcz = pos[c, 0] - rest[c, 0], pos[c, 1] - rest[c, 1], pos[c, 2] - rest[c, 2]
+            E1x, E1y, E1z = rest[b, 0] - rest[a, 0], rest[b, 1] - rest[a, 1], rest[b, 2] - rest[a, 2]
+            E2x, E2y, E2z = rest[c, 0] - rest[a, 0], rest[c, 1] - rest[a, 1], rest[c, 2] - rest[a, 2]
+            e1x, e1y, e1z = dbx - dax, dby - day, dbz - daz
+            e2x, e2y, e2z = dcx - dax, dcy - day, dcz - daz
+            # the area vector N(s) = (E1 + s e1) x (E2 + s e2) / 2 integrated over s in [0, 1]
+            n0 = _cross(E1x, E1y, E1z, E2x, E2y, E2z)
+            n1 = _cross(E1x, E1y, E1z, e2x, e2y, e2z)
+            n2 = _cross(e1x, e1y, e1z, E2x, E2y, E2z)
+            n3 = _cross(e1x, e1y, e1z, e2x, e2y, e2z)
+            nx = 0.5 * (n0[0] + 0.5 * (n1[0] + n2[0]) + n3[0] / 3.0)
+            ny = 0.5 * (n0[1] + 0.5 * (n1[1] + n2[1]) + n3[1] / 3.0)
+            nz = 0.5 * (n0[2] + 0.5 * (n1[2] + n2[2]) + n3[2] / 3.0)
+            total += ((dax + dbx + dcx) * nx + (day + dby + dcy) * ny + (daz + dbz + dcz) * nz) / 3.0
+        out[f] = total
+    return out
 
 
 def quat_rot(q: np.ndarray) -> np.ndarray:

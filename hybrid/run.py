@@ -29,7 +29,7 @@ from .provenance import run_provenance
 from .scene import Muscle, MuscleFibres, SoftVolume, Volume
 from .simulation import Simulation
 from .step import F_KE, F_PRESSURE, F_TIME, F_VOLUME, capture_frame
-from .readouts import pitch_deg, quat_rot, swept_volume
+from .readouts import pitch_deg, quat_rot, swept_volumes
 from .loads import Loads, LoadsObserver
 from .terms.volume import face_volume
 
@@ -409,7 +409,7 @@ def run(sim: Simulation, duration_s: float, *, frame_dt_s: float = 0.01, progres
             else np.nan
         rows[:, _COL["pressure_pa"]] = scal[:, F_PRESSURE] if "pressure" in parts else np.nan
         rows[:, _COL["kinetic_energy_j"]] = scal[:, F_KE]
-        rows[:, _COL["swept_volume_ml"]] = [-swept_volume(swept_faces, rest, p) * 1e6 for p in pos] \
+        rows[:, _COL["swept_volume_ml"]] = -swept_volumes(swept_faces, rest, pos) * 1e6 \
             if swept_faces is not None else np.nan
         if thorax is not None:
             nonlocal thorax_axis

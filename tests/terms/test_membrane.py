@@ -140,6 +140,33 @@ def test_swept_volumes_of_a_partition_add_up_to_the_volume_change():
     assert parts[0] > 0 and parts[1] > 0
 
 
+def _swept_reference(face_vert, rest, pos):
+    """The swept volume by its formula in numpy, face by face (the slow reference)."""
+    X, x = rest[face_vert], pos[face_vert]
+    d = x - X
+    E1, E2 = X[:, 1] - X[:, 0], X[:, 2] - X[:, 0]
+    d1, d2 = d[:, 1] - d[:, 0], d[:, 2] - d[:, 0]
+    n = 0.5 * (np.cross(E1, E2) + 0.5 * (np.cross(E1, d2) + np.cross(d1, E2)) + np.cross(d1, d2) / 3.0)
+    return float(np.einsum("ij,ij->", d.mean(axis=1), n))
+
+
+def test_compiled_swept_volumes_of_frames_match_the_formula_and_a_prism():
+    from hybrid.readouts import swept_volumes
+    mesh = FAMILIES["irregular"]()
+    rng = np.random.default_rng(8)
+    frames = mesh.vert_pos + 0.05 * rng.standard_normal((4, mesh.nvert, 3))
+    faces = mesh.face_vert[mesh.vert_pos[mesh.face_vert].mean(axis=1)[:, 2] > 0.0]
+    got = swept_volumes(faces, mesh.vert_pos, frames)
+    want = np.array([_swept_reference(faces, mesh.vert_pos, p) for p in frames])
+    # the same sums in another order: rounding only (1e-12 of the sum of absolute terms' scale)
+    assert np.abs(got - want).max() <= 1e-12 * np.abs(want).max()
+    # a right triangle of legs 0.3 and 0.2 moved 0.05 along its normal sweeps a prism: A h
+    tri = np.array([[0, 1, 2]])
+    rest = np.array([[0.0, 0.0, 0.0], [0.3, 0.0, 0.0], [0.0, 0.2, 0.0]])
+    moved = rest + [0.01, -0.02, 0.05]
+    assert swept_volumes(tri, rest, moved[None])[0] == pytest.approx(0.5 * 0.3 * 0.2 * 0.05, rel=1e-14)
+
+
 @pytest.mark.parametrize("field, value, message", [
     ("youngs_modulus_n_per_m", -1.0, r"youngs_modulus_n_per_m: expected a number > 0"),
     ("poisson_ratio", 0.6, r"poisson_ratio: expected a number in \[0, 0.5\], received 0.6"),
