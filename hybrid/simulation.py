@@ -302,9 +302,17 @@ class Simulation:
         elif code == VOLUME_FAILED:
             why = ("the volume gradient vanished on the free points" if s.status[3] == PROJ_NO_GRADIENT
                    else "the volume cubic has no real root")
-            err = ConstraintError(
-                f"volume projection failed at t = {t:.6g} s (step {step}): {why}; expected a closed surface "
-                f"with free points to move")
+            if step == 0:  # the first projection: the surface or its free points are at fault
+                err = ConstraintError(
+                    f"volume projection failed at t = {t:.6g} s (step {step}): {why}; expected a closed surface "
+                    f"with free points to move")
+            else:  # projections that held until now: the surface has folded, the run diverged
+                moved = float(np.sqrt(((s.vert_pos - model.arrays.vert_rest) ** 2).sum(axis=1)).max())
+                remedy, suggest = self._advice()
+                err = SimulationDiverged(
+                    f"simulation diverged at t = {t:.6g} s (step {step}): the volume projection failed ({why}): "
+                    f"the surface folded, a point {moved:.3g} m from rest; time step {h:.3g} s with "
+                    f"{model.scene.integrator}; {remedy}", time_s=t, step=step, vert=vert, dt_suggested_s=suggest)
         else:
             disp = float(s.scal[S_MAXDISP])
             if code == DIVERGED_NONFINITE:
