@@ -65,6 +65,8 @@ def test_bench_only_some_sections_and_bad_names_in_one_line(capsys):
 
 
 def test_the_recommended_levels_realtime_run_is_implicit_euler_solved_to_a_looser_tolerance():
+    from hybrid.cli import build_parser
+    assert build_parser().parse_args(["bench"]).realtime_level == bench.RECOMMENDED_LEVEL
     integrator, dt, overrides = bench.REALTIME_RUNS[("breathing", bench.RECOMMENDED_LEVEL)]
     assert integrator == "implicit_euler" and abs(0.01 / dt - round(0.01 / dt)) < 1e-9
     rt = bench.realtime_row("breathing", 1, integrator="implicit_euler", dt_s=1e-2, overrides=overrides,
