@@ -65,7 +65,7 @@ from .terms.tangents import (NCACHE, NFIB_CACHE, NPF_CACHE, fibre_cached_product
                              passive_fibres_cached_product, passive_fibres_energy_kernel, passive_fibres_tangent_cache)
 
 __all__ = ["IMPLICIT_ID", "IMPLICIT_NOT_CONVERGED", "ImplicitWork", "Info", "implicit_work", "implicit_step",
-           "implicit_pressure", "implicit_forces", "NewtonRows", "newton_rows", "newton_caches", "newton_product"]
+           "implicit_pressure", "implicit_forces", "implicit_start_forces", "NewtonRows", "newton_rows", "newton_caches", "newton_product"]
 
 #: `MembraneArrays.integrator` of implicit Euler
 IMPLICIT_ID = 2
@@ -192,6 +192,23 @@ def implicit_forces(m, sched_val, x, v, out):
 
 
 @kernel
+def implicit_start_forces(m, sched_val, x, v, imp, vert_force):
+    """Step phase 1's implicit part: imp.f = `implicit_forces` at the step's start, added to
+    vert_force (which the force pass left without them). Returns False when imp is None
+    (another integrator: the None prunes this). `implicit_step` reads imp.f: the explicit
+    forces are vert_force - imp.f at the same positions, before the linked points move.
+    # Model: m   # Data in: sched_val, x (m), v (m/s)   # Data out: imp.f (N)   # Data in/out: vert_force (N)
+    """
+    if imp is None:
+        return False
+    implicit_forces(m, sched_val, x, v, imp.f)
+    for i in range(vert_force.shape[0]):
+        for a in range(3):
+            vert_force[i, a] += imp.f[i, a]
+    return True
+
+
+@kernel
 def newton_caches(m, rows, sched_val, x, face, fib, pf):
     """The tangent caches of the triangles `rows` at x, what `newton_product` reads: once
     per Newton iteration, not once per conjugate-gradient iteration."""
@@ -285,10 +302,9 @@ def _solve(m, w, h, project, target, cg_max):
 
 
 @kernel
-def _residual(m, sched_val, pos, vel, h, w):
-    """At dv: x_try, v_try, f = f_i(x_try, v_try), res = f + f_expl - M dv / h (0 on fixed
-    points). Returns (|res|, |f| + |f_expl| + |M dv / h|, the vertex of the largest residual)."""
-    dv, xt, vt, res = w.dv, w.x_try, w.v_try, w.res
+def _trial(m, pos, vel, h, dv, w):
+    """w.v_try = vel + dv, w.x_try = pos + h w.v_try on the free points; pos, vel on the others."""
+    xt, vt = w.x_try, w.v_try
     free = m.vert_free
     for i in range(pos.shape[0]):
         for a in range(3):
@@ -298,6 +314,15 @@ def _residual(m, sched_val, pos, vel, h, w):
             else:
                 vt[i, a] = vel[i, a]
                 xt[i, a] = pos[i, a]
+
+
+@kernel
+def _residual(m, sched_val, pos, vel, h, w):
+    """At dv: x_try, v_try, f = f_i(x_try, v_try), res = f + f_expl - M dv / h (0 on fixed
+    points). Returns (|res|, |f| + |f_expl| + |M dv / h|, the vertex of the largest residual)."""
+    dv, xt, vt, res = w.dv, w.x_try, w.v_try, w.res
+    free = m.vert_free
+    _trial(m, pos, vel, h, dv, w)
     implicit_forces(m, sched_val, xt, vt, w.f)
     rr = ff = ee = mm = 0.0
     worst, big = 0, -1.0
@@ -322,17 +347,18 @@ def _residual(m, sched_val, pos, vel, h, w):
 
 
 @kernel
-def _merit(m, sched_val, h, w):
-    """The incremental potential at dv (after `_residual`), whose dv-gradient is minus
-    h res: 1/2 dv M dv - h f_e . dv + E(x_try) + h/2 sum c |v_try|^2 + h R(x_try, v_try),
-    E the membrane's and fibres' energies, R the viscosity's dissipation function at
-    the positions x_kv where the Newton iteration started (the gradient there exact)."""
+def _merit(m, sched_val, h, dv, w):
+    """The incremental potential at dv (w.x_try, w.v_try taken there: `_trial`), whose
+    dv-gradient is minus h res: 1/2 dv M dv - h f_e . dv + E(x_try) + h/2 sum c |v_try|^2
+    + h R(x_try, v_try), E the membrane's and fibres' energies, R the viscosity's
+    dissipation function at the positions x_kv where the Newton iteration started (the
+    gradient there exact)."""
     on = m.term_on
     total = 0.0
-    for i in range(w.dv.shape[0]):
+    for i in range(dv.shape[0]):
         if m.vert_free[i]:
             for a in range(3):
-                total += w.dv[i, a] * (0.5 * m.vert_mass[i] * w.dv[i, a] - h * w.f_expl[i, a])
+                total += dv[i, a] * (0.5 * m.vert_mass[i] * dv[i, a] - h * w.f_expl[i, a])
         if on[T_DAMPING]:
             total += 0.5 * h * m.damp_coef[i] * (w.v_try[i, 0] ** 2 + w.v_try[i, 1] ** 2 + w.v_try[i, 2] ** 2)
     if on[T_MEMBRANE]:
@@ -377,8 +403,8 @@ def implicit_step(m, s, step, imp):
     w = imp
     info = w.info
     free = m.vert_free
-    # the explicit part: every force at the step's start less the implicit ones there
-    implicit_forces(m, s.sched_val, pos, vel, w.f)
+    # the explicit part: every force at the step's start less the implicit ones there (w.f,
+    # `implicit_start_forces`: both before the linked points moved to their new sites)
     carried = info[I_PRESSURE] if m.term_on[T_VOLUME] else 0.0
     if carried != 0.0:
         _volume_gradient(m.face_vert, pos, w.grad)
@@ -405,7 +431,6 @@ def implicit_step(m, s, step, imp):
         for i in range(n):
             for a in range(3):
                 w.x_kv[i, a] = w.x_try[i, a]
-        phi = _merit(m, s.sched_val, h, w)
         newton_caches(m, w.rows, s.sched_val, w.x_try, w.face, w.fib, w.pf)
         assemble(m, w.rows, w.face, w.fib, w.pf, h, w.mat)
         # the exact Hessian, its negative curvature ending the conjugate gradients early
@@ -436,17 +461,24 @@ def implicit_step(m, s, step, imp):
             at_roundoff = True
             break
         slope = -h * _dot(w.mat.free, w.res, w.cg_x)  # the potential's derivative along the step (< 0)
+        dv_start = w.cg_q  # the iteration's start (the conjugate gradients' scratch, free now)
         for i in range(n):
             for a in range(3):
+                dv_start[i, a] = w.dv[i, a]
                 w.dv[i, a] += w.cg_x[i, a]
         frac = 1.0  # of the step now applied
+        phi = np.nan  # the potential at the start: taken only when a residual does not halve
         for k in range(HALVINGS + 1):
             rn_new, scale, worst = _residual(m, s.sched_val, pos, vel, h, w)
             # a residual that halved (near the root the potential's change is round-off),
             # else Armijo on the potential
             if rn_new <= 0.5 * rn or k == HALVINGS:
                 break
-            if _merit(m, s.sched_val, h, w) <= phi + ARMIJO * frac * slope:
+            if phi != phi:
+                _trial(m, pos, vel, h, dv_start, w)
+                phi = _merit(m, s.sched_val, h, dv_start, w)
+                _trial(m, pos, vel, h, w.dv, w)
+            if _merit(m, s.sched_val, h, w.dv, w) <= phi + ARMIJO * frac * slope:
                 break
             frac *= 0.5
             for i in range(n):

@@ -40,7 +40,7 @@ from .terms.volume import volume_direction_parallel, volume_direction_serial
 from .terms.volume import Pressure, add_pressure
 from .terms.fibres import MuscleFibres, add_muscle_fibres
 from .terms.passive_fibres import PassiveFibres, add_passive_fibres
-from .implicit import EXPLICIT, implicit_pressure, implicit_step, implicit_work
+from .implicit import EXPLICIT, IMPLICIT_ID, implicit_pressure, implicit_start_forces, implicit_step, implicit_work
 
 __all__ = ["Scal", "StepStatus", "FrameColumn", "MembraneState", "new_state", "membrane_forces", "membrane_advance", "run_membrane",
            "run_membrane_frames", "capture_frame", "kinetic_energy_of", "Frames", "step_par", "FORCE_SWITCHES",
@@ -185,8 +185,10 @@ def membrane_forces(m, s, t, par=True, shape_memory=True, membrane=True, applied
     """
     eval_schedules(m.sched, t, s.sched_val)
     on = m.term_on
-    _pointwise_forces(m, s, par, shape_memory)
-    if membrane is not None and on[T_MEMBRANE]:
+    # implicit Euler: the terms it treats implicitly once, kept for its solve (`implicit_start_forces`)
+    implicit = m.integrator == IMPLICIT_ID
+    _pointwise_forces(m, s, par, shape_memory, implicit)
+    if membrane is not None and on[T_MEMBRANE] and not implicit:
         if par is not None and m.parallel:
             membrane_faces_parallel(m.mem_vert, m.mem_par, m.kv_on, s.vert_pos, s.vert_vel, s.face_force)
             membrane_gather_parallel(m.mvf_ptr, m.mvf_slot, s.face_force, s.vert_force)
@@ -213,12 +215,15 @@ def membrane_forces(m, s, t, par=True, shape_memory=True, membrane=True, applied
     if pressure is not None and on[T_PRESSURE]:
         add_pressure(m.ring_ptr, m.ring_vert, m.pres_sched, s.sched_val, s.vert_pos, s.vert_force)
         s.term_calls[T_PRESSURE] += 1
-    if fibres is not None and on[T_MUSCLE_FIBRES]:
+    if fibres is not None and on[T_MUSCLE_FIBRES] and not implicit:
         add_muscle_fibres(m.fib_vert, m.fib_par, m.fib_sched, s.sched_val, s.vert_pos, s.vert_force)
         s.term_calls[T_MUSCLE_FIBRES] += 1
-    if passive is not None and on[T_PASSIVE_FIBRES]:
+    if passive is not None and on[T_PASSIVE_FIBRES] and not implicit:
         add_passive_fibres(m.pf_vert, m.pf_par, s.vert_pos, s.vert_force)
         s.term_calls[T_PASSIVE_FIBRES] += 1
+    if implicit_start_forces(m, s.sched_val, s.vert_pos, s.vert_vel, s.implicit, s.vert_force):
+        for k in (T_MEMBRANE, T_MUSCLE_FIBRES, T_PASSIVE_FIBRES):
+            s.term_calls[k] += on[k]
 
 
 def _integrate(vert_free, vert_mass, explicit, h, vert_force, vert_pos, vert_vel, chunk_acc):
@@ -265,13 +270,13 @@ _integrate_serial, _integrate_parallel = kernel_twin(_integrate)
 
 
 @kernel(inline="always")
-def _pointwise_forces(m, s, par, shape_memory):
+def _pointwise_forces(m, s, par, shape_memory, implicit=False):
     """Step phase 1 for gravity, damping and shape memory: the shape memory's
     ring gathers (compiled unless `shape_memory` is None), then the fused pass
     `hybrid.terms.pointwise.point_forces` (serial or parallel build)."""
     on = m.term_on
     sm = on[T_SHAPE_MEMORY] != 0
-    grav, damp = on[T_GRAVITY] != 0, on[T_DAMPING] != 0
+    grav, damp = on[T_GRAVITY] != 0, on[T_DAMPING] != 0 and not implicit  # implicit Euler's drag: its own
     if par is not None and m.parallel:
         if shape_memory is not None and sm:
             shape_memory_frames_parallel(m.sm_vert, m.ring_ptr, m.ring_vert, m.ring_closed, s.vert_pos, s.sm_sums)
