@@ -2,8 +2,8 @@
 products and their preconditioner, a symmetric Gauss-Seidel sweep.
 
 Once per Newton iteration the free points' 3 x 3 blocks of M + h^2 K + h C are
-assembled into a block-sparse matrix A (`NewtonMatrix`: its rows, built once per
-model, and each element's slots) from the terms' tangent caches
+assembled into a block-sparse matrix A, its upper triangle alone (`NewtonMatrix`: its
+rows, built once per model, and each element's slots) from the terms' tangent caches
 (`hybrid.terms.tangent_blocks`), K the exact Hessian, with the diagonal blocks D of
 the matrix whose K is projected per element (positive definite). A product with the
 assembled matrix reads each block once, where the element-by-element product
@@ -30,13 +30,17 @@ T_MEMBRANE, T_FIBRES, T_PASSIVE, T_DAMPING = Membrane.id, MuscleFibres.id, Passi
 
 
 class NewtonMatrix(NamedTuple):
-    """The free points' blocks: free (nfree,): the free points (the rows the products and
-    sweeps visit); row_ptr (nvert + 1,), col (nblocks,) sorted in each row, diag
-    (nvert,): each row's diagonal block (a fixed point's row has it alone);
-    mem_slot, fib_slot, pf_slot (nrows, 9): the block of each element's corner pair
-    (m, n) at 3 m + n, -1 with a fixed corner; amat (nblocks, 9): the blocks (row-major,
-    zero at fixed points); pdiag (nvert, 9): the diagonal blocks with K projected; dinv
-    (nvert, 9): their inverses (the identity at fixed points)."""
+    """The free points' blocks, the upper triangle of the symmetric matrix alone (a block
+    (i, j), i < j, stands for itself and its transpose at (j, i): half the memory each
+    product and sweep reads, and each element pair assembled once): free (nfree,): the
+    free points (the rows the products and sweeps visit); row_ptr (nvert + 1,), col
+    (nblocks,) sorted in each row, from the diagonal block on (col >= row); diag (nvert,):
+    each row's diagonal block (a fixed point's row has it alone); mem_slot, fib_slot,
+    pf_slot (nrows, 9): the block of each element's corner pair (m, n), m <= n, at
+    3 m + n (the block of the smaller to the larger point), -1 with a fixed corner and
+    for m > n; amat (nblocks, 9): the blocks (row-major, zero at fixed points); pdiag
+    (nvert, 9): the diagonal blocks with K projected; dinv (nvert, 9): their inverses
+    (the identity at fixed points); acc (nvert, 3): the forward sweep's scratch."""
     free: np.ndarray
     row_ptr: np.ndarray
     col: np.ndarray
@@ -47,26 +51,31 @@ class NewtonMatrix(NamedTuple):
     amat: np.ndarray
     pdiag: np.ndarray
     dinv: np.ndarray
+    acc: np.ndarray
 
 
 def newton_matrix(nvert: int, vert_free, mem_vert, fib_vert, pf_vert) -> NewtonMatrix:
     """The pattern of the blocks coupling free points through the given triangles' (nf, 3) corners."""
     free = np.asarray(vert_free) != 0
     every = np.arange(nvert, dtype=np.int64)
-    # each triangle's corner pairs (m, n) at 3 m + n, as row * nvert + column, -1 with a fixed corner
+    # each triangle's corner pairs (m, n) at 3 m + n, m <= n, as (smaller point) * nvert + larger;
+    # -1 with a fixed corner and for m > n
+    upper = np.arange(9) // 3 <= np.arange(9) % 3
     pair_keys = []
     for t in (mem_vert, fib_vert, pf_vert):
         t = np.asarray(t, np.int64).reshape(-1, 3)
         i, j = np.repeat(t, 3, axis=1), np.tile(t, (1, 3))
-        pair_keys.append(np.where(free[i] & free[j], i * nvert + j, -1))
+        key = np.minimum(i, j) * nvert + np.maximum(i, j)
+        pair_keys.append(np.where(free[i] & free[j] & upper[None, :], key, -1))
     keys = np.unique(np.concatenate([every * nvert + every] + [k[k >= 0] for k in pair_keys]))
     row, col = keys // nvert, keys % nvert
     row_ptr = np.zeros(nvert + 1, np.int64)
     np.cumsum(np.bincount(row, minlength=nvert), out=row_ptr[1:])
     slots = [np.where(k >= 0, np.searchsorted(keys, k), -1) for k in pair_keys]
     nb = keys.size
-    return NewtonMatrix(np.flatnonzero(free).astype(np.int64), row_ptr, col.astype(np.int64), np.searchsorted(keys, every * nvert + every), *slots,
-                        amat=np.zeros((nb, 9)), pdiag=np.zeros((nvert, 9)), dinv=np.zeros((nvert, 9)))
+    return NewtonMatrix(np.flatnonzero(free).astype(np.int64), row_ptr, col.astype(np.int64), row_ptr[:-1].copy(),
+                        *slots, amat=np.zeros((nb, 9)), pdiag=np.zeros((nvert, 9)), dinv=np.zeros((nvert, 9)),
+                        acc=np.zeros((nvert, 3)))
 
 
 @kernel
@@ -120,45 +129,60 @@ def _invert(a, b):
 
 @kernel
 def matrix_product(mat, u, y):
-    """y = A u on the free points, A the assembled matrix (the fixed points' rows of y
-    left as they are: A's are zero)."""
+    """y = A u on the free points, A the assembled matrix: each upper block B at (i, j) adds
+    B u_j to row i and B^T u_i to row j (the fixed points' rows of y left as they are: A's
+    are zero)."""
     a = mat.amat
     col, ptr = mat.col, mat.row_ptr
     for i in mat.free:
-        sx = sy = sz = 0.0
-        for k in range(ptr[i], ptr[i + 1]):
+        y[i, 0] = y[i, 1] = y[i, 2] = 0.0
+    for i in mat.free:
+        b = a[ptr[i]]  # the diagonal block
+        ux, uy, uz = u[i, 0], u[i, 1], u[i, 2]
+        sx = b[0] * ux + b[1] * uy + b[2] * uz
+        sy = b[3] * ux + b[4] * uy + b[5] * uz
+        sz = b[6] * ux + b[7] * uy + b[8] * uz
+        for k in range(ptr[i] + 1, ptr[i + 1]):
             b, j = a[k], col[k]
-            ux, uy, uz = u[j, 0], u[j, 1], u[j, 2]
-            sx += b[0] * ux + b[1] * uy + b[2] * uz
-            sy += b[3] * ux + b[4] * uy + b[5] * uz
-            sz += b[6] * ux + b[7] * uy + b[8] * uz
-        y[i, 0], y[i, 1], y[i, 2] = sx, sy, sz
+            vx, vy, vz = u[j, 0], u[j, 1], u[j, 2]
+            sx += b[0] * vx + b[1] * vy + b[2] * vz
+            sy += b[3] * vx + b[4] * vy + b[5] * vz
+            sz += b[6] * vx + b[7] * vy + b[8] * vz
+            y[j, 0] += b[0] * ux + b[3] * uy + b[6] * uz
+            y[j, 1] += b[1] * ux + b[4] * uy + b[7] * uz
+            y[j, 2] += b[2] * ux + b[5] * uy + b[8] * uz
+        y[i, 0] += sx
+        y[i, 1] += sy
+        y[i, 2] += sz
 
 
 @kernel
 def sgs_sweep(mat, r, z):
-    """z = (D + U)^-1 D (D + L)^-1 r on the free points (the fixed points' rows of z left
-    as they are: no block couples them)."""
-    a, col, ptr, diag, dinv, free = mat.amat, mat.col, mat.row_ptr, mat.diag, mat.dinv, mat.free
+    """z = (D + U)^-1 D (D + L)^-1 r on the free points, L = U^T (the fixed points' rows of z
+    left as they are: no block couples them). The forward sweep reads the upper blocks by
+    rows too: once z_i is known, each block B at (i, j) takes B^T z_i from row j's sum."""
+    a, col, ptr, dinv, free, acc = mat.amat, mat.col, mat.row_ptr, mat.dinv, mat.free, mat.acc
+    for i in free:
+        acc[i, 0] = acc[i, 1] = acc[i, 2] = 0.0
     for f in range(free.shape[0]):  # forward: (D + L) z = r
         i = free[f]
-        sx, sy, sz = r[i, 0], r[i, 1], r[i, 2]
-        for k in range(ptr[i], diag[i]):
-            b, j = a[k], col[k]
-            zx, zy, zz = z[j, 0], z[j, 1], z[j, 2]
-            sx -= b[0] * zx + b[1] * zy + b[2] * zz
-            sy -= b[3] * zx + b[4] * zy + b[5] * zz
-            sz -= b[6] * zx + b[7] * zy + b[8] * zz
+        sx, sy, sz = r[i, 0] - acc[i, 0], r[i, 1] - acc[i, 1], r[i, 2] - acc[i, 2]
         b = dinv[i]
-        z[i, 0] = b[0] * sx + b[1] * sy + b[2] * sz
-        z[i, 1] = b[3] * sx + b[4] * sy + b[5] * sz
-        z[i, 2] = b[6] * sx + b[7] * sy + b[8] * sz
+        zx = b[0] * sx + b[1] * sy + b[2] * sz
+        zy = b[3] * sx + b[4] * sy + b[5] * sz
+        zz = b[6] * sx + b[7] * sy + b[8] * sz
+        z[i, 0], z[i, 1], z[i, 2] = zx, zy, zz
+        for k in range(ptr[i] + 1, ptr[i + 1]):
+            b, j = a[k], col[k]
+            acc[j, 0] += b[0] * zx + b[3] * zy + b[6] * zz
+            acc[j, 1] += b[1] * zx + b[4] * zy + b[7] * zz
+            acc[j, 2] += b[2] * zx + b[5] * zy + b[8] * zz
     for f in range(free.shape[0] - 1, -1, -1):  # backward: (D + U) z' = D z
         i = free[f]
-        if diag[i] + 1 == ptr[i + 1]:
+        if ptr[i] + 1 == ptr[i + 1]:
             continue
         sx = sy = sz = 0.0
-        for k in range(diag[i] + 1, ptr[i + 1]):
+        for k in range(ptr[i] + 1, ptr[i + 1]):
             b, j = a[k], col[k]
             zx, zy, zz = z[j, 0], z[j, 1], z[j, 2]
             sx += b[0] * zx + b[1] * zy + b[2] * zz

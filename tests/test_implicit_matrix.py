@@ -54,11 +54,14 @@ def dense(n, product):
 
 
 def blocks_of(mat, n, blocks):
+    """The whole matrix of the upper blocks (each also its transpose's)."""
     out = np.zeros((3 * n, 3 * n))
     for i in range(n):
         for k in range(mat.row_ptr[i], mat.row_ptr[i + 1]):
             j = mat.col[k]
+            assert j >= i
             out[3 * i:3 * i + 3, 3 * j:3 * j + 3] = blocks[k].reshape(3, 3)
+            out[3 * j:3 * j + 3, 3 * i:3 * i + 3] = blocks[k].reshape(3, 3).T
     return out
 
 

@@ -3,9 +3,11 @@ assembled block-sparse matrix, and the diagonal blocks of the projected ones: wh
 implicit Euler's conjugate gradients multiply by and precondition with
 (`hybrid.implicit_matrix`).
 
-Each element adds, for each ordered pair of its corners (m, n), its block K_mn to the
-matrix slot `slot[element, 3 m + n]` (-1: a corner is fixed, no slot), and its
-projected K_nn to the row of corner n in `pdiag`. With the
+Each element adds, for each pair of its corners (m, n), m <= n, its block K_mn to the
+matrix slot `slot[element, 3 m + n]` (-1: a corner is fixed, no slot), transposed when
+corner m is the larger point (the matrix keeps its upper triangle,
+`hybrid.implicit_matrix.NewtonMatrix`), and its projected K_nn to the row of corner n
+in `pdiag`. With the
 corner weights w_n of F = sum_n x_n w_n^T (w_0 = -(d00, d01 + d11), w_1 = (d00, d01),
 w_2 = (0, d11)) and q_n = F w_n:
 
@@ -14,7 +16,7 @@ w_2 = (0, d11)) and q_n = F w_n:
 
 cm = kx + kv tau, S the stress (the clamped one projected), r the rank-one coefficient
 and L the edges' Laplacian with their coefficients (the tangent caches' exact or
-projected columns). K_nm = K_mn^T: each pair is computed once.
+projected columns). K_nm = K_mn^T: each pair is computed and stored once.
 """
 
 from __future__ import annotations
@@ -26,31 +28,22 @@ __all__ = ["membrane_tangent_blocks", "fibre_tangent_blocks", "passive_fibres_ta
 
 
 @kernel(inline="always")
-def _add_block(mat, s, t, v0, v1, v2, v3, v4, v5, v6, v7, v8, diag):
-    """mat[s] += v + diag I (v row-major) and mat[t] += its transpose (t < 0: no slot;
-    t == s: a diagonal block, added once)."""
+def _add_block(mat, s, transpose, v0, v1, v2, v3, v4, v5, v6, v7, v8, diag):
+    """mat[s] += v + diag I (v row-major), or its transpose."""
     b = mat[s]
     b[0] += v0 + diag
+    b[4] += v4 + diag
+    b[8] += v8 + diag
+    if transpose:
+        v1, v3 = v3, v1
+        v2, v6 = v6, v2
+        v5, v7 = v7, v5
     b[1] += v1
     b[2] += v2
     b[3] += v3
-    b[4] += v4 + diag
     b[5] += v5
     b[6] += v6
     b[7] += v7
-    b[8] += v8 + diag
-    if t < 0 or t == s:
-        return
-    b = mat[t]
-    b[0] += v0 + diag
-    b[1] += v3
-    b[2] += v6
-    b[3] += v1
-    b[4] += v4 + diag
-    b[5] += v7
-    b[6] += v2
-    b[7] += v5
-    b[8] += v8 + diag
 
 
 @kernel(inline="always")
@@ -101,11 +94,10 @@ def membrane_tangent_blocks(mem_vert, mem_par, cache, kx, kv, slot, amat, pdiag)
                 v6 = cl * qmz * qnx + cu * qnz * qmx + ww * a02
                 v7 = cl * qmz * qny + cu * qnz * qmy + ww * a12
                 v8 = cl * qmz * qnz + cu * qnz * qmz + ww * a22
-                t = slot[k, 3 * n + m]
-                _add_block(amat, s, t, v0, v1, v2, v3, v4, v5, v6, v7, v8, geo_e)
+                _add_block(amat, s, mem_vert[k, m] > mem_vert[k, n], v0, v1, v2, v3, v4, v5, v6, v7, v8, geo_e)
                 if m == n:
                     geo_p = kg * (w00 * c[9] + w01 * c[10] + w11 * c[11])
-                    _add_block(pdiag, mem_vert[k, m], -1, v0, v1, v2, v3, v4, v5, v6, v7, v8, geo_p)
+                    _add_block(pdiag, mem_vert[k, m], False, v0, v1, v2, v3, v4, v5, v6, v7, v8, geo_p)
 
 
 @kernel(inline="always")
@@ -131,11 +123,11 @@ def _edge_blocks(tri, c, slot, scale, rank_e, rank_p, e_col, p_col, amat, pdiag)
             g0, g1, g2 = gmx * gnx, gmx * gny, gmx * gnz
             g3, g4, g5 = gmy * gnx, gmy * gny, gmy * gnz
             g6, g7, g8 = gmz * gnx, gmz * gny, gmz * gnz
-            _add_block(amat, s, slot[3 * n + m], re * g0, re * g1, re * g2, re * g3, re * g4, re * g5, re * g6,
+            _add_block(amat, s, tri[m] > tri[n], re * g0, re * g1, re * g2, re * g3, re * g4, re * g5, re * g6,
                        re * g7, re * g8, lap_e)
             if m == n:
                 lap_p = scale * (c[p_col + m] + c[p_col + mp])
-                _add_block(pdiag, tri[m], -1, rp * g0, rp * g1, rp * g2, rp * g3, rp * g4, rp * g5, rp * g6, rp * g7,
+                _add_block(pdiag, tri[m], False, rp * g0, rp * g1, rp * g2, rp * g3, rp * g4, rp * g5, rp * g6, rp * g7,
                            rp * g8, lap_p)
 
 
