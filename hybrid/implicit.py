@@ -52,14 +52,15 @@ from enum import IntEnum
 from typing import NamedTuple
 
 import numpy as np
+from numba import prange
 
-from .implicit_matrix import NewtonMatrix, assemble, matrix_product, newton_matrix, sgs_sweep
-from .kernel import CHUNK_VERTS, kernel
+from .implicit_matrix import (NewtonMatrix, assemble_parallel, assemble_serial, element_groups, matrix_product_parallel,
+                              matrix_product_serial, newton_matrix, newton_parts, sgs_sweep)
+from .kernel import CHUNK_VERTS, kernel, kernel_twin
 from .terms import Damping, Membrane, MuscleFibres, PassiveFibres, Volume
 from .terms.fibres import add_muscle_fibres
 from .terms.passive_fibres import add_passive_fibres
-from .terms.membrane import add_membrane_serial
-from .terms.membrane import membrane_energy
+from .terms.membrane import add_membrane_serial, membrane_energy, membrane_faces_parallel, membrane_gather_parallel
 from .terms.tangents import (NCACHE, NFIB_CACHE, NPF_CACHE, fibre_cached_product, fibre_energy, fibre_tangent_cache,
                              kelvin_voigt_dissipation, membrane_tangent_cache, membrane_tangent_product,
                              passive_fibres_cached_product, passive_fibres_energy_kernel, passive_fibres_tangent_cache)
@@ -80,6 +81,7 @@ HALVINGS = 12
 ARMIJO = 1e-4  # the fraction of the predicted decrease a step must achieve
 EPS = 2.0 ** -52  # the doubles' relative spacing
 ULPS = 4.0  # a Newton correction at most this many units in the last place of the positions ends the solve
+CACHE_CHUNK = 256  # rows of the tangent caches per chunk (parallel build)
 FORCING = 0.5  # the linear solve: to this fraction of the residual, and of what convergence asks
 
 
@@ -103,7 +105,10 @@ class Info(IntEnum):
 class NewtonRows(NamedTuple):
     """The membrane's, muscle fibres' and passive fibres' rows (`MembraneArrays`) of the
     triangles with a free corner: the others add only to the Newton matrix's fixed rows,
-    which the solve zeroes, so its products and blocks skip them."""
+    which the solve zeroes, so its products and blocks skip them. In groups: the triangles
+    whose free corners lie in one part of the points (`hybrid.implicit_matrix.newton_parts`:
+    bounds), part by part, then those across parts; mem_group, fib_group, pf_group (nparts
+    + 2,): where each group starts and ends."""
     mem_vert: np.ndarray
     mem_par: np.ndarray
     fib_vert: np.ndarray
@@ -111,17 +116,26 @@ class NewtonRows(NamedTuple):
     fib_sched: np.ndarray
     pf_vert: np.ndarray
     pf_par: np.ndarray
+    bounds: np.ndarray
+    mem_group: np.ndarray
+    fib_group: np.ndarray
+    pf_group: np.ndarray
 
 
 def newton_rows(arrays) -> NewtonRows:
-    """The `NewtonRows` of a model's arrays (in their order)."""
+    """The `NewtonRows` of a model's arrays (in their order within each group)."""
     free = np.asarray(arrays.vert_free) != 0
-    out = []
+    bounds = newton_parts(arrays.vert_free)
+    ngroup = len(bounds)  # the parts and the triangles across them
+    out, groups = [], []
     for tri, *more in ((arrays.mem_vert, arrays.mem_par), (arrays.fib_vert, arrays.fib_par, arrays.fib_sched),
                        (arrays.pf_vert, arrays.pf_par)):
-        keep = free[tri.reshape(-1, 3)].any(axis=1)
-        out += [np.ascontiguousarray(a[keep]) for a in (tri, *more)]
-    return NewtonRows(*out)
+        keep = np.flatnonzero(free[tri.reshape(-1, 3)].any(axis=1))
+        group = element_groups(tri[keep], free, bounds)
+        order = keep[np.argsort(group, kind="stable")]
+        out += [np.ascontiguousarray(a[order]) for a in (tri, *more)]
+        groups.append(np.concatenate([[0], np.cumsum(np.bincount(group, minlength=ngroup))]).astype(np.int64))
+    return NewtonRows(*out, bounds, *groups)
 
 
 class ImplicitWork(NamedTuple):
@@ -164,7 +178,7 @@ def implicit_work(arrays) -> ImplicitWork | None:
     return ImplicitWork(*vec, rows=rows, face=np.zeros((rows.mem_vert.shape[0], NCACHE)),
                         fib=np.zeros((rows.fib_vert.shape[0], NFIB_CACHE)),
                         pf=np.zeros((rows.pf_vert.shape[0], NPF_CACHE)),
-                        mat=newton_matrix(n, arrays.vert_free, rows.mem_vert, rows.fib_vert, rows.pf_vert),
+                        mat=newton_matrix(n, arrays.vert_free, rows.mem_vert, rows.fib_vert, rows.pf_vert, rows.bounds),
                         info=np.zeros(len(Info)))
 
 
@@ -177,9 +191,35 @@ def implicit_forces(m, sched_val, x, v, out):
     for i in range(out.shape[0]):
         for a in range(3):
             out[i, a] = 0.0
-    on = m.term_on
-    if on[T_MEMBRANE]:
+    if m.term_on[T_MEMBRANE]:
         add_membrane_serial(m.mem_vert, m.mem_par, m.kv_on, x, v, out)
+    _forces_after_membrane(m, sched_val, x, v, out)
+
+
+@kernel
+def _forces(m, sched_val, x, v, out, face_force, par):
+    """`implicit_forces`, the membrane's with the parallel build's two passes when `par`
+    and m.parallel (the same sums: `hybrid.terms.membrane`). face_force: their scratch."""
+    if par is None or not m.parallel:
+        implicit_forces(m, sched_val, x, v, out)
+        return
+    _clear_parallel(out)
+    if m.term_on[T_MEMBRANE]:
+        membrane_faces_parallel(m.mem_vert, m.mem_par, m.kv_on, x, v, face_force)
+        membrane_gather_parallel(m.mvf_ptr, m.mvf_slot, face_force, out)
+    _forces_after_membrane(m, sched_val, x, v, out)
+
+
+@kernel(parallel=True)
+def _clear_parallel(out):
+    for i in prange(out.shape[0]):
+        out[i, 0] = out[i, 1] = out[i, 2] = 0.0
+
+
+@kernel
+def _forces_after_membrane(m, sched_val, x, v, out):
+    """out += the implicit forces other than the membrane's (`implicit_forces`)."""
+    on = m.term_on
     if on[T_FIBRES]:
         add_muscle_fibres(m.fib_vert, m.fib_par, m.fib_sched, sched_val, x, out)
     if on[T_PASSIVE]:
@@ -192,7 +232,7 @@ def implicit_forces(m, sched_val, x, v, out):
 
 
 @kernel
-def implicit_start_forces(m, sched_val, x, v, imp, vert_force):
+def implicit_start_forces(m, sched_val, x, v, imp, vert_force, face_force, par=None):
     """Step phase 1's implicit part: imp.f = `implicit_forces` at the step's start, added to
     vert_force (which the force pass left without them). Returns False when imp is None
     (another integrator: the None prunes this). `implicit_step` reads imp.f: the explicit
@@ -201,7 +241,7 @@ def implicit_start_forces(m, sched_val, x, v, imp, vert_force):
     """
     if imp is None:
         return False
-    implicit_forces(m, sched_val, x, v, imp.f)
+    _forces(m, sched_val, x, v, imp.f, face_force, par)
     for i in range(vert_force.shape[0]):
         for a in range(3):
             vert_force[i, a] += imp.f[i, a]
@@ -219,6 +259,28 @@ def newton_caches(m, rows, sched_val, x, face, fib, pf):
         fibre_tangent_cache(rows.fib_vert, rows.fib_par, rows.fib_sched, sched_val, x, fib)
     if on[T_PASSIVE]:
         passive_fibres_tangent_cache(rows.pf_vert, rows.pf_par, x, pf)
+
+
+def _newton_caches_chunked(m, rows, sched_val, x, face, fib, pf):
+    """`newton_caches` in chunks of rows (each row its own: the chunks at once in the parallel build)."""
+    on = m.term_on
+    mem_vert, mem_par, fib_vert, fib_par, fib_sched = rows.mem_vert, rows.mem_par, rows.fib_vert, rows.fib_par, rows.fib_sched
+    pf_vert, pf_par = rows.pf_vert, rows.pf_par
+    if on[T_MEMBRANE]:
+        for c in prange((mem_vert.shape[0] + CACHE_CHUNK - 1) // CACHE_CHUNK):
+            lo, hi = c * CACHE_CHUNK, min((c + 1) * CACHE_CHUNK, mem_vert.shape[0])
+            membrane_tangent_cache(mem_vert[lo:hi], mem_par[lo:hi], x, face[lo:hi])
+    if on[T_FIBRES]:
+        for c in prange((fib_vert.shape[0] + CACHE_CHUNK - 1) // CACHE_CHUNK):
+            lo, hi = c * CACHE_CHUNK, min((c + 1) * CACHE_CHUNK, fib_vert.shape[0])
+            fibre_tangent_cache(fib_vert[lo:hi], fib_par[lo:hi], fib_sched[lo:hi], sched_val, x, fib[lo:hi])
+    if on[T_PASSIVE]:
+        for c in prange((pf_vert.shape[0] + CACHE_CHUNK - 1) // CACHE_CHUNK):
+            lo, hi = c * CACHE_CHUNK, min((c + 1) * CACHE_CHUNK, pf_vert.shape[0])
+            passive_fibres_tangent_cache(pf_vert[lo:hi], pf_par[lo:hi], x, pf[lo:hi])
+
+
+_caches_serial, _caches_parallel = kernel_twin(_newton_caches_chunked)
 
 
 @kernel
@@ -241,11 +303,14 @@ def newton_product(m, rows, face, fib, pf, h, project, u, y):
 
 
 @kernel
-def _product(m, w, h, project, u, y):
+def _product(m, w, h, project, u, y, par):
     """y = the Newton matrix times u, 0 on fixed points: assembled, or with the Hessian
     projected element by element (the rare projected Newton iteration)."""
     if not project:
-        matrix_product(w.mat, u, y)
+        if par is not None and m.parallel:
+            matrix_product_parallel(w.mat, u, y)
+        else:
+            matrix_product_serial(w.mat, u, y)
         return
     newton_product(m, w.rows, w.face, w.fib, w.pf, h, True, u, y)
     for i in range(y.shape[0]):
@@ -263,7 +328,7 @@ def _dot(free, a, b):
 
 
 @kernel
-def _solve(m, w, h, project, target, cg_max):
+def _solve(m, w, h, project, target, cg_max, par=None):
     """w.cg_x = the preconditioned conjugate gradients' solution of (Newton matrix) x = w.cg_r
     (rows of fixed points zero), to |residual| <= target or cg_max iterations. Returns the iterations.
     The iterations visit the free points alone; x, z, p stay zero on the others."""
@@ -278,7 +343,7 @@ def _solve(m, w, h, project, target, cg_max):
             p[i, a] = z[i, a]
     rz = _dot(free, r, z)
     for k in range(cg_max):
-        _product(m, w, h, project, p, q)
+        _product(m, w, h, project, p, q, par)
         pq = _dot(free, p, q)
         if not pq > 0.0:  # negative curvature (or p = 0): stop with what we have (truncated Newton)
             return -1 if k == 0 else k
@@ -317,13 +382,13 @@ def _trial(m, pos, vel, h, dv, w):
 
 
 @kernel
-def _residual(m, sched_val, pos, vel, h, w):
+def _residual(m, sched_val, pos, vel, h, w, face_force, par):
     """At dv: x_try, v_try, f = f_i(x_try, v_try), res = f + f_expl - M dv / h (0 on fixed
     points). Returns (|res|, |f| + |f_expl| + |M dv / h|, the vertex of the largest residual)."""
     dv, xt, vt, res = w.dv, w.x_try, w.v_try, w.res
     free = m.vert_free
     _trial(m, pos, vel, h, dv, w)
-    implicit_forces(m, sched_val, xt, vt, w.f)
+    _forces(m, sched_val, xt, vt, w.f, face_force, par)
     rr = ff = ee = mm = 0.0
     worst, big = 0, -1.0
     for i in range(pos.shape[0]):
@@ -387,7 +452,7 @@ def _volume_gradient(face_vert, pos, grad):
 
 
 @kernel
-def implicit_step(m, s, step, imp):
+def implicit_step(m, s, step, imp, par=None):
     """Step phase 2 for implicit Euler: the free points' new velocities and positions,
     with the divergence check's sums per chunk of points into s.vert_acc (as
     `hybrid.step._integrate`). Returns 0 (done), `IMPLICIT_NOT_CONVERGED` (status
@@ -418,7 +483,7 @@ def implicit_step(m, s, step, imp):
     info[I_CARRIED] = carried
     tol = m.implicit_tol
     cg_max = max(CG_MIN_ITER, 9 * nfree)
-    rn, scale, worst = _residual(m, s.sched_val, pos, vel, h, w)
+    rn, scale, worst = _residual(m, s.sched_val, pos, vel, h, w, s.face_force, par)
     it = 0
     cg_total = 0
     at_roundoff = False
@@ -431,8 +496,12 @@ def implicit_step(m, s, step, imp):
         for i in range(n):
             for a in range(3):
                 w.x_kv[i, a] = w.x_try[i, a]
-        newton_caches(m, w.rows, s.sched_val, w.x_try, w.face, w.fib, w.pf)
-        assemble(m, w.rows, w.face, w.fib, w.pf, h, w.mat)
+        if par is not None and m.parallel:
+            _caches_parallel(m, w.rows, s.sched_val, w.x_try, w.face, w.fib, w.pf)
+            assemble_parallel(m, w.rows, w.face, w.fib, w.pf, h, w.mat)
+        else:
+            _caches_serial(m, w.rows, s.sched_val, w.x_try, w.face, w.fib, w.pf)
+            assemble_serial(m, w.rows, w.face, w.fib, w.pf, h, w.mat)
         # the exact Hessian, its negative curvature ending the conjugate gradients early
         # (truncated Newton); when met at once, the Hessian projected per element instead
         for i in range(n):
@@ -440,12 +509,12 @@ def implicit_step(m, s, step, imp):
                 w.cg_r[i, a] = h * w.res[i, a]
         # solve just accurately enough: FORCING of what convergence asks, at most FORCING of the residual
         eta = min(FORCING, FORCING * tol * scale / rn)
-        k = _solve(m, w, h, False, eta * h * rn, cg_max)
+        k = _solve(m, w, h, False, eta * h * rn, cg_max, par)
         if k < 0:
             for i in range(n):
                 for a in range(3):
                     w.cg_r[i, a] = h * w.res[i, a]
-            k = 1 + _solve(m, w, h, True, eta * h * rn, cg_max)
+            k = 1 + _solve(m, w, h, True, eta * h * rn, cg_max, par)
             info[I_PROJECTED_TOTAL] += 1
         cg_total += k
         it += 1
@@ -469,7 +538,7 @@ def implicit_step(m, s, step, imp):
         frac = 1.0  # of the step now applied
         phi = np.nan  # the potential at the start: taken only when a residual does not halve
         for k in range(HALVINGS + 1):
-            rn_new, scale, worst = _residual(m, s.sched_val, pos, vel, h, w)
+            rn_new, scale, worst = _residual(m, s.sched_val, pos, vel, h, w, s.face_force, par)
             # a residual that halved (near the root the potential's change is round-off),
             # else Armijo on the potential
             if rn_new <= 0.5 * rn or k == HALVINGS:
