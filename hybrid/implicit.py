@@ -22,7 +22,8 @@ C the damping matrix and K the forces' exact Hessian (`hybrid.terms.tangents`),
 by conjugate gradients with the matrix assembled once per Newton iteration from
 the terms' per-triangle tangent caches (`hybrid.implicit_matrix`), preconditioned
 with its symmetric Gauss-Seidel sweep whose diagonal blocks are those of the matrix
-with K made positive semi-definite per element. Where the exact matrix has negative curvature
+with K made positive semi-definite per element, in Eisenstat's implementation
+(`_solve_split`: two triangular solves an iteration). Where the exact matrix has negative curvature
 (a membrane under compression: it has no bending stiffness) the conjugate
 gradients stop there (truncated Newton); met at the first iteration, the solve
 is repeated with the per-element projected Hessian (projected Newton). Solving
@@ -55,7 +56,8 @@ import numpy as np
 from numba import prange
 
 from .implicit_matrix import (NewtonMatrix, assemble_parallel, assemble_serial, element_groups, matrix_product_parallel,
-                              matrix_product_serial, newton_matrix, newton_parts, sgs_sweep)
+                              matrix_product_serial, newton_matrix, newton_parts, sgs_sweep, upper_solve, lower_solve,
+                              lower_product)
 from .kernel import CHUNK_VERTS, kernel, kernel_twin
 from .terms import Damping, Membrane, MuscleFibres, PassiveFibres, Volume
 from .terms.fibres import add_muscle_fibres
@@ -160,6 +162,7 @@ class ImplicitWork(NamedTuple):
     cg_z: np.ndarray
     cg_p: np.ndarray
     cg_q: np.ndarray
+    cg_t: np.ndarray
     rows: NewtonRows
     face: np.ndarray
     fib: np.ndarray
@@ -173,7 +176,7 @@ def implicit_work(arrays) -> ImplicitWork | None:
     if arrays.integrator != IMPLICIT_ID:
         return None
     n = arrays.vert_rest.shape[0]
-    vec = [np.zeros((n, 3)) for _ in range(13)]
+    vec = [np.zeros((n, 3)) for _ in range(14)]
     rows = newton_rows(arrays)
     return ImplicitWork(*vec, rows=rows, face=np.zeros((rows.mem_vert.shape[0], NCACHE)),
                         fib=np.zeros((rows.fib_vert.shape[0], NFIB_CACHE)),
@@ -367,6 +370,107 @@ def _solve(m, w, h, project, target, cg_max, par=None):
 
 
 @kernel
+def _solve_split(w, target, cg_max):
+    """w.cg_x = the solution of A x = w.cg_r (A the assembled Newton matrix, rows of fixed
+    points zero) by the conjugate gradients of `_solve` with Eisenstat's implementation:
+    with P = (D + L) D^-1 (D + U) = C C^T, C = (D + L) G^-T (D = G G^T, D the projected
+    diagonal blocks, L = U^T the assembled off-diagonal ones), they iterate on C^-1 A C^-T,
+    whose product is two triangular solves (A = (D + L) + (D + U) + (D_A - 2 D), D_A the
+    exact diagonal blocks): t = (D + U)^-1 G p, C^-1 A C^-T p = G^T (t + (D + L)^-1 (G p +
+    (D_A - 2 D) t)). The same iterates as `_solve` (its x = C^-T y), for two triangular
+    solves an iteration instead of a product and a sweep (three). Stops when |C^-1 r|
+    has fallen by target / |r_0| (the preconditioned residual's reduction standing for the
+    residual's), or at negative curvature as `_solve`. Returns the iterations (-1:
+    negative curvature at once)."""
+    mat = w.mat
+    free = mat.free
+    x, r, y, p, q, t = w.cg_x, w.cg_r, w.cg_z, w.cg_p, w.cg_q, w.cg_t
+    g, a, diag, pdiag = mat.gchol, mat.amat, mat.diag, mat.pdiag
+    for i in range(x.shape[0]):
+        for c in range(3):
+            x[i, c] = y[i, c] = p[i, c] = q[i, c] = t[i, c] = 0.0
+    r0 = math.sqrt(_dot(free, r, r))
+    lower_solve(mat, r, t)  # r^ = C^-1 r = G^T (D + L)^-1 r
+    for i in free:
+        _gt(g[i], t[i, 0], t[i, 1], t[i, 2], r, i)
+        for c in range(3):
+            p[i, c] = r[i, c]
+    rr = _dot(free, r, r)
+    stop = target / r0 * math.sqrt(rr) if r0 > 0.0 else 0.0
+    k = 0
+    while k < cg_max:
+        # q = C^-1 A C^-T p
+        for i in free:
+            _g(g[i], p[i, 0], p[i, 1], p[i, 2], q, i)  # q = G p for now
+        upper_solve(mat, q, x)  # x (scratch till the end) = t = (D + U)^-1 G p
+        for i in free:
+            da, dp = a[diag[i]], pdiag[i]
+            tx, ty, tz = x[i, 0], x[i, 1], x[i, 2]
+            q[i, 0] += (da[0] - 2.0 * dp[0]) * tx + (da[1] - 2.0 * dp[1]) * ty + (da[2] - 2.0 * dp[2]) * tz
+            q[i, 1] += (da[3] - 2.0 * dp[3]) * tx + (da[4] - 2.0 * dp[4]) * ty + (da[5] - 2.0 * dp[5]) * tz
+            q[i, 2] += (da[6] - 2.0 * dp[6]) * tx + (da[7] - 2.0 * dp[7]) * ty + (da[8] - 2.0 * dp[8]) * tz
+        lower_solve(mat, q, t)
+        for i in free:
+            _gt(g[i], x[i, 0] + t[i, 0], x[i, 1] + t[i, 1], x[i, 2] + t[i, 2], q, i)
+        pq = _dot(free, p, q)
+        if not pq > 0.0:  # negative curvature (or p = 0): stop with what we have (truncated Newton)
+            if k == 0:
+                return -1
+            break
+        alpha = rr / pq
+        rr_new = 0.0
+        for i in free:
+            for c in range(3):
+                y[i, c] += alpha * p[i, c]
+                r[i, c] -= alpha * q[i, c]
+            rr_new += r[i, 0] * r[i, 0] + r[i, 1] * r[i, 1] + r[i, 2] * r[i, 2]
+        k += 1
+        # the preconditioned residual's reduction says when to look at the residual itself,
+        # r = C r^ = (D + L) G^-T r^ (half a product)
+        if math.sqrt(rr_new) <= stop and _split_residual(mat, r, x, t) <= target:
+            break
+        beta = rr_new / rr
+        rr = rr_new
+        for i in free:
+            for c in range(3):
+                p[i, c] = r[i, c] + beta * p[i, c]
+    for i in free:  # x = C^-T y = (D + U)^-1 G y
+        _g(g[i], y[i, 0], y[i, 1], y[i, 2], q, i)
+    upper_solve(mat, q, x)
+    return k
+
+
+@kernel
+def _split_residual(mat, rhat, v, out):
+    """|C r^| = |(D + L) G^-T r^| (v, out: scratch)."""
+    g = mat.gchol
+    for i in mat.free:  # v = G^-T r^: back substitution
+        gi = g[i]
+        vz = rhat[i, 2] / gi[5]
+        vy = (rhat[i, 1] - gi[4] * vz) / gi[2]
+        v[i, 0] = (rhat[i, 0] - gi[1] * vy - gi[3] * vz) / gi[0]
+        v[i, 1], v[i, 2] = vy, vz
+    lower_product(mat, v, out)
+    return math.sqrt(_dot(mat.free, out, out))
+
+
+@kernel(inline="always")
+def _g(g, vx, vy, vz, out, i):
+    """out[i] = G v, G lower triangular (g00, g10, g11, g20, g21, g22)."""
+    out[i, 0] = g[0] * vx
+    out[i, 1] = g[1] * vx + g[2] * vy
+    out[i, 2] = g[3] * vx + g[4] * vy + g[5] * vz
+
+
+@kernel(inline="always")
+def _gt(g, vx, vy, vz, out, i):
+    """out[i] = G^T v."""
+    out[i, 0] = g[0] * vx + g[1] * vy + g[3] * vz
+    out[i, 1] = g[2] * vy + g[4] * vz
+    out[i, 2] = g[5] * vz
+
+
+@kernel
 def _trial(m, pos, vel, h, dv, w):
     """w.v_try = vel + dv, w.x_try = pos + h w.v_try on the free points; pos, vel on the others."""
     xt, vt = w.x_try, w.v_try
@@ -509,7 +613,7 @@ def implicit_step(m, s, step, imp, par=None):
                 w.cg_r[i, a] = h * w.res[i, a]
         # solve just accurately enough: FORCING of what convergence asks, at most FORCING of the residual
         eta = min(FORCING, FORCING * tol * scale / rn)
-        k = _solve(m, w, h, False, eta * h * rn, cg_max, par)
+        k = _solve_split(w, eta * h * rn, cg_max)
         if k < 0:
             for i in range(n):
                 for a in range(3):

@@ -16,6 +16,7 @@ of the conjugate-gradient iterations of D^-1 alone.
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numpy as np
@@ -26,7 +27,8 @@ from .terms import Damping, Membrane, MuscleFibres, PassiveFibres
 from .terms.tangent_blocks import fibre_tangent_blocks, membrane_tangent_blocks, passive_fibres_tangent_blocks
 
 __all__ = ["NewtonMatrix", "newton_matrix", "newton_parts", "element_groups", "PARTS", "assemble", "matrix_product",
-           "sgs_sweep", "assemble_serial", "assemble_parallel", "matrix_product_serial", "matrix_product_parallel"]
+           "sgs_sweep", "assemble_serial", "assemble_parallel", "matrix_product_serial", "matrix_product_parallel",
+           "upper_solve", "lower_solve", "lower_product"]
 
 #: the parts of a mesh of at least PARALLEL_MIN_VERTS points (one below): a fixed number, so
 #: that both builds and every machine run the same arithmetic
@@ -48,7 +50,8 @@ class NewtonMatrix(NamedTuple):
     (nvert, 9): the diagonal blocks with K projected; dinv (nvert, 9): their inverses
     (the identity at fixed points); acc (nvert, 3): the forward sweep's scratch;
     part_free (nparts + 1,): each part's range in free (`newton_parts`); cross (nvert,):
-    the first block of each row whose column lies beyond the row's part."""
+    the first block of each row whose column lies beyond the row's part; gchol (nvert, 6):
+    the Cholesky factors G of pdiag, D = G G^T (g00, g10, g11, g20, g21, g22)."""
     free: np.ndarray
     row_ptr: np.ndarray
     col: np.ndarray
@@ -62,6 +65,7 @@ class NewtonMatrix(NamedTuple):
     acc: np.ndarray
     part_free: np.ndarray
     cross: np.ndarray
+    gchol: np.ndarray
 
 
 def newton_parts(vert_free, nparts: int | None = None) -> np.ndarray:
@@ -116,7 +120,7 @@ def newton_matrix(nvert: int, vert_free, mem_vert, fib_vert, pf_vert, bounds=Non
     return NewtonMatrix(free_idx, row_ptr, col.astype(np.int64), row_ptr[:-1].copy(),
                         *slots, amat=np.zeros((nb, 9)), pdiag=np.zeros((nvert, 9)), dinv=np.zeros((nvert, 9)),
                         acc=np.zeros((nvert, 3)), part_free=np.searchsorted(free_idx, bounds).astype(np.int64),
-                        cross=cross)
+                        cross=cross, gchol=np.zeros((nvert, 6)))
 
 
 def _assemble(m, rows, face, fib, pf, h, mat):
@@ -156,7 +160,7 @@ def _assemble(m, rows, face, fib, pf, h, mat):
                 lo, hi = pf_group[q], pf_group[q + 1]
                 passive_fibres_tangent_blocks(pf_vert[lo:hi], pf[lo:hi], h * h, pf_slot[lo:hi], amat, pdiag)
     for c in prange(nchunk):
-        _invert_rows(vert_free, pdiag, dinv, c * CHUNK_VERTS, min((c + 1) * CHUNK_VERTS, n))
+        _invert_rows(vert_free, pdiag, dinv, mat.gchol, c * CHUNK_VERTS, min((c + 1) * CHUNK_VERTS, n))
 
 
 @kernel
@@ -171,15 +175,80 @@ def _diagonal_rows(vert_mass, damp_coef, damping, vert_free, h, diag, pdiag, ama
 
 
 @kernel
-def _invert_rows(vert_free, pdiag, dinv, lo, hi):
-    """dinv of points lo..hi - 1: pdiag's inverses (the identity at fixed points)."""
+def _invert_rows(vert_free, pdiag, dinv, gchol, lo, hi):
+    """dinv and gchol of points lo..hi - 1: pdiag's inverses and Cholesky factors (the
+    identity at fixed points)."""
     for i in range(lo, hi):
-        b = dinv[i]
+        b, g = dinv[i], gchol[i]
         if not vert_free[i]:
             for r in range(9):
                 b[r] = 1.0 if r % 4 == 0 else 0.0
+            g[0] = g[2] = g[5] = 1.0
+            g[1] = g[3] = g[4] = 0.0
         else:
             _invert(pdiag[i], b)
+            _cholesky(pdiag[i], g)
+
+
+@kernel(inline="always")
+def _cholesky(a, g):
+    """g = the lower Cholesky factor of the 3 x 3 block a (row-major), (g00, g10, g11, g20, g21,
+    g22); of its diagonal if a is not positive definite (which the projection rules out)."""
+    d0 = a[0]
+    if d0 > 0.0:
+        g00 = math.sqrt(d0)
+        g10, g20 = a[3] / g00, a[6] / g00
+        d1 = a[4] - g10 * g10
+        if d1 > 0.0:
+            g11 = math.sqrt(d1)
+            g21 = (a[7] - g20 * g10) / g11
+            d2 = a[8] - g20 * g20 - g21 * g21
+            if d2 > 0.0:
+                g[0], g[1], g[2], g[3], g[4], g[5] = g00, g10, g11, g20, g21, math.sqrt(d2)
+                return
+    # as _invert's Jacobi fallback: dinv is then the diagonal's inverse
+    g[0], g[2], g[5] = math.sqrt(abs(a[0])), math.sqrt(abs(a[4])), math.sqrt(abs(a[8]))
+    g[1] = g[3] = g[4] = 0.0
+
+
+@kernel
+def upper_solve(mat, u, t):
+    """t = (D + U)^-1 u on the free points (D = pdiag)."""
+    a, col, ptr, dinv, free = mat.amat, mat.col, mat.row_ptr, mat.dinv, mat.free
+    for f in range(free.shape[0] - 1, -1, -1):
+        i = free[f]
+        sx, sy, sz = u[i, 0], u[i, 1], u[i, 2]
+        for k in range(ptr[i] + 1, ptr[i + 1]):
+            b, j = a[k], col[k]
+            tx, ty, tz = t[j, 0], t[j, 1], t[j, 2]
+            sx -= b[0] * tx + b[1] * ty + b[2] * tz
+            sy -= b[3] * tx + b[4] * ty + b[5] * tz
+            sz -= b[6] * tx + b[7] * ty + b[8] * tz
+        b = dinv[i]
+        t[i, 0] = b[0] * sx + b[1] * sy + b[2] * sz
+        t[i, 1] = b[3] * sx + b[4] * sy + b[5] * sz
+        t[i, 2] = b[6] * sx + b[7] * sy + b[8] * sz
+
+
+@kernel
+def lower_solve(mat, v, s):
+    """s = (D + L)^-1 v on the free points (D = pdiag, L = U^T read by rows of U)."""
+    a, col, ptr, dinv, free, acc = mat.amat, mat.col, mat.row_ptr, mat.dinv, mat.free, mat.acc
+    for i in free:
+        acc[i, 0] = acc[i, 1] = acc[i, 2] = 0.0
+    for f in range(free.shape[0]):
+        i = free[f]
+        sx, sy, sz = v[i, 0] - acc[i, 0], v[i, 1] - acc[i, 1], v[i, 2] - acc[i, 2]
+        b = dinv[i]
+        zx = b[0] * sx + b[1] * sy + b[2] * sz
+        zy = b[3] * sx + b[4] * sy + b[5] * sz
+        zz = b[6] * sx + b[7] * sy + b[8] * sz
+        s[i, 0], s[i, 1], s[i, 2] = zx, zy, zz
+        for k in range(ptr[i] + 1, ptr[i + 1]):
+            b, j = a[k], col[k]
+            acc[j, 0] += b[0] * zx + b[3] * zy + b[6] * zz
+            acc[j, 1] += b[1] * zx + b[4] * zy + b[7] * zz
+            acc[j, 2] += b[2] * zx + b[5] * zy + b[8] * zz
 
 
 assemble_serial, assemble_parallel = kernel_twin(_assemble)
@@ -291,3 +360,22 @@ def sgs_sweep(mat, r, z):
 
 matrix_product_serial, matrix_product_parallel = kernel_twin(_matrix_product)
 matrix_product = matrix_product_serial
+
+
+@kernel
+def lower_product(mat, v, out):
+    """out = (D + L) v on the free points (D = pdiag, L = U^T read by rows of U)."""
+    a, col, ptr, free, pdiag = mat.amat, mat.col, mat.row_ptr, mat.free, mat.pdiag
+    for i in free:
+        b = pdiag[i]
+        vx, vy, vz = v[i, 0], v[i, 1], v[i, 2]
+        out[i, 0] = b[0] * vx + b[1] * vy + b[2] * vz
+        out[i, 1] = b[3] * vx + b[4] * vy + b[5] * vz
+        out[i, 2] = b[6] * vx + b[7] * vy + b[8] * vz
+    for i in free:
+        vx, vy, vz = v[i, 0], v[i, 1], v[i, 2]
+        for k in range(ptr[i] + 1, ptr[i + 1]):
+            b, j = a[k], col[k]
+            out[j, 0] += b[0] * vx + b[3] * vy + b[6] * vz
+            out[j, 1] += b[1] * vx + b[4] * vy + b[7] * vz
+            out[j, 2] += b[2] * vx + b[5] * vy + b[8] * vz

@@ -108,3 +108,50 @@ def test_the_sweep_is_symmetric_gauss_seidel_with_the_projected_diagonal(setup):
     want = np.linalg.solve(upper, d @ np.linalg.solve(lower, r[fr].ravel()))
     assert np.abs(z[fr].ravel() - want).max() <= 1e-10 * np.abs(want).max()
     assert np.abs(z[~fr]).max() == 0.0
+
+
+def test_eisenstats_conjugate_gradients_take_the_same_iterates_as_the_swept_ones(setup):
+    """`_solve_split` (two triangular solves an iteration) iterates on C^-1 A C^-T what
+    `_solve` (a product and a sweep) iterates on A with the preconditioner C C^T: after
+    the same number of iterations both have the same x, to round-off (1e-9 of x: the
+    iterates differ by the rounding of a few dozen products)."""
+    from hybrid.implicit import _solve, _solve_split, implicit_work
+    from hybrid.implicit_matrix import lower_solve, upper_solve
+
+    a, rows, face, fib, pf, mat = setup
+    n = a.vert_rest.shape[0]
+    fr = a.vert_free != 0
+    # the triangular solves against dense ones
+    full = blocks_of(mat, n, mat.amat)
+    diag = np.zeros_like(full)
+    for i in range(n):
+        diag[3 * i:3 * i + 3, 3 * i:3 * i + 3] = mat.pdiag[i].reshape(3, 3)
+    one = np.kron(np.eye(n), np.ones((3, 3)))
+    off = full - one * full
+    free = np.repeat(fr, 3)
+    lower, upper = ((np.tril(off) + diag)[np.ix_(free, free)], (np.triu(off) + diag)[np.ix_(free, free)])
+    r = np.random.default_rng(8).standard_normal((n, 3))
+    r[~fr] = 0.0
+    t = np.zeros_like(r)
+    upper_solve(mat, r, t)
+    assert np.abs(upper @ t[fr].ravel() - r[fr].ravel()).max() <= 1e-12 * np.abs(r).max()
+    lower_solve(mat, r, t)
+    assert np.abs(lower @ t[fr].ravel() - r[fr].ravel()).max() <= 1e-12 * np.abs(r).max()
+    # the iterates
+    w = implicit_work(a)._replace(rows=rows, face=face, fib=fib, pf=pf, mat=mat)
+    b = np.abs(np.linalg.eigvalsh(full[np.ix_(free, free)]))
+    assert b.min() > 0.0
+    for iters in (1, 3, 6):
+        out = []
+        for solve in (lambda: _solve(a, w, H, False, 0.0, iters), lambda: _solve_split(w, 0.0, iters)):
+            w.cg_r[:] = r
+            assert solve() == iters
+            out.append(w.cg_x.copy())
+        assert np.abs(out[0] - out[1]).max() <= 1e-9 * np.abs(out[0]).max(), iters
+        assert np.abs(out[0][~fr]).max() == 0.0 and np.abs(out[1][~fr]).max() == 0.0
+    # to a tolerance: |A x - r| <= target, checked on the residual itself
+    w.cg_r[:] = r
+    k = _solve_split(w, 1e-6 * np.linalg.norm(r), 10 * n)
+    y = np.zeros_like(r)
+    matrix_product(mat, w.cg_x, y)
+    assert 0 < k < 10 * n and np.linalg.norm((y - r)[fr]) <= 1e-6 * np.linalg.norm(r)
