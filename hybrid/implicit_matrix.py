@@ -28,7 +28,7 @@ from .terms.tangent_blocks import fibre_tangent_blocks, membrane_tangent_blocks,
 
 __all__ = ["NewtonMatrix", "newton_matrix", "newton_parts", "element_groups", "PARTS", "assemble", "matrix_product",
            "sgs_sweep", "assemble_serial", "assemble_parallel", "matrix_product_serial", "matrix_product_parallel",
-           "upper_solve", "lower_solve", "lower_product"]
+           "upper_solve", "lower_solve"]
 
 #: the parts of a mesh of at least PARALLEL_MIN_VERTS points (one below): a fixed number, so
 #: that both builds and every machine run the same arithmetic
@@ -361,21 +361,3 @@ def sgs_sweep(mat, r, z):
 matrix_product_serial, matrix_product_parallel = kernel_twin(_matrix_product)
 matrix_product = matrix_product_serial
 
-
-@kernel
-def lower_product(mat, v, out):
-    """out = (D + L) v on the free points (D = pdiag, L = U^T read by rows of U)."""
-    a, col, ptr, free, pdiag = mat.amat, mat.col, mat.row_ptr, mat.free, mat.pdiag
-    for i in free:
-        b = pdiag[i]
-        vx, vy, vz = v[i, 0], v[i, 1], v[i, 2]
-        out[i, 0] = b[0] * vx + b[1] * vy + b[2] * vz
-        out[i, 1] = b[3] * vx + b[4] * vy + b[5] * vz
-        out[i, 2] = b[6] * vx + b[7] * vy + b[8] * vz
-    for i in free:
-        vx, vy, vz = v[i, 0], v[i, 1], v[i, 2]
-        for k in range(ptr[i] + 1, ptr[i + 1]):
-            b, j = a[k], col[k]
-            out[j, 0] += b[0] * vx + b[3] * vy + b[6] * vz
-            out[j, 1] += b[1] * vx + b[4] * vy + b[7] * vz
-            out[j, 2] += b[2] * vx + b[5] * vy + b[8] * vz
