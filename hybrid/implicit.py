@@ -56,15 +56,14 @@ from enum import IntEnum
 from typing import NamedTuple
 
 import numpy as np
-from numba import prange
 
-from .implicit_matrix import (NewtonMatrix, assemble_parallel, assemble_serial, element_groups, matrix_product_parallel,
-                              matrix_product_serial, newton_matrix, newton_parts, sgs_sweep, upper_solve, lower_solve)
-from .kernel import CHUNK_VERTS, kernel, kernel_twin
+from .implicit_matrix import (NewtonMatrix, assemble, lower_solve, matrix_product, newton_matrix, sgs_sweep,
+                              upper_solve)
+from .kernel import CHUNK_VERTS, kernel
 from .terms import Damping, Membrane, MuscleFibres, PassiveFibres, Volume
 from .terms.fibres import add_muscle_fibres
 from .terms.passive_fibres import add_passive_fibres
-from .terms.membrane import add_membrane_serial, membrane_energy, membrane_faces_parallel, membrane_gather_parallel
+from .terms.membrane import add_membrane_serial, membrane_energy
 from .terms.tangents import (NCACHE, NFIB_CACHE, NPF_CACHE, fibre_cached_product, fibre_energy, fibre_tangent_cache,
                              kelvin_voigt_dissipation, membrane_tangent_cache, membrane_tangent_product,
                              passive_fibres_cached_product, passive_fibres_energy_kernel, passive_fibres_tangent_cache)
@@ -86,7 +85,6 @@ ARMIJO = 1e-4  # the fraction of the predicted decrease a step must achieve
 EPS = 2.0 ** -52  # the doubles' relative spacing
 ULPS = 4.0  # a Newton correction at most this many units in the last place of the positions ends the solve
 STALL_ULPS = 256.0  # ... and one at most this many that did not halve the residual
-CACHE_CHUNK = 256  # rows of the tangent caches per chunk (parallel build)
 FORCING = 0.5  # the linear solve: to this fraction of the residual, and of what convergence asks
 
 
@@ -110,10 +108,7 @@ class Info(IntEnum):
 class NewtonRows(NamedTuple):
     """The membrane's, muscle fibres' and passive fibres' rows (`MembraneArrays`) of the
     triangles with a free corner: the others add only to the Newton matrix's fixed rows,
-    which the solve zeroes, so its products and blocks skip them. In groups: the triangles
-    whose free corners lie in one part of the points (`hybrid.implicit_matrix.newton_parts`:
-    bounds), part by part, then those across parts; mem_group, fib_group, pf_group (nparts
-    + 2,): where each group starts and ends."""
+    which the solve zeroes, so its products and blocks skip them."""
     mem_vert: np.ndarray
     mem_par: np.ndarray
     fib_vert: np.ndarray
@@ -121,26 +116,17 @@ class NewtonRows(NamedTuple):
     fib_sched: np.ndarray
     pf_vert: np.ndarray
     pf_par: np.ndarray
-    bounds: np.ndarray
-    mem_group: np.ndarray
-    fib_group: np.ndarray
-    pf_group: np.ndarray
 
 
 def newton_rows(arrays) -> NewtonRows:
-    """The `NewtonRows` of a model's arrays (in their order within each group)."""
+    """The `NewtonRows` of a model's arrays (in their order)."""
     free = np.asarray(arrays.vert_free) != 0
-    bounds = newton_parts(arrays.vert_free)
-    ngroup = len(bounds)  # the parts and the triangles across them
-    out, groups = [], []
+    out = []
     for tri, *more in ((arrays.mem_vert, arrays.mem_par), (arrays.fib_vert, arrays.fib_par, arrays.fib_sched),
                        (arrays.pf_vert, arrays.pf_par)):
-        keep = np.flatnonzero(free[tri.reshape(-1, 3)].any(axis=1))
-        group = element_groups(tri[keep], free, bounds)
-        order = keep[np.argsort(group, kind="stable")]
-        out += [np.ascontiguousarray(a[order]) for a in (tri, *more)]
-        groups.append(np.concatenate([[0], np.cumsum(np.bincount(group, minlength=ngroup))]).astype(np.int64))
-    return NewtonRows(*out, bounds, *groups)
+        keep = free[tri.reshape(-1, 3)].any(axis=1)
+        out += [np.ascontiguousarray(a[keep]) for a in (tri, *more)]
+    return NewtonRows(*out)
 
 
 class ImplicitWork(NamedTuple):
@@ -185,7 +171,7 @@ def implicit_work(arrays) -> ImplicitWork | None:
     return ImplicitWork(*vec, rows=rows, face=np.zeros((rows.mem_vert.shape[0], NCACHE)),
                         fib=np.zeros((rows.fib_vert.shape[0], NFIB_CACHE)),
                         pf=np.zeros((rows.pf_vert.shape[0], NPF_CACHE)),
-                        mat=newton_matrix(n, arrays.vert_free, rows.mem_vert, rows.fib_vert, rows.pf_vert, rows.bounds),
+                        mat=newton_matrix(n, arrays.vert_free, rows.mem_vert, rows.fib_vert, rows.pf_vert),
                         info=np.zeros(len(Info)))
 
 
@@ -204,26 +190,6 @@ def implicit_forces(m, sched_val, x, v, out):
 
 
 @kernel
-def _forces(m, sched_val, x, v, out, face_force, par):
-    """`implicit_forces`, the membrane's with the parallel build's two passes when `par`
-    and m.parallel (the same sums: `hybrid.terms.membrane`). face_force: their scratch."""
-    if par is None or not m.parallel:
-        implicit_forces(m, sched_val, x, v, out)
-        return
-    _clear_parallel(out)
-    if m.term_on[T_MEMBRANE]:
-        membrane_faces_parallel(m.mem_vert, m.mem_par, m.kv_on, x, v, face_force)
-        membrane_gather_parallel(m.mvf_ptr, m.mvf_slot, face_force, out)
-    _forces_after_membrane(m, sched_val, x, v, out)
-
-
-@kernel(parallel=True)
-def _clear_parallel(out):
-    for i in prange(out.shape[0]):
-        out[i, 0] = out[i, 1] = out[i, 2] = 0.0
-
-
-@kernel
 def _forces_after_membrane(m, sched_val, x, v, out):
     """out += the implicit forces other than the membrane's (`implicit_forces`)."""
     on = m.term_on
@@ -239,7 +205,7 @@ def _forces_after_membrane(m, sched_val, x, v, out):
 
 
 @kernel
-def implicit_start_forces(m, sched_val, x, v, imp, vert_force, face_force, par=None):
+def implicit_start_forces(m, sched_val, x, v, imp, vert_force):
     """Step phase 1's implicit part: imp.f = `implicit_forces` at the step's start, added to
     vert_force (which the force pass left without them, kept as the explicit forces in
     imp.f_expl). Returns False when imp is None (another integrator: the None prunes
@@ -250,7 +216,7 @@ def implicit_start_forces(m, sched_val, x, v, imp, vert_force, face_force, par=N
     """
     if imp is None:
         return False
-    _forces(m, sched_val, x, v, imp.f, face_force, par)
+    implicit_forces(m, sched_val, x, v, imp.f)
     for i in range(vert_force.shape[0]):
         for a in range(3):
             imp.f_expl[i, a] = vert_force[i, a]  # the explicit forces, kept exact for the solve
@@ -269,28 +235,6 @@ def newton_caches(m, rows, sched_val, x, face, fib, pf):
         fibre_tangent_cache(rows.fib_vert, rows.fib_par, rows.fib_sched, sched_val, x, fib)
     if on[T_PASSIVE]:
         passive_fibres_tangent_cache(rows.pf_vert, rows.pf_par, x, pf)
-
-
-def _newton_caches_chunked(m, rows, sched_val, x, face, fib, pf):
-    """`newton_caches` in chunks of rows (each row its own: the chunks at once in the parallel build)."""
-    on = m.term_on
-    mem_vert, mem_par, fib_vert, fib_par, fib_sched = rows.mem_vert, rows.mem_par, rows.fib_vert, rows.fib_par, rows.fib_sched
-    pf_vert, pf_par = rows.pf_vert, rows.pf_par
-    if on[T_MEMBRANE]:
-        for c in prange((mem_vert.shape[0] + CACHE_CHUNK - 1) // CACHE_CHUNK):
-            lo, hi = c * CACHE_CHUNK, min((c + 1) * CACHE_CHUNK, mem_vert.shape[0])
-            membrane_tangent_cache(mem_vert[lo:hi], mem_par[lo:hi], x, face[lo:hi])
-    if on[T_FIBRES]:
-        for c in prange((fib_vert.shape[0] + CACHE_CHUNK - 1) // CACHE_CHUNK):
-            lo, hi = c * CACHE_CHUNK, min((c + 1) * CACHE_CHUNK, fib_vert.shape[0])
-            fibre_tangent_cache(fib_vert[lo:hi], fib_par[lo:hi], fib_sched[lo:hi], sched_val, x, fib[lo:hi])
-    if on[T_PASSIVE]:
-        for c in prange((pf_vert.shape[0] + CACHE_CHUNK - 1) // CACHE_CHUNK):
-            lo, hi = c * CACHE_CHUNK, min((c + 1) * CACHE_CHUNK, pf_vert.shape[0])
-            passive_fibres_tangent_cache(pf_vert[lo:hi], pf_par[lo:hi], x, pf[lo:hi])
-
-
-_caches_serial, _caches_parallel = kernel_twin(_newton_caches_chunked)
 
 
 @kernel
@@ -313,14 +257,11 @@ def newton_product(m, rows, face, fib, pf, h, project, u, y):
 
 
 @kernel
-def _product(m, w, h, project, u, y, par):
+def _product(m, w, h, project, u, y):
     """y = the Newton matrix times u, 0 on fixed points: assembled, or with the Hessian
     projected element by element (the rare projected Newton iteration)."""
     if not project:
-        if par is not None and m.parallel:
-            matrix_product_parallel(w.mat, u, y)
-        else:
-            matrix_product_serial(w.mat, u, y)
+        matrix_product(w.mat, u, y)
         return
     newton_product(m, w.rows, w.face, w.fib, w.pf, h, True, u, y)
     for i in range(y.shape[0]):
@@ -337,8 +278,20 @@ def _dot(free, a, b):
     return s
 
 
+@kernel(inline="always")
+def _cg_update(free, alpha, p, q, x, r):
+    """x += alpha p, r -= alpha q on the points `free`; returns |r|^2."""
+    rr = 0.0
+    for i in free:
+        for a in range(3):
+            x[i, a] += alpha * p[i, a]
+            r[i, a] -= alpha * q[i, a]
+        rr += r[i, 0] * r[i, 0] + r[i, 1] * r[i, 1] + r[i, 2] * r[i, 2]
+    return rr
+
+
 @kernel
-def _solve(m, w, h, project, target, cg_max, par=None):
+def _solve(m, w, h, project, target, cg_max):
     """w.cg_x = the preconditioned conjugate gradients' solution of (Newton matrix) x = w.cg_r
     (rows of fixed points zero), to |residual| <= target or cg_max iterations. Returns the iterations.
     The iterations visit the free points alone; x, z, p stay zero on the others."""
@@ -353,17 +306,12 @@ def _solve(m, w, h, project, target, cg_max, par=None):
             p[i, a] = z[i, a]
     rz = _dot(free, r, z)
     for k in range(cg_max):
-        _product(m, w, h, project, p, q, par)
+        _product(m, w, h, project, p, q)
         pq = _dot(free, p, q)
         if not pq > 0.0:  # negative curvature (or p = 0): stop with what we have (truncated Newton)
             return -1 if k == 0 else k
         alpha = rz / pq
-        rr = 0.0
-        for i in free:
-            for a in range(3):
-                x[i, a] += alpha * p[i, a]
-                r[i, a] -= alpha * q[i, a]
-            rr += r[i, 0] * r[i, 0] + r[i, 1] * r[i, 1] + r[i, 2] * r[i, 2]
+        rr = _cg_update(free, alpha, p, q, x, r)
         if math.sqrt(rr) <= target:
             return k + 1
         sgs_sweep(w.mat, r, z)
@@ -426,12 +374,7 @@ def _solve_split(w, target, cg_max):
                 return -1
             break
         alpha = rr / pq
-        rr_new = 0.0
-        for i in free:
-            for c in range(3):
-                y[i, c] += alpha * p[i, c]
-                r[i, c] -= alpha * q[i, c]
-            rr_new += r[i, 0] * r[i, 0] + r[i, 1] * r[i, 1] + r[i, 2] * r[i, 2]
+        rr_new = _cg_update(free, alpha, p, q, y, r)
         k += 1
         # the preconditioned residual's reduction says when to look at the residual itself,
         # b - A x at x = C^-T y (the recursive one drifts from it at tight tolerances); if it is
@@ -461,7 +404,7 @@ def _true_residual(mat, g, y, b, x, q, t):
     for i in mat.free:
         _g(g[i], y[i, 0], y[i, 1], y[i, 2], t, i)
     upper_solve(mat, t, x)
-    matrix_product_serial(mat, x, q)
+    matrix_product(mat, x, q)
     rr = 0.0
     for i in mat.free:
         for c in range(3):
@@ -502,13 +445,13 @@ def _trial(m, pos, vel, h, dv, w):
 
 
 @kernel
-def _residual(m, sched_val, pos, vel, h, w, face_force, par):
+def _residual(m, sched_val, pos, vel, h, w):
     """At dv: x_try, v_try, f = f_i(x_try, v_try), res = f + f_expl - M dv / h (0 on fixed
     points). Returns (|res|, |f| + |f_expl| + |M dv / h|, the vertex of the largest residual)."""
     dv, xt, vt, res = w.dv, w.x_try, w.v_try, w.res
     free = m.vert_free
     _trial(m, pos, vel, h, dv, w)
-    _forces(m, sched_val, xt, vt, w.f, face_force, par)
+    implicit_forces(m, sched_val, xt, vt, w.f)
     rr = ff = ee = mm = 0.0
     worst, big = 0, -1.0
     for i in range(pos.shape[0]):
@@ -572,7 +515,7 @@ def _volume_gradient(face_vert, pos, grad):
 
 
 @kernel
-def implicit_step(m, s, step, imp, par=None):
+def implicit_step(m, s, step, imp):
     """Step phase 2 for implicit Euler: the free points' new velocities and positions,
     with the divergence check's sums per chunk of points into s.vert_acc (as
     `hybrid.step._integrate`). Returns 0 (done), `IMPLICIT_NOT_CONVERGED` (status
@@ -605,7 +548,7 @@ def implicit_step(m, s, step, imp, par=None):
     info[I_CARRIED] = carried
     tol = m.implicit_tol
     cg_max = max(CG_MIN_ITER, 9 * nfree)
-    rn, scale, worst = _residual(m, s.sched_val, pos, vel, h, w, s.face_force, par)
+    rn, scale, worst = _residual(m, s.sched_val, pos, vel, h, w)
     it = 0
     cg_total = 0
     at_roundoff = False
@@ -618,12 +561,8 @@ def implicit_step(m, s, step, imp, par=None):
         for i in range(n):
             for a in range(3):
                 w.x_kv[i, a] = w.x_try[i, a]
-        if par is not None and m.parallel:
-            _caches_parallel(m, w.rows, s.sched_val, w.x_try, w.face, w.fib, w.pf)
-            assemble_parallel(m, w.rows, w.face, w.fib, w.pf, h, w.mat)
-        else:
-            _caches_serial(m, w.rows, s.sched_val, w.x_try, w.face, w.fib, w.pf)
-            assemble_serial(m, w.rows, w.face, w.fib, w.pf, h, w.mat)
+        newton_caches(m, w.rows, s.sched_val, w.x_try, w.face, w.fib, w.pf)
+        assemble(m, w.rows, w.face, w.fib, w.pf, h, w.mat)
         # the exact Hessian, its negative curvature ending the conjugate gradients early
         # (truncated Newton); when met at once, the Hessian projected per element instead
         for i in range(n):
@@ -636,7 +575,7 @@ def implicit_step(m, s, step, imp, par=None):
             for i in range(n):
                 for a in range(3):
                     w.cg_r[i, a] = h * w.res[i, a]
-            k = 1 + _solve(m, w, h, True, eta * h * rn, cg_max, par)
+            k = 1 + _solve(m, w, h, True, eta * h * rn, cg_max)
             info[I_PROJECTED_TOTAL] += 1
         cg_total += k
         it += 1
@@ -660,7 +599,7 @@ def implicit_step(m, s, step, imp, par=None):
         frac = 1.0  # of the step now applied
         phi = np.nan  # the potential at the start: taken only when a residual does not halve
         for k in range(HALVINGS + 1):
-            rn_new, scale, worst = _residual(m, s.sched_val, pos, vel, h, w, s.face_force, par)
+            rn_new, scale, worst = _residual(m, s.sched_val, pos, vel, h, w)
             # a residual that halved (near the root the potential's change is round-off),
             # else Armijo on the potential
             if rn_new <= 0.5 * rn or k == HALVINGS:

@@ -20,19 +20,12 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from numba import prange
 
-from .kernel import CHUNK_VERTS, PARALLEL_MIN_VERTS, kernel, kernel_twin
+from .kernel import kernel
 from .terms import Damping, Membrane, MuscleFibres, PassiveFibres
 from .terms.tangent_blocks import fibre_tangent_blocks, membrane_tangent_blocks, passive_fibres_tangent_blocks
 
-__all__ = ["NewtonMatrix", "newton_matrix", "newton_parts", "element_groups", "PARTS", "assemble", "matrix_product",
-           "sgs_sweep", "assemble_serial", "assemble_parallel", "matrix_product_serial", "matrix_product_parallel",
-           "upper_solve", "lower_solve"]
-
-#: the parts of a mesh of at least PARALLEL_MIN_VERTS points (one below): a fixed number, so
-#: that both builds and every machine run the same arithmetic
-PARTS = 4
+__all__ = ["NewtonMatrix", "newton_matrix", "assemble", "matrix_product", "sgs_sweep", "upper_solve", "lower_solve"]
 
 T_MEMBRANE, T_FIBRES, T_PASSIVE, T_DAMPING = Membrane.id, MuscleFibres.id, PassiveFibres.id, Damping.id
 
@@ -48,9 +41,7 @@ class NewtonMatrix(NamedTuple):
     3 m + n (the block of the smaller to the larger point), -1 with a fixed corner and
     for m > n; amat (nblocks, 9): the blocks (row-major, zero at fixed points); pdiag
     (nvert, 9): the diagonal blocks with K projected; dinv (nvert, 9): their inverses
-    (the identity at fixed points); acc (nvert, 3): the forward sweep's scratch;
-    part_free (nparts + 1,): each part's range in free (`newton_parts`); cross (nvert,):
-    the first block of each row whose column lies beyond the row's part; gchol (nvert, 6):
+    (the identity at fixed points); acc (nvert, 3): the forward sweep's scratch; gchol (nvert, 6):
     the Cholesky factors G of pdiag, D = G G^T (g00, g10, g11, g20, g21, g22)."""
     free: np.ndarray
     row_ptr: np.ndarray
@@ -63,38 +54,11 @@ class NewtonMatrix(NamedTuple):
     pdiag: np.ndarray
     dinv: np.ndarray
     acc: np.ndarray
-    part_free: np.ndarray
-    cross: np.ndarray
     gchol: np.ndarray
 
 
-def newton_parts(vert_free, nparts: int | None = None) -> np.ndarray:
-    """(nparts + 1,) point indices bounding consecutive ranges of points with as many free
-    points each: the parts whose rows the parallel build's threads assemble, multiply and
-    sweep each on its own. `PARTS` parts from PARALLEL_MIN_VERTS points up, else one."""
-    free = np.flatnonzero(np.asarray(vert_free) != 0)
-    n = len(vert_free)
-    if nparts is None:
-        nparts = PARTS if n >= PARALLEL_MIN_VERTS else 1
-    cuts = [free[len(free) * p // nparts] for p in range(1, nparts)] if len(free) else [n] * (nparts - 1)
-    return np.array([0, *cuts, n], np.int64)
-
-
-def element_groups(tri, vert_free, bounds) -> np.ndarray:
-    """Each triangle's group: the part holding all its free corners (the rows it assembles
-    into), or nparts for a triangle across parts (assembled after the parts)."""
-    tri = np.asarray(tri, np.int64).reshape(-1, 3)
-    nparts = len(bounds) - 1
-    part = np.searchsorted(bounds, tri, side="right") - 1
-    free = np.asarray(vert_free)[tri] != 0
-    lo = np.where(free, part, nparts).min(axis=1)
-    hi = np.where(free, part, -1).max(axis=1)
-    return np.where(lo == hi, lo, nparts)
-
-
-def newton_matrix(nvert: int, vert_free, mem_vert, fib_vert, pf_vert, bounds=None) -> NewtonMatrix:
-    """The pattern of the blocks coupling free points through the given triangles' (nf, 3)
-    corners; the parts `bounds` (`newton_parts`, by default one)."""
+def newton_matrix(nvert: int, vert_free, mem_vert, fib_vert, pf_vert) -> NewtonMatrix:
+    """The pattern of the blocks coupling free points through the given triangles' (nf, 3) corners."""
     free = np.asarray(vert_free) != 0
     every = np.arange(nvert, dtype=np.int64)
     # each triangle's corner pairs (m, n) at 3 m + n, m <= n, as (smaller point) * nvert + larger;
@@ -112,55 +76,31 @@ def newton_matrix(nvert: int, vert_free, mem_vert, fib_vert, pf_vert, bounds=Non
     np.cumsum(np.bincount(row, minlength=nvert), out=row_ptr[1:])
     slots = [np.where(k >= 0, np.searchsorted(keys, k), -1) for k in pair_keys]
     nb = keys.size
-    bounds = np.array([0, nvert], np.int64) if bounds is None else np.asarray(bounds, np.int64)
-    free_idx = np.flatnonzero(free).astype(np.int64)
-    part_end = bounds[np.searchsorted(bounds, every, side="right")]  # the end of each point's part
-    cross = np.array([row_ptr[i] + np.searchsorted(col[row_ptr[i]:row_ptr[i + 1]], part_end[i]) for i in every],
-                     np.int64)
-    return NewtonMatrix(free_idx, row_ptr, col.astype(np.int64), row_ptr[:-1].copy(),
+    return NewtonMatrix(np.flatnonzero(free).astype(np.int64), row_ptr, col.astype(np.int64), row_ptr[:-1].copy(),
                         *slots, amat=np.zeros((nb, 9)), pdiag=np.zeros((nvert, 9)), dinv=np.zeros((nvert, 9)),
-                        acc=np.zeros((nvert, 3)), part_free=np.searchsorted(free_idx, bounds).astype(np.int64),
-                        cross=cross, gchol=np.zeros((nvert, 6)))
+                        acc=np.zeros((nvert, 3)), gchol=np.zeros((nvert, 6)))
 
 
-def _assemble(m, rows, face, fib, pf, h, mat):
+@kernel
+def assemble(m, rows, face, fib, pf, h, mat):
     """mat.amat = M + h^2 K + h C on the free points, mat.pdiag its diagonal blocks with K
-    projected, from the tangent caches of `rows` (`hybrid.implicit.newton_caches`); mat.dinv.
-    The triangles of each part (`rows`' groups) add into that part's rows alone: the parts
-    run at once in the parallel build, then the triangles across parts; every block sums
-    in the same order in both builds."""
-    amat, pdiag, dinv, diag = mat.amat, mat.pdiag, mat.dinv, mat.diag
-    vert_mass, damp_coef, vert_free = m.vert_mass, m.damp_coef, m.vert_free
-    on = m.term_on
-    damping, membrane, fibres, passive = on[T_DAMPING] != 0, on[T_MEMBRANE] != 0, on[T_FIBRES] != 0, on[T_PASSIVE] != 0
-    for k in prange(amat.shape[0]):
+    projected, from the tangent caches of `rows` (`hybrid.implicit.newton_caches`); mat.dinv,
+    mat.gchol. One thread in both builds (threads summing into shared blocks would change
+    their last bits from one build to the other)."""
+    amat, pdiag = mat.amat, mat.pdiag
+    for k in range(amat.shape[0]):
         for r in range(9):
             amat[k, r] = 0.0
+    on = m.term_on
     n = pdiag.shape[0]
-    nchunk = (n + CHUNK_VERTS - 1) // CHUNK_VERTS
-    # the per-point arithmetic in kernels of their own: the same machine code in both builds
-    for c in prange(nchunk):
-        _diagonal_rows(vert_mass, damp_coef, damping, vert_free, h, diag, pdiag, amat, c * CHUNK_VERTS,
-                       min((c + 1) * CHUNK_VERTS, n))
-    mem_vert, mem_par, mem_group, mem_slot = rows.mem_vert, rows.mem_par, rows.mem_group, mat.mem_slot
-    fib_vert, fib_group, fib_slot = rows.fib_vert, rows.fib_group, mat.fib_slot
-    pf_vert, pf_group, pf_slot = rows.pf_vert, rows.pf_group, mat.pf_slot
-    nparts = mem_group.shape[0] - 2
-    for phase in range(2):  # the parts at once, then the triangles across them
-        for p in prange(nparts if phase == 0 else 1):
-            q = p if phase == 0 else nparts
-            if membrane:
-                lo, hi = mem_group[q], mem_group[q + 1]
-                membrane_tangent_blocks(mem_vert[lo:hi], mem_par[lo:hi], face[lo:hi], h * h, h, mem_slot[lo:hi], amat,
-                                        pdiag)
-            if fibres:
-                lo, hi = fib_group[q], fib_group[q + 1]
-                fibre_tangent_blocks(fib_vert[lo:hi], fib[lo:hi], h * h, fib_slot[lo:hi], amat, pdiag)
-            if passive:
-                lo, hi = pf_group[q], pf_group[q + 1]
-                passive_fibres_tangent_blocks(pf_vert[lo:hi], pf[lo:hi], h * h, pf_slot[lo:hi], amat, pdiag)
-    for c in prange(nchunk):
-        _invert_rows(vert_free, pdiag, dinv, mat.gchol, c * CHUNK_VERTS, min((c + 1) * CHUNK_VERTS, n))
+    _diagonal_rows(m.vert_mass, m.damp_coef, on[T_DAMPING] != 0, m.vert_free, h, mat.diag, pdiag, amat, 0, n)
+    if on[T_MEMBRANE]:
+        membrane_tangent_blocks(rows.mem_vert, rows.mem_par, face, h * h, h, mat.mem_slot, amat, pdiag)
+    if on[T_FIBRES]:
+        fibre_tangent_blocks(rows.fib_vert, fib, h * h, mat.fib_slot, amat, pdiag)
+    if on[T_PASSIVE]:
+        passive_fibres_tangent_blocks(rows.pf_vert, pf, h * h, mat.pf_slot, amat, pdiag)
+    _invert_rows(m.vert_free, pdiag, mat.dinv, mat.gchol, 0, n)
 
 
 @kernel
@@ -213,7 +153,8 @@ def _cholesky(a, g):
 
 @kernel
 def upper_solve(mat, u, t):
-    """t = (D + U)^-1 u on the free points (D = pdiag)."""
+    """t = (D + U)^-1 u on the free points (D = pdiag; t may be u: row i reads u_i before
+    writing t_i, and t_j of the rows after it)."""
     a, col, ptr, dinv, free = mat.amat, mat.col, mat.row_ptr, mat.dinv, mat.free
     for f in range(free.shape[0] - 1, -1, -1):
         i = free[f]
@@ -251,10 +192,6 @@ def lower_solve(mat, v, s):
             acc[j, 2] += b[2] * zx + b[5] * zy + b[8] * zz
 
 
-assemble_serial, assemble_parallel = kernel_twin(_assemble)
-assemble = assemble_serial
-
-
 @kernel(inline="always")
 def _invert(a, b):
     """b = the inverse of the 3 x 3 block a (row-major); its diagonal's inverse (Jacobi)
@@ -274,90 +211,46 @@ def _invert(a, b):
     b[6], b[7], b[8] = (a[3] * a[7] - a[4] * a[6]) * inv, (a[1] * a[6] - a[0] * a[7]) * inv, (a[0] * a[4] - a[1] * a[3]) * inv
 
 
-def _matrix_product(mat, u, y):
+@kernel
+def matrix_product(mat, u, y):
     """y = A u on the free points, A the assembled matrix: each upper block B at (i, j) adds
     B u_j to row i and B^T u_i to row j (the fixed points' rows of y left as they are: A's
-    are zero). The parts' rows at once in the parallel build, each adding B^T u_i into its
-    own rows; the blocks across parts add theirs after, in row order (both builds alike)."""
-    a, col, ptr, cross, free, pf = mat.amat, mat.col, mat.row_ptr, mat.cross, mat.free, mat.part_free
-    for p in prange(pf.shape[0] - 1):
-        for f in range(pf[p], pf[p + 1]):
-            i = free[f]
-            y[i, 0] = y[i, 1] = y[i, 2] = 0.0
-        for f in range(pf[p], pf[p + 1]):
-            i = free[f]
-            b = a[ptr[i]]  # the diagonal block
-            ux, uy, uz = u[i, 0], u[i, 1], u[i, 2]
-            sx = b[0] * ux + b[1] * uy + b[2] * uz
-            sy = b[3] * ux + b[4] * uy + b[5] * uz
-            sz = b[6] * ux + b[7] * uy + b[8] * uz
-            for k in range(ptr[i] + 1, cross[i]):
-                b, j = a[k], col[k]
-                vx, vy, vz = u[j, 0], u[j, 1], u[j, 2]
-                sx += b[0] * vx + b[1] * vy + b[2] * vz
-                sy += b[3] * vx + b[4] * vy + b[5] * vz
-                sz += b[6] * vx + b[7] * vy + b[8] * vz
-                y[j, 0] += b[0] * ux + b[3] * uy + b[6] * uz
-                y[j, 1] += b[1] * ux + b[4] * uy + b[7] * uz
-                y[j, 2] += b[2] * ux + b[5] * uy + b[8] * uz
-            for k in range(cross[i], ptr[i + 1]):
-                b, j = a[k], col[k]
-                vx, vy, vz = u[j, 0], u[j, 1], u[j, 2]
-                sx += b[0] * vx + b[1] * vy + b[2] * vz
-                sy += b[3] * vx + b[4] * vy + b[5] * vz
-                sz += b[6] * vx + b[7] * vy + b[8] * vz
-            y[i, 0] += sx
-            y[i, 1] += sy
-            y[i, 2] += sz
-    for i in free:  # the transposes of the blocks across parts
+    are zero)."""
+    a, col, ptr, free = mat.amat, mat.col, mat.row_ptr, mat.free
+    for i in free:
+        y[i, 0] = y[i, 1] = y[i, 2] = 0.0
+    for i in free:
+        b = a[ptr[i]]  # the diagonal block
         ux, uy, uz = u[i, 0], u[i, 1], u[i, 2]
-        for k in range(cross[i], ptr[i + 1]):
+        sx = b[0] * ux + b[1] * uy + b[2] * uz
+        sy = b[3] * ux + b[4] * uy + b[5] * uz
+        sz = b[6] * ux + b[7] * uy + b[8] * uz
+        for k in range(ptr[i] + 1, ptr[i + 1]):
             b, j = a[k], col[k]
+            vx, vy, vz = u[j, 0], u[j, 1], u[j, 2]
+            sx += b[0] * vx + b[1] * vy + b[2] * vz
+            sy += b[3] * vx + b[4] * vy + b[5] * vz
+            sz += b[6] * vx + b[7] * vy + b[8] * vz
             y[j, 0] += b[0] * ux + b[3] * uy + b[6] * uz
             y[j, 1] += b[1] * ux + b[4] * uy + b[7] * uz
             y[j, 2] += b[2] * ux + b[5] * uy + b[8] * uz
+        y[i, 0] += sx
+        y[i, 1] += sy
+        y[i, 2] += sz
 
 
 @kernel
 def sgs_sweep(mat, r, z):
     """z = (D + U)^-1 D (D + L)^-1 r on the free points, L = U^T (the fixed points' rows of z
-    left as they are: no block couples them). The forward sweep reads the upper blocks by
-    rows too: once z_i is known, each block B at (i, j) takes B^T z_i from row j's sum. One
-    thread: a sweep is sequential (the parts swept each on its own, block Jacobi, took a
-    quarter more conjugate-gradient iterations on the breathing scene at level 8)."""
-    a, col, ptr, dinv, free, acc = mat.amat, mat.col, mat.row_ptr, mat.dinv, mat.free, mat.acc
-    for i in free:
-        acc[i, 0] = acc[i, 1] = acc[i, 2] = 0.0
-    for f in range(free.shape[0]):  # forward: (D + L) z = r
-        i = free[f]
-        sx, sy, sz = r[i, 0] - acc[i, 0], r[i, 1] - acc[i, 1], r[i, 2] - acc[i, 2]
-        b = dinv[i]
-        zx = b[0] * sx + b[1] * sy + b[2] * sz
-        zy = b[3] * sx + b[4] * sy + b[5] * sz
-        zz = b[6] * sx + b[7] * sy + b[8] * sz
-        z[i, 0], z[i, 1], z[i, 2] = zx, zy, zz
-        for k in range(ptr[i] + 1, ptr[i + 1]):
-            b, j = a[k], col[k]
-            acc[j, 0] += b[0] * zx + b[3] * zy + b[6] * zz
-            acc[j, 1] += b[1] * zx + b[4] * zy + b[7] * zz
-            acc[j, 2] += b[2] * zx + b[5] * zy + b[8] * zz
-    for f in range(free.shape[0] - 1, -1, -1):  # backward: (D + U) z' = D z
-        i = free[f]
-        if ptr[i] + 1 == ptr[i + 1]:
-            continue
-        sx = sy = sz = 0.0
-        for k in range(ptr[i] + 1, ptr[i + 1]):
-            b, j = a[k], col[k]
-            zx, zy, zz = z[j, 0], z[j, 1], z[j, 2]
-            sx += b[0] * zx + b[1] * zy + b[2] * zz
-            sy += b[3] * zx + b[4] * zy + b[5] * zz
-            sz += b[6] * zx + b[7] * zy + b[8] * zz
-        b = dinv[i]
-        z[i, 0] -= b[0] * sx + b[1] * sy + b[2] * sz
-        z[i, 1] -= b[3] * sx + b[4] * sy + b[5] * sz
-        z[i, 2] -= b[6] * sx + b[7] * sy + b[8] * sz
+    left as they are: no block couples them): `lower_solve`, D, `upper_solve` (in place)."""
+    lower_solve(mat, r, z)
+    pdiag = mat.pdiag
+    for i in mat.free:
+        b = pdiag[i]
+        zx, zy, zz = z[i, 0], z[i, 1], z[i, 2]
+        z[i, 0] = b[0] * zx + b[1] * zy + b[2] * zz
+        z[i, 1] = b[3] * zx + b[4] * zy + b[5] * zz
+        z[i, 2] = b[6] * zx + b[7] * zy + b[8] * zz
+    upper_solve(mat, z, z)
 
-
-matrix_product_serial, matrix_product_parallel = kernel_twin(_matrix_product)
-matrix_product = matrix_product_serial
 

@@ -221,7 +221,7 @@ def membrane_forces(m, s, t, par=True, shape_memory=True, membrane=True, applied
     if passive is not None and on[T_PASSIVE_FIBRES] and not implicit:
         add_passive_fibres(m.pf_vert, m.pf_par, s.vert_pos, s.vert_force)
         s.term_calls[T_PASSIVE_FIBRES] += 1
-    if implicit_start_forces(m, s.sched_val, s.vert_pos, s.vert_vel, s.implicit, s.vert_force, s.face_force, par):
+    if implicit_start_forces(m, s.sched_val, s.vert_pos, s.vert_vel, s.implicit, s.vert_force):
         for k in (T_MEMBRANE, T_MUSCLE_FIBRES, T_PASSIVE_FIBRES):
             s.term_calls[k] += on[k]
 
@@ -305,7 +305,7 @@ def membrane_advance(m, s, t, step, par=True, prescribed=True, keep_in=True, vol
             volume_direction_parallel(m.ring_ptr, m.ring_vert, m.vert_weight, pos, s.dirn)
         else:
             volume_direction_serial(m.ring_ptr, m.ring_vert, m.vert_weight, pos, s.dirn)
-    code = implicit_step(m, s, step, s.implicit, par)  # implicit Euler (hybrid.implicit), else EXPLICIT
+    code = implicit_step(m, s, step, s.implicit)  # implicit Euler (hybrid.implicit), else EXPLICIT
     if code == EXPLICIT:
         if par is not None and m.parallel:
             _integrate_parallel(m.vert_free, m.vert_mass, m.integrator == 0, m.dt, s.vert_force, pos, vel, s.vert_acc)

@@ -161,11 +161,10 @@ def test_muscle_fibres_x100_contract_without_collapse_at_the_rigid_models_step()
 
 def test_serial_and_parallel_builds_agree_to_the_bit():
     """The breathing scene at level 5 (2,563 points: enough for the parallel build), with
-    its ribs, membrane, muscle and passive fibres, drag and volume: the Newton matrix in
-    four parts with triangles across them, and both builds take the same steps to the bit
-    (the parts' sums in one order)."""
+    its ribs, membrane, muscle and passive fibres, drag and volume: both builds take the
+    same implicit steps to the bit (the solve runs on one thread in both; the force pass's
+    explicit terms and the volume projection in each build's own)."""
     from hybrid import resolve_scene
-    from hybrid.implicit_matrix import PARTS
 
     model = compile_scene(resolve_scene("breathing", overrides=["mesh.level=5", "integrator=implicit_euler",
                                                                 "dt_s=0.01", "implicit_tol=1e-3"]))
@@ -175,9 +174,6 @@ def test_serial_and_parallel_builds_agree_to_the_bit():
         sim = Simulation(model, build=build)
         sim.step(40)
         pos[build] = sim.vert_pos.copy()
-        rows = sim.state.implicit.rows
-        assert len(rows.bounds) == PARTS + 1
-        assert all(g[-1] - g[-2] > 0 for g in (rows.mem_group, rows.fib_group, rows.pf_group))  # across parts
         assert sim.state.implicit.info[Info.NEWTON_TOTAL] > 0
     assert np.abs(pos["serial"] - model.arrays.vert_rest).max() > 1e-4  # it breathed
     assert np.array_equal(pos["serial"], pos["parallel"])
