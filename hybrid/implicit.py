@@ -23,7 +23,7 @@ by conjugate gradients with the matrix assembled once per Newton iteration from
 the terms' per-triangle tangent caches (`hybrid.implicit_matrix`), preconditioned
 with its symmetric Gauss-Seidel sweep whose diagonal blocks are those of the matrix
 with K made positive semi-definite per element, in Eisenstat's implementation
-(`_solve_split`: two triangular solves an iteration). Where the exact matrix has negative curvature
+(`hybrid.implicit_matrix.split_cg`: two triangular solves an iteration). Where the exact matrix has negative curvature
 (a membrane under compression: it has no bending stiffness) the conjugate
 gradients stop there (truncated Newton); met at the first iteration, the solve
 is repeated with the per-element projected Hessian (projected Newton). Solving
@@ -57,8 +57,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .implicit_matrix import (NewtonMatrix, assemble, lower_solve, matrix_product, newton_matrix, sgs_sweep,
-                              upper_solve)
+from .implicit_matrix import NewtonMatrix, assemble, cg_update, dot, matrix_product, newton_matrix, sgs_sweep, split_cg
 from .kernel import CHUNK_VERTS, kernel
 from .terms import Damping, Membrane, MuscleFibres, PassiveFibres, Volume
 from .terms.fibres import add_muscle_fibres
@@ -184,15 +183,9 @@ def implicit_forces(m, sched_val, x, v, out):
     for i in range(out.shape[0]):
         for a in range(3):
             out[i, a] = 0.0
-    if m.term_on[T_MEMBRANE]:
-        add_membrane_serial(m.mem_vert, m.mem_par, m.kv_on, x, v, out)
-    _forces_after_membrane(m, sched_val, x, v, out)
-
-
-@kernel
-def _forces_after_membrane(m, sched_val, x, v, out):
-    """out += the implicit forces other than the membrane's (`implicit_forces`)."""
     on = m.term_on
+    if on[T_MEMBRANE]:
+        add_membrane_serial(m.mem_vert, m.mem_par, m.kv_on, x, v, out)
     if on[T_FIBRES]:
         add_muscle_fibres(m.fib_vert, m.fib_par, m.fib_sched, sched_val, x, out)
     if on[T_PASSIVE]:
@@ -270,27 +263,6 @@ def _product(m, w, h, project, u, y):
 
 
 @kernel
-def _dot(free, a, b):
-    """a . b over the points `free` (in order: the other points' rows are zero)."""
-    s = 0.0
-    for i in free:
-        s += a[i, 0] * b[i, 0] + a[i, 1] * b[i, 1] + a[i, 2] * b[i, 2]
-    return s
-
-
-@kernel(inline="always")
-def _cg_update(free, alpha, p, q, x, r):
-    """x += alpha p, r -= alpha q on the points `free`; returns |r|^2."""
-    rr = 0.0
-    for i in free:
-        for a in range(3):
-            x[i, a] += alpha * p[i, a]
-            r[i, a] -= alpha * q[i, a]
-        rr += r[i, 0] * r[i, 0] + r[i, 1] * r[i, 1] + r[i, 2] * r[i, 2]
-    return rr
-
-
-@kernel
 def _solve(m, w, h, project, target, cg_max):
     """w.cg_x = the preconditioned conjugate gradients' solution of (Newton matrix) x = w.cg_r
     (rows of fixed points zero), to |residual| <= target or cg_max iterations. Returns the iterations.
@@ -304,129 +276,24 @@ def _solve(m, w, h, project, target, cg_max):
     for i in free:
         for a in range(3):
             p[i, a] = z[i, a]
-    rz = _dot(free, r, z)
+    rz = dot(free, r, z)
     for k in range(cg_max):
         _product(m, w, h, project, p, q)
-        pq = _dot(free, p, q)
+        pq = dot(free, p, q)
         if not pq > 0.0:  # negative curvature (or p = 0): stop with what we have (truncated Newton)
             return -1 if k == 0 else k
         alpha = rz / pq
-        rr = _cg_update(free, alpha, p, q, x, r)
+        rr = cg_update(free, alpha, p, q, x, r)
         if math.sqrt(rr) <= target:
             return k + 1
         sgs_sweep(w.mat, r, z)
-        rz_new = _dot(free, r, z)
+        rz_new = dot(free, r, z)
         beta = rz_new / rz
         rz = rz_new
         for i in free:
             for a in range(3):
                 p[i, a] = z[i, a] + beta * p[i, a]
     return cg_max
-
-
-@kernel
-def _solve_split(w, target, cg_max):
-    """w.cg_x = the solution of A x = w.cg_r (A the assembled Newton matrix, rows of fixed
-    points zero) by the conjugate gradients of `_solve` with Eisenstat's implementation:
-    with P = (D + L) D^-1 (D + U) = C C^T, C = (D + L) G^-T (D = G G^T, D the projected
-    diagonal blocks, L = U^T the assembled off-diagonal ones), they iterate on C^-1 A C^-T,
-    whose product is two triangular solves (A = (D + L) + (D + U) + (D_A - 2 D), D_A the
-    exact diagonal blocks): t = (D + U)^-1 G p, C^-1 A C^-T p = G^T (t + (D + L)^-1 (G p +
-    (D_A - 2 D) t)). The same iterates as `_solve` (its x = C^-T y), for two triangular
-    solves an iteration instead of a product and a sweep (three). Stops when the residual
-    b - A x is at most target, looked at when |C^-1 r| has fallen by target / |r_0| (then
-    replacing the recursive C^-1 r if not yet), or at negative curvature as `_solve`.
-    Returns the iterations (-1: negative curvature at once)."""
-    mat = w.mat
-    free = mat.free
-    x, r, y, p, q, t, b = w.cg_x, w.cg_r, w.cg_z, w.cg_p, w.cg_q, w.cg_t, w.cg_b
-    g, a, diag, pdiag = mat.gchol, mat.amat, mat.diag, mat.pdiag
-    for i in range(x.shape[0]):
-        for c in range(3):
-            x[i, c] = y[i, c] = p[i, c] = q[i, c] = t[i, c] = 0.0
-            b[i, c] = r[i, c]
-    r0 = math.sqrt(_dot(free, r, r))
-    lower_solve(mat, r, t)  # r^ = C^-1 r = G^T (D + L)^-1 r
-    for i in free:
-        _gt(g[i], t[i, 0], t[i, 1], t[i, 2], r, i)
-        for c in range(3):
-            p[i, c] = r[i, c]
-    rr = _dot(free, r, r)
-    stop = target / r0 * math.sqrt(rr) if r0 > 0.0 else 0.0
-    k = 0
-    while k < cg_max:
-        # q = C^-1 A C^-T p
-        for i in free:
-            _g(g[i], p[i, 0], p[i, 1], p[i, 2], q, i)  # q = G p for now
-        upper_solve(mat, q, x)  # x (scratch till the end) = t = (D + U)^-1 G p
-        for i in free:
-            da, dp = a[diag[i]], pdiag[i]
-            tx, ty, tz = x[i, 0], x[i, 1], x[i, 2]
-            q[i, 0] += (da[0] - 2.0 * dp[0]) * tx + (da[1] - 2.0 * dp[1]) * ty + (da[2] - 2.0 * dp[2]) * tz
-            q[i, 1] += (da[3] - 2.0 * dp[3]) * tx + (da[4] - 2.0 * dp[4]) * ty + (da[5] - 2.0 * dp[5]) * tz
-            q[i, 2] += (da[6] - 2.0 * dp[6]) * tx + (da[7] - 2.0 * dp[7]) * ty + (da[8] - 2.0 * dp[8]) * tz
-        lower_solve(mat, q, t)
-        for i in free:
-            _gt(g[i], x[i, 0] + t[i, 0], x[i, 1] + t[i, 1], x[i, 2] + t[i, 2], q, i)
-        pq = _dot(free, p, q)
-        if not pq > 0.0:  # negative curvature (or p = 0): stop with what we have (truncated Newton)
-            if k == 0:
-                return -1
-            break
-        alpha = rr / pq
-        rr_new = _cg_update(free, alpha, p, q, y, r)
-        k += 1
-        # the preconditioned residual's reduction says when to look at the residual itself,
-        # b - A x at x = C^-T y (the recursive one drifts from it at tight tolerances); if it is
-        # not yet small enough, r^ = C^-1 (b - A x) replaces the recursive one
-        if math.sqrt(rr_new) <= stop:
-            if _true_residual(mat, g, y, b, x, q, t) <= target:
-                break
-            lower_solve(mat, q, t)
-            rr_new = 0.0
-            for i in free:
-                _gt(g[i], t[i, 0], t[i, 1], t[i, 2], r, i)
-                rr_new += r[i, 0] * r[i, 0] + r[i, 1] * r[i, 1] + r[i, 2] * r[i, 2]
-        beta = rr_new / rr
-        rr = rr_new
-        for i in free:
-            for c in range(3):
-                p[i, c] = r[i, c] + beta * p[i, c]
-    for i in free:  # x = C^-T y = (D + U)^-1 G y
-        _g(g[i], y[i, 0], y[i, 1], y[i, 2], q, i)
-    upper_solve(mat, q, x)
-    return k
-
-
-@kernel
-def _true_residual(mat, g, y, b, x, q, t):
-    """x = C^-T y = (D + U)^-1 G y; q = b - A x on the free points (t: scratch); |q|."""
-    for i in mat.free:
-        _g(g[i], y[i, 0], y[i, 1], y[i, 2], t, i)
-    upper_solve(mat, t, x)
-    matrix_product(mat, x, q)
-    rr = 0.0
-    for i in mat.free:
-        for c in range(3):
-            q[i, c] = b[i, c] - q[i, c]
-        rr += q[i, 0] * q[i, 0] + q[i, 1] * q[i, 1] + q[i, 2] * q[i, 2]
-    return math.sqrt(rr)
-
-
-@kernel(inline="always")
-def _g(g, vx, vy, vz, out, i):
-    """out[i] = G v, G lower triangular (g00, g10, g11, g20, g21, g22)."""
-    out[i, 0] = g[0] * vx
-    out[i, 1] = g[1] * vx + g[2] * vy
-    out[i, 2] = g[3] * vx + g[4] * vy + g[5] * vz
-
-
-@kernel(inline="always")
-def _gt(g, vx, vy, vz, out, i):
-    """out[i] = G^T v."""
-    out[i, 0] = g[0] * vx + g[1] * vy + g[3] * vz
-    out[i, 1] = g[2] * vy + g[4] * vz
-    out[i, 2] = g[5] * vz
 
 
 @kernel
@@ -570,7 +437,7 @@ def implicit_step(m, s, step, imp):
                 w.cg_r[i, a] = h * w.res[i, a]
         # solve just accurately enough: FORCING of what convergence asks, at most FORCING of the residual
         eta = min(FORCING, FORCING * tol * scale / rn)
-        k = _solve_split(w, eta * h * rn, cg_max)
+        k = split_cg(w.mat, w.cg_r, w.cg_x, w.cg_z, w.cg_p, w.cg_q, w.cg_t, w.cg_b, eta * h * rn, cg_max)
         if k < 0:
             for i in range(n):
                 for a in range(3):
@@ -590,7 +457,7 @@ def implicit_step(m, s, step, imp):
         if dx_max <= ulp_x:
             at_roundoff = True
             break
-        slope = -h * _dot(w.mat.free, w.res, w.cg_x)  # the potential's derivative along the step (< 0)
+        slope = -h * dot(w.mat.free, w.res, w.cg_x)  # the potential's derivative along the step (< 0)
         dv_start = w.cg_q  # the iteration's start (the conjugate gradients' scratch, free now)
         for i in range(n):
             for a in range(3):

@@ -1,5 +1,6 @@
 """Implicit Euler's Newton matrix assembled (`hybrid.implicit`): the conjugate gradients'
-products and their preconditioner, a symmetric Gauss-Seidel sweep.
+products, their preconditioner (a symmetric Gauss-Seidel sweep) and the conjugate
+gradients themselves in Eisenstat's implementation (`split_cg`).
 
 Once per Newton iteration the free points' 3 x 3 blocks of M + h^2 K + h C are
 assembled into a block-sparse matrix A, its upper triangle alone (`NewtonMatrix`: its
@@ -25,7 +26,8 @@ from .kernel import kernel
 from .terms import Damping, Membrane, MuscleFibres, PassiveFibres
 from .terms.tangent_blocks import fibre_tangent_blocks, membrane_tangent_blocks, passive_fibres_tangent_blocks
 
-__all__ = ["NewtonMatrix", "newton_matrix", "assemble", "matrix_product", "sgs_sweep", "upper_solve", "lower_solve"]
+__all__ = ["NewtonMatrix", "newton_matrix", "assemble", "matrix_product", "sgs_sweep", "upper_solve", "lower_solve",
+           "split_cg", "dot", "cg_update"]
 
 T_MEMBRANE, T_FIBRES, T_PASSIVE, T_DAMPING = Membrane.id, MuscleFibres.id, PassiveFibres.id, Damping.id
 
@@ -42,7 +44,8 @@ class NewtonMatrix(NamedTuple):
     for m > n; amat (nblocks, 9): the blocks (row-major, zero at fixed points); pdiag
     (nvert, 9): the diagonal blocks with K projected; dinv (nvert, 9): their inverses
     (the identity at fixed points); acc (nvert, 3): the forward sweep's scratch; gchol (nvert, 6):
-    the Cholesky factors G of pdiag, D = G G^T (g00, g10, g11, g20, g21, g22)."""
+    the Cholesky factors G of pdiag, D = G G^T (g00, g10, g11, g20, g21, g22); ediag (nvert,
+    9): E = D_A - 2 D, D_A the exact diagonal blocks (`split_cg`)."""
     free: np.ndarray
     row_ptr: np.ndarray
     col: np.ndarray
@@ -55,6 +58,7 @@ class NewtonMatrix(NamedTuple):
     dinv: np.ndarray
     acc: np.ndarray
     gchol: np.ndarray
+    ediag: np.ndarray
 
 
 def newton_matrix(nvert: int, vert_free, mem_vert, fib_vert, pf_vert) -> NewtonMatrix:
@@ -78,56 +82,45 @@ def newton_matrix(nvert: int, vert_free, mem_vert, fib_vert, pf_vert) -> NewtonM
     nb = keys.size
     return NewtonMatrix(np.flatnonzero(free).astype(np.int64), row_ptr, col.astype(np.int64), row_ptr[:-1].copy(),
                         *slots, amat=np.zeros((nb, 9)), pdiag=np.zeros((nvert, 9)), dinv=np.zeros((nvert, 9)),
-                        acc=np.zeros((nvert, 3)), gchol=np.zeros((nvert, 6)))
+                        acc=np.zeros((nvert, 3)), gchol=np.zeros((nvert, 6)), ediag=np.zeros((nvert, 9)))
 
 
 @kernel
 def assemble(m, rows, face, fib, pf, h, mat):
     """mat.amat = M + h^2 K + h C on the free points, mat.pdiag its diagonal blocks with K
     projected, from the tangent caches of `rows` (`hybrid.implicit.newton_caches`); mat.dinv,
-    mat.gchol. One thread in both builds (threads summing into shared blocks would change
-    their last bits from one build to the other)."""
+    mat.gchol, mat.ediag. One thread in both builds (threads summing into shared blocks
+    would change their last bits from one build to the other)."""
     amat, pdiag = mat.amat, mat.pdiag
     for k in range(amat.shape[0]):
         for r in range(9):
             amat[k, r] = 0.0
     on = m.term_on
-    n = pdiag.shape[0]
-    _diagonal_rows(m.vert_mass, m.damp_coef, on[T_DAMPING] != 0, m.vert_free, h, mat.diag, pdiag, amat, 0, n)
+    for i in range(pdiag.shape[0]):
+        c = m.vert_mass[i] + (h * m.damp_coef[i] if on[T_DAMPING] else 0.0) if m.vert_free[i] else 0.0
+        d = mat.diag[i]
+        for r in range(9):
+            pdiag[i, r] = c if r % 4 == 0 else 0.0
+            amat[d, r] = pdiag[i, r]
     if on[T_MEMBRANE]:
         membrane_tangent_blocks(rows.mem_vert, rows.mem_par, face, h * h, h, mat.mem_slot, amat, pdiag)
     if on[T_FIBRES]:
         fibre_tangent_blocks(rows.fib_vert, fib, h * h, mat.fib_slot, amat, pdiag)
     if on[T_PASSIVE]:
         passive_fibres_tangent_blocks(rows.pf_vert, pf, h * h, mat.pf_slot, amat, pdiag)
-    _invert_rows(m.vert_free, pdiag, mat.dinv, mat.gchol, 0, n)
-
-
-@kernel
-def _diagonal_rows(vert_mass, damp_coef, damping, vert_free, h, diag, pdiag, amat, lo, hi):
-    """The diagonal blocks of points lo..hi - 1 start as (m + h c) I (free points; zero else)."""
-    for i in range(lo, hi):
-        c = vert_mass[i] + (h * damp_coef[i] if damping else 0.0) if vert_free[i] else 0.0
-        d = diag[i]
-        for r in range(9):
-            pdiag[i, r] = c if r % 4 == 0 else 0.0
-            amat[d, r] = pdiag[i, r]
-
-
-@kernel
-def _invert_rows(vert_free, pdiag, dinv, gchol, lo, hi):
-    """dinv and gchol of points lo..hi - 1: pdiag's inverses and Cholesky factors (the
-    identity at fixed points)."""
-    for i in range(lo, hi):
-        b, g = dinv[i], gchol[i]
-        if not vert_free[i]:
+    for i in range(pdiag.shape[0]):
+        b, g, e, da = mat.dinv[i], mat.gchol[i], mat.ediag[i], amat[mat.diag[i]]
+        if not m.vert_free[i]:
             for r in range(9):
                 b[r] = 1.0 if r % 4 == 0 else 0.0
+                e[r] = 0.0
             g[0] = g[2] = g[5] = 1.0
             g[1] = g[3] = g[4] = 0.0
-        else:
-            _invert(pdiag[i], b)
-            _cholesky(pdiag[i], g)
+            continue
+        _invert(pdiag[i], b)
+        _cholesky(pdiag[i], g)
+        for r in range(9):
+            e[r] = da[r] - 2.0 * pdiag[i, r]
 
 
 @kernel(inline="always")
@@ -254,3 +247,129 @@ def sgs_sweep(mat, r, z):
     upper_solve(mat, z, z)
 
 
+@kernel
+def dot(free, a, b):
+    """a . b over the points `free` (in order: the other points' rows are zero)."""
+    s = 0.0
+    for i in free:
+        s += a[i, 0] * b[i, 0] + a[i, 1] * b[i, 1] + a[i, 2] * b[i, 2]
+    return s
+
+
+@kernel(inline="always")
+def cg_update(free, alpha, p, q, x, r):
+    """x += alpha p, r -= alpha q on the points `free`; returns |r|^2."""
+    rr = 0.0
+    for i in free:
+        for a in range(3):
+            x[i, a] += alpha * p[i, a]
+            r[i, a] -= alpha * q[i, a]
+        rr += r[i, 0] * r[i, 0] + r[i, 1] * r[i, 1] + r[i, 2] * r[i, 2]
+    return rr
+
+
+@kernel
+def split_cg(mat, r, x, y, p, q, t, b, target, cg_max):
+    """x = the solution of A x = r (A the assembled Newton matrix, rows of fixed points
+    zero) by the preconditioned conjugate gradients of `hybrid.implicit._solve` in
+    Eisenstat's implementation: with P = (D + L) D^-1 (D + U) = C C^T, C = (D + L) G^-T
+    (D = G G^T, D the projected diagonal blocks, L = U^T the assembled off-diagonal
+    ones), they iterate on C^-1 A C^-T, whose product is two triangular solves (A = (D +
+    L) + (D + U) + E, E = D_A - 2 D, D_A the exact diagonal blocks): t = (D + U)^-1 G p,
+    C^-1 A C^-T p = G^T (t + (D + L)^-1 (G p + E t)). The same iterates as
+    `hybrid.implicit._solve` (its x = C^-T y), for two triangular solves an iteration
+    instead of a product and a sweep (three). Stops when the residual b - A x is at most
+    target, looked at when |C^-1 r| has fallen by target / |r_0| (then replacing the
+    recursive C^-1 r if not yet), or at negative curvature as `_solve`. Returns the
+    iterations (-1: negative curvature at once).
+    # Data in: mat, r (n, 3) (overwritten: C^-1 r)   # Data out: x (n, 3)
+    # Scratch: y, p, q, t, b (n, 3)
+    """
+    free = mat.free
+    g, e = mat.gchol, mat.ediag
+    for i in range(x.shape[0]):
+        for c in range(3):
+            x[i, c] = y[i, c] = p[i, c] = q[i, c] = t[i, c] = 0.0
+            b[i, c] = r[i, c]
+    r0 = math.sqrt(dot(free, r, r))
+    lower_solve(mat, r, t)  # r^ = C^-1 r = G^T (D + L)^-1 r
+    for i in free:
+        _gt(g[i], t[i, 0], t[i, 1], t[i, 2], r, i)
+        for c in range(3):
+            p[i, c] = r[i, c]
+    rr = dot(free, r, r)
+    stop = target / r0 * math.sqrt(rr) if r0 > 0.0 else 0.0
+    k = 0
+    while k < cg_max:
+        # q = C^-1 A C^-T p
+        for i in free:
+            _g(g[i], p[i, 0], p[i, 1], p[i, 2], q, i)  # q = G p for now
+        upper_solve(mat, q, x)  # x (scratch till the end) = t = (D + U)^-1 G p
+        for i in free:
+            d = e[i]
+            tx, ty, tz = x[i, 0], x[i, 1], x[i, 2]
+            q[i, 0] += d[0] * tx + d[1] * ty + d[2] * tz
+            q[i, 1] += d[3] * tx + d[4] * ty + d[5] * tz
+            q[i, 2] += d[6] * tx + d[7] * ty + d[8] * tz
+        lower_solve(mat, q, t)
+        for i in free:
+            _gt(g[i], x[i, 0] + t[i, 0], x[i, 1] + t[i, 1], x[i, 2] + t[i, 2], q, i)
+        pq = dot(free, p, q)
+        if not pq > 0.0:  # negative curvature (or p = 0): stop with what we have (truncated Newton)
+            if k == 0:
+                return -1
+            break
+        alpha = rr / pq
+        rr_new = cg_update(free, alpha, p, q, y, r)
+        k += 1
+        # the preconditioned residual's reduction says when to look at the residual itself,
+        # b - A x at x = C^-T y (the recursive one drifts from it at tight tolerances); if it is
+        # not yet small enough, r^ = C^-1 (b - A x) replaces the recursive one
+        if math.sqrt(rr_new) <= stop:
+            if _true_residual(mat, g, y, b, x, q, t) <= target:
+                break
+            lower_solve(mat, q, t)
+            rr_new = 0.0
+            for i in free:
+                _gt(g[i], t[i, 0], t[i, 1], t[i, 2], r, i)
+                rr_new += r[i, 0] * r[i, 0] + r[i, 1] * r[i, 1] + r[i, 2] * r[i, 2]
+        beta = rr_new / rr
+        rr = rr_new
+        for i in free:
+            for c in range(3):
+                p[i, c] = r[i, c] + beta * p[i, c]
+    for i in free:  # x = C^-T y = (D + U)^-1 G y
+        _g(g[i], y[i, 0], y[i, 1], y[i, 2], q, i)
+    upper_solve(mat, q, x)
+    return k
+
+
+@kernel
+def _true_residual(mat, g, y, b, x, q, t):
+    """x = C^-T y = (D + U)^-1 G y; q = b - A x on the free points (t: scratch); |q|."""
+    for i in mat.free:
+        _g(g[i], y[i, 0], y[i, 1], y[i, 2], t, i)
+    upper_solve(mat, t, x)
+    matrix_product(mat, x, q)
+    rr = 0.0
+    for i in mat.free:
+        for c in range(3):
+            q[i, c] = b[i, c] - q[i, c]
+        rr += q[i, 0] * q[i, 0] + q[i, 1] * q[i, 1] + q[i, 2] * q[i, 2]
+    return math.sqrt(rr)
+
+
+@kernel(inline="always")
+def _g(g, vx, vy, vz, out, i):
+    """out[i] = G v, G lower triangular (g00, g10, g11, g20, g21, g22)."""
+    out[i, 0] = g[0] * vx
+    out[i, 1] = g[1] * vx + g[2] * vy
+    out[i, 2] = g[3] * vx + g[4] * vy + g[5] * vz
+
+
+@kernel(inline="always")
+def _gt(g, vx, vy, vz, out, i):
+    """out[i] = G^T v."""
+    out[i, 0] = g[0] * vx + g[1] * vy + g[3] * vz
+    out[i, 1] = g[2] * vy + g[4] * vz
+    out[i, 2] = g[5] * vz
