@@ -33,8 +33,13 @@ this needs at most 14): the projection drops the compressive stress that the
 mass term nearly balances on out-of-plane modes. Each step is then halved until
 the incremental potential (whose dv-gradient is -h r, the viscous part taken at
 the iteration's start) falls by 1e-4 of the predicted decrease, or |r| halves
-(at most 12 halvings). A step has converged when |r| <= implicit_tol (|f_i| +
-|f_e| + |M dv / h|) (2-norms over the free points), or when a Newton correction
+(at most 12 halvings). A step has converged when |r| <= implicit_tol max(F, F_mean),
+F = |f_i| + |f_e| + |M dv / h| (2-norms over the free points) and F_mean the mean of
+the step-start F over the run's solved steps, this one included (the time-averaged force
+of Abaqus's residual criterion: at the end of expiration the breathing membrane's forces
+fall 50-200 fold, and a tolerance of the instantaneous forces alone asked for a residual
+that many times smaller in newtons there, at 2-3 Newton iterations a step, for no
+change in the run's metrics), or when a Newton correction
 moves no point by more than a few units in the last place of the positions, or
 one of at most a few hundred such units no longer halves the residual (the
 round-off floor: a coupled body at rest, its linked points placed by the rigid
@@ -90,7 +95,7 @@ FORCING = 0.5  # the linear solve: to this fraction of the residual, and of what
 class Info(IntEnum):
     """The slots of `ImplicitWork.info`."""
     NEWTON = 0  # Newton iterations of the last step
-    RESIDUAL = 1  # its relative residual |r| / (|f_i| + |f_e| + |M dv / h|)
+    RESIDUAL = 1  # its relative residual |r| / max(F, F_mean) (the module's docstring)
     CG = 2  # conjugate-gradient iterations of the last step
     CARRIED = 3  # Pa, the pressure the last solve carried
     PRESSURE = 4  # Pa, the last step's pressure (carried + the projection's)
@@ -98,10 +103,13 @@ class Info(IntEnum):
     CG_TOTAL = 6
     WORST = 7  # the vertex of the largest residual
     PROJECTED_TOTAL = 8  # Newton iterations over the run solved with the projected Hessian
+    FORCE_SUM = 9  # N, the step-start force scale F summed over the run's solved steps
+    SOLVED = 10  # the run's solved steps
+    FORCE = 11  # N, the last step's step-start force scale F
 
 
 (I_NEWTON, I_RESIDUAL, I_CG, I_CARRIED, I_PRESSURE, I_NEWTON_TOTAL, I_CG_TOTAL, I_WORST,
- I_PROJECTED_TOTAL) = (int(k) for k in Info)
+ I_PROJECTED_TOTAL, I_FORCE_SUM, I_SOLVED, I_FORCE) = (int(k) for k in Info)
 
 
 class NewtonRows(NamedTuple):
@@ -416,6 +424,9 @@ def implicit_step(m, s, step, imp):
     tol = m.implicit_tol
     cg_max = max(CG_MIN_ITER, 9 * nfree)
     rn, scale, worst = _residual(m, s.sched_val, pos, vel, h, w)
+    # the time-averaged force scale: the run's mean step-start scale, this step's included
+    scale_start = scale
+    scale_mean = (info[I_FORCE_SUM] + scale) / (info[I_SOLVED] + 1.0)
     it = 0
     cg_total = 0
     at_roundoff = False
@@ -424,7 +435,7 @@ def implicit_step(m, s, step, imp):
         for a in range(3):
             x_max = max(x_max, abs(pos[i, a]))
     ulp_x = ULPS * EPS * x_max
-    while not (rn <= tol * scale) and it < m.implicit_max_iter and rn < np.inf:
+    while not (rn <= tol * max(scale, scale_mean)) and it < m.implicit_max_iter and rn < np.inf:
         for i in range(n):
             for a in range(3):
                 w.x_kv[i, a] = w.x_try[i, a]
@@ -436,7 +447,7 @@ def implicit_step(m, s, step, imp):
             for a in range(3):
                 w.cg_r[i, a] = h * w.res[i, a]
         # solve just accurately enough: FORCING of what convergence asks, at most FORCING of the residual
-        eta = min(FORCING, FORCING * tol * scale / rn)
+        eta = min(FORCING, FORCING * tol * max(scale, scale_mean) / rn)
         k = split_cg(w.mat, w.cg_r, w.cg_x, w.cg_z, w.cg_p, w.cg_q, w.cg_t, w.cg_b, eta * h * rn, cg_max)
         if k < 0:
             for i in range(n):
@@ -490,12 +501,13 @@ def implicit_step(m, s, step, imp):
             break
         rn = rn_new
     info[I_NEWTON] = it
-    info[I_RESIDUAL] = rn / scale if scale > 0.0 else 0.0
+    ref = max(scale, scale_mean)
+    info[I_RESIDUAL] = rn / ref if ref > 0.0 else 0.0
     info[I_CG] = cg_total
     info[I_NEWTON_TOTAL] += it
     info[I_CG_TOTAL] += cg_total
     info[I_WORST] = worst
-    if not (rn <= tol * scale or at_roundoff):
+    if not (rn <= tol * ref or at_roundoff):
         for i in range(n):  # no warm start from a failed solve
             for a in range(3):
                 w.dv[i, a] = 0.0
@@ -503,6 +515,9 @@ def implicit_step(m, s, step, imp):
         s.status[1] = step
         s.status[2] = worst
         return IMPLICIT_NOT_CONVERGED
+    info[I_FORCE] = scale_start
+    info[I_FORCE_SUM] += scale_start
+    info[I_SOLVED] += 1.0
     acc = s.vert_acc
     for c in range(acc.shape[0]):
         dsum = ke = dmax = 0.0
