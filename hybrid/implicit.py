@@ -139,8 +139,10 @@ def newton_rows(arrays) -> NewtonRows:
 class ImplicitWork(NamedTuple):
     """The implicit step's arrays: dv (nvert, 3) m/s, the last step's velocity change
     (warm start); x_try, v_try, f, f_expl, res, x_kv (the positions the line search's
-    viscous dissipation is taken at) and the conjugate gradients' cg_* (nvert, 3):
-    scratch; grad (nvert, 3) m^2: the volume gradient at the step's start; rows: the
+    viscous dissipation is taken at), dv_start (the Newton iteration's dv), full_u,
+    full_y (the projected product's) (nvert, 3) and the conjugate gradients' cg_* (nfree,
+    3, in the Newton matrix's numbering of the free points): scratch; grad (nvert, 3)
+    m^2: the volume gradient at the step's start; rows: the
     triangles the Newton matrix reads (`newton_rows`); face (NCACHE), fib (NFIB_CACHE),
     pf (NPF_CACHE) per row of rows: the membrane's, muscle fibres' and passive fibres'
     tangent caches (`newton_caches`); mat: the assembled Newton matrix
@@ -153,6 +155,9 @@ class ImplicitWork(NamedTuple):
     res: np.ndarray
     x_kv: np.ndarray
     grad: np.ndarray
+    dv_start: np.ndarray
+    full_u: np.ndarray
+    full_y: np.ndarray
     cg_x: np.ndarray
     cg_r: np.ndarray
     cg_z: np.ndarray
@@ -173,7 +178,8 @@ def implicit_work(arrays) -> ImplicitWork | None:
     if arrays.integrator != IMPLICIT_ID:
         return None
     n = arrays.vert_rest.shape[0]
-    vec = [np.zeros((n, 3)) for _ in range(15)]
+    nfree = int(np.count_nonzero(np.asarray(arrays.vert_free)))
+    vec = [np.zeros((n, 3)) for _ in range(11)] + [np.zeros((nfree, 3)) for _ in range(7)]
     rows = newton_rows(arrays)
     return ImplicitWork(*vec, rows=rows, face=np.zeros((rows.mem_vert.shape[0], NCACHE)),
                         fib=np.zeros((rows.fib_vert.shape[0], NFIB_CACHE)),
@@ -259,49 +265,69 @@ def newton_product(m, rows, face, fib, pf, h, project, u, y):
 
 @kernel
 def _product(m, w, h, project, u, y):
-    """y = the Newton matrix times u, 0 on fixed points: assembled, or with the Hessian
-    projected element by element (the rare projected Newton iteration)."""
+    """y = the Newton matrix times u ((nfree, 3), the matrix's numbering): assembled, or
+    with the Hessian projected element by element (the rare projected Newton iteration,
+    on every point: w.full_u is zero on the fixed ones)."""
     if not project:
         matrix_product(w.mat, u, y)
         return
-    newton_product(m, w.rows, w.face, w.fib, w.pf, h, True, u, y)
-    for i in range(y.shape[0]):
-        if not m.vert_free[i]:
-            y[i, 0] = y[i, 1] = y[i, 2] = 0.0
+    free = w.mat.free
+    for f in range(free.shape[0]):
+        for a in range(3):
+            w.full_u[free[f], a] = u[f, a]
+    newton_product(m, w.rows, w.face, w.fib, w.pf, h, True, w.full_u, w.full_y)
+    for f in range(free.shape[0]):
+        for a in range(3):
+            y[f, a] = w.full_y[free[f], a]
 
 
 @kernel
 def _solve(m, w, h, project, target, cg_max):
     """w.cg_x = the preconditioned conjugate gradients' solution of (Newton matrix) x = w.cg_r
-    (rows of fixed points zero), to |residual| <= target or cg_max iterations. Returns the iterations.
-    The iterations visit the free points alone; x, z, p stay zero on the others."""
+    ((nfree, 3), the matrix's numbering), to |residual| <= target or cg_max iterations.
+    Returns the iterations."""
     x, r, z, p, q = w.cg_x, w.cg_r, w.cg_z, w.cg_p, w.cg_q
-    free = w.mat.free
     for i in range(x.shape[0]):
         for a in range(3):
             x[i, a] = z[i, a] = p[i, a] = 0.0
     sgs_sweep(w.mat, r, z)
-    for i in free:
+    for i in range(x.shape[0]):
         for a in range(3):
             p[i, a] = z[i, a]
-    rz = dot(free, r, z)
+    rz = dot(r, z)
     for k in range(cg_max):
         _product(m, w, h, project, p, q)
-        pq = dot(free, p, q)
+        pq = dot(p, q)
         if not pq > 0.0:  # negative curvature (or p = 0): stop with what we have (truncated Newton)
             return -1 if k == 0 else k
         alpha = rz / pq
-        rr = cg_update(free, alpha, p, q, x, r)
+        rr = cg_update(alpha, p, q, x, r)
         if math.sqrt(rr) <= target:
             return k + 1
         sgs_sweep(w.mat, r, z)
-        rz_new = dot(free, r, z)
+        rz_new = dot(r, z)
         beta = rz_new / rz
         rz = rz_new
-        for i in free:
+        for i in range(x.shape[0]):
             for a in range(3):
                 p[i, a] = z[i, a] + beta * p[i, a]
     return cg_max
+
+
+@kernel(inline="always")
+def _gather(rows_of, c, full, out):
+    """out[f] = c full[rows_of[f]]: a vector of every point to the Newton matrix's numbering."""
+    for f in range(rows_of.shape[0]):
+        for a in range(3):
+            out[f, a] = c * full[rows_of[f], a]
+
+
+@kernel(inline="always")
+def _scatter_add(rows_of, c, x, full):
+    """full[rows_of[f]] += c x[f]."""
+    for f in range(rows_of.shape[0]):
+        for a in range(3):
+            full[rows_of[f], a] += c * x[f, a]
 
 
 @kernel
@@ -423,6 +449,7 @@ def implicit_step(m, s, step, imp):
     info[I_CARRIED] = carried
     tol = m.implicit_tol
     cg_max = max(CG_MIN_ITER, 9 * nfree)
+    rows_of = w.mat.free  # the free point of each row of the Newton matrix
     rn, scale, worst = _residual(m, s.sched_val, pos, vel, h, w)
     # the time-averaged force scale: the run's mean step-start scale, this step's included
     scale_start = scale
@@ -443,16 +470,12 @@ def implicit_step(m, s, step, imp):
         assemble(m, w.rows, w.face, w.fib, w.pf, h, w.mat)
         # the exact Hessian, its negative curvature ending the conjugate gradients early
         # (truncated Newton); when met at once, the Hessian projected per element instead
-        for i in range(n):
-            for a in range(3):
-                w.cg_r[i, a] = h * w.res[i, a]
+        _gather(rows_of, h, w.res, w.cg_r)
         # solve just accurately enough: FORCING of what convergence asks, at most FORCING of the residual
         eta = min(FORCING, FORCING * tol * max(scale, scale_mean) / rn)
         k = split_cg(w.mat, w.cg_r, w.cg_x, w.cg_z, w.cg_p, w.cg_q, w.cg_t, w.cg_b, eta * h * rn, cg_max)
         if k < 0:
-            for i in range(n):
-                for a in range(3):
-                    w.cg_r[i, a] = h * w.res[i, a]
+            _gather(rows_of, h, w.res, w.cg_r)
             k = 1 + _solve(m, w, h, True, eta * h * rn, cg_max)
             info[I_PROJECTED_TOTAL] += 1
         cg_total += k
@@ -461,19 +484,20 @@ def implicit_step(m, s, step, imp):
         # body's largest coordinate) cannot move the state: the solve is at its round-off
         # floor (a body at rest whose forces are themselves round-off, as at a run's start)
         dx_max = 0.0
-        for i in range(n):
-            if free[i]:
-                for a in range(3):
-                    dx_max = max(dx_max, abs(h * w.cg_x[i, a]))
+        slope = 0.0  # the potential's derivative along the step (< 0)
+        for f in range(rows_of.shape[0]):
+            i = rows_of[f]
+            for a in range(3):
+                dx_max = max(dx_max, abs(h * w.cg_x[f, a]))
+                slope -= h * w.res[i, a] * w.cg_x[f, a]
         if dx_max <= ulp_x:
             at_roundoff = True
             break
-        slope = -h * dot(w.mat.free, w.res, w.cg_x)  # the potential's derivative along the step (< 0)
-        dv_start = w.cg_q  # the iteration's start (the conjugate gradients' scratch, free now)
+        dv_start = w.dv_start  # the iteration's start
         for i in range(n):
             for a in range(3):
                 dv_start[i, a] = w.dv[i, a]
-                w.dv[i, a] += w.cg_x[i, a]
+        _scatter_add(rows_of, 1.0, w.cg_x, w.dv)
         frac = 1.0  # of the step now applied
         phi = np.nan  # the potential at the start: taken only when a residual does not halve
         for k in range(HALVINGS + 1):
@@ -489,9 +513,7 @@ def implicit_step(m, s, step, imp):
             if _merit(m, s.sched_val, h, w.dv, w) <= phi + ARMIJO * frac * slope:
                 break
             frac *= 0.5
-            for i in range(n):
-                for a in range(3):
-                    w.dv[i, a] -= frac * w.cg_x[i, a]
+            _scatter_add(rows_of, -frac, w.cg_x, w.dv)
         # a residual that no longer falls under corrections of a few hundred units in the last
         # place of the positions: its floor is the positions' rounding times the stiffness
         # (about 3e-13 N on the breathing scene at rest at level 6), where no correction helps
