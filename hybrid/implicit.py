@@ -113,9 +113,11 @@ class Info(IntEnum):
 
 
 class NewtonRows(NamedTuple):
-    """The membrane's, muscle fibres' and passive fibres' rows (`MembraneArrays`) of the
-    triangles with a free corner: the others add only to the Newton matrix's fixed rows,
-    which the solve zeroes, so its products and blocks skip them."""
+    """The membrane's, muscle fibres' and passive fibres' rows (`MembraneArrays`) and the
+    surface's faces (face_vert) of the triangles with a free corner: the others add only
+    to fixed points, whose rows the solve leaves out, so its residuals, products, blocks
+    and volume gradient skip them (at level 8 of the breathing scene a fifth of the
+    membrane's triangles and half of the muscle's)."""
     mem_vert: np.ndarray
     mem_par: np.ndarray
     fib_vert: np.ndarray
@@ -123,6 +125,7 @@ class NewtonRows(NamedTuple):
     fib_sched: np.ndarray
     pf_vert: np.ndarray
     pf_par: np.ndarray
+    face_vert: np.ndarray
 
 
 def newton_rows(arrays) -> NewtonRows:
@@ -133,6 +136,8 @@ def newton_rows(arrays) -> NewtonRows:
                        (arrays.pf_vert, arrays.pf_par)):
         keep = free[tri.reshape(-1, 3)].any(axis=1)
         out += [np.ascontiguousarray(a[keep]) for a in (tri, *more)]
+    faces = np.asarray(arrays.face_vert)
+    out.append(np.ascontiguousarray(faces[free[faces.reshape(-1, 3)].any(axis=1)]))
     return NewtonRows(*out)
 
 
@@ -189,21 +194,22 @@ def implicit_work(arrays) -> ImplicitWork | None:
 
 
 @kernel
-def implicit_forces(m, sched_val, x, v, out):
+def implicit_forces(m, tri, sched_val, x, v, out):
     """out = the forces implicit Euler treats implicitly at (x, v): membrane (with its
-    viscosity), muscle fibres, passive fibres, drag.
-    # Model: m   # Data in: sched_val (schedules at t), x (m), v (m/s)   # Data out: out (N)
+    viscosity), muscle fibres, passive fibres, drag; of the triangles `tri` (m itself: all
+    of them; `NewtonRows`: those with a free corner, whole on the free points).
+    # Model: m, tri   # Data in: sched_val (schedules at t), x (m), v (m/s)   # Data out: out (N)
     """
     for i in range(out.shape[0]):
         for a in range(3):
             out[i, a] = 0.0
     on = m.term_on
     if on[T_MEMBRANE]:
-        add_membrane_serial(m.mem_vert, m.mem_par, m.kv_on, x, v, out)
+        add_membrane_serial(tri.mem_vert, tri.mem_par, m.kv_on, x, v, out)
     if on[T_FIBRES]:
-        add_muscle_fibres(m.fib_vert, m.fib_par, m.fib_sched, sched_val, x, out)
+        add_muscle_fibres(tri.fib_vert, tri.fib_par, tri.fib_sched, sched_val, x, out)
     if on[T_PASSIVE]:
-        add_passive_fibres(m.pf_vert, m.pf_par, x, out)
+        add_passive_fibres(tri.pf_vert, tri.pf_par, x, out)
     if on[T_DAMPING]:
         for i in range(out.shape[0]):
             c = m.damp_coef[i]
@@ -223,7 +229,7 @@ def implicit_start_forces(m, sched_val, x, v, imp, vert_force):
     """
     if imp is None:
         return False
-    implicit_forces(m, sched_val, x, v, imp.f)
+    implicit_forces(m, m, sched_val, x, v, imp.f)
     for i in range(vert_force.shape[0]):
         for a in range(3):
             imp.f_expl[i, a] = vert_force[i, a]  # the explicit forces, kept exact for the solve
@@ -352,7 +358,7 @@ def _residual(m, sched_val, pos, vel, h, w):
     dv, xt, vt, res = w.dv, w.x_try, w.v_try, w.res
     free = m.vert_free
     _trial(m, pos, vel, h, dv, w)
-    implicit_forces(m, sched_val, xt, vt, w.f)
+    implicit_forces(m, w.rows, sched_val, xt, vt, w.f)
     rr = ff = ee = mm = 0.0
     worst, big = 0, -1.0
     for i in range(pos.shape[0]):
@@ -390,20 +396,23 @@ def _merit(m, sched_val, h, dv, w):
                 total += dv[i, a] * (0.5 * m.vert_mass[i] * dv[i, a] - h * w.f_expl[i, a])
         if on[T_DAMPING]:
             total += 0.5 * h * m.damp_coef[i] * (w.v_try[i, 0] ** 2 + w.v_try[i, 1] ** 2 + w.v_try[i, 2] ** 2)
+    # the triangles with a free corner (`NewtonRows`): the others' terms do not change in the solve
+    tri = w.rows
     if on[T_MEMBRANE]:
-        total += membrane_energy(m.mem_vert, m.mem_par, w.x_try)
+        total += membrane_energy(tri.mem_vert, tri.mem_par, w.x_try)
         if m.kv_on:
-            total += h * kelvin_voigt_dissipation(m.mem_vert, m.mem_par, w.x_kv, w.v_try)
+            total += h * kelvin_voigt_dissipation(tri.mem_vert, tri.mem_par, w.x_kv, w.v_try)
     if on[T_FIBRES]:
-        total += fibre_energy(m.fib_vert, m.fib_par, m.fib_sched, sched_val, w.x_try)
+        total += fibre_energy(tri.fib_vert, tri.fib_par, tri.fib_sched, sched_val, w.x_try)
     if on[T_PASSIVE]:
-        total += passive_fibres_energy_kernel(m.pf_vert, m.pf_par, w.x_try)
+        total += passive_fibres_energy_kernel(tri.pf_vert, tri.pf_par, w.x_try)
     return total
 
 
 @kernel
 def _volume_gradient(face_vert, pos, grad):
-    """grad = grad V at pos (m^2), face by face."""
+    """grad = grad V at pos (m^2), face by face: whole at the points all of whose faces
+    face_vert lists (`NewtonRows.face_vert`: at the free points)."""
     for i in range(grad.shape[0]):
         grad[i, 0] = grad[i, 1] = grad[i, 2] = 0.0
     sixth = 1.0 / 6.0
@@ -437,7 +446,7 @@ def implicit_step(m, s, step, imp):
     # rounding would set a floor under the residual), plus the carried pressure
     carried = info[I_PRESSURE] if m.term_on[T_VOLUME] else 0.0
     if carried != 0.0:
-        _volume_gradient(m.face_vert, pos, w.grad)
+        _volume_gradient(w.rows.face_vert, pos, w.grad)
     nfree = 0
     for i in range(n):
         nfree += free[i] != 0

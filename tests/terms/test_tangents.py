@@ -203,7 +203,7 @@ def test_the_newton_matrix_against_finite_differences_of_the_implicit_forces(mod
 
     def forces(y, w):
         f = np.zeros_like(y)
-        implicit_forces(a, sv, y, w, f)
+        implicit_forces(a, a, sv, y, w, f)
         return f
     newton = columns(x.shape[0], product)
     dfdx = finite_difference(lambda y: forces(y, zero), x, 1e-7)
