@@ -21,8 +21,8 @@ solves (M + h^2 K + h C) ddv = h r, r = f_i + f_e - M dv / h (N) the residual,
 C the damping matrix and K the forces' exact Hessian (`hybrid.terms.tangents`),
 by conjugate gradients with the matrix assembled once per Newton iteration from
 the terms' per-triangle tangent caches (`hybrid.implicit_matrix`), preconditioned
-with its symmetric Gauss-Seidel sweep whose diagonal blocks are those of the matrix
-with K made positive semi-definite per element, in Eisenstat's implementation
+with its symmetric over-relaxed Gauss-Seidel (SSOR) sweep whose diagonal blocks are those
+of the matrix with K made positive semi-definite per element, in Eisenstat's implementation
 (`hybrid.implicit_matrix.split_cg`: two triangular solves an iteration). Where the exact matrix has negative curvature
 (a membrane under compression: it has no bending stiffness) the conjugate
 gradients stop there (truncated Newton); met at the first iteration, the solve

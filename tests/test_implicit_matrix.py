@@ -1,14 +1,14 @@
 """Implicit Euler's assembled Newton matrix (hybrid.implicit_matrix): its blocks are those
-of the element-by-element product, its product is theirs, its diagonal blocks D those of
-the projected product, and the preconditioner's sweep is (D + U)^-1 D (D + L)^-1; on a
-small irregular mesh with every tangent term and points that are not integrated."""
+of the element-by-element product, its product is theirs, its diagonal blocks P those of
+the projected product, and the preconditioner's sweep is (D + U)^-1 D (D + L)^-1, D = P /
+omega; on a small irregular mesh with every tangent term and points that are not integrated."""
 
 import numpy as np
 import pytest
 
 from hybrid import Damping, HalfSpace, Masses, Membrane, MuscleFibres, PassiveFibres, Scene
 from hybrid.implicit import newton_caches, newton_product, newton_rows
-from hybrid.implicit_matrix import assemble, matrix_product, newton_matrix, sgs_sweep
+from hybrid.implicit_matrix import SSOR_OMEGA, assemble, matrix_product, newton_matrix, sgs_sweep
 from hybrid.mesh import irregular_sphere
 from hybrid.model import compile_scene
 from hybrid.terms.tangents import NCACHE, NFIB_CACHE, NPF_CACHE
@@ -95,18 +95,26 @@ def test_the_assembled_blocks_are_the_element_products(setup):
     assert np.abs(pdiag - exact_diag).max() > 0.0  # the projection changes some
     fr = a.vert_free != 0
     assert np.abs(mat.pdiag[fr] - pdiag[fr]).max() <= 1e-12 * scale
+    # the sweep's, over-relaxed (to the rounding of a division taken as a reciprocal's product)
+    assert np.abs(mat.sdiag - mat.pdiag[fr] / SSOR_OMEGA).max() <= 1e-15 * np.abs(mat.pdiag).max()
 
 
-def test_the_sweep_is_symmetric_gauss_seidel_with_the_projected_diagonal(setup):
+def sweep_diagonal(mat, n):
+    """The sweep's D on every point (zero on fixed points)."""
+    diag = np.zeros((3 * n, 3 * n))
+    for f, i in enumerate(mat.free):
+        diag[3 * i:3 * i + 3, 3 * i:3 * i + 3] = mat.sdiag[f].reshape(3, 3)
+    return diag
+
+
+def test_the_sweep_is_ssor_with_the_projected_diagonal(setup):
     a, rows, face, fib, pf, mat = setup
     n = a.vert_rest.shape[0]
     fr = a.vert_free != 0
     free = np.repeat(fr, 3)
     exact = blocks_of(mat, n, mat.amat)
     one = np.kron(np.eye(n), np.ones((3, 3)))
-    diag = np.zeros((3 * n, 3 * n))
-    for i in range(n):
-        diag[3 * i:3 * i + 3, 3 * i:3 * i + 3] = mat.pdiag[i].reshape(3, 3)
+    diag = sweep_diagonal(mat, n)
     off = exact - one * exact
     lower = (np.tril(off) + diag)[np.ix_(free, free)]
     upper = (np.triu(off) + diag)[np.ix_(free, free)]
@@ -136,9 +144,7 @@ def test_eisenstats_conjugate_gradients_take_the_same_iterates_as_the_swept_ones
     fr = a.vert_free != 0
     # the triangular solves against dense ones
     full = blocks_of(mat, n, mat.amat)
-    diag = np.zeros_like(full)
-    for i in range(n):
-        diag[3 * i:3 * i + 3, 3 * i:3 * i + 3] = mat.pdiag[i].reshape(3, 3)
+    diag = sweep_diagonal(mat, n)
     one = np.kron(np.eye(n), np.ones((3, 3)))
     off = full - one * full
     free = np.repeat(fr, 3)
