@@ -278,7 +278,7 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--realtime-level", type=int, default=8, metavar="K",
                    help="the breathing scene's mesh level in the realtime row besides its default level 4 "
                         "(default 8, the convergence study's 1%% level of all four metrics: 12 s of it take "
-                        "13-16 s a run here; 7 about 11 s; 4 for none)")
+                        "7-9 s a run here; 7 about 7 s; 4 for none)")
     b.set_defaults(func=_cmd_bench)
     i = sub.add_parser("inspect", help="what a scene or an MJCF model holds: bodies at qpos0, joints, actuators, "
                                        "keyframes; regions, links, nails, terms and the stable step")
