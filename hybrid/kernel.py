@@ -42,13 +42,17 @@ from pathlib import Path
 import numba
 from numba import njit
 
-__all__ = ["CACHE_DIR", "FAST", "FLAGS", "jit", "kernel", "kernel_twin", "CHUNK_VERTS", "PARALLEL_MIN_VERTS",
+__all__ = ["CACHE_DIR", "FAST", "FAST_NO_FMA", "FLAGS", "jit", "kernel", "kernel_twin", "CHUNK_VERTS", "PARALLEL_MIN_VERTS",
            "use_parallel", "usable_threads", "limit_threads", "chunk_count", "kernel_sources",
            "prune_old_caches", "compile_notice", "numba_info"]
 
 # Fast-math without the flags that assume no NaN or infinity: fused
 # multiply-adds and reciprocals, but the divergence check still sees NaN.
 FAST = {"contract", "arcp", "nsz", "afn"}
+# ... without fused multiply-adds, for kernels whose bits came out different when compiled
+# than when loaded from the cache (the Newton matrix's blocks: hybrid.terms.tangent_blocks;
+# level 5 of the breathing scene, implicit Euler, 60 steps: 6e-16 m apart, 0 without)
+FAST_NO_FMA = {"arcp", "nsz", "afn"}
 # nogil: a compiled step lets other Python threads (the recorder) run meanwhile.
 # no_cfunc_wrapper: no C-callable copy of each function (nothing here takes a
 # kernel's address); building one for every kernel and callee costs a first run time.
@@ -231,10 +235,10 @@ def jit(fn=None, **flags):
 
 
 def kernel(fn=None, **extra):
-    """`@kernel`: compile a step kernel with the step's flags."""
+    """`@kernel`: compile a step kernel with the step's flags (`extra` adds or replaces some)."""
     def wrap(f):
         with _our_cache():
-            return njit(**FLAGS, **extra)(f)
+            return njit(**{**FLAGS, **extra})(f)
     return wrap if fn is None else wrap(fn)
 
 

@@ -16,18 +16,20 @@ w_2 = (0, d11)) and q_n = F w_n:
 
 cm = kx + kv tau, S the stress (the clamped one projected), r the rank-one coefficient
 and L the edges' Laplacian with their coefficients (the tangent caches' exact or
-projected columns). K_nm = K_mn^T: each pair is computed and stored once.
+projected columns). K_nm = K_mn^T: each pair is computed and stored once. Compiled
+without fused multiply-adds (`hybrid.kernel.FAST_NO_FMA`): with them the blocks' last bits
+differed between a kernel just compiled and one loaded from the cache.
 """
 
 from __future__ import annotations
 
-from ..kernel import kernel
+from ..kernel import FAST_NO_FMA, kernel
 from .membrane import P_AREA, P_D00, P_D01, P_D11, P_LAM, P_MU, P_TAU
 
 __all__ = ["membrane_tangent_blocks", "fibre_tangent_blocks", "passive_fibres_tangent_blocks"]
 
 
-@kernel(inline="always")
+@kernel(inline="always", fastmath=FAST_NO_FMA)
 def _add_block(mat, s, transpose, v0, v1, v2, v3, v4, v5, v6, v7, v8, diag):
     """mat[s] += v + diag I (v row-major), or its transpose."""
     b = mat[s]
@@ -46,7 +48,7 @@ def _add_block(mat, s, transpose, v0, v1, v2, v3, v4, v5, v6, v7, v8, diag):
     b[7] += v7
 
 
-@kernel(inline="always")
+@kernel(inline="always", fastmath=FAST_NO_FMA)
 def _corner_weights(d00, d01, d11, n):
     if n == 0:
         return -d00, -(d01 + d11)
@@ -55,7 +57,7 @@ def _corner_weights(d00, d01, d11, n):
     return 0.0, d11
 
 
-@kernel
+@kernel(fastmath=FAST_NO_FMA)
 def membrane_tangent_blocks(mem_vert, mem_par, cache, kx, kv, slot, amat, pdiag):
     """amat[slot] += the blocks of kx K + kv C; pdiag[corner] += the diagonal ones with K projected.
     # Model: mem_vert, mem_par   # Data in: cache (membrane_tangent_cache), slot (nf, 9) int64
@@ -100,7 +102,7 @@ def membrane_tangent_blocks(mem_vert, mem_par, cache, kx, kv, slot, amat, pdiag)
                     _add_block(pdiag, mem_vert[k, m], False, v0, v1, v2, v3, v4, v5, v6, v7, v8, geo_p)
 
 
-@kernel(inline="always")
+@kernel(inline="always", fastmath=FAST_NO_FMA)
 def _edge_blocks(tri, c, slot, scale, rank_e, rank_p, e_col, p_col, amat, pdiag):
     """The blocks of scale (rank G_m G_n^T + L_mn I) of a fibre triangle from its cache row c:
     columns 0..8 the edge vectors (edge k from corner k to k + 1), e_col / p_col the first
@@ -131,7 +133,7 @@ def _edge_blocks(tri, c, slot, scale, rank_e, rank_p, e_col, p_col, amat, pdiag)
                            rp * g8, lap_p)
 
 
-@kernel
+@kernel(fastmath=FAST_NO_FMA)
 def fibre_tangent_blocks(fib_vert, cache, kx, slot, amat, pdiag):
     """amat[slot] += the muscle fibres' blocks of kx K, pdiag[corner] += the diagonal ones of K
     projected, from `fibre_tangent_cache`."""
@@ -141,7 +143,7 @@ def fibre_tangent_blocks(fib_vert, cache, kx, slot, amat, pdiag):
             _edge_blocks(fib_vert[f], c, slot[f], kx, c[9], c[10], 11, 14, amat, pdiag)
 
 
-@kernel
+@kernel(fastmath=FAST_NO_FMA)
 def passive_fibres_tangent_blocks(pf_vert, cache, kx, slot, amat, pdiag):
     """amat[slot] += the passive fibres' blocks of kx K, pdiag[corner] += the diagonal ones of
     K projected, from `passive_fibres_tangent_cache`."""
