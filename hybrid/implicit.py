@@ -269,6 +269,30 @@ def newton_product(m, rows, face, fib, pf, h, project, u, y):
         passive_fibres_cached_product(rows.pf_vert, pf, project, h * h, u, y)
 
 
+@kernel(inline="always")
+def _gather(rows_of, c, full, out):
+    """out[f] = c full[rows_of[f]]: a vector of every point to the Newton matrix's numbering."""
+    for f in range(rows_of.shape[0]):
+        for a in range(3):
+            out[f, a] = c * full[rows_of[f], a]
+
+
+@kernel(inline="always")
+def _scatter(rows_of, x, full):
+    """full[rows_of[f]] = x[f]: the Newton matrix's numbering to a vector of every point."""
+    for f in range(rows_of.shape[0]):
+        for a in range(3):
+            full[rows_of[f], a] = x[f, a]
+
+
+@kernel(inline="always")
+def _scatter_add(rows_of, c, x, full):
+    """full[rows_of[f]] += c x[f]."""
+    for f in range(rows_of.shape[0]):
+        for a in range(3):
+            full[rows_of[f], a] += c * x[f, a]
+
+
 @kernel
 def _product(m, w, h, project, u, y):
     """y = the Newton matrix times u ((nfree, 3), the matrix's numbering): assembled, or
@@ -277,14 +301,9 @@ def _product(m, w, h, project, u, y):
     if not project:
         matrix_product(w.mat, u, y)
         return
-    free = w.mat.free
-    for f in range(free.shape[0]):
-        for a in range(3):
-            w.full_u[free[f], a] = u[f, a]
+    _scatter(w.mat.free, u, w.full_u)
     newton_product(m, w.rows, w.face, w.fib, w.pf, h, True, w.full_u, w.full_y)
-    for f in range(free.shape[0]):
-        for a in range(3):
-            y[f, a] = w.full_y[free[f], a]
+    _gather(w.mat.free, 1.0, w.full_y, y)
 
 
 @kernel
@@ -318,22 +337,6 @@ def _solve(m, w, h, project, target, cg_max):
             for a in range(3):
                 p[i, a] = z[i, a] + beta * p[i, a]
     return cg_max
-
-
-@kernel(inline="always")
-def _gather(rows_of, c, full, out):
-    """out[f] = c full[rows_of[f]]: a vector of every point to the Newton matrix's numbering."""
-    for f in range(rows_of.shape[0]):
-        for a in range(3):
-            out[f, a] = c * full[rows_of[f], a]
-
-
-@kernel(inline="always")
-def _scatter_add(rows_of, c, x, full):
-    """full[rows_of[f]] += c x[f]."""
-    for f in range(rows_of.shape[0]):
-        for a in range(3):
-            full[rows_of[f], a] += c * x[f, a]
 
 
 @kernel
@@ -447,9 +450,7 @@ def implicit_step(m, s, step, imp):
     carried = info[I_PRESSURE] if m.term_on[T_VOLUME] else 0.0
     if carried != 0.0:
         _volume_gradient(w.rows.face_vert, pos, w.grad)
-    nfree = 0
     for i in range(n):
-        nfree += free[i] != 0
         for a in range(3):
             if carried != 0.0:
                 w.f_expl[i, a] += carried * w.grad[i, a]
@@ -457,8 +458,8 @@ def implicit_step(m, s, step, imp):
                 w.dv[i, a] = 0.0
     info[I_CARRIED] = carried
     tol = m.implicit_tol
-    cg_max = max(CG_MIN_ITER, 9 * nfree)
     rows_of = w.mat.free  # the free point of each row of the Newton matrix
+    cg_max = max(CG_MIN_ITER, 9 * rows_of.shape[0])
     rn, scale, worst = _residual(m, s.sched_val, pos, vel, h, w)
     # the time-averaged force scale: the run's mean step-start scale, this step's included
     scale_start = scale

@@ -17,8 +17,8 @@ R = 0.12
 H = 2e-3
 
 
-@pytest.fixture(scope="module")
-def setup():
+def assembled():
+    """The module's matrix: (arrays, rows, face, fib, pf, mat), assembled."""
     mesh = irregular_sphere(40, R, seed=3)
     a = compile_scene(Scene(mesh=mesh, masses=Masses(total_kg=1.0), integrator="implicit_euler", forces=(
         Membrane(800.0, damping_time_s=0.02), PassiveFibres(modulus_n_per_m=600.0, around_axis=(0.0, 0.0, 1.0)),
@@ -35,11 +35,17 @@ def setup():
     face, fib = np.zeros((rows.mem_vert.shape[0], NCACHE)), np.zeros((rows.fib_vert.shape[0], NFIB_CACHE))
     pf = np.zeros((rows.pf_vert.shape[0], NPF_CACHE))
     newton_caches(a, rows, sv, x, face, fib, pf)
+    mat = newton_matrix(n, a.vert_free, rows.mem_vert, rows.fib_vert, rows.pf_vert)
+    assemble(a, rows, face, fib, pf, H, mat)
+    return a, rows, face, fib, pf, mat
+
+
+@pytest.fixture(scope="module")
+def setup():
+    a, rows, face, fib, pf, mat = assembled()
     assert (face[:, 6:9] != face[:, 9:12]).any(axis=1).sum() > 0  # clamped stresses
     assert 0 < (pf[:, 9] != 0.0).sum() < pf.shape[0]  # stretched and slack passive fibres
     assert (fib[:, 9] != fib[:, 10]).any() or (fib[:, 11:14] != fib[:, 14:17]).any()  # projected fibres
-    mat = newton_matrix(n, a.vert_free, rows.mem_vert, rows.fib_vert, rows.pf_vert)
-    assemble(a, rows, face, fib, pf, H, mat)
     return a, rows, face, fib, pf, mat
 
 
@@ -174,29 +180,13 @@ def test_eisenstats_conjugate_gradients_take_the_same_iterates_as_the_swept_ones
     assert 0 < k < 10 * n and np.linalg.norm(y - r) <= 1e-6 * np.linalg.norm(r)
 
 
+# `assembled()` in a process of its own, its matrix saved to argv[1]
 ASSEMBLE_SCRIPT = """
 import sys
 import numpy as np
-from hybrid import Damping, HalfSpace, Masses, Membrane, MuscleFibres, PassiveFibres, Scene
-from hybrid.implicit import newton_caches, newton_rows
-from hybrid.implicit_matrix import assemble, newton_matrix
-from hybrid.mesh import irregular_sphere
-from hybrid.model import compile_scene
-from hybrid.terms.tangents import NCACHE, NFIB_CACHE, NPF_CACHE
-R = 0.12
-a = compile_scene(Scene(mesh=irregular_sphere(40, R, seed=3), masses=Masses(total_kg=1.0), integrator="implicit_euler",
-    forces=(Membrane(800.0, damping_time_s=0.02), PassiveFibres(modulus_n_per_m=600.0, around_axis=(0.0, 0.0, 1.0)),
-            MuscleFibres(HalfSpace((0.0, 0.0, -0.03), (0.0, 0.0, 1.0)), 40.0, toward_m=(0.0, 0.0, R),
-                         force_length_width=0.5), Damping(drag_n_s_per_m3=30.0)))).arrays
-n = a.vert_rest.shape[0]
-x = a.vert_rest + 0.01 * np.random.default_rng(4).standard_normal((n, 3))
-sv = np.full((a.sched.kind.shape[0], 3), 40.0)
-rows = newton_rows(a)
-face, fib = np.zeros((rows.mem_vert.shape[0], NCACHE)), np.zeros((rows.fib_vert.shape[0], NFIB_CACHE))
-pf = np.zeros((rows.pf_vert.shape[0], NPF_CACHE))
-newton_caches(a, rows, sv, x, face, fib, pf)
-mat = newton_matrix(n, a.vert_free, rows.mem_vert, rows.fib_vert, rows.pf_vert)
-assemble(a, rows, face, fib, pf, 2e-3, mat)
+sys.path.insert(0, sys.argv[2])
+from test_implicit_matrix import assembled
+a, rows, face, fib, pf, mat = assembled()
 np.save(sys.argv[1], np.concatenate([mat.amat.ravel(), mat.pdiag.ravel(), mat.gchol.ravel()]))
 """
 
@@ -215,7 +205,8 @@ def test_the_assembled_matrix_is_the_same_compiled_or_loaded_from_the_cache(tmp_
     out = []
     for k in range(2):
         path = tmp_path / f"matrix{k}.npy"
-        subprocess.run([sys.executable, "-c", ASSEMBLE_SCRIPT, str(path)], env=env, check=True)
+        subprocess.run([sys.executable, "-c", ASSEMBLE_SCRIPT, str(path), os.path.dirname(__file__)], env=env,
+                       check=True)
         out.append(np.load(path))
     assert (tmp_path / "cache").is_dir() and any((tmp_path / "cache").rglob("*.nbi"))  # the second run loaded
     assert np.array_equal(out[0], out[1])
