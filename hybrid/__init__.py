@@ -19,46 +19,114 @@ observers' side. Everything else lives in the submodules, which may change.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Sequence
 
-from .errors import (ConstraintError, HybridError, MeshError, RigidError, SceneError,
-                     SimulationDiverged)
+from .errors import ConstraintError, HybridError, MeshError, RigidError, SceneError, SimulationDiverged
 from .model import Model, compile_scene
 from .regions import All, Ball, Border, Box, Difference, HalfSpace, Indices, Intersection, Nearest, Patch, Union_, Wedge
 from .resolve import resolve_scene, scene_names
+
 # `run` and `sweep` are both a module and its function: importing the function here
 # makes `hybrid.run` / `hybrid.sweep` the function (`from hybrid.run import ...` still
 # reaches the module). Both modules are light (matplotlib and dask load when used).
 from .run import RunFailed, run
-from .scene import (AppliedForce, Attraction, Damping, Gravity, KeepIn, Masses, MassSpring, MeshSpec, Muscle,
-                    Nailed, Prescribed, RibPair, Ribs, Rigid, RigidLink, Scene, ShapeMemory, SoftVolume, Volume,
-                    Membrane)
-from .scene import MuscleFibres, PassiveFibres, Pressure
+from .scene import (
+    AppliedForce,
+    Attraction,
+    Damping,
+    Gravity,
+    KeepIn,
+    Masses,
+    MassSpring,
+    Membrane,
+    MeshSpec,
+    Muscle,
+    MuscleFibres,
+    Nailed,
+    PassiveFibres,
+    Prescribed,
+    Pressure,
+    RibPair,
+    Ribs,
+    Rigid,
+    RigidLink,
+    Scene,
+    ShapeMemory,
+    SoftVolume,
+    Volume,
+)
 from .schedule import Breathing, Constant, Function, Table
 from .simulation import Simulation
 from .sweep import sweep
 
 __all__ = [
     # loading and running
-    "load", "load_scene", "scene_names", "compile_scene", "Model", "Simulation", "run", "read", "sweep",
+    "load",
+    "load_scene",
+    "scene_names",
+    "compile_scene",
+    "Model",
+    "Simulation",
+    "run",
+    "read",
+    "sweep",
     # the scene and its terms
-    "Scene", "MeshSpec", "Masses",
-    "Gravity", "Damping", "ShapeMemory", "Membrane", "MassSpring", "Muscle", "AppliedForce", "Attraction", "SoftVolume",
-    "Nailed", "KeepIn", "Prescribed", "Volume", "Rigid", "RigidLink", "Ribs", "RibPair",
-    "Pressure", "MuscleFibres", "PassiveFibres",
+    "Scene",
+    "MeshSpec",
+    "Masses",
+    "Gravity",
+    "Damping",
+    "ShapeMemory",
+    "Membrane",
+    "MassSpring",
+    "Muscle",
+    "AppliedForce",
+    "Attraction",
+    "SoftVolume",
+    "Nailed",
+    "KeepIn",
+    "Prescribed",
+    "Volume",
+    "Rigid",
+    "RigidLink",
+    "Ribs",
+    "RibPair",
+    "Pressure",
+    "MuscleFibres",
+    "PassiveFibres",
     # region selectors
-    "All", "Border", "Indices", "HalfSpace", "Ball", "Box", "Wedge", "Nearest", "Patch", "Union_", "Intersection", "Difference",
+    "All",
+    "Border",
+    "Indices",
+    "HalfSpace",
+    "Ball",
+    "Box",
+    "Wedge",
+    "Nearest",
+    "Patch",
+    "Union_",
+    "Intersection",
+    "Difference",
     # schedules
-    "Constant", "Table", "Breathing", "Function",
+    "Constant",
+    "Table",
+    "Breathing",
+    "Function",
     # errors
-    "HybridError", "MeshError", "SceneError", "ConstraintError", "RigidError", "SimulationDiverged",
+    "HybridError",
+    "MeshError",
+    "SceneError",
+    "ConstraintError",
+    "RigidError",
+    "SimulationDiverged",
     "RunFailed",
 ]
 
 
-def load_scene(source: str | Path | Scene = "breathing", *, overrides: Sequence[str] = (),
-               without: Sequence[str] = ()) -> Scene:
+def load_scene(
+    source: str | Path | Scene = "breathing", *, overrides: Sequence[str] = (), without: Sequence[str] = ()
+) -> Scene:
     """The `Scene` a source names: a packaged scene ("breathing", "myotorso_breathing"),
     a scene written in Python ("membrane_demo"), a path to a TOML file, or a `Scene`;
     with "KEY=VALUE" `overrides` applied and the terms named in `without` removed
@@ -67,8 +135,9 @@ def load_scene(source: str | Path | Scene = "breathing", *, overrides: Sequence[
     return resolve_scene(source, overrides=overrides, without=without)
 
 
-def load(source: str | Path | Scene = "breathing", *, overrides: Sequence[str] = (),
-         without: Sequence[str] = ()) -> Simulation:
+def load(
+    source: str | Path | Scene = "breathing", *, overrides: Sequence[str] = (), without: Sequence[str] = ()
+) -> Simulation:
     """A ready-to-step simulation of a source, as `load_scene` takes it."""
     return Simulation(compile_scene(load_scene(source, overrides=overrides, without=without)))
 
@@ -77,6 +146,7 @@ def __getattr__(name: str):
     # the recording's reader, with its MCAP decoding, only when asked for
     if name == "read":
         from .record import read
+
         globals()["read"] = read
         return read
     raise AttributeError(f"module 'hybrid' has no attribute {name!r}")

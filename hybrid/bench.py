@@ -32,9 +32,19 @@ from .scene import Damping, Gravity, Masses, Membrane, MeshSpec, Nailed, Scene, 
 from .scenefile import apply_overrides, builtin_scene, load_scene
 from .simulation import Simulation
 
-__all__ = ["bench_membrane", "bench_membrane_rows", "bench_continuum", "formulation_rows", "implicit_rows",
-           "realtime_row", "coupled_row", "recording_row", "flex_rows", "run_bench",
-           "format_table"]
+__all__ = [
+    "bench_membrane",
+    "bench_membrane_rows",
+    "bench_continuum",
+    "formulation_rows",
+    "implicit_rows",
+    "realtime_row",
+    "coupled_row",
+    "recording_row",
+    "flex_rows",
+    "run_bench",
+    "format_table",
+]
 
 # mesh (None = the paper's 80-point sphere, else icosphere subdivisions)
 MEMBRANE_MESHES = (None, 3, 4, 5, 6)
@@ -44,9 +54,13 @@ def bench_membrane(subdivisions: int | None, dt_s: float = 1e-4) -> Scene:
     """The benchmark's full membrane step: shape memory, damping, gravity and
     the exact volume, on the paper's sphere (subdivisions=None) or an
     icosphere; a nailed cap keeps it from falling."""
-    mesh = (MeshSpec(generator="uv_sphere", radius_m=RADIUS_M) if subdivisions is None else
-            MeshSpec(generator="icosphere", subdivisions=subdivisions, radius_m=RADIUS_M))
-    return Scene(formulation="paper",
+    mesh = (
+        MeshSpec(generator="uv_sphere", radius_m=RADIUS_M)
+        if subdivisions is None
+        else MeshSpec(generator="icosphere", subdivisions=subdivisions, radius_m=RADIUS_M)
+    )
+    return Scene(
+        formulation="paper",
         name="bench_membrane",
         mesh=mesh,
         masses=Masses(total_kg=4.0),
@@ -60,10 +74,15 @@ def bench_membrane(subdivisions: int | None, dt_s: float = 1e-4) -> Scene:
 def bench_continuum(subdivisions: int | None, dt_s: float = 1e-4) -> Scene:
     """`bench_membrane` in the continuum formulation: the membrane (2D Young's
     modulus 300 N/m, Poisson 0.3), a drag per area, gravity and the exact volume."""
-    return Scene(name="bench_continuum", mesh=bench_membrane(subdivisions).mesh, masses=Masses(total_kg=4.0),
-                 regions={"pelvis": HalfSpace((0.0, 0.0, -0.1), (0.0, 0.0, -1.0))},
-                 forces=(Gravity(), Membrane(300.0), Damping(drag_n_s_per_m3=500.0)),
-                 constraints=(Nailed("pelvis"), Volume()), dt_s=dt_s)
+    return Scene(
+        name="bench_continuum",
+        mesh=bench_membrane(subdivisions).mesh,
+        masses=Masses(total_kg=4.0),
+        regions={"pelvis": HalfSpace((0.0, 0.0, -0.1), (0.0, 0.0, -1.0))},
+        forces=(Gravity(), Membrane(300.0), Damping(drag_n_s_per_m3=500.0)),
+        constraints=(Nailed("pelvis"), Volume()),
+        dt_s=dt_s,
+    )
 
 
 def formulation_rows(meshes=(None, 5), *, repeats: int = 7, work: float = 4e6) -> list[dict]:
@@ -84,9 +103,13 @@ def formulation_rows(meshes=(None, 5), *, repeats: int = 7, work: float = 4e6) -
                 t0 = time.perf_counter()
                 sim.step(nstep)
                 times[k].append((time.perf_counter() - t0) / nstep * 1e6)
-        rows.append({"nvert": paper.nvert, **{f"{k}_us_per_step": statistics.median(v) for k, v in times.items()},
-                     "continuum_over_paper": statistics.median(
-                         [c / p for c, p in zip(times["continuum"], times["paper"])])})
+        rows.append(
+            {
+                "nvert": paper.nvert,
+                **{f"{k}_us_per_step": statistics.median(v) for k, v in times.items()},
+                "continuum_over_paper": statistics.median([c / p for c, p in zip(times["continuum"], times["paper"])]),
+            }
+        )
     return rows
 
 
@@ -101,8 +124,10 @@ def implicit_rows(meshes=(None, 5), *, repeats: int = 7, work: float = 4e6) -> l
         paper = compile_scene(bench_membrane(sub))
         h = 0.25 * paper.dt_stable_s
         scene = bench_continuum(sub, h)
-        sims = {integ: Simulation(compile_scene(dataclasses.replace(scene, integrator=integ)))
-                for integ in ("symplectic_euler", "implicit_euler")}
+        sims = {
+            integ: Simulation(compile_scene(dataclasses.replace(scene, integrator=integ)))
+            for integ in ("symplectic_euler", "implicit_euler")
+        }
         n = paper.nvert
         nstep = max(20, int(work / n))
         for sim in sims.values():
@@ -117,12 +142,21 @@ def implicit_rows(meshes=(None, 5), *, repeats: int = 7, work: float = 4e6) -> l
                 times[k].append((time.perf_counter() - t0) / nstep * 1e6)
         done = sims["implicit_euler"].steps_done - steps0
         ex, im = statistics.median(times["symplectic_euler"]), statistics.median(times["implicit_euler"])
-        rows.append({"nvert": n, "dt_s": h, "explicit_us_per_step": ex, "implicit_us_per_step": im,
-                     "explicit_ns_per_vertex_step": ex * 1e3 / n, "implicit_ns_per_vertex_step": im * 1e3 / n,
-                     "implicit_over_explicit": statistics.median(
-                         [i / e for i, e in zip(times["implicit_euler"], times["symplectic_euler"])]),
-                     "newton_per_step": (info[Info.NEWTON_TOTAL] - newton0) / done,
-                     "cg_per_step": (info[Info.CG_TOTAL] - cg0) / done})
+        rows.append(
+            {
+                "nvert": n,
+                "dt_s": h,
+                "explicit_us_per_step": ex,
+                "implicit_us_per_step": im,
+                "explicit_ns_per_vertex_step": ex * 1e3 / n,
+                "implicit_ns_per_vertex_step": im * 1e3 / n,
+                "implicit_over_explicit": statistics.median(
+                    [i / e for i, e in zip(times["implicit_euler"], times["symplectic_euler"])]
+                ),
+                "newton_per_step": (info[Info.NEWTON_TOTAL] - newton0) / done,
+                "cg_per_step": (info[Info.CG_TOTAL] - cg0) / done,
+            }
+        )
     return rows
 
 
@@ -134,11 +168,13 @@ def implicit_rows(meshes=(None, 5), *, repeats: int = 7, work: float = 4e6) -> l
 #: 4 s run's within 0.08%; at level 8 implicit Euler at 30 ms solved to 1e-2 of the forces: the
 #: 12 s run's metrics within 0.4% of those at 10 ms and within 0.04% of 30 ms solved to 1e-4 (at
 #: 40 ms they move by up to 0.7%); the paper's scene at its own step. Other levels: `realtime_step`
-REALTIME_RUNS = {("breathing", 4): ("symplectic_euler", 1e-3, ()),
-                 ("breathing", 6): ("implicit_euler", 1e-2, ("implicit_tol=1e-3",)),
-                 ("breathing", 7): ("implicit_euler", 1e-2, ("implicit_tol=1e-3",)),
-                 ("breathing", 8): ("implicit_euler", 3e-2, ("implicit_tol=1e-2",)),
-                 ("breathing_paper", None): ("symplectic_euler", 1e-3, ())}
+REALTIME_RUNS = {
+    ("breathing", 4): ("symplectic_euler", 1e-3, ()),
+    ("breathing", 6): ("implicit_euler", 1e-2, ("implicit_tol=1e-3",)),
+    ("breathing", 7): ("implicit_euler", 1e-2, ("implicit_tol=1e-3",)),
+    ("breathing", 8): ("implicit_euler", 3e-2, ("implicit_tol=1e-2",)),
+    ("breathing_paper", None): ("symplectic_euler", 1e-3, ()),
+}
 #: the fraction of the stable-step estimate `realtime_step` takes (README: keep h below 0.8 of it)
 REALTIME_BOUND_FRACTION = 0.7
 
@@ -151,9 +187,16 @@ def realtime_step(model) -> float:
     return 0.01 / math.ceil(0.01 / (REALTIME_BOUND_FRACTION * model.dt_stable_s))
 
 
-def realtime_row(scene: str = "breathing", level: int | None = 4, *, integrator: str | None = None,
-                 dt_s: float | None = None, overrides: tuple | None = None, duration_s: float = 12.0,
-                 repeats: int = 3) -> dict:
+def realtime_row(
+    scene: str = "breathing",
+    level: int | None = 4,
+    *,
+    integrator: str | None = None,
+    dt_s: float | None = None,
+    overrides: tuple | None = None,
+    duration_s: float = 12.0,
+    repeats: int = 3,
+) -> dict:
     """`duration_s` of a packaged scene (`hybrid.run.run`, frames every 10 ms, no
     recording) at mesh `level` (None: the scene's own mesh) with `integrator` at `dt_s`
     with `overrides` ("KEY=VALUE"); each not given is `REALTIME_RUNS`'s (the overrides only
@@ -182,8 +225,17 @@ def realtime_row(scene: str = "breathing", level: int | None = 4, *, integrator:
         run_scene(sim, duration_s)
         walls.append(time.perf_counter() - t0)
     wall = statistics.median(walls)
-    return {"scene": scene, "level": level, "nvert": model.nvert, "integrator": integrator, "dt": dt_s,
-            "overrides": list(overrides), "wall_s": wall, "sim_s": duration_s, "realtime_factor": duration_s / wall}
+    return {
+        "scene": scene,
+        "level": level,
+        "nvert": model.nvert,
+        "integrator": integrator,
+        "dt": dt_s,
+        "overrides": list(overrides),
+        "wall_s": wall,
+        "sim_s": duration_s,
+        "realtime_factor": duration_s / wall,
+    }
 
 
 def bench_membrane_rows(meshes=MEMBRANE_MESHES, *, repeats: int = 7, work: float = 4e6) -> list[dict]:
@@ -206,23 +258,30 @@ def bench_membrane_rows(meshes=MEMBRANE_MESHES, *, repeats: int = 7, work: float
             sim.step(max(1, nstep // 10))
         times: dict[str, list] = {build: [] for build in sims}
         for rep in range(repeats):
-            order = list(sims)[rep % 3:] + list(sims)[:rep % 3]
+            order = list(sims)[rep % 3 :] + list(sims)[: rep % 3]
             for build in order:
                 t0 = time.perf_counter()
                 sims[build].step(nstep)
                 times[build].append((time.perf_counter() - t0) / nstep * 1e6)
         med = {build: statistics.median(t) for build, t in times.items()}
         chosen = sims["auto"].builds.summary()
-        rows.append({"nvert": model.nvert, "us_per_step": med["auto"],
-                     "ns_per_vertex_step": med["auto"] * 1e3 / model.nvert,
-                     "serial_us_per_step": med["serial"], "parallel_us_per_step": med["parallel"],
-                     "parallel_to_serial": statistics.median(
-                         [p / s for p, s in zip(times["parallel"], times["serial"])]),
-                     "default_to_faster": statistics.median(
-                         [a / min(s, p) for a, s, p in zip(times["auto"], times["serial"], times["parallel"])]),
-                     "default_build": "parallel" if chosen["parallel_now"] else "serial",
-                     "default_parallel_steps": chosen["parallel_steps"],
-                     "default_serial_steps": chosen["serial_steps"], "threads": chosen["threads"]})
+        rows.append(
+            {
+                "nvert": model.nvert,
+                "us_per_step": med["auto"],
+                "ns_per_vertex_step": med["auto"] * 1e3 / model.nvert,
+                "serial_us_per_step": med["serial"],
+                "parallel_us_per_step": med["parallel"],
+                "parallel_to_serial": statistics.median([p / s for p, s in zip(times["parallel"], times["serial"])]),
+                "default_to_faster": statistics.median(
+                    [a / min(s, p) for a, s, p in zip(times["auto"], times["serial"], times["parallel"])]
+                ),
+                "default_build": "parallel" if chosen["parallel_now"] else "serial",
+                "default_parallel_steps": chosen["parallel_steps"],
+                "default_serial_steps": chosen["serial_steps"],
+                "threads": chosen["threads"],
+            }
+        )
     return rows
 
 
@@ -251,8 +310,11 @@ def coupled_row(*, nstep: int = 4000, repeats: int = 9) -> dict:
         coupled.append(c)
         mj.append(b)
         ratio.append(c / b)
-    return {"us_per_step": statistics.median(coupled), "mj_step_us": statistics.median(mj),
-            "ratio": statistics.median(ratio)}
+    return {
+        "us_per_step": statistics.median(coupled),
+        "mj_step_us": statistics.median(mj),
+        "ratio": statistics.median(ratio),
+    }
 
 
 def recording_row(*, duration_s: float = 12.0, repeats: int = 9) -> dict:
@@ -278,10 +340,14 @@ def recording_row(*, duration_s: float = 12.0, repeats: int = 9) -> dict:
                 if rep:  # the first round warms up (compiled encoder, file cache)
                     times[mode].append(time.perf_counter() - t0)
     off = times["off"]
-    return {"duration_s": duration_s, "run_s": statistics.median(off),
-            "recorded_s": statistics.median(times["on"]), "inline_s": statistics.median(times["inline"]),
-            "ratio": statistics.median([a / b for a, b in zip(times["on"], off)]),
-            "inline_ratio": statistics.median([a / b for a, b in zip(times["inline"], off)])}
+    return {
+        "duration_s": duration_s,
+        "run_s": statistics.median(off),
+        "recorded_s": statistics.median(times["on"]),
+        "inline_s": statistics.median(times["inline"]),
+        "ratio": statistics.median([a / b for a, b in zip(times["on"], off)]),
+        "inline_ratio": statistics.median([a / b for a, b in zip(times["inline"], off)]),
+    }
 
 
 def flex_rows(*, duration_s: float = 1.0) -> list[dict]:
@@ -325,8 +391,13 @@ SECTIONS = ("membrane", "formulations", "implicit", "realtime", "coupled", "reco
 RECOMMENDED_LEVEL = 8
 
 
-def run_bench(json_path: Path | None = None, *, quick: bool = False, realtime_level: int = RECOMMENDED_LEVEL,
-              only: tuple | None = None) -> dict:
+def run_bench(
+    json_path: Path | None = None,
+    *,
+    quick: bool = False,
+    realtime_level: int = RECOMMENDED_LEVEL,
+    only: tuple | None = None,
+) -> dict:
     """The benchmark's sections (`only` a subset of SECTIONS; all by default), the
     breathing scene's realtime rows at mesh `realtime_level` and at its default level 4;
     writes them to json_path if given."""
@@ -339,16 +410,22 @@ def run_bench(json_path: Path | None = None, *, quick: bool = False, realtime_le
     if "membrane" in want:
         result["membrane"] = bench_membrane_rows(meshes, repeats=3 if quick else 7, work=2e5 if quick else 4e6)
     if "formulations" in want:
-        result["formulations"] = formulation_rows((None, 3) if quick else (None, 5), repeats=3 if quick else 7,
-                                                  work=2e5 if quick else 4e6)
+        result["formulations"] = formulation_rows(
+            (None, 3) if quick else (None, 5), repeats=3 if quick else 7, work=2e5 if quick else 4e6
+        )
     if "implicit" in want:  # quick: a smoke test, the 80-point step
         result["implicit"] = implicit_rows((None,), repeats=1, work=2e4) if quick else implicit_rows((None, 5))
     if "realtime" in want:  # quick: half a second of the breathing scene at level 2
         levels = sorted({realtime_level, 4}, reverse=True)
-        result["realtime"] = ([realtime_row("breathing", 2, duration_s=0.5, repeats=1),
-                               realtime_row("breathing_paper", None, duration_s=0.5, repeats=1)] if quick else
-                              [realtime_row("breathing", k, repeats=5 if k <= 5 else 3) for k in levels]
-                              + [realtime_row("breathing_paper", None, repeats=5)])
+        result["realtime"] = (
+            [
+                realtime_row("breathing", 2, duration_s=0.5, repeats=1),
+                realtime_row("breathing_paper", None, duration_s=0.5, repeats=1),
+            ]
+            if quick
+            else [realtime_row("breathing", k, repeats=5 if k <= 5 else 3) for k in levels]
+            + [realtime_row("breathing_paper", None, repeats=5)]
+        )
     if "coupled" in want:
         result["coupled"] = coupled_row(nstep=500, repeats=3) if quick else coupled_row()
     if "recording" in want:
@@ -361,49 +438,76 @@ def run_bench(json_path: Path | None = None, *, quick: bool = False, realtime_le
 
 
 def format_table(result: dict) -> str:
-    lines = ["membrane step (shape memory, damping, gravity, exact volume); medians, us per step",
-             f"{'nvert':>8} {'serial':>10} {'parallel':>10} {'default':>10} {'ns/vertex-step':>15} "
-             f"{'par/ser':>8} {'default/faster':>15}  default runs"]
+    lines = [
+        "membrane step (shape memory, damping, gravity, exact volume); medians, us per step",
+        f"{'nvert':>8} {'serial':>10} {'parallel':>10} {'default':>10} {'ns/vertex-step':>15} "
+        f"{'par/ser':>8} {'default/faster':>15}  default runs",
+    ]
     for row in result.get("membrane", []):
-        lines.append(f"{row['nvert']:>8} {row['serial_us_per_step']:>10.2f} {row['parallel_us_per_step']:>10.2f} "
-                     f"{row['us_per_step']:>10.2f} {row['ns_per_vertex_step']:>15.1f} "
-                     f"{row['parallel_to_serial']:>8.2f} {row['default_to_faster']:>15.2f}  "
-                     f"{row['default_build']} ({row['threads']} threads)")
+        lines.append(
+            f"{row['nvert']:>8} {row['serial_us_per_step']:>10.2f} {row['parallel_us_per_step']:>10.2f} "
+            f"{row['us_per_step']:>10.2f} {row['ns_per_vertex_step']:>15.1f} "
+            f"{row['parallel_to_serial']:>8.2f} {row['default_to_faster']:>15.2f}  "
+            f"{row['default_build']} ({row['threads']} threads)"
+        )
     if "formulations" in result:
-        lines += ["", "full step of each formulation, same mesh and step; medians, ratio of per-repeat times",
-                  f"{'nvert':>8} {'paper us':>10} {'continuum us':>13} {'ratio':>7}"]
+        lines += [
+            "",
+            "full step of each formulation, same mesh and step; medians, ratio of per-repeat times",
+            f"{'nvert':>8} {'paper us':>10} {'continuum us':>13} {'ratio':>7}",
+        ]
         for row in result["formulations"]:
-            lines.append(f"{row['nvert']:>8} {row['paper_us_per_step']:>10.2f} "
-                         f"{row['continuum_us_per_step']:>13.2f} {row['continuum_over_paper']:>7.2f}")
+            lines.append(
+                f"{row['nvert']:>8} {row['paper_us_per_step']:>10.2f} "
+                f"{row['continuum_us_per_step']:>13.2f} {row['continuum_over_paper']:>7.2f}"
+            )
     if "implicit" in result:
-        lines += ["", "continuum membrane step, symplectic vs implicit Euler at the same step; medians",
-                  f"{'nvert':>8} {'dt (ms)':>8} {'explicit us':>12} {'implicit us':>12} {'ns/vstep ex':>12} "
-                  f"{'ns/vstep im':>12} {'ratio':>7} {'newton':>7} {'cg':>6}"]
+        lines += [
+            "",
+            "continuum membrane step, symplectic vs implicit Euler at the same step; medians",
+            f"{'nvert':>8} {'dt (ms)':>8} {'explicit us':>12} {'implicit us':>12} {'ns/vstep ex':>12} "
+            f"{'ns/vstep im':>12} {'ratio':>7} {'newton':>7} {'cg':>6}",
+        ]
         for row in result["implicit"]:
-            lines.append(f"{row['nvert']:>8} {row['dt_s'] * 1e3:>8.3f} {row['explicit_us_per_step']:>12.2f} "
-                         f"{row['implicit_us_per_step']:>12.2f} {row['explicit_ns_per_vertex_step']:>12.1f} "
-                         f"{row['implicit_ns_per_vertex_step']:>12.1f} {row['implicit_over_explicit']:>7.2f} "
-                         f"{row['newton_per_step']:>7.2f} {row['cg_per_step']:>6.2f}")
+            lines.append(
+                f"{row['nvert']:>8} {row['dt_s'] * 1e3:>8.3f} {row['explicit_us_per_step']:>12.2f} "
+                f"{row['implicit_us_per_step']:>12.2f} {row['explicit_ns_per_vertex_step']:>12.1f} "
+                f"{row['implicit_ns_per_vertex_step']:>12.1f} {row['implicit_over_explicit']:>7.2f} "
+                f"{row['newton_per_step']:>7.2f} {row['cg_per_step']:>6.2f}"
+            )
     if "realtime" in result:
         lines += ["", "realtime: a packaged scene's run (frames every 10 ms); median wall time"]
         for r in result["realtime"]:
             extra = f" ({', '.join(r['overrides'])})" if r.get("overrides") else ""
-            lines.append(f"  {r['scene']} level {r['level']} ({r['nvert']} points), {r['integrator']} at "
-                         f"{r['dt'] * 1e3:g} ms{extra}: {r['sim_s']:g} s in {r['wall_s']:.2f} s, "
-                         f"realtime factor {r['realtime_factor']:.2f}")
+            lines.append(
+                f"  {r['scene']} level {r['level']} ({r['nvert']} points), {r['integrator']} at "
+                f"{r['dt'] * 1e3:g} ms{extra}: {r['sim_s']:g} s in {r['wall_s']:.2f} s, "
+                f"realtime factor {r['realtime_factor']:.2f}"
+            )
     if "coupled" in result:
         c = result["coupled"]
-        lines += ["", "coupled breathing step vs bare mj_step of the trunk model; medians",
-                  f"  coupled {c['us_per_step']:.2f} us   mj_step {c['mj_step_us']:.2f} us   ratio {c['ratio']:.2f}"]
+        lines += [
+            "",
+            "coupled breathing step vs bare mj_step of the trunk model; medians",
+            f"  coupled {c['us_per_step']:.2f} us   mj_step {c['mj_step_us']:.2f} us   ratio {c['ratio']:.2f}",
+        ]
     if "recording" in result:
         r = result["recording"]
-        lines += ["", f"breathing run of {r['duration_s']:g} s, frames every 10 ms: without and with the MCAP recording; medians",
-                  f"  run {r['run_s']:.3f} s   recorded {r['recorded_s']:.3f} s (ratio {r['ratio']:.3f})   "
-                  f"encoded between steps {r['inline_s']:.3f} s (ratio {r['inline_ratio']:.3f})"]
+        lines += [
+            "",
+            f"breathing run of {r['duration_s']:g} s, frames every 10 ms: without and with the MCAP recording; medians",
+            f"  run {r['run_s']:.3f} s   recorded {r['recorded_s']:.3f} s (ratio {r['ratio']:.3f})   "
+            f"encoded between steps {r['inline_s']:.3f} s (ratio {r['inline_ratio']:.3f})",
+        ]
     if "flex" in result:
-        lines += ["", "MuJoCo's 2D flex sphere on a plane under gravity, 1 s, beside our membrane",
-                  f"{'nvert':>8} {'flex us/step':>13} {'flex dV/V0':>11} {'ours dV/V0':>11}"]
+        lines += [
+            "",
+            "MuJoCo's 2D flex sphere on a plane under gravity, 1 s, beside our membrane",
+            f"{'nvert':>8} {'flex us/step':>13} {'flex dV/V0':>11} {'ours dV/V0':>11}",
+        ]
         for row in result["flex"]:
-            lines.append(f"{row['nvert']:>8} {row['us_per_step']:>13.1f} {row['volume_change']:>11.3g} "
-                         f"{row['ours_volume_change']:>11.2g}")
+            lines.append(
+                f"{row['nvert']:>8} {row['us_per_step']:>13.1f} {row['volume_change']:>11.3g} "
+                f"{row['ours_volume_change']:>11.2g}"
+            )
     return "\n".join(lines)

@@ -65,17 +65,17 @@ class BuildChoice:
         limit_threads(self.threads)  # never more threads than CPUs to run them
         self.active = build == "auto" and bool(may_parallel) and self.threads > 1
         self.parallel = build == "parallel"
-        self.steps = {False: 0, True: 0}                        # steps run by each build
-        self.us_per_step = {False: math.nan, True: math.nan}    # each build's last piece
+        self.steps = {False: 0, True: 0}  # steps run by each build
+        self.us_per_step = {False: math.nan, True: math.nan}  # each build's last piece
         self.probes = 0
-        self._probe: list[bool] = []       # the builds of the probe's pieces to come
-        self._spent = {False: [0.0, 0], True: [0.0, 0]}   # the probe's seconds and steps per build
-        self._clock = 0.0                  # s spent stepping (the pieces recorded): the probes' clock
-        self._next_probe = 0.0             # _clock of the next probe: at the start
+        self._probe: list[bool] = []  # the builds of the probe's pieces to come
+        self._spent = {False: [0.0, 0], True: [0.0, 0]}  # the probe's seconds and steps per build
+        self._clock = 0.0  # s spent stepping (the pieces recorded): the probes' clock
+        self._next_probe = 0.0  # _clock of the next probe: at the start
         self._every = self.PROBE_EVERY_S
         self._last_probe = 0.0
-        self._budget_wait = 0.0            # s after a probe that keep its loss within PROBE_BUDGET
-        self._chosen_us = math.nan         # the running build's time per step when chosen
+        self._budget_wait = 0.0  # s after a probe that keep its loss within PROBE_BUDGET
+        self._chosen_us = math.nan  # the running build's time per step when chosen
 
     def chunk(self, remaining: int) -> tuple[bool, int]:
         """(parallel, steps) of the next piece of `remaining` steps."""
@@ -133,6 +133,12 @@ class BuildChoice:
         steps of each, the probes and the last one's parallel / serial mean time
         per step."""
         ratio = self._ratio if self.probes else None
-        return {"build": self.build, "threads": self.threads, "parallel_now": self.parallel,
-                "serial_steps": self.steps[False], "parallel_steps": self.steps[True], "probes": self.probes,
-                "parallel_to_serial": ratio}
+        return {
+            "build": self.build,
+            "threads": self.threads,
+            "parallel_now": self.parallel,
+            "serial_steps": self.steps[False],
+            "parallel_steps": self.steps[True],
+            "probes": self.probes,
+            "parallel_to_serial": ratio,
+        }

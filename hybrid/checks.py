@@ -99,14 +99,25 @@ def plain_name(where, v) -> str:
     empty, no path separator, no '..', no NUL, not '.'."""
     if not isinstance(v, str):
         fail(where, f"expected a string, received {show(v)}")
-    why = ("is empty" if not v.strip() else
-           "holds a NUL character" if "\0" in v else
-           "holds a path separator" if "/" in v or "\\" in v else
-           "holds '..'" if ".." in v else
-           "is '.'" if v == "." else None)
+    why = (
+        "is empty"
+        if not v.strip()
+        else "holds a NUL character"
+        if "\0" in v
+        else "holds a path separator"
+        if "/" in v or "\\" in v
+        else "holds '..'"
+        if ".." in v
+        else "is '.'"
+        if v == "."
+        else None
+    )
     if why is not None:
-        fail(where, f"expected a plain name (the folder runs/<name> when --out is not given), received "
-                    f"{v!r}, which {why}; choose the folder with --out")
+        fail(
+            where,
+            f"expected a plain name (the folder runs/<name> when --out is not given), received "
+            f"{v!r}, which {why}; choose the folder with --out",
+        )
     return v
 
 

@@ -61,13 +61,14 @@ def _load_and_run(args, scene) -> int:
     run_steps(duration, sim.model.dt_s, confirmed=args.yes)
     if not args.no_record:
         from .record import record_steps
+
         record_steps(args.record_every, sim.model.dt_s, name="--record-every")
     chosen, lock = claim_folder(out, explicit=args.out is not None, overwrite=args.overwrite)
     if chosen != out:
-        sys.stderr.write(f"hybrid: {out} holds an earlier run; this one goes to {chosen} "
-                         f"(--overwrite replaces it)\n")
-    provenance = run_provenance(sim, command=["hybrid", *args.argv], overrides=args.set or [],
-                                without=args.without or [])
+        sys.stderr.write(f"hybrid: {out} holds an earlier run; this one goes to {chosen} (--overwrite replaces it)\n")
+    provenance = run_provenance(
+        sim, command=["hybrid", *args.argv], overrides=args.set or [], without=args.without or []
+    )
     try:
         return _run_into(args, sim, duration, chosen, provenance)
     finally:
@@ -86,8 +87,7 @@ def _run_into(args, sim, duration: float, out: Path, provenance: dict) -> int:
     from .run import RunFailed, RunInterrupted, run, write_outputs, write_summary
 
     model = sim.model
-    base = {"scene": model.scene.name, "dt": model.dt_s, "duration_requested_s": duration,
-            "provenance": provenance}
+    base = {"scene": model.scene.name, "dt": model.dt_s, "duration_requested_s": duration, "provenance": provenance}
     write_summary({**base, "status": "running", "pid": os.getpid()}, out)
     caught = []
 
@@ -108,11 +108,21 @@ def _run_into(args, sim, duration: float, out: Path, provenance: dict) -> int:
                 loads = sim.model.rigid is not None
                 if not args.no_record:
                     from .record import Recorder
-                    recorder = Recorder(out / "run.mcap", sim, every_s=args.record_every, provenance=provenance,
-                                        loads=loads)
+
+                    recorder = Recorder(
+                        out / "run.mcap", sim, every_s=args.record_every, provenance=provenance, loads=loads
+                    )
                 try:
-                    result = run(sim, duration, progress=True, observers=[recorder] if recorder else [],
-                                 trace_spill=spill, stop=lambda: bool(caught), provenance=provenance, loads=loads)
+                    result = run(
+                        sim,
+                        duration,
+                        progress=True,
+                        observers=[recorder] if recorder else [],
+                        trace_spill=spill,
+                        stop=lambda: bool(caught),
+                        provenance=provenance,
+                        loads=loads,
+                    )
                 except RunFailed as failed:
                     result, failure = failed.result, failed.error
                 except RunInterrupted as interrupted:
@@ -127,8 +137,16 @@ def _run_into(args, sim, duration: float, out: Path, provenance: dict) -> int:
         write_summary({**base, "status": "interrupted", "steps": sim.steps_done, "duration_s": sim.time}, out)
         return _interrupted(caught, sim, out)
     except (HybridError, OSError) as exc:
-        write_summary({**base, "status": "failed", "error": " ".join(str(exc).split()), "steps": sim.steps_done,
-                       "duration_s": sim.time}, out)
+        write_summary(
+            {
+                **base,
+                "status": "failed",
+                "error": " ".join(str(exc).split()),
+                "steps": sim.steps_done,
+                "duration_s": sim.time,
+            },
+            out,
+        )
         raise
     finally:
         for sig, handler in previous.items():
@@ -138,8 +156,10 @@ def _run_into(args, sim, duration: float, out: Path, provenance: dict) -> int:
         raise failure
     if s["status"] == "interrupted":
         return _interrupted(caught, sim, out)
-    print(f"{s['scene']}: {s['steps']} steps of {s['dt']:g} s in {s['wall_s']:.2f} s "
-          f"({s['us_per_step']:.1f} us/step); {_metrics_line(s)} -> {out}")
+    print(
+        f"{s['scene']}: {s['steps']} steps of {s['dt']:g} s in {s['wall_s']:.2f} s "
+        f"({s['us_per_step']:.1f} us/step); {_metrics_line(s)} -> {out}"
+    )
     return 0
 
 
@@ -164,17 +184,27 @@ def _metrics_line(s: dict) -> str:
 def _interrupted(caught, sim, out: Path) -> int:
     """One line, and the shell's status for the signal (128 + its number: 130 for Ctrl-C)."""
     import signal
+
     signum = caught[-1] if caught else signal.SIGINT
-    sys.stderr.write(f"hybrid: interrupted by {signal.Signals(signum).name} at t = {sim.time:.6g} s "
-                     f"(step {sim.steps_done}); what was recorded is in {out}\n")
+    sys.stderr.write(
+        f"hybrid: interrupted by {signal.Signals(signum).name} at t = {sim.time:.6g} s "
+        f"(step {sim.steps_done}); what was recorded is in {out}\n"
+    )
     return 128 + int(signum)
 
 
 def _cmd_render(args) -> int:
     from .render import render
     from .run import out_folder
-    result = render(args.source, out_folder(_out_arg(args.out)), video=args.video, duration_s=args.duration,
-                    overrides=args.set or (), without=args.without or ())
+
+    result = render(
+        args.source,
+        out_folder(_out_arg(args.out)),
+        video=args.video,
+        duration_s=args.duration,
+        overrides=args.set or (),
+        without=args.without or (),
+    )
     extra = f" and {result['video']}" if result["video"] else ""
     frames = ", ".join(f"{name} t = {t:.2f} s" for name, t in zip(result["titles"], result["frames"]))
     print(f"{frames} -> {result['figure']}{extra}")
@@ -183,30 +213,43 @@ def _cmd_render(args) -> int:
 
 def _cmd_view(args) -> int:
     from .render import view
+
     shown = view(args.scene, duration_s=args.duration)
-    print(f"viewed {shown['frames']} frames to t = {shown['t_s']:.2f} s, the membrane drawn as "
-          f"{shown['membrane_geoms']} of its {shown['edges']} edges")
+    print(
+        f"viewed {shown['frames']} frames to t = {shown['t_s']:.2f} s, the membrane drawn as "
+        f"{shown['membrane_geoms']} of its {shown['edges']} edges"
+    )
     return 0
 
 
 def _cmd_bench(args) -> int:
     from .bench import SECTIONS, format_table, run_bench
+
     only = tuple(s for s in args.only.split(",") if s) if args.only else None
     bad = sorted(set(only or ()) - set(SECTIONS))
     if bad:
         raise HybridError(f"--only: expected sections among {', '.join(SECTIONS)}, received {', '.join(bad)}")
     if args.realtime_level < 0:
         raise HybridError(f"--realtime-level: expected a mesh level >= 0, received {args.realtime_level}")
-    result = run_bench(Path(args.json) if args.json else None, quick=args.quick, realtime_level=args.realtime_level,
-                       only=only)
+    result = run_bench(
+        Path(args.json) if args.json else None, quick=args.quick, realtime_level=args.realtime_level, only=only
+    )
     print(format_table(result))
     return 0
 
 
 def _cmd_sweep(args) -> int:
     from .grid import run_grid
-    done = run_grid(args.scene, args.set or (), without=args.without or (), duration_s=args.duration,
-                    out=_out_arg(args.out), metric=args.metric, workers=args.workers)
+
+    done = run_grid(
+        args.scene,
+        args.set or (),
+        without=args.without or (),
+        duration_s=args.duration,
+        out=_out_arg(args.out),
+        metric=args.metric,
+        workers=args.workers,
+    )
     print(f"{len(done['rows'])} runs, {done['failed']} failed -> {done['csv']}, {done['plot']} ({done['metric']})")
     return 1 if done["failed"] else 0
 
@@ -223,11 +266,13 @@ def _positive_float(text: str) -> float:
 
 def _cmd_inspect(args) -> int:
     from .inspection import main_inspect
+
     return main_inspect(args)
 
 
 def _cmd_study(args) -> int:
     from .studies.cli import main_study
+
     return main_study(args.study_argv)
 
 
@@ -239,15 +284,19 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--duration", type=float, help="simulated time (s); default: the scene's")
     r.add_argument("--dt", type=float, help="time step (s); default: the scene's")
     r.add_argument("--out", help="output folder (default runs/SCENE, or runs/SCENE-2, -3, ... when it holds a run)")
-    r.add_argument("--overwrite", action="store_true",
-                   help="write into the output folder even if it holds an earlier run")
+    r.add_argument(
+        "--overwrite", action="store_true", help="write into the output folder even if it holds an earlier run"
+    )
     r.add_argument("--yes", action="store_true", help="run even more than 1e8 steps")
     r.add_argument("--without", action="append", metavar="NAME", help="drop a force term or constraint by name")
     r.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a scene value, e.g. dt_s=5e-4")
     r.add_argument("--no-record", action="store_true", help="do not write OUT/run.mcap (the MCAP recording)")
-    r.add_argument("--record-every", type=_positive_float, metavar="SECONDS",
-                   help="recording interval in simulated time, a whole number of steps "
-                        "(default: the steps nearest 0.01 s)")
+    r.add_argument(
+        "--record-every",
+        type=_positive_float,
+        metavar="SECONDS",
+        help="recording interval in simulated time, a whole number of steps (default: the steps nearest 0.01 s)",
+    )
     r.set_defaults(func=_cmd_run)
     d = sub.add_parser("render", help="draw rest, peak inspiration and end of expiration (figure 4) headless")
     d.add_argument("source", nargs="?", help="a run.mcap recording, or a scene to run (default: breathing)")
@@ -273,22 +322,39 @@ def build_parser() -> argparse.ArgumentParser:
     b = sub.add_parser("bench", help="time the full step; medians of repeated runs")
     b.add_argument("--json", metavar="FILE", help="also write the figures as JSON")
     b.add_argument("--quick", action="store_true", help="small sizes only (a smoke test)")
-    b.add_argument("--only", metavar="SECTION[,SECTION]", help="these sections only: membrane, formulations, "
-                   "implicit, realtime, coupled, recording, flex")
-    b.add_argument("--realtime-level", type=int, default=8, metavar="K",
-                   help="the breathing scene's mesh level in the realtime row besides its default level 4 "
-                        "(default 8, the convergence study's 1%% level of all four metrics: 12 s of it take "
-                        "7-9 s a run here; 7 about 7 s; 4 for none)")
+    b.add_argument(
+        "--only",
+        metavar="SECTION[,SECTION]",
+        help="these sections only: membrane, formulations, implicit, realtime, coupled, recording, flex",
+    )
+    b.add_argument(
+        "--realtime-level",
+        type=int,
+        default=8,
+        metavar="K",
+        help="the breathing scene's mesh level in the realtime row besides its default level 4 "
+        "(default 8, the convergence study's 1%% level of all four metrics: 12 s of it take "
+        "7-9 s a run here; 7 about 7 s; 4 for none)",
+    )
     b.set_defaults(func=_cmd_bench)
-    i = sub.add_parser("inspect", help="what a scene or an MJCF model holds: bodies at qpos0, joints, actuators, "
-                                       "keyframes; regions, links, nails, terms and the stable step")
-    i.add_argument("source", nargs="?", help="a scene (TOML file or built-in name, default breathing), or an MJCF "
-                                             "file (*.xml), \"trunk\" or a package model (myo_sim:myotorso)")
+    i = sub.add_parser(
+        "inspect",
+        help="what a scene or an MJCF model holds: bodies at qpos0, joints, actuators, "
+        "keyframes; regions, links, nails, terms and the stable step",
+    )
+    i.add_argument(
+        "source",
+        nargs="?",
+        help="a scene (TOML file or built-in name, default breathing), or an MJCF "
+        'file (*.xml), "trunk" or a package model (myo_sim:myotorso)',
+    )
     i.add_argument("--json", action="store_true", help="print JSON (for scripts)")
     i.add_argument("--without", action="append", metavar="NAME", help="drop a force term or constraint by name")
     i.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a scene value, e.g. dt_s=5e-4")
     i.set_defaults(func=_cmd_inspect)
-    st = sub.add_parser("study", help="numerical studies: stability, extremes, work-precision", add_help=False, prefix_chars="\0")
+    st = sub.add_parser(
+        "study", help="numerical studies: stability, extremes, work-precision", add_help=False, prefix_chars="\0"
+    )
     st.add_argument("study_argv", nargs=argparse.REMAINDER)
     st.set_defaults(func=_cmd_study)
     return p

@@ -46,8 +46,18 @@ from .errors import RigidError, SimulationDiverged
 from .kernel import kernel
 from .rigid import CoupledRigid, mj_step_ctypes, point_wrench_kernel, site_vel_kernel
 from .schedule import schedule_eval
-from .step import (OK, S_PRESSURE, S_TIME, T_GRAVITY, Frames, MembraneState, capture_frame, membrane_advance,
-                   membrane_forces, step_switches)
+from .step import (
+    OK,
+    S_PRESSURE,
+    S_TIME,
+    T_GRAVITY,
+    Frames,
+    MembraneState,
+    capture_frame,
+    membrane_advance,
+    membrane_forces,
+    step_switches,
+)
 
 __all__ = ["LinkArrays", "CtrlArrays", "MjViews", "WrenchHistory", "Coupling", "run_coupled"]
 
@@ -56,6 +66,7 @@ _DSBL_GRAVITY = int(mujoco.mjtDisableBit.mjDSBL_GRAVITY)
 
 
 # ----------------------------------------------------------------- MuJoCo from numba
+
 
 def _register_mujoco_symbols() -> None:
     """Make MuJoCo's C step functions callable from cached numba code.
@@ -78,6 +89,7 @@ _mj_step2 = types.ExternalFunction("hybrid_mj_step2", _SIG)
 
 # ----------------------------------------------------------------- the compiled loop's packs
 
+
 class LinkArrays(NamedTuple):
     """The n linked points and their attachment sites, in site order.
 
@@ -88,6 +100,7 @@ class LinkArrays(NamedTuple):
     Scratch: force (n, 3) N, the forces sent to the sites; vel (n, 3) m/s, the
     sites' velocities.
     """
+
     vert: np.ndarray
     site_id: np.ndarray
     site_body: np.ndarray
@@ -101,6 +114,7 @@ class CtrlArrays(NamedTuple):
     """The actuators a scene drives (`rigid.ctrl`): act (nc,) int64, their ids;
     sched, their schedules (`hybrid.schedule.ScheduleTable`, row j for act[j]);
     scratch: val (3,), a schedule's value."""
+
     act: np.ndarray
     sched: object
     val: np.ndarray
@@ -114,6 +128,7 @@ class MjViews(NamedTuple):
     xfrc_applied (nbody, 6) [N, N m]; cvel (nbody, 6) [rad/s, m/s]; subtree_com
     (nbody, 3) m; qpos (nq,); xpos (nbody, 3) m and xquat (nbody, 4) (w, x, y, z),
     the bodies' poses; ctrl (nu,), the actuators' controls."""
+
     model_ptr: int
     data_ptr: int
     site_xpos: np.ndarray
@@ -131,18 +146,46 @@ class WrenchHistory(NamedTuple):
     """Per step k of a recorded run: xfrc (nstep, nbody, 6) [N, N m], the
     `xfrc_applied` used; qpos (nstep, nq), MuJoCo's qpos after the step. Empty
     (nstep = 0) when not recording."""
+
     xfrc: np.ndarray
     qpos: np.ndarray
 
 
 # ----------------------------------------------------------------- the coupled step
 
+
 @kernel
-def run_coupled(m, s, links, ctrls, mj, rk4, stops, step0, record, hist, frame_pos, frame_scal, frame_body_pos,
-                frame_body_quat, par=True, shape_memory=True, membrane=True, applied=True, attraction=True,
-                mass_spring=True, muscle=True, soft_volume=True, pressure=True, fibres=True, passive=True,
-                prescribed=True,
-                keep_in=True, volume=True, shake=True):
+def run_coupled(
+    m,
+    s,
+    links,
+    ctrls,
+    mj,
+    rk4,
+    stops,
+    step0,
+    record,
+    hist,
+    frame_pos,
+    frame_scal,
+    frame_body_pos,
+    frame_body_quat,
+    par=True,
+    shape_memory=True,
+    membrane=True,
+    applied=True,
+    attraction=True,
+    mass_spring=True,
+    muscle=True,
+    soft_volume=True,
+    pressure=True,
+    fibres=True,
+    passive=True,
+    prescribed=True,
+    keep_in=True,
+    volume=True,
+    shake=True,
+):
     """Coupled steps (module docstring, steps 1-5) to each step index of stops,
     capturing a frame at each (a stop at the current step captures it without
     stepping). Returns the frames captured: fewer than stops when the membrane
@@ -176,8 +219,22 @@ def run_coupled(m, s, links, ctrls, mj, rk4, stops, step0, record, hist, frame_p
         for k in range(stops[f] - done):
             t = t0 + k * h
             row = done - step0 + k
-            membrane_forces(m, s, t, par, shape_memory, membrane, applied, attraction, mass_spring, muscle,
-                            soft_volume, pressure, fibres, passive)
+            membrane_forces(
+                m,
+                s,
+                t,
+                par,
+                shape_memory,
+                membrane,
+                applied,
+                attraction,
+                mass_spring,
+                muscle,
+                soft_volume,
+                pressure,
+                fibres,
+                passive,
+            )
             p = s.scal[S_PRESSURE]
             for j in range(n):
                 i = link_vert[j]
@@ -199,8 +256,7 @@ def run_coupled(m, s, links, ctrls, mj, rk4, stops, step0, record, hist, frame_p
             if record:
                 for a in range(qpos.shape[0]):
                     hist.qpos[row, a] = qpos[a]
-            site_vel_kernel(mj.site_xpos, mj.cvel, mj.subtree_com, site_id, links.site_body, links.site_root,
-                            link_vel)
+            site_vel_kernel(mj.site_xpos, mj.cvel, mj.subtree_com, site_id, links.site_body, links.site_root, link_vel)
             for j in range(n):
                 i = link_vert[j]
                 sid = site_id[j]
@@ -278,12 +334,23 @@ class Coupling:
         """MuJoCo back to its initial state; the linked points onto their sites."""
         sys = self.system
         sys.reset()
-        self._links = LinkArrays(self.link_vert, sys.site_id, sys.site_body, sys.site_root,
-                                 self.link_extra_force(), self._force, self._vel)
+        self._links = LinkArrays(
+            self.link_vert, sys.site_id, sys.site_body, sys.site_root, self.link_extra_force(), self._force, self._vel
+        )
         self._ctrls = CtrlArrays(sys.ctrl_act, sys.ctrl_sched, np.zeros(3))
         d = sys.data
-        self._mj = MjViews(*sys.pointers(), d.site_xpos, d.xipos, d.xfrc_applied, d.cvel,
-                           d.subtree_com, d.qpos, d.xpos, d.xquat, d.ctrl)
+        self._mj = MjViews(
+            *sys.pointers(),
+            d.site_xpos,
+            d.xipos,
+            d.xfrc_applied,
+            d.cvel,
+            d.subtree_com,
+            d.qpos,
+            d.xpos,
+            d.xquat,
+            d.ctrl,
+        )
         self.initial_state = sys.state()
         self._xfrc_hist.clear()
         self._qpos_hist.clear()
@@ -304,14 +371,28 @@ class Coupling:
         the model's arrays with the build to run (`Simulation` chooses), by default the model's."""
         mjm = self.system.model
         record = bool(self.record_wrenches)
-        hist = (WrenchHistory(np.empty((nstep, mjm.nbody, 6)), np.empty((nstep, mjm.nq))) if record
-                else self._no_hist)
+        hist = WrenchHistory(np.empty((nstep, mjm.nbody, 6)), np.empty((nstep, mjm.nq))) if record else self._no_hist
         mj_time = self.system.data.time
         a = self.model.arrays if arrays is None else arrays
         f = self._frame
         stop = np.array([step0 + nstep], np.int64)
-        count = run_coupled(a, state, self._links, self._ctrls, self._mj, self._rk4(), stop, int(step0), record, hist, f.pos,
-                            f.scal, f.body_pos, f.body_quat, *step_switches(a))
+        count = run_coupled(
+            a,
+            state,
+            self._links,
+            self._ctrls,
+            self._mj,
+            self._rk4(),
+            stop,
+            int(step0),
+            record,
+            hist,
+            f.pos,
+            f.scal,
+            f.body_pos,
+            f.body_quat,
+            *step_switches(a),
+        )
         done = int(nstep) if count else int(state.status[1]) - int(step0)
         if record:
             self._xfrc_hist.append(hist.xfrc[:done])
@@ -328,17 +409,35 @@ class Coupling:
             raise SimulationDiverged(
                 f"MuJoCo's rigid state diverged between steps {step0} and {step0 + done} "
                 f"(t <= {state.scal[S_TIME]:.6g} s) and MuJoCo reset it; try a smaller dt_s, heavier or "
-                f"stiffer rigid bodies, or more damping", time_s=float(state.scal[S_TIME]),
-                step=int(step0 + done), vert=int(self.link_vert[0]) if self.link_vert.size else 0,
-                dt_suggested_s=0.5 * float(self.model.arrays.dt))
+                f"stiffer rigid bodies, or more damping",
+                time_s=float(state.scal[S_TIME]),
+                step=int(step0 + done),
+                vert=int(self.link_vert[0]) if self.link_vert.size else 0,
+                dt_suggested_s=0.5 * float(self.model.arrays.dt),
+            )
 
     def run_frames(self, state: MembraneState, stops: np.ndarray, step0: int, frames: Frames, arrays=None) -> int:
         """`run` to each step index of stops in one compiled call, capturing a frame at
         each into frames; returns the frames captured. (Without wrench recording.)"""
         mj_time = self.system.data.time
         a = self.model.arrays if arrays is None else arrays
-        count = run_coupled(a, state, self._links, self._ctrls, self._mj, self._rk4(), stops, int(step0), False, self._no_hist,
-                            frames.pos, frames.scal, frames.body_pos, frames.body_quat, *step_switches(a))
+        count = run_coupled(
+            a,
+            state,
+            self._links,
+            self._ctrls,
+            self._mj,
+            self._rk4(),
+            stops,
+            int(step0),
+            False,
+            self._no_hist,
+            frames.pos,
+            frames.scal,
+            frames.body_pos,
+            frames.body_quat,
+            *step_switches(a),
+        )
         # a reset anywhere in these frames makes none of them trustworthy (frames.count stays 0)
         self._check_not_reset(state, mj_time, step0, (int(stops[count - 1]) if count else int(step0)) - int(step0))
         return count

@@ -17,7 +17,8 @@ def membrane_demo(duration_s: float = 12.0) -> Scene:
     """The paper's abdomen-diaphragm sphere without ribs: 80 points, 4 kg,
     incompressible, the top cap muscular (fibres along the meridians toward
     the apex), the bottom nailed; three quiet breaths at 15 per minute."""
-    return Scene(formulation="paper",
+    return Scene(
+        formulation="paper",
         name="membrane_demo",
         mesh=MeshSpec(generator="uv_sphere", radius_m=RADIUS_M),
         masses=Masses(total_kg=4.0),
@@ -29,8 +30,9 @@ def membrane_demo(duration_s: float = 12.0) -> Scene:
             Gravity(),
             ShapeMemory(3000.0),
             Damping(critical_fraction=0.3),
-            Muscle("diaphragm", Breathing(period_s=4.0, inspiration_fraction=0.4, peak=60.0),
-                   toward_m=(0.0, 0.0, RADIUS_M)),
+            Muscle(
+                "diaphragm", Breathing(period_s=4.0, inspiration_fraction=0.4, peak=60.0), toward_m=(0.0, 0.0, RADIUS_M)
+            ),
         ),
         constraints=(Nailed("pelvis"), Volume()),
         dt_s=1e-3,

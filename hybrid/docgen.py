@@ -34,74 +34,153 @@ __all__ = ["render", "DOC_PATH", "main"]
 DOC_PATH = Path(__file__).resolve().parents[1] / "docs" / "scene-file.md"
 
 # a field's unit from its name's suffix (the project's naming rule), longest first
-_SUFFIX_UNITS = (("_n_s_per_m3", "N s/m^3"), ("_n_s_per_m", "N s/m"), ("_n_per_m", "N/m"), ("_kg_per_m2", "kg/m^2"), ("_m_s2", "m/s^2"),
-                 ("_m_s", "m/s"), ("_deg", "deg"), ("_pa", "Pa"), ("_kg", "kg"), ("_m", "m"), ("_s", "s"),
-                 ("_n", "N"))
+_SUFFIX_UNITS = (
+    ("_n_s_per_m3", "N s/m^3"),
+    ("_n_s_per_m", "N s/m"),
+    ("_n_per_m", "N/m"),
+    ("_kg_per_m2", "kg/m^2"),
+    ("_m_s2", "m/s^2"),
+    ("_m_s", "m/s"),
+    ("_deg", "deg"),
+    ("_pa", "Pa"),
+    ("_kg", "kg"),
+    ("_m", "m"),
+    ("_s", "s"),
+    ("_n", "N"),
+)
 
 # the tables without kinds: {field: (unit, default as the file spells it, valid values)}
-_MASSES = {"total_kg": ("kg", "none", "a number > 0, spread in proportion to each point's share of the area"),
-           "density_kg_per_m2": ("kg/m^2", "none", "{region = number > 0, ...}; the last listed region wins "
-                                                   "where regions overlap; every point covered"),
-           "per_vertex_kg": ("kg", "none", "[m0, m1, ...], one number > 0 per point")}
-_RIGID = {"mjcf": ("-", "*required*", "\"trunk\" (the packaged two-rib model), a path to an MJCF file, or "
-                                      "\"package:model\" (e.g. \"myo_sim:myotorso\")"),
-          "links": ("-", "[]", "[[rigid.links]] tables, below"),
-          "prefix": ("-", "\"\"", "a string prepended to the model's names"),
-          "add_link_mass": ("-", "true", "true or false: add the linked points' masses to their bodies"),
-          "keyframe": ("-", "none", "the name of a keyframe of the model: the run starts from it (qpos, qvel, "
-                                    "act, ctrl), the membrane placed against the bodies there"),
-          "fix": ("-", "[]", "[body, ...]: their joints removed, each body fixed to its parent where it starts "
-                             "(a body on the world stays there)"),
-          "fix_root": ("-", "false", "true or false: every free-floating root body (a free joint on the world) "
-                                     "fixed where it starts"),
-          "weld": ("-", "[]", "[body, ...]: welded to the world where they start (a MuJoCo weld, time "
-                              "constant 2 dt)"),
-          "hold": ("-", "[]", "[joint or pattern, ...] (\"*\": all but free joints): held where they start by "
-                              "springs, replacing the joint's own stiffness and damping"),
-          "hold_stiffness_nm_per_rad": ("N m/rad", "1000", "a number > 0 (N/m for a slide joint)"),
-          "hold_damping_nms_per_rad": ("N m s/rad", "10", "a number >= 0 (N s/m for a slide joint)"),
-          "lock": ("-", "[]", "[hinge or slide joint or pattern, ...]: locked where they start (MuJoCo joint "
-                              "equalities, time constant 2 dt)"),
-          "load_joints": ("-", "[]", "[joint, ...]: the membrane's loads and the intra-abdominal pressure's moment "
-                          "are also given about each joint's anchor (hybrid.loads; README, \"Loads\")"),
-          "ctrl": ("-", "{}", "{actuator or pattern = schedule}: the actuators' ctrl set before every step "
-                              "(a number, a breathing waveform or a table)"),
-          "integrator": ("-", "the MJCF's", "MuJoCo's integrator: \"Euler\", \"RK4\", \"implicit\" or "
-                                            "\"implicitfast\""),
-          "ribs": ("-", "none", "a [rigid.ribs] table, below: articulated ribs added to the model")}
-_RIBS = {"body": ("-", "*required*", "the thoracic body of the model the ribs hang on"),
-         "pairs": ("-", "*required*", "[[rigid.ribs.pairs]] tables, below; at least one")}
-_PAIRS = {"name": ("-", "*required*", "a name: the bodies NAME_left, NAME_right and their joints, sites and "
-                                      "tendon (new names in the model)"),
-          "head_m": ("m", "*required*", "[x, y, z]: the left rib's costovertebral joint where the model starts, "
-                                        "at least radius_m left of the mid-sagittal plane"),
-          "front_m": ("m", "*required*", "[x, y, z]: the left rib's anterior end, at least radius_m left of the "
-                                         "plane and 4 radius_m from the head"),
-          "half_width_m": ("m", "*required*", "a number > 0, more than the head's and the anterior end's distance "
-                                              "from the mid-sagittal plane"),
-          "stiffness_n_m_per_rad": ("N m/rad", "12.0", "a number > 0 and <= 1e12: the hinge spring"),
-          "damping_n_m_s_per_rad": ("N m s/rad", "0.05", "a number >= 0 and <= 1e12"),
-          "reference_angle_deg": ("deg", "0.0", "a number in [-90, 90]: the spring's rest angle beyond the pose "
-                                                "that holds the rib's weight where drawn (positive lifts)")}
-_LINKS = {"region": ("-", "*required*", "a selector (see Regions)"),
-          "body": ("-", "*required*", "the name of a body of the MJCF model"),
-          "name": ("-", "the body's name", "a string (what --without and --set refer to)")}
+_MASSES = {
+    "total_kg": ("kg", "none", "a number > 0, spread in proportion to each point's share of the area"),
+    "density_kg_per_m2": (
+        "kg/m^2",
+        "none",
+        "{region = number > 0, ...}; the last listed region wins where regions overlap; every point covered",
+    ),
+    "per_vertex_kg": ("kg", "none", "[m0, m1, ...], one number > 0 per point"),
+}
+_RIGID = {
+    "mjcf": (
+        "-",
+        "*required*",
+        '"trunk" (the packaged two-rib model), a path to an MJCF file, or "package:model" (e.g. "myo_sim:myotorso")',
+    ),
+    "links": ("-", "[]", "[[rigid.links]] tables, below"),
+    "prefix": ("-", '""', "a string prepended to the model's names"),
+    "add_link_mass": ("-", "true", "true or false: add the linked points' masses to their bodies"),
+    "keyframe": (
+        "-",
+        "none",
+        "the name of a keyframe of the model: the run starts from it (qpos, qvel, "
+        "act, ctrl), the membrane placed against the bodies there",
+    ),
+    "fix": (
+        "-",
+        "[]",
+        "[body, ...]: their joints removed, each body fixed to its parent where it starts "
+        "(a body on the world stays there)",
+    ),
+    "fix_root": (
+        "-",
+        "false",
+        "true or false: every free-floating root body (a free joint on the world) fixed where it starts",
+    ),
+    "weld": ("-", "[]", "[body, ...]: welded to the world where they start (a MuJoCo weld, time constant 2 dt)"),
+    "hold": (
+        "-",
+        "[]",
+        '[joint or pattern, ...] ("*": all but free joints): held where they start by '
+        "springs, replacing the joint's own stiffness and damping",
+    ),
+    "hold_stiffness_nm_per_rad": ("N m/rad", "1000", "a number > 0 (N/m for a slide joint)"),
+    "hold_damping_nms_per_rad": ("N m s/rad", "10", "a number >= 0 (N s/m for a slide joint)"),
+    "lock": (
+        "-",
+        "[]",
+        "[hinge or slide joint or pattern, ...]: locked where they start (MuJoCo joint equalities, time constant 2 dt)",
+    ),
+    "load_joints": (
+        "-",
+        "[]",
+        "[joint, ...]: the membrane's loads and the intra-abdominal pressure's moment "
+        'are also given about each joint\'s anchor (hybrid.loads; README, "Loads")',
+    ),
+    "ctrl": (
+        "-",
+        "{}",
+        "{actuator or pattern = schedule}: the actuators' ctrl set before every step "
+        "(a number, a breathing waveform or a table)",
+    ),
+    "integrator": ("-", "the MJCF's", 'MuJoCo\'s integrator: "Euler", "RK4", "implicit" or "implicitfast"'),
+    "ribs": ("-", "none", "a [rigid.ribs] table, below: articulated ribs added to the model"),
+}
+_RIBS = {
+    "body": ("-", "*required*", "the thoracic body of the model the ribs hang on"),
+    "pairs": ("-", "*required*", "[[rigid.ribs.pairs]] tables, below; at least one"),
+}
+_PAIRS = {
+    "name": (
+        "-",
+        "*required*",
+        "a name: the bodies NAME_left, NAME_right and their joints, sites and tendon (new names in the model)",
+    ),
+    "head_m": (
+        "m",
+        "*required*",
+        "[x, y, z]: the left rib's costovertebral joint where the model starts, "
+        "at least radius_m left of the mid-sagittal plane",
+    ),
+    "front_m": (
+        "m",
+        "*required*",
+        "[x, y, z]: the left rib's anterior end, at least radius_m left of the plane and 4 radius_m from the head",
+    ),
+    "half_width_m": (
+        "m",
+        "*required*",
+        "a number > 0, more than the head's and the anterior end's distance from the mid-sagittal plane",
+    ),
+    "stiffness_n_m_per_rad": ("N m/rad", "12.0", "a number > 0 and <= 1e12: the hinge spring"),
+    "damping_n_m_s_per_rad": ("N m s/rad", "0.05", "a number >= 0 and <= 1e12"),
+    "reference_angle_deg": (
+        "deg",
+        "0.0",
+        "a number in [-90, 90]: the spring's rest angle beyond the pose "
+        "that holds the rib's weight where drawn (positive lifts)",
+    ),
+}
+_LINKS = {
+    "region": ("-", "*required*", "a selector (see Regions)"),
+    "body": ("-", "*required*", "the name of a body of the MJCF model"),
+    "name": ("-", "the body's name", "a string (what --without and --set refer to)"),
+}
 # the selectors' fields' units and values (a field not here: its unit from its name)
-_SELECTOR_FIELDS = {"indices": ("-", "[i, j, ...], vertex indices >= 0"),
-                    "point": ("m", "[x, y, z]"), "normal": ("-", "[x, y, z], non-zero"),
-                    "center": ("m", "[x, y, z]"), "radius": ("m", "a number > 0"),
-                    "radius_m": ("m", "a number > 0"),
-                    "lo": ("m", "[x, y, z], lo <= hi"), "hi": ("m", "[x, y, z]"),
-                    "points": ("m", "[[x, y, z], ...]"), "parts": ("-", "[selector, ...], not empty"),
-                    "base": ("-", "a selector"), "minus": ("-", "a selector"),
-                    "from_deg": ("deg", "a number in [-360, 360]"), "to_deg": ("deg", "a number in [-360, 360]")}
+_SELECTOR_FIELDS = {
+    "indices": ("-", "[i, j, ...], vertex indices >= 0"),
+    "point": ("m", "[x, y, z]"),
+    "normal": ("-", "[x, y, z], non-zero"),
+    "center": ("m", "[x, y, z]"),
+    "radius": ("m", "a number > 0"),
+    "radius_m": ("m", "a number > 0"),
+    "lo": ("m", "[x, y, z], lo <= hi"),
+    "hi": ("m", "[x, y, z]"),
+    "points": ("m", "[[x, y, z], ...]"),
+    "parts": ("-", "[selector, ...], not empty"),
+    "base": ("-", "a selector"),
+    "minus": ("-", "a selector"),
+    "from_deg": ("deg", "a number in [-360, 360]"),
+    "to_deg": ("deg", "a number in [-360, 360]"),
+}
 _SCHEDULES = {"breathing": S.Breathing, "table": S.Table}
-_SCHEDULE_FIELDS = {"period_s": ("s", "a number > 0"), "inspiration_fraction": ("-", "a number in (0, 1)"),
-                    "peak": ("the field's", "a number; *required* in a file"),
-                    "onset_s": ("s", "a number >= 0"),
-                    "t_s": ("s", "[t0, t1, ...], strictly increasing"),
-                    "value": ("the field's", "one per time: numbers, or [x, y, z] for a vector field"),
-                    "periodic": ("-", "true or false: repeat with the table's span")}
+_SCHEDULE_FIELDS = {
+    "period_s": ("s", "a number > 0"),
+    "inspiration_fraction": ("-", "a number in (0, 1)"),
+    "peak": ("the field's", "a number; *required* in a file"),
+    "onset_s": ("s", "a number >= 0"),
+    "t_s": ("s", "[t0, t1, ...], strictly increasing"),
+    "value": ("the field's", "one per time: numbers, or [x, y, z] for a vector field"),
+    "periodic": ("-", "true or false: repeat with the table's span"),
+}
 
 
 def _unit(name: str, meta: dict) -> str:
@@ -144,8 +223,9 @@ def _valid(kind: str, meta: dict) -> str:
     if kind == "angle_deg":
         return "a number in (0, 90)"
     if kind == "integer":
-        return f"an integer in {meta['lo']}..{meta['hi']}" if meta.get("hi") is not None else \
-            f"an integer >= {meta['lo']}"
+        return (
+            f"an integer in {meta['lo']}..{meta['hi']}" if meta.get("hi") is not None else f"an integer >= {meta['lo']}"
+        )
     if kind == "choice":
         return "one of " + ", ".join(f'"{c}"' for c in meta["choices"])
     if kind == "vec3":
@@ -159,8 +239,11 @@ def _valid(kind: str, meta: dict) -> str:
     if kind == "selector":
         return "a selector (see Regions)"
     if kind == "schedule":
-        return ("a schedule: a number, breathing or table (see Schedules)" if meta.get("ncomp") == 1 else
-                "a schedule: [x, y, z] or a table (see Schedules)")
+        return (
+            "a schedule: a number, breathing or table (see Schedules)"
+            if meta.get("ncomp") == 1
+            else "a schedule: [x, y, z] or a table (see Schedules)"
+        )
     # a kind added since: its bounds, as far as the field declares them
     bounds = [f">= {_show(meta['lo'])}"] if meta.get("lo") is not None else []
     bounds += [f"<= {_show(meta['hi'])}"] if meta.get("hi") is not None else []
@@ -180,8 +263,15 @@ def _only(meta: dict) -> str:
 
 
 def _field_rows(fields) -> list[str]:
-    return _HEAD + [_row(f"`{f.name}`", _unit(f.name, f.metadata), _show(f.default),
-                         _valid(f.metadata["kind"], f.metadata) + _only(f.metadata)) for f in fields]
+    return _HEAD + [
+        _row(
+            f"`{f.name}`",
+            _unit(f.name, f.metadata),
+            _show(f.default),
+            _valid(f.metadata["kind"], f.metadata) + _only(f.metadata),
+        )
+        for f in fields
+    ]
 
 
 def _doc(cls) -> str:
@@ -215,7 +305,7 @@ def _hand_rows(cls, table: dict) -> list[str]:
 def _terms(types: dict, section: str) -> list[str]:
     out = []
     for toml_type, cls in types.items():
-        out += [f"### `type = \"{toml_type}\"` ({cls.__name__})", "", _doc(cls), ""]
+        out += [f'### `type = "{toml_type}"` ({cls.__name__})', "", _doc(cls), ""]
         formulations = tuple(getattr(cls, "formulations", FORMULATIONS))
         if set(formulations) != set(FORMULATIONS):
             out += ["Only in a scene with " + " or ".join(f'formulation = "{x}"' for x in formulations) + ".", ""]
@@ -235,8 +325,10 @@ def selector_classes() -> dict:
     keys = ["all", *scenefile._SELECTOR_KINDS]
     unmatched = [k for k in keys if k not in classes]
     if unmatched:
-        raise RuntimeError(f"docgen: selector keys {unmatched} of hybrid.scenefile have no class of that name "
-                           f"in hybrid.regions.Selector")
+        raise RuntimeError(
+            f"docgen: selector keys {unmatched} of hybrid.scenefile have no class of that name "
+            f"in hybrid.regions.Selector"
+        )
     return {k: classes[k] for k in keys}
 
 
@@ -252,10 +344,17 @@ def _selectors() -> list[str]:
             spelling = f"`{{ {key} = [...] }}`"
         else:
             spelling = f"`{{ {key} = {{ " + ", ".join(f"{f.name} = ..." for f in fields) + " } }`"
-        described = "; ".join(f"`{f.name}` ({unit}): {valid}" for f in fields
-                              for unit, valid in [_SELECTOR_FIELDS.get(f.name, (_unit(f.name, {}), "-"))]) or "-"
-        what = _doc(cls) or {"union": "Vertices in any of the parts.",
-                             "intersection": "Vertices in every part."}.get(key, "")
+        described = (
+            "; ".join(
+                f"`{f.name}` ({unit}): {valid}"
+                for f in fields
+                for unit, valid in [_SELECTOR_FIELDS.get(f.name, (_unit(f.name, {}), "-"))]
+            )
+            or "-"
+        )
+        what = _doc(cls) or {"union": "Vertices in any of the parts.", "intersection": "Vertices in every part."}.get(
+            key, ""
+        )
         if key == "all":
             what += " A region's name: the vertices of that region, defined above."
         out.append(_row(spelling, described, what))
@@ -329,9 +428,9 @@ def render() -> str:
         "else 1e-3 s. MuJoCo keeps the MJCF's own integrator unless `rigid.integrator` sets it; the",
         "summary's `rigid` table records the step and integrator used and where each came from.",
         "",
-        "`formulation` says how the membrane's parameters are meant. \"paper\" is the per-point model of Promayon,",
+        '`formulation` says how the membrane\'s parameters are meant. "paper" is the per-point model of Promayon,',
         "Baconnier & Puech (1997) kept exactly (its stiffnesses act on points, so their meaning",
-        "changes with the mesh); \"continuum\" takes material parameters that mean the same on",
+        'changes with the mesh); "continuum" takes material parameters that mean the same on',
         "every mesh. A term or key marked below for one formulation is refused, in one line, in",
         "a scene of the other.",
         "",
@@ -352,9 +451,8 @@ def render() -> str:
         "## `[regions]`: selectors",
         "",
         "`name = selector`, evaluated in order on the rest positions when the scene is compiled;",
-        "a selector may name a region defined before it (or `\"all\"`). A region that selects no",
-        "point is refused. Selectors nest (union, intersection, difference) up to "
-        f"{R.MAX_SELECTOR_DEPTH} levels.",
+        'a selector may name a region defined before it (or `"all"`). A region that selects no',
+        f"point is refused. Selectors nest (union, intersection, difference) up to {R.MAX_SELECTOR_DEPTH} levels.",
         "",
         *_selectors(),
         "",

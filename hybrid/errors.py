@@ -71,8 +71,7 @@ class SimulationDiverged(HybridError, RuntimeError):
     dt_suggested_s : float   a time step that the stability estimate deems safe (s)
     """
 
-    def __init__(self, message: str, *, time_s: float, step: int, vert: int,
-                 dt_suggested_s: float):
+    def __init__(self, message: str, *, time_s: float, step: int, vert: int, dt_suggested_s: float):
         super().__init__(message)
         self.time_s = float(time_s)
         self.step = int(step)

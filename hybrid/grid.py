@@ -24,8 +24,8 @@ import functools
 import itertools
 import json
 import math
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Sequence
 
 from .errors import HybridError
 from .model import compile_scene
@@ -41,7 +41,7 @@ PLOT_METRICS = ("apex_descent_mm", "rib_lift_mm", "pressure_max_pa", "volume_rel
 
 
 def split_values(item: str) -> tuple[str, list[str]]:
-    """"KEY=V1,V2,..." as (KEY, [V1, V2, ...]); commas inside brackets or quotes
+    """ "KEY=V1,V2,..." as (KEY, [V1, V2, ...]); commas inside brackets or quotes
     belong to their value (a vector such as [0, 0, -9.81])."""
     if not isinstance(item, str) or "=" not in item:
         raise HybridError(f"--set {item!r}: expected KEY=V1,V2,..., e.g. dt_s=1e-3,5e-4")
@@ -102,9 +102,16 @@ def _checked(source, cases, without, duration_s):
     return models
 
 
-def run_grid(source: str | None, sets: Sequence[str], *, without: Sequence[str] = (),
-             duration_s: float | None = None, out: Path, metric: str | None = None,
-             workers: int | None = None) -> dict:
+def run_grid(
+    source: str | None,
+    sets: Sequence[str],
+    *,
+    without: Sequence[str] = (),
+    duration_s: float | None = None,
+    out: Path,
+    metric: str | None = None,
+    workers: int | None = None,
+) -> dict:
     """Run the grid into the folder `out`; {"rows", "failed", "csv", "plot", "metric"}."""
     if workers is not None and not (isinstance(workers, int) and workers >= 1):
         raise HybridError(f"--workers: expected an integer >= 1, received {workers!r}")
@@ -120,8 +127,10 @@ def run_grid(source: str | None, sets: Sequence[str], *, without: Sequence[str] 
         except ValueError:
             before = None
         if before != meta:
-            raise HybridError(f"--out {str(out)!r}: holds a sweep of {before}, expected {meta}; "
-                              f"choose another folder to sweep other settings")
+            raise HybridError(
+                f"--out {str(out)!r}: holds a sweep of {before}, expected {meta}; "
+                f"choose another folder to sweep other settings"
+            )
     meta_path.write_text(json.dumps(meta, indent=2) + "\n", encoding="utf-8")
     # compiled code loaded (or compiled, once) here, before the workers start
     try:
@@ -136,19 +145,29 @@ def run_grid(source: str | None, sets: Sequence[str], *, without: Sequence[str] 
     metric = metric or next((m for m in PLOT_METRICS if any(_number(r.get(m)) for r in rows)), None)
     if metric is None or not any(_number(r.get(metric)) for r in rows):
         names = sorted({k for r in rows for k, v in r.items() if _number(v)} - set(cases[0]))
-        raise HybridError(f"--metric {metric!r}: expected a metric the runs report, one of {names}; "
-                          f"the runs are in {csv_path}")
+        raise HybridError(
+            f"--metric {metric!r}: expected a metric the runs report, one of {names}; the runs are in {csv_path}"
+        )
     plot_path = out / "sweep.png"
     _plot(rows, list(cases[0]), metric, plot_path, title=f"{models[0].scene.name}: {metric}")
-    return {"rows": rows, "failed": sum(r["status"] != "ok" for r in rows), "csv": csv_path, "plot": plot_path,
-            "metric": metric}
+    return {
+        "rows": rows,
+        "failed": sum(r["status"] != "ok" for r in rows),
+        "csv": csv_path,
+        "plot": plot_path,
+        "metric": metric,
+    }
 
 
 def _row(case: dict, result) -> dict:
     if isinstance(result, BaseException):
         return {**case, "status": "failed", "error": " ".join(str(result).split())}
-    return {**case, "status": "ok", "error": "", **{k: v for k, v in result.items()
-                                                     if v is None or isinstance(v, (int, float, str))}}
+    return {
+        **case,
+        "status": "ok",
+        "error": "",
+        **{k: v for k, v in result.items() if v is None or isinstance(v, (int, float, str))},
+    }
 
 
 def _number(v) -> bool:
@@ -166,6 +185,7 @@ def _write_csv(rows: list[dict], keys: list, path: Path) -> None:
 
 def _plot(rows: list[dict], keys: list, metric: str, path: Path, *, title: str) -> None:
     import matplotlib
+
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 

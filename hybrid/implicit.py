@@ -66,14 +66,38 @@ from .implicit_matrix import NewtonMatrix, assemble, cg_update, dot, matrix_prod
 from .kernel import CHUNK_VERTS, kernel
 from .terms import Damping, Membrane, MuscleFibres, PassiveFibres, Volume
 from .terms.fibres import add_muscle_fibres
-from .terms.passive_fibres import add_passive_fibres
 from .terms.membrane import add_membrane_serial, membrane_energy
-from .terms.tangents import (NCACHE, NFIB_CACHE, NPF_CACHE, fibre_cached_product, fibre_energy, fibre_tangent_cache,
-                             kelvin_voigt_dissipation, membrane_tangent_cache, membrane_tangent_product,
-                             passive_fibres_cached_product, passive_fibres_energy_kernel, passive_fibres_tangent_cache)
+from .terms.passive_fibres import add_passive_fibres
+from .terms.tangents import (
+    NCACHE,
+    NFIB_CACHE,
+    NPF_CACHE,
+    fibre_cached_product,
+    fibre_energy,
+    fibre_tangent_cache,
+    kelvin_voigt_dissipation,
+    membrane_tangent_cache,
+    membrane_tangent_product,
+    passive_fibres_cached_product,
+    passive_fibres_energy_kernel,
+    passive_fibres_tangent_cache,
+)
 
-__all__ = ["IMPLICIT_ID", "IMPLICIT_NOT_CONVERGED", "ImplicitWork", "Info", "implicit_work", "implicit_step",
-           "implicit_pressure", "implicit_forces", "implicit_start_forces", "NewtonRows", "newton_rows", "newton_caches", "newton_product"]
+__all__ = [
+    "IMPLICIT_ID",
+    "IMPLICIT_NOT_CONVERGED",
+    "ImplicitWork",
+    "Info",
+    "implicit_work",
+    "implicit_step",
+    "implicit_pressure",
+    "implicit_forces",
+    "implicit_start_forces",
+    "NewtonRows",
+    "newton_rows",
+    "newton_caches",
+    "newton_product",
+]
 
 #: `MembraneArrays.integrator` of implicit Euler
 IMPLICIT_ID = 2
@@ -86,7 +110,7 @@ T_PASSIVE = PassiveFibres.id
 CG_MIN_ITER = 50  # the conjugate gradients' cap: 3 x the free coordinates, at least this
 HALVINGS = 12
 ARMIJO = 1e-4  # the fraction of the predicted decrease a step must achieve
-EPS = 2.0 ** -52  # the doubles' relative spacing
+EPS = 2.0**-52  # the doubles' relative spacing
 ULPS = 4.0  # a Newton correction at most this many units in the last place of the positions ends the solve
 STALL_ULPS = 256.0  # ... and one at most this many that did not halve the residual
 FORCING = 0.5  # the linear solve: to this fraction of the residual, and of what convergence asks
@@ -94,6 +118,7 @@ FORCING = 0.5  # the linear solve: to this fraction of the residual, and of what
 
 class Info(IntEnum):
     """The slots of `ImplicitWork.info`."""
+
     NEWTON = 0  # Newton iterations of the last step
     RESIDUAL = 1  # its relative residual |r| / max(F, F_mean) (the module's docstring)
     CG = 2  # conjugate-gradient iterations of the last step
@@ -108,8 +133,20 @@ class Info(IntEnum):
     FORCE = 11  # N, the last step's step-start force scale F
 
 
-(I_NEWTON, I_RESIDUAL, I_CG, I_CARRIED, I_PRESSURE, I_NEWTON_TOTAL, I_CG_TOTAL, I_WORST,
- I_PROJECTED_TOTAL, I_FORCE_SUM, I_SOLVED, I_FORCE) = (int(k) for k in Info)
+(
+    I_NEWTON,
+    I_RESIDUAL,
+    I_CG,
+    I_CARRIED,
+    I_PRESSURE,
+    I_NEWTON_TOTAL,
+    I_CG_TOTAL,
+    I_WORST,
+    I_PROJECTED_TOTAL,
+    I_FORCE_SUM,
+    I_SOLVED,
+    I_FORCE,
+) = (int(k) for k in Info)
 
 
 class NewtonRows(NamedTuple):
@@ -118,6 +155,7 @@ class NewtonRows(NamedTuple):
     to fixed points, whose rows the solve leaves out, so its residuals, products, blocks
     and volume gradient skip them (at level 8 of the breathing scene a fifth of the
     membrane's triangles and half of the muscle's)."""
+
     mem_vert: np.ndarray
     mem_par: np.ndarray
     fib_vert: np.ndarray
@@ -132,8 +170,11 @@ def newton_rows(arrays) -> NewtonRows:
     """The `NewtonRows` of a model's arrays (in their order)."""
     free = np.asarray(arrays.vert_free) != 0
     out = []
-    for tri, *more in ((arrays.mem_vert, arrays.mem_par), (arrays.fib_vert, arrays.fib_par, arrays.fib_sched),
-                       (arrays.pf_vert, arrays.pf_par)):
+    for tri, *more in (
+        (arrays.mem_vert, arrays.mem_par),
+        (arrays.fib_vert, arrays.fib_par, arrays.fib_sched),
+        (arrays.pf_vert, arrays.pf_par),
+    ):
         keep = free[tri.reshape(-1, 3)].any(axis=1)
         out += [np.ascontiguousarray(a[keep]) for a in (tri, *more)]
     faces = np.asarray(arrays.face_vert)
@@ -152,6 +193,7 @@ class ImplicitWork(NamedTuple):
     pf (NPF_CACHE) per row of rows: the membrane's, muscle fibres' and passive fibres'
     tangent caches (`newton_caches`); mat: the assembled Newton matrix
     (`hybrid.implicit_matrix`); info (len(Info),): the `Info` slots."""
+
     dv: np.ndarray
     x_try: np.ndarray
     v_try: np.ndarray
@@ -186,11 +228,15 @@ def implicit_work(arrays) -> ImplicitWork | None:
     nfree = int(np.count_nonzero(np.asarray(arrays.vert_free)))
     vec = [np.zeros((n, 3)) for _ in range(11)] + [np.zeros((nfree, 3)) for _ in range(7)]
     rows = newton_rows(arrays)
-    return ImplicitWork(*vec, rows=rows, face=np.zeros((rows.mem_vert.shape[0], NCACHE)),
-                        fib=np.zeros((rows.fib_vert.shape[0], NFIB_CACHE)),
-                        pf=np.zeros((rows.pf_vert.shape[0], NPF_CACHE)),
-                        mat=newton_matrix(n, arrays.vert_free, rows.mem_vert, rows.fib_vert, rows.pf_vert),
-                        info=np.zeros(len(Info)))
+    return ImplicitWork(
+        *vec,
+        rows=rows,
+        face=np.zeros((rows.mem_vert.shape[0], NCACHE)),
+        fib=np.zeros((rows.fib_vert.shape[0], NFIB_CACHE)),
+        pf=np.zeros((rows.pf_vert.shape[0], NPF_CACHE)),
+        mat=newton_matrix(n, arrays.vert_free, rows.mem_vert, rows.fib_vert, rows.pf_vert),
+        info=np.zeros(len(Info)),
+    )
 
 
 @kernel
@@ -421,7 +467,7 @@ def _volume_gradient(face_vert, pos, grad):
     sixth = 1.0 / 6.0
     for k in range(face_vert.shape[0]):
         a, b, c = face_vert[k, 0], face_vert[k, 1], face_vert[k, 2]
-        for (i, j, l) in ((a, b, c), (b, c, a), (c, a, b)):
+        for i, j, l in ((a, b, c), (b, c, a), (c, a, b)):
             grad[i, 0] += sixth * (pos[j, 1] * pos[l, 2] - pos[j, 2] * pos[l, 1])
             grad[i, 1] += sixth * (pos[j, 2] * pos[l, 0] - pos[j, 0] * pos[l, 2])
             grad[i, 2] += sixth * (pos[j, 0] * pos[l, 1] - pos[j, 1] * pos[l, 0])

@@ -27,8 +27,18 @@ from .kernel import kernel
 from .terms import Damping, Membrane, MuscleFibres, PassiveFibres
 from .terms.tangent_blocks import fibre_tangent_blocks, membrane_tangent_blocks, passive_fibres_tangent_blocks
 
-__all__ = ["NewtonMatrix", "newton_matrix", "assemble", "matrix_product", "sgs_sweep", "upper_solve", "lower_solve",
-           "split_cg", "dot", "cg_update"]
+__all__ = [
+    "NewtonMatrix",
+    "newton_matrix",
+    "assemble",
+    "matrix_product",
+    "sgs_sweep",
+    "upper_solve",
+    "lower_solve",
+    "split_cg",
+    "dot",
+    "cg_update",
+]
 
 # the sweep's over-relaxation: conjugate-gradient iterations a step of the breathing scene
 # (implicit Euler), omega 1 -> 1.4: level 8 at 30 ms, tol 1e-2, 15.1 -> 11.7; level 6 at
@@ -56,6 +66,7 @@ class NewtonMatrix(NamedTuple):
     scratch; gchol (nfree, 6): the Cholesky factors G of D = G G^T (g00, g10, g11, g20,
     g21, g22); ediag (nfree, 9): E = D_A - 2 D, D_A the exact diagonal blocks
     (`split_cg`)."""
+
     free: np.ndarray
     row_ptr: np.ndarray
     col: np.ndarray
@@ -93,9 +104,19 @@ def newton_matrix(nvert: int, vert_free, mem_vert, fib_vert, pf_vert) -> NewtonM
     np.cumsum(np.bincount(row, minlength=nf), out=row_ptr[1:])
     slots = [np.where(k >= 0, np.searchsorted(keys, k), -1) for k in pair_keys]
     nb = keys.size
-    return NewtonMatrix(free, row_ptr, col.astype(np.int64), *slots, amat=np.zeros((nb, 9)),
-                        pdiag=np.zeros((nvert, 9)), sdiag=np.zeros((nf, 9)), dinv=np.zeros((nf, 9)),
-                        acc=np.zeros((nf, 3)), gchol=np.zeros((nf, 6)), ediag=np.zeros((nf, 9)))
+    return NewtonMatrix(
+        free,
+        row_ptr,
+        col.astype(np.int64),
+        *slots,
+        amat=np.zeros((nb, 9)),
+        pdiag=np.zeros((nvert, 9)),
+        sdiag=np.zeros((nf, 9)),
+        dinv=np.zeros((nf, 9)),
+        acc=np.zeros((nf, 3)),
+        gchol=np.zeros((nf, 6)),
+        ediag=np.zeros((nf, 9)),
+    )
 
 
 @kernel
@@ -209,8 +230,16 @@ def _invert(a, b):
         return
     inv = 1.0 / det
     b[0], b[1], b[2] = c00 * inv, c01 * inv, c02 * inv
-    b[3], b[4], b[5] = (a[5] * a[6] - a[3] * a[8]) * inv, (a[0] * a[8] - a[2] * a[6]) * inv, (a[2] * a[3] - a[0] * a[5]) * inv
-    b[6], b[7], b[8] = (a[3] * a[7] - a[4] * a[6]) * inv, (a[1] * a[6] - a[0] * a[7]) * inv, (a[0] * a[4] - a[1] * a[3]) * inv
+    b[3], b[4], b[5] = (
+        (a[5] * a[6] - a[3] * a[8]) * inv,
+        (a[0] * a[8] - a[2] * a[6]) * inv,
+        (a[2] * a[3] - a[0] * a[5]) * inv,
+    )
+    b[6], b[7], b[8] = (
+        (a[3] * a[7] - a[4] * a[6]) * inv,
+        (a[1] * a[6] - a[0] * a[7]) * inv,
+        (a[0] * a[4] - a[1] * a[3]) * inv,
+    )
 
 
 @kernel

@@ -41,6 +41,7 @@ def _mjcf_report(source: str) -> dict:
         from .rigid import load_rigid_spec
         from .rigid.mjcf import compile_spec
         from .scene import Masses, Rigid, Scene
+
         spec, label, _ = load_rigid_spec(Scene(masses=Masses(total_kg=1.0), rigid=Rigid(source)))
         return {"kind": "mjcf", "source": source, "model": describe_model(compile_spec(spec, label))}
     if not source.lower().endswith(_MJCF_SUFFIXES) or Path(source).is_file():
@@ -64,37 +65,59 @@ def _scene_report(source, overrides, without) -> dict:
         return {"points": int(idx.size), "area_m2": float(area[idx].sum())}
 
     report = {
-        "kind": "scene", "source": str(source), "name": scene.name, "formulation": scene.formulation,
-        "dt_s": model.dt_s, "dt_from": "scene" if scene.dt_s is not None else
-        "mjcf" if model.rigid is not None else "default",
+        "kind": "scene",
+        "source": str(source),
+        "name": scene.name,
+        "formulation": scene.formulation,
+        "dt_s": model.dt_s,
+        "dt_from": "scene" if scene.dt_s is not None else "mjcf" if model.rigid is not None else "default",
         "dt_stable_s": model.dt_stable_s if math.isfinite(model.dt_stable_s) else None,
-        "membrane": {"points": int(mesh.nvert), "faces": int(mesh.face_vert.shape[0]),
-                     "area_m2": float(area.sum()), "volume_m3": float(volume(mesh.vert_pos, mesh.face_vert)),
-                     "mass_kg": float(model.arrays.vert_mass.sum())},
+        "membrane": {
+            "points": int(mesh.nvert),
+            "faces": int(mesh.face_vert.shape[0]),
+            "area_m2": float(area.sum()),
+            "volume_m3": float(volume(mesh.vert_pos, mesh.face_vert)),
+            "mass_kg": float(model.arrays.vert_mass.sum()),
+        },
         "regions": {name: region(idx) for name, idx in model.regions.items()},
-        "terms": [{"name": t.name, "section": t.section, "type": t.toml_type}
-                  for t in (*scene.forces, *scene.constraints)],
-        "nails": [{"name": c.name, **region(_select(model, c.region, f"constraints[{c.name!r}].region"))}
-                  for c in scene.constraints if isinstance(c, Nailed)],
+        "terms": [
+            {"name": t.name, "section": t.section, "type": t.toml_type} for t in (*scene.forces, *scene.constraints)
+        ],
+        "nails": [
+            {"name": c.name, **region(_select(model, c.region, f"constraints[{c.name!r}].region"))}
+            for c in scene.constraints
+            if isinstance(c, Nailed)
+        ],
         "links": [],
     }
     if model.rigid is not None:
         from .rigid.describe import describe_model
+
         rig = model.rigid
         for link in scene.rigid.links:
             idx = _select(model, link.region, f"rigid.links[{link.name!r}].region")
-            report["links"].append({"name": link.name, "body": rig.link_body[list(rig.link_vert).index(idx[0])]
-                                    if idx.size else link.body, **region(idx)})
-        report["rigid"] = {"mjcf": str(scene.rigid.mjcf), "settings": rig.settings(),
-                           "model": describe_model(rig.model)}
+            report["links"].append(
+                {
+                    "name": link.name,
+                    "body": rig.link_body[list(rig.link_vert).index(idx[0])] if idx.size else link.body,
+                    **region(idx),
+                }
+            )
+        report["rigid"] = {
+            "mjcf": str(scene.rigid.mjcf),
+            "settings": rig.settings(),
+            "model": describe_model(rig.model),
+        }
     return report
 
 
 def _select(model, sel, what) -> np.ndarray:
     from .regions import select
+
     mesh = model.mesh
-    return select(sel, mesh.vert_pos, name=what, regions=model.regions, border_vert=mesh.border_vert,
-                  face_vert=mesh.face_vert)
+    return select(
+        sel, mesh.vert_pos, name=what, regions=model.regions, border_vert=mesh.border_vert, face_vert=mesh.face_vert
+    )
 
 
 def inspect_source(source: str | None, *, overrides=(), without=()) -> dict:
@@ -112,19 +135,29 @@ def _vec(v) -> str:
 
 
 def _model_lines(m: dict) -> list[str]:
-    lines = [f"rigid model: timestep {m['timestep_s']:g} s, integrator {m['integrator']}, gravity "
-             f"{_vec(m['gravity_m_s2'])} m/s^2, nq {m['nq']}, nv {m['nv']}, nu {m['nu']}",
-             f"bodies ({len(m['bodies'])}; world position at qpos0, m):"]
-    lines += [f"  {b['name'] or '(unnamed)'}  parent {b['parent']}  {b['mass_kg']:.4g} kg  at {_vec(b['pos_m'])}"
-              for b in m["bodies"]]
+    lines = [
+        f"rigid model: timestep {m['timestep_s']:g} s, integrator {m['integrator']}, gravity "
+        f"{_vec(m['gravity_m_s2'])} m/s^2, nq {m['nq']}, nv {m['nv']}, nu {m['nu']}",
+        f"bodies ({len(m['bodies'])}; world position at qpos0, m):",
+    ]
+    lines += [
+        f"  {b['name'] or '(unnamed)'}  parent {b['parent']}  {b['mass_kg']:.4g} kg  at {_vec(b['pos_m'])}"
+        for b in m["bodies"]
+    ]
     lines.append(f"joints ({len(m['joints'])}):")
-    lines += [f"  {j['name'] or '(unnamed)'}  {j['type']} on {j['body']}  qpos0 {_vec(j['qpos0'])}"
-              + (f"  range {_vec(j['range'])}" if j["range"] else "") for j in m["joints"]]
+    lines += [
+        f"  {j['name'] or '(unnamed)'}  {j['type']} on {j['body']}  qpos0 {_vec(j['qpos0'])}"
+        + (f"  range {_vec(j['range'])}" if j["range"] else "")
+        for j in m["joints"]
+    ]
     lines.append(f"actuators ({len(m['actuators'])}):")
-    lines += [f"  {a['name'] or '(unnamed)'}  {a['target']}" + (f"  ctrl {_vec(a['ctrlrange'])}" if a["ctrlrange"]
-                                                               else "") for a in m["actuators"]]
-    lines.append(f"keyframes ({len(m['keyframes'])}): " + (", ".join(k["name"] or "(unnamed)"
-                                                                   for k in m["keyframes"]) or "none"))
+    lines += [
+        f"  {a['name'] or '(unnamed)'}  {a['target']}" + (f"  ctrl {_vec(a['ctrlrange'])}" if a["ctrlrange"] else "")
+        for a in m["actuators"]
+    ]
+    lines.append(
+        f"keyframes ({len(m['keyframes'])}): " + (", ".join(k["name"] or "(unnamed)" for k in m["keyframes"]) or "none")
+    )
     return lines
 
 
@@ -136,11 +169,13 @@ def format_report(r: dict) -> str:
     stable = "none (no stiffness)" if r["dt_stable_s"] is None else f"{r['dt_stable_s']:.3g} s"
     if r["dt_stable_s"] is not None and r["dt_s"] > r["dt_stable_s"]:
         stable += " (the step is larger: expect a divergence; set dt_s below it)"
-    lines = [f"scene {r['name']} ({r['formulation']}) from {r['source']}",
-             f"step: dt {r['dt_s']:g} s (from the {r['dt_from']}); stable-step estimate {stable}",
-             f"membrane: {mem['points']} points, {mem['faces']} faces, area {mem['area_m2']:.4g} m^2, volume "
-             f"{mem['volume_m3']:.4g} m^3, mass {mem['mass_kg']:.4g} kg",
-             f"regions ({len(r['regions'])}):"]
+    lines = [
+        f"scene {r['name']} ({r['formulation']}) from {r['source']}",
+        f"step: dt {r['dt_s']:g} s (from the {r['dt_from']}); stable-step estimate {stable}",
+        f"membrane: {mem['points']} points, {mem['faces']} faces, area {mem['area_m2']:.4g} m^2, volume "
+        f"{mem['volume_m3']:.4g} m^3, mass {mem['mass_kg']:.4g} kg",
+        f"regions ({len(r['regions'])}):",
+    ]
     lines += [f"  {k}: {v['points']} points, {v['area_m2']:.4g} m^2" for k, v in r["regions"].items()]
     lines.append(f"terms ({len(r['terms'])}):")
     lines += [f"  {t['name']} ({t['section']}: {t['type']})" for t in r["terms"]]
@@ -150,11 +185,13 @@ def format_report(r: dict) -> str:
     lines += [f"  {k['name']} -> {k['body']}: {k['points']} points, {k['area_m2']:.4g} m^2" for k in r["links"]]
     if "rigid" in r:
         s = r["rigid"]["settings"]
-        changed = ", ".join(f"{k} {s[k]}" for k in ("keyframe", "fixed", "welded", "held", "locked", "driven")
-                            if s.get(k))
-        lines.append(f"rigid: {r['rigid']['mjcf']}; integrator {s['integrator']} (from the "
-                     f"{s['integrator_from']}); MJCF timestep {s['mjcf_timestep_s']:g} s"
-                     + (f"; {changed}" if changed else ""))
+        changed = ", ".join(
+            f"{k} {s[k]}" for k in ("keyframe", "fixed", "welded", "held", "locked", "driven") if s.get(k)
+        )
+        lines.append(
+            f"rigid: {r['rigid']['mjcf']}; integrator {s['integrator']} (from the "
+            f"{s['integrator_from']}); MJCF timestep {s['mjcf_timestep_s']:g} s" + (f"; {changed}" if changed else "")
+        )
         lines += _model_lines(r["rigid"]["model"])
     return "\n".join(lines)
 

@@ -42,9 +42,25 @@ from pathlib import Path
 import numba
 from numba import njit
 
-__all__ = ["CACHE_DIR", "FAST", "FAST_NO_FMA", "FLAGS", "jit", "kernel", "kernel_twin", "CHUNK_VERTS", "PARALLEL_MIN_VERTS",
-           "use_parallel", "usable_threads", "limit_threads", "chunk_count", "kernel_sources",
-           "prune_old_caches", "compile_notice", "numba_info"]
+__all__ = [
+    "CACHE_DIR",
+    "FAST",
+    "FAST_NO_FMA",
+    "FLAGS",
+    "jit",
+    "kernel",
+    "kernel_twin",
+    "CHUNK_VERTS",
+    "PARALLEL_MIN_VERTS",
+    "use_parallel",
+    "usable_threads",
+    "limit_threads",
+    "chunk_count",
+    "kernel_sources",
+    "prune_old_caches",
+    "compile_notice",
+    "numba_info",
+]
 
 # Fast-math without the flags that assume no NaN or infinity: fused
 # multiply-adds and reciprocals, but the divergence check still sees NaN.
@@ -71,8 +87,11 @@ CHUNK_VERTS = 64
 # over several lines) or "import x.y as z"; read with a pattern, as parsing the
 # package would cost 0.2 s at each import. A docstring line that looks like an
 # import only adds a module to the key.
-_IMPORT = re.compile(r"^[ \t]*(?:from[ \t]+(\.*)([\w.]*)[ \t]+import[ \t]+(\([^)]*\)|[^\n;#]*)"
-                     r"|import[ \t]+([^\n;#]*))", re.MULTILINE)
+_IMPORT = re.compile(
+    r"^[ \t]*(?:from[ \t]+(\.*)([\w.]*)[ \t]+import[ \t]+(\([^)]*\)|[^\n;#]*)"
+    r"|import[ \t]+([^\n;#]*))",
+    re.MULTILINE,
+)
 
 
 def _module_imports(source: str, module: str, is_package: bool, modules: set[str]) -> tuple[set[str], bool]:
@@ -88,7 +107,7 @@ def _module_imports(source: str, module: str, is_package: bool, modules: set[str
         else:
             if dots:  # relative: from the module's package, up len(dots) - 1
                 parts = module.split(".")
-                origin = ".".join(parts[:len(parts) - len(dots) + is_package] + ([origin] if origin else []))
+                origin = ".".join(parts[: len(parts) - len(dots) + is_package] + ([origin] if origin else []))
             names = [f"{origin}.{name.split()[0]}" for name in from_names.strip("()").split(",") if name.strip()]
         for name in names:  # a module, or a name of a module
             compiles |= name == "numba" or name.startswith("numba.") or name in compilers
@@ -130,7 +149,8 @@ def _cache_dir(package_root: Path = Path(__file__).resolve().parent) -> str:
         digest.update(path.relative_to(package_root).as_posix().encode())
         digest.update(path.read_bytes())
     base = os.environ.get("NUMBA_CACHE_DIR") or os.path.join(
-        os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache"), "hybrid")
+        os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache"), "hybrid"
+    )
     return os.path.join(base, "numba-" + digest.hexdigest()[:16])
 
 
@@ -139,8 +159,9 @@ CACHE_DIR = _cache_dir()
 CACHE_KEEP_DAYS = 30
 
 
-def prune_old_caches(cache_dir: str = CACHE_DIR, keep_days: float = CACHE_KEEP_DAYS,
-                     now: float | None = None) -> list[str]:
+def prune_old_caches(
+    cache_dir: str = CACHE_DIR, keep_days: float = CACHE_KEEP_DAYS, now: float | None = None
+) -> list[str]:
     """Mark cache_dir as used now, and remove its sibling folders of other versions
     of the kernel sources ("numba-" and 16 hex digits) not used for keep_days: each
     kernel change or numba upgrade leaves one (5-12 MB). Returns the folders removed."""
@@ -194,6 +215,7 @@ def _prepare_numba() -> None:
         fcntl = None
     original = caching.IndexDataCacheFile.save
     if fcntl is not None and not getattr(original, "_hybrid_locked", False):
+
         def save(self, key, data):
             if not str(self._cache_path).startswith(CACHE_DIR):
                 return original(self, key, data)
@@ -228,25 +250,28 @@ def jit(fn=None, **flags):
     """`numba.njit(cache=True, **flags)` caching into `CACHE_DIR`, without the C-callable
     copy (`FLAGS`); for compiled helpers outside the step (they keep numba's default
     arithmetic flags)."""
+
     def wrap(f):
         with _our_cache():
             return njit(cache=True, no_cfunc_wrapper=True, **flags)(f)
+
     return wrap if fn is None else wrap(fn)
 
 
 def kernel(fn=None, **extra):
     """`@kernel`: compile a step kernel with the step's flags (`extra` adds or replaces some)."""
+
     def wrap(f):
         with _our_cache():
             return njit(**{**FLAGS, **extra})(f)
+
     return wrap if fn is None else wrap(fn)
 
 
 def kernel_twin(fn, **extra):
     """(serial, parallel) builds of one kernel source. The parallel copy gets its
     own qualified name so that the two builds keep separate on-disk caches."""
-    par = types.FunctionType(fn.__code__, fn.__globals__, fn.__name__ + "_parallel", fn.__defaults__,
-                             fn.__closure__)
+    par = types.FunctionType(fn.__code__, fn.__globals__, fn.__name__ + "_parallel", fn.__defaults__, fn.__closure__)
     par.__qualname__ = fn.__qualname__ + "_parallel"
     par.__doc__ = fn.__doc__
     with _our_cache():
@@ -353,5 +378,7 @@ def compile_notice(estimate_s: float, stream=None, *, tick_s: float = 1.0):
         event.unregister("numba:compile", listener)
         done.set()
         if state["t0"] is not None:
-            write(("\n" if tty else "") + f"hybrid: compiled in {state['spent']:.1f} s; "
-                  f"later runs load the kernels from {CACHE_DIR}\n")
+            write(
+                ("\n" if tty else "") + f"hybrid: compiled in {state['spent']:.1f} s; "
+                f"later runs load the kernels from {CACHE_DIR}\n"
+            )

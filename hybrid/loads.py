@@ -43,8 +43,15 @@ class LoadGroup:
     """The points whose forces one part of the skeleton takes: kind "body" (a linked
     body: rows, its rows in the coupling's link order) or "nail" (a nailed region)."""
 
-    def __init__(self, kind: str, name: str, vert: np.ndarray, rows: np.ndarray | None = None,
-                 body_id: int = -1, centre_m: np.ndarray | None = None):
+    def __init__(
+        self,
+        kind: str,
+        name: str,
+        vert: np.ndarray,
+        rows: np.ndarray | None = None,
+        body_id: int = -1,
+        centre_m: np.ndarray | None = None,
+    ):
         self.kind, self.name, self.vert, self.rows = kind, name, vert, rows
         self.body_id, self.centre_m = body_id, centre_m
 
@@ -79,11 +86,15 @@ class Loads:
                 self.groups.append(LoadGroup("body", name, sim.rigid.link_vert[rows], rows, body_id=int(b)))
             self.joints = [(n, int(sim.mj_model.joint(n).id)) for n in system.controls.load_joints]
         rest = model.mesh.vert_pos
-        for k, term in enumerate(model.scene.constraints):
+        for _k, term in enumerate(model.scene.constraints):
             if isinstance(term, Nailed):
-                idx = (model.regions[term.region] if isinstance(term.region, str) and term.region in model.regions
-                       else select(term.region, rest, name=term.name, regions=model.regions,
-                                   face_vert=model.mesh.face_vert))
+                idx = (
+                    model.regions[term.region]
+                    if isinstance(term.region, str) and term.region in model.regions
+                    else select(
+                        term.region, rest, name=term.name, regions=model.regions, face_vert=model.mesh.face_vert
+                    )
+                )
                 idx = np.asarray(idx, np.int64)
                 self.groups.append(LoadGroup("nail", term.name, idx, centre_m=rest[idx].mean(axis=0)))
         held = [g.vert for g in self.groups]

@@ -53,9 +53,9 @@ _CORE_AFTER = {
     "implicit_max_iter": "implicit Euler's Newton iteration cap",
     "max_speed": "m/s: a point faster than this has run away",
     "volume_shake": "bool: the volume projection's direction is the gradient where the step starts (SHAKE: "
-                    "symplectic; the continuum formulation), else at the predicted positions (the paper's)",
+    "symplectic; the continuum formulation), else at the predicted positions (the paper's)",
     "parallel": "bool: the per-point passes run their multi-core build (hybrid.kernel); in a model, that "
-                "they may: the simulation times both builds as it runs (hybrid.builds)",
+    "they may: the simulation times both builds as it runs (hybrid.builds)",
 }
 _TERM_ARRAYS = {name: default for cls in TERM_CLASSES for name, default in cls.arrays.items()}
 
@@ -63,7 +63,8 @@ MembraneArrays = NamedTuple("MembraneArrays", [(k, object) for k in (*_CORE_BEFO
 MembraneArrays.__doc__ = (
     "What the compiled step reads, built by `compile_scene`: "
     + "; ".join(f"{k} {v}" for k, v in {**_CORE_BEFORE, **_CORE_AFTER}.items() if v)
-    + "; and the arrays of each term (hybrid.terms), empty when the scene lacks it.")
+    + "; and the arrays of each term (hybrid.terms), empty when the scene lacks it."
+)
 
 
 @dataclass(frozen=True)
@@ -77,6 +78,7 @@ class Model:
     and stability); dt_stable_s: the largest step the per-point linear
     analysis deems stable (s); rigid: the rigid part, or None.
     """
+
     scene: Scene
     mesh: Mesh
     regions: dict
@@ -97,22 +99,39 @@ class Model:
     def dt_s(self) -> float:
         return self.arrays.dt
 
-    def with_dt(self, dt_s: float, integrator: str | None = None) -> "Model":
+    def with_dt(self, dt_s: float, integrator: str | None = None) -> Model:
         """The same model with another time step (no file is read again)."""
         _check_dt(dt_s)
         integ = self.arrays.integrator if integrator is None else _integrator_id(integrator, self.scene.formulation)
         arrays = self.arrays._replace(dt=float(dt_s), integrator=integ)
         scene = dataclasses.replace(self.scene, dt_s=float(dt_s), integrator=INTEGRATORS[integ])
         dt_stable = _stable_dt(arrays, self.vert_stiffness, self.vert_viscosity)
-        return Model(scene, self.mesh, self.regions, arrays, self.terms, self.python_schedules,
-                     self.vert_stiffness, dt_stable, self.rigid, self.link_vert, self.vert_viscosity)
+        return Model(
+            scene,
+            self.mesh,
+            self.regions,
+            arrays,
+            self.terms,
+            self.python_schedules,
+            self.vert_stiffness,
+            dt_stable,
+            self.rigid,
+            self.link_vert,
+            self.vert_viscosity,
+        )
 
     def region_faces(self, name: str) -> np.ndarray:
         """The faces of the named region, by the rule the terms use (`hybrid.regions.faces_of`)."""
-        return _regions.faces_of(self.scene.regions[name], self.mesh.vert_pos, self.mesh.face_vert,
-                                 self.scene.regions, self.regions[name], name=name)
+        return _regions.faces_of(
+            self.scene.regions[name],
+            self.mesh.vert_pos,
+            self.mesh.face_vert,
+            self.scene.regions,
+            self.regions[name],
+            name=name,
+        )
 
-    def without_speed_limit(self) -> "Model":
+    def without_speed_limit(self) -> Model:
         """The same model without the runaway test (`max_speed_m_s`): for numerical
         studies of runs that move fast while converging; a run still stops on
         non-finite values."""
@@ -138,8 +157,10 @@ def _integrator_id(name, formulation):
         raise SceneError(f"integrator: expected one of {list(INTEGRATORS)}, received {name!r}")
     if name == "implicit_euler" and formulation != "continuum":
         # the paper's shape memory and muscle derive from no energy: no Hessian to solve with
-        raise SceneError(f"integrator: 'implicit_euler' needs formulation 'continuum' (forces with a Hessian), "
-                         f"received formulation {formulation!r}; use 'symplectic_euler' or 'explicit_euler'")
+        raise SceneError(
+            f"integrator: 'implicit_euler' needs formulation 'continuum' (forces with a Hessian), "
+            f"received formulation {formulation!r}; use 'symplectic_euler' or 'explicit_euler'"
+        )
     return INTEGRATOR_ID[name]
 
 
@@ -166,13 +187,19 @@ def _refine_file_mesh(pos, face, level):
     """A file mesh's faces split into four `level` times, the new points projected onto
     the sphere through its points (`MeshSpec`)."""
     from .mesh.refine import fit_sphere, split_faces
-    npoint = len(pos) + (4 ** level - 1) * len(face) // 2  # closed: E = 3F/2, F x 4 a level
+
+    npoint = len(pos) + (4**level - 1) * len(face) // 2  # closed: E = 3F/2, F x 4 a level
     if npoint > checks.MAX_POINTS:  # before any array is allocated
-        raise SceneError(f"mesh.level: level {level} splits the file mesh's {len(face)} faces into "
-                         f"{len(face) * 4 ** level} (about {npoint} points); expected at most {checks.MAX_POINTS} points")
+        raise SceneError(
+            f"mesh.level: level {level} splits the file mesh's {len(face)} faces into "
+            f"{len(face) * 4**level} (about {npoint} points); expected at most {checks.MAX_POINTS} points"
+        )
     try:
-        ctr, radius = fit_sphere(pos, SPHERE_FIT_REL_TOL, "mesh.level on a file mesh (new points go onto "
-                                 "the surface it samples, known for a sphere)")
+        ctr, radius = fit_sphere(
+            pos,
+            SPHERE_FIT_REL_TOL,
+            "mesh.level on a file mesh (new points go onto the surface it samples, known for a sphere)",
+        )
     except MeshError as exc:
         raise SceneError(f"{exc}; or no mesh.level") from None
     return split_faces(pos, face, level, center=ctr, radius_m=radius)
@@ -181,6 +208,7 @@ def _refine_file_mesh(pos, face, level):
 def build_mesh(scene: Scene) -> Mesh:
     """The scene's surface: a given Mesh, a mesh file, or a generator."""
     from . import mesh as _mesh
+
     spec = scene.mesh
     if isinstance(spec, Mesh):
         return spec
@@ -188,8 +216,11 @@ def build_mesh(scene: Scene) -> Mesh:
         raise SceneError(f"mesh: expected a MeshSpec or a hybrid.mesh.Mesh, received {type(spec).__name__}")
     # each field checked by the kind MeshSpec gives it (the scene file reads the same);
     # the generator by the choice below, whose message also offers a path
-    val = {f.name: check_value(f"mesh.{f.name}", f.metadata["kind"], getattr(spec, f.name), f.metadata)
-           for f in dataclasses.fields(MeshSpec) if getattr(spec, f.name) is not None and f.name != "generator"}
+    val = {
+        f.name: check_value(f"mesh.{f.name}", f.metadata["kind"], getattr(spec, f.name), f.metadata)
+        for f in dataclasses.fields(MeshSpec)
+        if getattr(spec, f.name) is not None and f.name != "generator"
+    }
     center = np.asarray(val["center_m"])
     if spec.path is not None:
         m = Mesh.load(scene.resolve(spec.path))
@@ -201,20 +232,25 @@ def build_mesh(scene: Scene) -> Mesh:
     radius = val["radius_m"]
     gen = spec.generator
     if val.get("level") is not None and gen not in LEVEL_GENERATORS:
-        raise SceneError(f"mesh.level: expected a generator that refines by level ({', '.join(LEVEL_GENERATORS)}), "
-                         f"received generator={gen!r}")
+        raise SceneError(
+            f"mesh.level: expected a generator that refines by level ({', '.join(LEVEL_GENERATORS)}), "
+            f"received generator={gen!r}"
+        )
     for key, what in (("conform_z_m", "latitudes"), ("conform_azimuth_deg", "azimuths")):
         if val.get(key) and gen not in ("uv_sphere", "ring_sphere"):
-            raise SceneError(f"mesh.{key}: expected a generator with circles of latitude (uv_sphere or "
-                             f"ring_sphere), received generator={gen!r}; or no {what} (--set mesh.{key}=[])")
+            raise SceneError(
+                f"mesh.{key}: expected a generator with circles of latitude (uv_sphere or "
+                f"ring_sphere), received generator={gen!r}; or no {what} (--set mesh.{key}=[])"
+            )
     conform, azimuths = val.get("conform_z_m", ()), val.get("conform_azimuth_deg", ())
     npoint = _mesh.level_counts(val.get("level") or 0)[2]
     try:
         if gen == "fibonacci_sphere":
             return _mesh.fibonacci_sphere(npoint, radius, center=tuple(center))
         if gen == "ring_sphere":
-            return _mesh.ring_sphere(npoint, radius, center=tuple(center), conform_z=conform,
-                                     conform_azimuth_deg=azimuths)
+            return _mesh.ring_sphere(
+                npoint, radius, center=tuple(center), conform_z=conform, conform_azimuth_deg=azimuths
+            )
     except MeshError as exc:
         raise SceneError(f"mesh: {exc}") from None
     if gen == "uv_sphere":
@@ -222,11 +258,19 @@ def build_mesh(scene: Scene) -> Mesh:
             val["segments"], val["rings"], _ = _mesh.level_counts(val["level"])
         npoint = val["segments"] * (val["rings"] - 1) + 2
         if npoint > checks.MAX_POINTS:  # before any array is allocated
-            raise SceneError(f"mesh: segments = {val['segments']} x rings = {val['rings']} gives {npoint} points; "
-                             f"expected at most {checks.MAX_POINTS}")
+            raise SceneError(
+                f"mesh: segments = {val['segments']} x rings = {val['rings']} gives {npoint} points; "
+                f"expected at most {checks.MAX_POINTS}"
+            )
         try:
-            return _mesh.uv_sphere(radius, val["segments"], val["rings"], center=tuple(center), conform_z=conform,
-                                  conform_azimuth_deg=azimuths)
+            return _mesh.uv_sphere(
+                radius,
+                val["segments"],
+                val["rings"],
+                center=tuple(center),
+                conform_z=conform,
+                conform_azimuth_deg=azimuths,
+            )
         except MeshError as exc:
             raise SceneError(f"mesh: {exc}") from None
     if gen == "icosphere":
@@ -239,8 +283,9 @@ def build_mesh(scene: Scene) -> Mesh:
 def _masses(spec: Masses, mesh: Mesh, regions: dict) -> np.ndarray:
     given = [k for k in ("total_kg", "density_kg_per_m2", "per_vertex_kg") if getattr(spec, k) is not None]
     if len(given) != 1:
-        raise SceneError(f"masses: expected exactly one of total_kg, density_kg_per_m2, per_vertex_kg, "
-                         f"received {given or 'none'}")
+        raise SceneError(
+            f"masses: expected exactly one of total_kg, density_kg_per_m2, per_vertex_kg, received {given or 'none'}"
+        )
     area = vertex_area(mesh.vert_pos, mesh.face_vert)
     if spec.total_kg is not None:
         total = checks.positive("masses.total_kg", spec.total_kg, checks.MAX_MASS_KG, " kg")
@@ -251,12 +296,16 @@ def _masses(spec: Masses, mesh: Mesh, regions: dict) -> np.ndarray:
             raise SceneError(f"masses.per_vertex_kg: expected {mesh.nvert} values, received shape {m.shape}")
         bad = np.nonzero(~(m > 0) | ~np.isfinite(m))[0]
         if bad.size:
-            raise SceneError(f"masses.per_vertex_kg: expected masses > 0 kg, received {float(m[bad[0]])!r} "
-                             f"at vertices {bad[:8].tolist()}")
+            raise SceneError(
+                f"masses.per_vertex_kg: expected masses > 0 kg, received {float(m[bad[0]])!r} "
+                f"at vertices {bad[:8].tolist()}"
+            )
         bad = np.nonzero(m > checks.MAX_MASS_KG)[0]
         if bad.size:
-            raise SceneError(f"masses.per_vertex_kg: expected masses > 0 kg and <= {checks.MAX_MASS_KG:g} kg "
-                             f"(a physical bound), received {float(m[bad[0]])!r} at vertices {bad[:8].tolist()}")
+            raise SceneError(
+                f"masses.per_vertex_kg: expected masses > 0 kg and <= {checks.MAX_MASS_KG:g} kg "
+                f"(a physical bound), received {float(m[bad[0]])!r} at vertices {bad[:8].tolist()}"
+            )
         return m.copy()
     dens = spec.density_kg_per_m2
     if not isinstance(dens, dict) or not dens:
@@ -264,19 +313,23 @@ def _masses(spec: Masses, mesh: Mesh, regions: dict) -> np.ndarray:
     m = np.full(mesh.nvert, np.nan)
     for name, rho in dens.items():
         rho = checks.positive(f"masses.density_kg_per_m2[{name!r}]", rho, checks.MAX_MASS_KG, " kg/m^2")
-        idx = _regions.select(name, mesh.vert_pos, name=f"masses.density_kg_per_m2[{name!r}]", regions=regions,
-                               face_vert=mesh.face_vert)
+        idx = _regions.select(
+            name, mesh.vert_pos, name=f"masses.density_kg_per_m2[{name!r}]", regions=regions, face_vert=mesh.face_vert
+        )
         m[idx] = rho * area[idx]
     missing = np.nonzero(np.isnan(m))[0]
     if missing.size:
-        raise SceneError(f"masses.density_kg_per_m2: vertices {missing[:8].tolist()} ({missing.size} in all) "
-                         f"lie in none of the regions {list(dens)}; expected every vertex covered")
+        raise SceneError(
+            f"masses.density_kg_per_m2: vertices {missing[:8].tolist()} ({missing.size} in all) "
+            f"lie in none of the regions {list(dens)}; expected every vertex covered"
+        )
     return m
 
 
 def _region(sel, mesh, regions, what):
-    return _regions.select(sel, mesh.vert_pos, name=what, regions=regions, border_vert=mesh.border_vert,
-                           face_vert=mesh.face_vert)
+    return _regions.select(
+        sel, mesh.vert_pos, name=what, regions=regions, border_vert=mesh.border_vert, face_vert=mesh.face_vert
+    )
 
 
 #: the share of the stable-step estimate that dt_s = "auto" takes (the estimate is
@@ -288,16 +341,17 @@ def nice_floor(x: float) -> float:
     """The largest 1, 2 or 5 x 10^k at most x (> 0): a step that reads well in tables."""
     k = math.floor(math.log10(x))
     for mant in (5.0, 2.0, 1.0):
-        if mant * 10.0 ** k <= x * (1 + 1e-12):
-            return mant * 10.0 ** k
-    return 10.0 ** k
+        if mant * 10.0**k <= x * (1 + 1e-12):
+            return mant * 10.0**k
+    return 10.0**k
 
 
 def auto_dt(dt_stable_s: float) -> float:
     """The step dt_s = "auto" takes: AUTO_DT_SHARE of the stable-step estimate, rounded
     down by `nice_floor`, and at most MAX_DT_S."""
-    return min(nice_floor(AUTO_DT_SHARE * dt_stable_s), checks.MAX_DT_S) if math.isfinite(dt_stable_s) \
-        else checks.MAX_DT_S
+    return (
+        min(nice_floor(AUTO_DT_SHARE * dt_stable_s), checks.MAX_DT_S) if math.isfinite(dt_stable_s) else checks.MAX_DT_S
+    )
 
 
 #: implicit Euler's "auto" step: this many times symplectic Euler's stable-step estimate,
@@ -357,22 +411,28 @@ def _compile(scene: Scene) -> Model:
 
     b = Build(mesh, regions, vert_mass, len(TERMS))
     b.selectors = dict(scene.regions)
-    for section, terms, types in (("forces", scene.forces, FORCE_TYPES),
-                                  ("constraints", scene.constraints, CONSTRAINT_TYPES)):
+    for section, terms, types in (
+        ("forces", scene.forces, FORCE_TYPES),
+        ("constraints", scene.constraints, CONSTRAINT_TYPES),
+    ):
         for term in terms:
             if type(term) not in types.values():
-                raise SceneError(f"{section}: expected {_or(cls.__name__ for cls in types.values())}, received "
-                                 f"{type(term).__name__}")
+                raise SceneError(
+                    f"{section}: expected {_or(cls.__name__ for cls in types.values())}, received {type(term).__name__}"
+                )
             term.check_formulation(scene.formulation, f"{section}[{term.name!r}]")
             term.compile(b, f"{section}[{term.name!r}]")
 
     # rigid links: linked points follow their sites
     rigid = None
     if scene.rigid is not None and not scene.rigid.links:
-        raise SceneError(f"rigid.links: expected at least one link of membrane points to a body of "
-                         f"{scene.rigid.mjcf!r}, received none; add [[rigid.links]] or remove [rigid]")
+        raise SceneError(
+            f"rigid.links: expected at least one link of membrane points to a body of "
+            f"{scene.rigid.mjcf!r}, received none; add [[rigid.links]] or remove [rigid]"
+        )
     if scene.rigid is not None:
         from .rigid import build_rigid  # imports mujoco, only for scenes that have rigid parts
+
         rigid, b.link_vert = build_rigid(scene, mesh, regions, vert_mass)
         b.vert_free[b.link_vert] = 0
     # the step: the scene's, else the MJCF's own (a rigid part), else the default
@@ -396,12 +456,17 @@ def _compile(scene: Scene) -> Model:
         ring_vert=np.ascontiguousarray(mesh.ring_vert, np.int32),
         ring_closed=np.ascontiguousarray(mesh.ring_closed, np.uint8),
         vert_rest=np.ascontiguousarray(mesh.vert_pos, np.float64),
-        vert_mass=vert_mass, vert_free=b.vert_free, term_on=b.term_on,
+        vert_mass=vert_mass,
+        vert_free=b.vert_free,
+        term_on=b.term_on,
         **{k: b.out[k] if k in b.out else default(nvert) for k, default in _TERM_ARRAYS.items()},
         vert_weight=b.out["vert_weight"],
         vol0=b.out.get("vol0", 0.0),
-        sched=sched_table, dt=float(dt), integrator=integrator,
-        implicit_tol=_scene_value(scene, "implicit_tol"), implicit_max_iter=_scene_value(scene, "implicit_max_iter"),
+        sched=sched_table,
+        dt=float(dt),
+        integrator=integrator,
+        implicit_tol=_scene_value(scene, "implicit_tol"),
+        implicit_max_iter=_scene_value(scene, "implicit_max_iter"),
         max_speed=_positive(scene.max_speed_m_s, "max_speed_m_s"),
         volume_shake=scene.formulation == "continuum",
         parallel=use_parallel(nvert),
@@ -410,25 +475,39 @@ def _compile(scene: Scene) -> Model:
         if isinstance(arr, np.ndarray):
             arr.flags.writeable = False
     terms = tuple(TERMS[i] for i in range(len(TERMS)) if b.term_on[i])
-    return Model(scene=scene, mesh=mesh, regions=regions, arrays=arrays, terms=terms,
-                 python_schedules=tuple(python_fns), vert_stiffness=b.vert_stiffness,
-                 dt_stable_s=_stable_dt(arrays, b.vert_stiffness, b.vert_viscosity), rigid=rigid,
-                 link_vert=b.link_vert, vert_viscosity=b.vert_viscosity)
+    return Model(
+        scene=scene,
+        mesh=mesh,
+        regions=regions,
+        arrays=arrays,
+        terms=terms,
+        python_schedules=tuple(python_fns),
+        vert_stiffness=b.vert_stiffness,
+        dt_stable_s=_stable_dt(arrays, b.vert_stiffness, b.vert_viscosity),
+        rigid=rigid,
+        link_vert=b.link_vert,
+        vert_viscosity=b.vert_viscosity,
+    )
 
 
 def _refuse_single_points(scene: Scene) -> None:
     """A continuum scene's regions have a physical size: a `nearest` selector (one
     point, whatever the mesh) is refused, naming where it is used."""
     where = [(f"regions.{k}", sel) for k, sel in scene.regions.items()]
-    where += [(f"{t.section}[{t.name!r}].region", t.region) for t in (*scene.forces, *scene.constraints)
-              if "region" in getattr(t, "fields", dict)()]
+    where += [
+        (f"{t.section}[{t.name!r}].region", t.region)
+        for t in (*scene.forces, *scene.constraints)
+        if "region" in getattr(t, "fields", dict)()
+    ]
     if scene.rigid is not None:
         where += [(f"rigid.links[{k.name!r}].region", k.region) for k in scene.rigid.links]
     for what, sel in where:
         if _regions.contains(sel, _regions.Nearest):
-            raise SceneError(f"{what}: a `nearest` selector picks single points, whose share of the surface "
-                             f"changes with the mesh; expected a region of physical size in formulation "
-                             f"'continuum' (a patch of radius_m, a ball, a box, a half-space)")
+            raise SceneError(
+                f"{what}: a `nearest` selector picks single points, whose share of the surface "
+                f"changes with the mesh; expected a region of physical size in formulation "
+                f"'continuum' (a patch of radius_m, a ball, a box, a half-space)"
+            )
 
 
 def _or(names) -> str:

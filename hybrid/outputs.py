@@ -19,8 +19,19 @@ import numpy as np
 from . import checks
 from .errors import HybridError
 
-__all__ = ["out_folder", "default_out", "LOCK_NAME", "FolderLock", "holds_run", "claim_folder",
-           "write_summary", "write_outputs", "plot_name", "plot_trace", "PLOT_BINS"]
+__all__ = [
+    "out_folder",
+    "default_out",
+    "LOCK_NAME",
+    "FolderLock",
+    "holds_run",
+    "claim_folder",
+    "write_summary",
+    "write_outputs",
+    "plot_name",
+    "plot_trace",
+    "PLOT_BINS",
+]
 
 
 def out_folder(out: Path) -> Path:
@@ -31,8 +42,9 @@ def out_folder(out: Path) -> Path:
         with tempfile.TemporaryFile(dir=out):
             pass
     except OSError as exc:
-        raise HybridError(f"--out: expected a folder that can be created and written, received {str(out)!r} "
-                          f"({exc.strerror or exc})") from None
+        raise HybridError(
+            f"--out: expected a folder that can be created and written, received {str(out)!r} ({exc.strerror or exc})"
+        ) from None
     return out
 
 
@@ -68,13 +80,16 @@ class FolderLock:
         except BlockingIOError:
             holder = os.pread(self._fd, 32, 0).decode(errors="replace").strip() or "unknown"
             os.close(self._fd)
-            raise HybridError(f"--out: expected a folder no other run is writing, received {str(folder)!r}, "
-                              f"in use by hybrid run process {holder}; wait for it or choose another --out") from None
+            raise HybridError(
+                f"--out: expected a folder no other run is writing, received {str(folder)!r}, "
+                f"in use by hybrid run process {holder}; wait for it or choose another --out"
+            ) from None
         os.ftruncate(self._fd, 0)
         os.pwrite(self._fd, f"{os.getpid()}\n".encode(), 0)
 
     def release(self) -> None:
         import os
+
         if self._fd is not None:
             os.close(self._fd)  # closing the descriptor releases the flock
             self._fd = None
@@ -115,8 +130,10 @@ def claim_folder(out: Path, *, explicit: bool, overwrite: bool = False) -> tuple
         found = holds_run(out) if not overwrite else None
         if found is not None:
             lock.release()
-            raise HybridError(f"--out: expected a folder that holds no earlier run, received {str(out)!r}, "
-                              f"which holds one ({found}); add --overwrite to replace it, or choose another --out")
+            raise HybridError(
+                f"--out: expected a folder that holds no earlier run, received {str(out)!r}, "
+                f"which holds one ({found}); add --overwrite to replace it, or choose another --out"
+            )
         return out, lock
     for k in range(1, MAX_SUFFIX + 1):
         folder = out if k == 1 else out.with_name(f"{out.name}-{k}")
@@ -131,8 +148,9 @@ def claim_folder(out: Path, *, explicit: bool, overwrite: bool = False) -> tuple
             lock.release()
             continue
         return folder, lock
-    raise HybridError(f"--out: {str(out)!r} and its {MAX_SUFFIX - 1} numbered siblings all hold runs; "
-                      f"choose --out or --overwrite")
+    raise HybridError(
+        f"--out: {str(out)!r} and its {MAX_SUFFIX - 1} numbered siblings all hold runs; choose --out or --overwrite"
+    )
 
 
 def write_summary(summary: dict, out_dir: Path) -> None:
@@ -160,10 +178,14 @@ def write_outputs(result: dict, out_dir: Path, *, plot: bool = True) -> None:
 PLOT_BINS = 2000
 
 # the panels a plot may have, in order: (series, label, log scale)
-_PANELS = (("rib_lift_mm", "rib lift (mm)", False), ("apex_descent_mm", "apex descent (mm)", False),
-           ("volume_rel_error", "volume error |V - V0| / V0", True),
-           ("volume_rel_change", "volume change |V - V0| / V0", False),
-           ("pressure_pa", "pressure (Pa)", False), ("muscle_n_per_m", "muscle stiffness (N/m)", False))
+_PANELS = (
+    ("rib_lift_mm", "rib lift (mm)", False),
+    ("apex_descent_mm", "apex descent (mm)", False),
+    ("volume_rel_error", "volume error |V - V0| / V0", True),
+    ("volume_rel_change", "volume change |V - V0| / V0", False),
+    ("pressure_pa", "pressure (Pa)", False),
+    ("muscle_n_per_m", "muscle stiffness (N/m)", False),
+)
 
 
 def plot_trace(trace, path: Path, *, title: str = "") -> None:
@@ -171,6 +193,7 @@ def plot_trace(trace, path: Path, *, title: str = "") -> None:
     has: rib lift, apex descent, the volume (its error under the exact constraint,
     on a log scale, else its change), pressure and muscle stiffness."""
     import matplotlib
+
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
@@ -180,9 +203,14 @@ def plot_trace(trace, path: Path, *, title: str = "") -> None:
         panels = [p for p in panels if p[0] != "volume_rel_change"]
     # fixed margins: tight_layout took half a second of every run
     height = 1.2 + 1.6 * len(panels)
-    fig, axes = plt.subplots(len(panels), 1, figsize=(7, height), sharex=True, squeeze=False,
-                             gridspec_kw=dict(left=0.13, right=0.97, top=1 - 0.45 / height,
-                                              bottom=0.55 / height, hspace=0.15))
+    fig, axes = plt.subplots(
+        len(panels),
+        1,
+        figsize=(7, height),
+        sharex=True,
+        squeeze=False,
+        gridspec_kw=dict(left=0.13, right=0.97, top=1 - 0.45 / height, bottom=0.55 / height, hspace=0.15),
+    )
     axes = axes[:, 0]
     for ax, (key, label, log) in zip(axes, panels):
         y = a[key]

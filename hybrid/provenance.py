@@ -15,7 +15,7 @@ import platform
 import shlex
 import subprocess
 import sys
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 
 __all__ = ["run_provenance", "package_version", "git_commit"]
@@ -27,6 +27,7 @@ _PACKAGE_ROOT = Path(__file__).resolve().parent
 def package_version() -> str | None:
     """The installed distribution's version (None when the source is not installed)."""
     from importlib import metadata
+
     try:
         return metadata.version("hybrid")
     except metadata.PackageNotFoundError:
@@ -41,8 +42,10 @@ def git_commit(root: Path = _PACKAGE_ROOT.parent) -> dict:
         return {"commit": None, "dirty": None}
 
     def git(*args) -> str:
-        return subprocess.run(["git", "-C", str(root), *args], capture_output=True, text=True, timeout=10,
-                              check=True).stdout.strip()
+        return subprocess.run(
+            ["git", "-C", str(root), *args], capture_output=True, text=True, timeout=10, check=True
+        ).stdout.strip()
+
     try:
         commit = git("rev-parse", "HEAD")
         dirty = bool(git("status", "--porcelain", "--untracked-files=no"))
@@ -55,6 +58,7 @@ def _scene_toml(scene) -> tuple[str | None, str | None]:
     """(the scene as TOML text, None), or (None, why not) for what TOML cannot hold."""
     from .errors import HybridError
     from .scenefile import scene_to_toml
+
     try:
         return scene_to_toml(scene), None
     except HybridError as exc:
@@ -86,7 +90,7 @@ def run_provenance(sim, *, command: list[str] | None = None, overrides=None, wit
         "git_commit": git["commit"],
         "git_dirty": git["dirty"],
         "command": shlex.join(words),
-        "started_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        "started_utc": datetime.now(UTC).isoformat(timespec="seconds"),
         "scene": model.scene.name,
         "scene_toml": toml,
         "overrides": None if overrides is None else list(overrides),
@@ -94,8 +98,13 @@ def run_provenance(sim, *, command: list[str] | None = None, overrides=None, wit
         "integrator": INTEGRATORS[model.arrays.integrator],
         "dt_s": model.dt_s,
         "threads": {"numba_threads": info["numba_threads"], "parallel_build": bool(model.arrays.parallel)},
-        "machine": {"cpu_count": os.cpu_count(), "cpus_usable": _usable_cpus(), "platform": platform.platform(),
-                    "python": platform.python_version(), "numba": info["numba"]},
+        "machine": {
+            "cpu_count": os.cpu_count(),
+            "cpus_usable": _usable_cpus(),
+            "platform": platform.platform(),
+            "python": platform.python_version(),
+            "numba": info["numba"],
+        },
     }
     if why is not None:
         table["scene_toml_error"] = why

@@ -13,15 +13,24 @@ import numpy as np
 from .kernel import jit
 from .mesh.geometry import region_faces
 from .model import MembraneArrays
-from .terms import Membrane, MassSpring, Muscle, MuscleFibres, PassiveFibres, ShapeMemory
+from .terms import MassSpring, Membrane, Muscle, MuscleFibres, PassiveFibres, ShapeMemory
 from .terms.fibres import add_muscle_fibres
-from .terms.passive_fibres import add_passive_fibres, passive_fibres_energy
 from .terms.membrane import add_membrane_serial, membrane_energy
 from .terms.muscle import add_muscle
+from .terms.passive_fibres import add_passive_fibres, passive_fibres_energy
 from .terms.shape_memory import add_shape_memory
 from .terms.springs import add_mass_spring
 
-__all__ = ["internal_forces", "net_internal", "elastic_energy", "region_faces", "swept_volume", "swept_volumes", "quat_rot", "pitch_deg"]
+__all__ = [
+    "internal_forces",
+    "net_internal",
+    "elastic_energy",
+    "region_faces",
+    "swept_volume",
+    "swept_volumes",
+    "quat_rot",
+    "pitch_deg",
+]
 
 #: terms whose forces are internal to the membrane (between its points)
 INTERNAL_TERMS = (Membrane, ShapeMemory, Muscle, MassSpring, MuscleFibres, PassiveFibres)
@@ -38,8 +47,7 @@ def internal_forces(a: MembraneArrays, vert_pos: np.ndarray, sched_val: np.ndarr
         add_membrane_serial(a.mem_vert, a.mem_par, False, vert_pos, np.zeros_like(vert_pos), f)
     if on[ShapeMemory.id]:
         sums = np.zeros((a.sm_vert.shape[0], 9))
-        add_shape_memory(a.sm_vert, a.sm_stiff, a.sm_coef, a.ring_ptr, a.ring_vert, a.ring_closed, vert_pos,
-                         sums, f)
+        add_shape_memory(a.sm_vert, a.sm_stiff, a.sm_coef, a.ring_ptr, a.ring_vert, a.ring_closed, vert_pos, sums, f)
     if on[Muscle.id]:
         add_muscle(a.mus_vert, a.mus_nbr, a.mus_sched, sched_val, vert_pos, f)
     if on[MassSpring.id]:
@@ -56,9 +64,12 @@ def net_internal(vert_pos: np.ndarray, force: np.ndarray) -> dict:
     `force`, with the sums of |F| and |r x F| they are small against."""
     r = vert_pos - vert_pos.mean(axis=0)
     rxf = np.cross(r, force)
-    return {"net_force_n": force.sum(axis=0), "net_moment_n_m": rxf.sum(axis=0),
-            "sum_abs_force_n": float(np.linalg.norm(force, axis=1).sum()),
-            "sum_abs_moment_n_m": float(np.linalg.norm(rxf, axis=1).sum())}
+    return {
+        "net_force_n": force.sum(axis=0),
+        "net_moment_n_m": rxf.sum(axis=0),
+        "sum_abs_force_n": float(np.linalg.norm(force, axis=1).sum()),
+        "sum_abs_moment_n_m": float(np.linalg.norm(rxf, axis=1).sum()),
+    }
 
 
 def elastic_energy(a: MembraneArrays, vert_pos: np.ndarray) -> float | None:
@@ -75,7 +86,7 @@ def elastic_energy(a: MembraneArrays, vert_pos: np.ndarray) -> float | None:
     if a.term_on[MassSpring.id]:
         p = vert_pos[a.spring_vert]
         stretch = np.linalg.norm(p[:, 1] - p[:, 0], axis=1) - a.spring_rest
-        e += float(0.5 * (a.spring_stiff * stretch ** 2).sum())
+        e += float(0.5 * (a.spring_stiff * stretch**2).sum())
     return float(e)
 
 
@@ -91,8 +102,11 @@ def swept_volumes(face_vert: np.ndarray, rest: np.ndarray, pos_frames: np.ndarra
     """`swept_volume` of each frame of pos_frames (nframe, nvert, 3): (nframe,) m^3.
     Compiled: a run reads it every frame, where numpy's temporaries cost a quarter
     of an implicit step at 5,000 points."""
-    return _swept_volumes(np.ascontiguousarray(face_vert, np.int64), np.ascontiguousarray(rest, float),
-                          np.ascontiguousarray(pos_frames, float))
+    return _swept_volumes(
+        np.ascontiguousarray(face_vert, np.int64),
+        np.ascontiguousarray(rest, float),
+        np.ascontiguousarray(pos_frames, float),
+    )
 
 
 @jit
@@ -131,9 +145,14 @@ def _swept_volumes(face_vert, rest, pos_frames):
 def quat_rot(q: np.ndarray) -> np.ndarray:
     """(n, 3, 3) rotation matrices of unit quaternions q (n, 4), w first."""
     w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
-    return np.stack([np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
-                     np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
-                     np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1)], 1)
+    return np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
+        ],
+        1,
+    )
 
 
 def pitch_deg(quat: np.ndarray, axis_body: np.ndarray, anterior: np.ndarray, cranial: np.ndarray) -> np.ndarray:

@@ -17,8 +17,24 @@ import numpy as np
 from .errors import SceneError
 from .mesh.geometry import region_faces, vertex_area
 
-__all__ = ["Indices", "HalfSpace", "Ball", "Box", "Wedge", "Nearest", "Patch", "All", "Border",
-           "Union_", "Intersection", "Difference", "Selector", "select", "contains", "select_faces"]
+__all__ = [
+    "Indices",
+    "HalfSpace",
+    "Ball",
+    "Box",
+    "Wedge",
+    "Nearest",
+    "Patch",
+    "All",
+    "Border",
+    "Union_",
+    "Intersection",
+    "Difference",
+    "Selector",
+    "select",
+    "contains",
+    "select_faces",
+]
 
 
 def _vec3(v, name):
@@ -41,12 +57,14 @@ class Border:
 @dataclass(frozen=True)
 class Indices:
     """Explicit vertex indices."""
+
     indices: tuple[int, ...]
 
 
 @dataclass(frozen=True)
 class HalfSpace:
     """Vertices with (x - point) . normal >= 0 (m)."""
+
     point: tuple[float, float, float]
     normal: tuple[float, float, float]
 
@@ -54,6 +72,7 @@ class HalfSpace:
 @dataclass(frozen=True)
 class Ball:
     """Vertices within `radius` (m) of `center` (m)."""
+
     center: tuple[float, float, float]
     radius: float
 
@@ -61,6 +80,7 @@ class Ball:
 @dataclass(frozen=True)
 class Box:
     """Vertices inside the axis-aligned box [lo, hi] (m)."""
+
     lo: tuple[float, float, float]
     hi: tuple[float, float, float]
 
@@ -75,6 +95,7 @@ class Wedge:
     """Vertices whose azimuth about the vertical (z) axis through `center` (m) lies
     from `from_deg` to `to_deg` (degrees from +x toward +y, counter-clockwise seen
     from +z; the wedge may cross 180), borders included."""
+
     from_deg: float
     to_deg: float
     center: tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -83,6 +104,7 @@ class Wedge:
 @dataclass(frozen=True)
 class Nearest:
     """For each given point (m), the nearest vertex."""
+
     points: tuple[tuple[float, float, float], ...]
 
 
@@ -93,6 +115,7 @@ class Patch:
     each face's area per point) must cover pi radius_m^2 (the area a ball centred
     on a sphere cuts from it, exactly, and on any smooth surface to second order)
     within a rim of one local edge length; otherwise the region is refused."""
+
     center: tuple[float, float, float]
     radius_m: float
 
@@ -110,12 +133,14 @@ class Intersection:
 @dataclass(frozen=True)
 class Difference:
     """Vertices of `base` that are not in `minus`."""
+
     base: object
     minus: object
 
 
-Selector = Union[All, Border, Indices, HalfSpace, Ball, Box, Wedge, Nearest, Patch, Union_, Intersection,
-                 Difference, str]
+Selector = Union[
+    All, Border, Indices, HalfSpace, Ball, Box, Wedge, Nearest, Patch, Union_, Intersection, Difference, str
+]
 
 
 def contains(sel, cls) -> bool:
@@ -129,8 +154,15 @@ def contains(sel, cls) -> bool:
     return False
 
 
-def select(sel: Selector, vert_pos: np.ndarray, *, name: str, regions: dict | None = None,
-           border_vert: np.ndarray | None = None, face_vert: np.ndarray | None = None) -> np.ndarray:
+def select(
+    sel: Selector,
+    vert_pos: np.ndarray,
+    *,
+    name: str,
+    regions: dict | None = None,
+    border_vert: np.ndarray | None = None,
+    face_vert: np.ndarray | None = None,
+) -> np.ndarray:
     """Evaluate a selector on rest positions vert_pos (nvert, 3) m.
 
     Returns sorted unique int32 indices. A string names a region already
@@ -141,8 +173,10 @@ def select(sel: Selector, vert_pos: np.ndarray, *, name: str, regions: dict | No
     idx = _select(sel, vert_pos, name, regions or {}, (border_vert, face_vert))
     idx = np.unique(idx).astype(np.int32)
     if idx.size == 0:
-        raise SceneError(f"region {name!r}: expected at least one vertex, the selector {sel!r} "
-                         f"selects none of the {len(vert_pos)} vertices")
+        raise SceneError(
+            f"region {name!r}: expected at least one vertex, the selector {sel!r} "
+            f"selects none of the {len(vert_pos)} vertices"
+        )
     return idx
 
 
@@ -154,14 +188,18 @@ def _select(sel, vert_pos, name, regions, surface, depth=0) -> np.ndarray:
     nvert = len(vert_pos)
     border_vert, face_vert = surface
     if depth > MAX_SELECTOR_DEPTH:
-        raise SceneError(f"region {name!r}: selectors nested more than {MAX_SELECTOR_DEPTH} levels deep; "
-                         f"expected at most {MAX_SELECTOR_DEPTH} (name an inner part as a region instead)")
+        raise SceneError(
+            f"region {name!r}: selectors nested more than {MAX_SELECTOR_DEPTH} levels deep; "
+            f"expected at most {MAX_SELECTOR_DEPTH} (name an inner part as a region instead)"
+        )
     if isinstance(sel, str):
         if sel == "all":
             return np.arange(nvert)
         if sel not in regions:
-            raise SceneError(f"region {name!r}: refers to region {sel!r}, which is not defined; "
-                             f"defined regions: {sorted(regions) + ['all']}")
+            raise SceneError(
+                f"region {name!r}: refers to region {sel!r}, which is not defined; "
+                f"defined regions: {sorted(regions) + ['all']}"
+            )
         return regions[sel]
     if isinstance(sel, All):
         return np.arange(nvert)
@@ -173,8 +211,7 @@ def _select(sel, vert_pos, name, regions, surface, depth=0) -> np.ndarray:
             raise SceneError(f"region {name!r}: expected a list of vertex indices, received {sel.indices!r}")
         bad = idx[(idx < 0) | (idx >= nvert)]
         if bad.size:
-            raise SceneError(f"region {name!r}: vertex indices must lie in [0, {nvert}), "
-                             f"received {bad[:5].tolist()}")
+            raise SceneError(f"region {name!r}: vertex indices must lie in [0, {nvert}), received {bad[:5].tolist()}")
         return idx
     if isinstance(sel, HalfSpace):
         p, n = _vec3(sel.point, f"region {name!r}.point"), _vec3(sel.normal, f"region {name!r}.normal")
@@ -211,16 +248,20 @@ def _select(sel, vert_pos, name, regions, surface, depth=0) -> np.ndarray:
         a = _select(sel.base, vert_pos, name, regions, surface, depth + 1)
         b = _select(sel.minus, vert_pos, name, regions, surface, depth + 1)
         return np.setdiff1d(a, b)
-    raise SceneError(f"region {name!r}: expected a selector (indices, half_space, ball, box, wedge, nearest, patch, "
-                     f"all, border, union, intersection, difference or a region name), received {sel!r}")
+    raise SceneError(
+        f"region {name!r}: expected a selector (indices, half_space, ball, box, wedge, nearest, patch, "
+        f"all, border, union, intersection, difference or a region name), received {sel!r}"
+    )
 
 
 def _wedge(sel: Wedge, vert_pos: np.ndarray, name: str) -> np.ndarray:
     c = _vec3(sel.center, f"region {name!r}.center")
     lo, hi = float(sel.from_deg), float(sel.to_deg)
     if not (np.isfinite(lo) and np.isfinite(hi) and abs(lo) <= 360.0 and abs(hi) <= 360.0):
-        raise SceneError(f"region {name!r}: expected from_deg and to_deg in [-360, 360] degrees, "
-                         f"received from_deg={sel.from_deg!r} to_deg={sel.to_deg!r}")
+        raise SceneError(
+            f"region {name!r}: expected from_deg and to_deg in [-360, 360] degrees, "
+            f"received from_deg={sel.from_deg!r} to_deg={sel.to_deg!r}"
+        )
     d = vert_pos - c
     az = np.arctan2(d[:, 1], d[:, 0])
     # the angle turned counter-clockwise from the wedge's first border, in [0, 2 pi)
@@ -252,9 +293,11 @@ def _patch(sel: Patch, vert_pos, face_vert, name) -> np.ndarray:
     want = np.pi * r * r
     tol = 2 * np.pi * r * h + np.pi * h * h  # a rim of one edge length
     if abs(area - want) > tol:
-        raise SceneError(f"region {name!r}: a patch of radius_m = {r:g} m covers {area:.4g} m^2 of this mesh, "
-                         f"expected pi r^2 = {want:.4g} m^2 within {tol:.3g} m^2 (a rim of one edge length, "
-                         f"{h:.3g} m); widen the patch or refine the mesh (or the patch leaves the surface)")
+        raise SceneError(
+            f"region {name!r}: a patch of radius_m = {r:g} m covers {area:.4g} m^2 of this mesh, "
+            f"expected pi r^2 = {want:.4g} m^2 within {tol:.3g} m^2 (a rim of one edge length, "
+            f"{h:.3g} m); widen the patch or refine the mesh (or the patch leaves the surface)"
+        )
     return idx
 
 
@@ -299,8 +342,9 @@ def _expand(sel, selectors: dict, depth: int = 0):
     return sel
 
 
-def select_faces(sel: Selector, vert_pos: np.ndarray, face_vert: np.ndarray, selectors: dict,
-                 *, name: str) -> np.ndarray | None:
+def select_faces(
+    sel: Selector, vert_pos: np.ndarray, face_vert: np.ndarray, selectors: dict, *, name: str
+) -> np.ndarray | None:
     """The faces whose centroid the selector holds, for a selector of geometry only
     (half-spaces, balls, boxes and their combinations, names of such regions): on
     a mesh whose edges follow the region's border (e.g. `mesh.conform_z_m`) these
@@ -316,8 +360,9 @@ def select_faces(sel: Selector, vert_pos: np.ndarray, face_vert: np.ndarray, sel
     return np.unique(_select(geo, tri.mean(axis=1), name, {}, (None, None))).astype(np.int64)
 
 
-def faces_of(sel: Selector, vert_pos: np.ndarray, face_vert: np.ndarray, selectors: dict, verts: np.ndarray,
-             *, name: str) -> np.ndarray:
+def faces_of(
+    sel: Selector, vert_pos: np.ndarray, face_vert: np.ndarray, selectors: dict, verts: np.ndarray, *, name: str
+) -> np.ndarray:
     """A region's faces, by the one rule the terms and the readouts share: those whose
     centroid it holds for a region of geometry (`select_faces`), else those with two
     of their points among its points `verts`."""

@@ -28,9 +28,25 @@ import numpy as np
 
 from .errors import HybridError
 
-__all__ = ["Frames", "frames_from_recording", "frames_from_scene", "key_frames", "breathes", "panel_titles",
-           "sagittal_section", "build_figure", "draw_figure", "render", "write_video", "view", "has_display",
-           "membrane_edges", "draw_membrane", "shown_geoms", "SHOWN_GEOM_GROUPS"]
+__all__ = [
+    "Frames",
+    "frames_from_recording",
+    "frames_from_scene",
+    "key_frames",
+    "breathes",
+    "panel_titles",
+    "sagittal_section",
+    "build_figure",
+    "draw_figure",
+    "render",
+    "write_video",
+    "view",
+    "has_display",
+    "membrane_edges",
+    "draw_membrane",
+    "shown_geoms",
+    "SHOWN_GEOM_GROUPS",
+]
 
 PANEL_TITLES = ("a. rest", "b. peak inspiration", "c. end of expiration")
 #: the same key frames of a scene that does not breathe
@@ -51,6 +67,8 @@ def shown_geoms(geoms: list) -> list:
     `SHOWN_GEOM_GROUPS` (a geom without a group, from an older recording, counts as
     group 0) that are not transparent (rgba alpha > 0)."""
     return [g for g in geoms if int(g.get("group", 0)) in SHOWN_GEOM_GROUPS and float(g["rgba"][3]) > 0]
+
+
 #: how the rest outline is drawn (dashed), in the section and on the 3D view
 REST_STYLE = dict(colors="black", linestyles=(0, (3, 2)), linewidths=1.0)
 _LIGHT = np.array([0.45, -0.35, 0.82]) / np.linalg.norm([0.45, -0.35, 0.82])
@@ -63,6 +81,7 @@ class Frames:
     (n, nbody, 4) (w, x, y, z) for `bodies`; geoms: dicts (body, type, size, pos,
     quat, rgba) in body frames; apex_descent, muscle, rib_lift (n,) for choosing the key frames and the labels;
     regions: the region names, vert_label (nvert,) each point's index in them (-1: none)."""
+
     scene: str
     t: np.ndarray
     pos: np.ndarray
@@ -112,16 +131,33 @@ def frames_from_recording(path: str | Path) -> Frames:
         s = data.get(topic)
         return None if s is None or len(s["value"]) < n else s["value"][:n]
 
-    return Frames(scene=meta.get("scene", path.stem), t=pts["t"][:n], pos=pts["pos"][:n].astype(float),
-                  face_vert=meta["face_vert"], vert_rgba=meta["vert_rgba"], bodies=bodies,
-                  body_pos=body_pos, body_quat=body_quat, geoms=shown_geoms(meta.get("geoms", [])),
-                  apex_descent=series("/apex_descent"), muscle=series("/muscle_stiffness"),
-                  rib_lift=series("/rib_elevation"), regions=list(meta.get("regions", [])),
-                  vert_label=meta.get("vert_label"))
+    return Frames(
+        scene=meta.get("scene", path.stem),
+        t=pts["t"][:n],
+        pos=pts["pos"][:n].astype(float),
+        face_vert=meta["face_vert"],
+        vert_rgba=meta["vert_rgba"],
+        bodies=bodies,
+        body_pos=body_pos,
+        body_quat=body_quat,
+        geoms=shown_geoms(meta.get("geoms", [])),
+        apex_descent=series("/apex_descent"),
+        muscle=series("/muscle_stiffness"),
+        rib_lift=series("/rib_elevation"),
+        regions=list(meta.get("regions", [])),
+        vert_label=meta.get("vert_label"),
+    )
 
 
-def frames_from_scene(scene_arg: str | None, duration_s: float | None = None, *, full: bool = False,
-                      every_s: float = 0.01, overrides=(), without=()) -> Frames:
+def frames_from_scene(
+    scene_arg: str | None,
+    duration_s: float | None = None,
+    *,
+    full: bool = False,
+    every_s: float = 0.01,
+    overrides=(),
+    without=(),
+) -> Frames:
     """Run a scene (a TOML file or a built-in name, with "KEY=VALUE" `overrides` and
     the terms named in `without` removed) and keep its frames in memory. Without
     `duration_s`: the scene's duration if `full`, else up to the end of the first breath."""
@@ -160,13 +196,22 @@ def frames_from_scene(scene_arg: str | None, duration_s: float | None = None, *,
     n = len(keep["t"])
     idx = np.searchsorted(tr["t_s"], np.asarray(keep["t"]) - 1e-12)
     names, label, colours = region_colours(sim.model)
-    return Frames(scene=scene.name, t=np.asarray(keep["t"]), pos=np.asarray(keep["pos"]),
-                  face_vert=np.asarray(sim.model.mesh.face_vert), vert_rgba=colours, bodies=bodies,
-                  body_pos=np.asarray(keep["bpos"]) if bodies else None,
-                  body_quat=np.asarray(keep["bquat"]) if bodies else None,
-                  geoms=shown_geoms(body_geoms(sim.mj_model)) if sim.mj_model is not None else [],
-                  apex_descent=tr["apex_descent_mm"][idx][:n], muscle=_present(tr["muscle_n_per_m"][idx][:n]),
-                  rib_lift=_present(tr["rib_lift_mm"][idx][:n]), regions=names, vert_label=label)
+    return Frames(
+        scene=scene.name,
+        t=np.asarray(keep["t"]),
+        pos=np.asarray(keep["pos"]),
+        face_vert=np.asarray(sim.model.mesh.face_vert),
+        vert_rgba=colours,
+        bodies=bodies,
+        body_pos=np.asarray(keep["bpos"]) if bodies else None,
+        body_quat=np.asarray(keep["bquat"]) if bodies else None,
+        geoms=shown_geoms(body_geoms(sim.mj_model)) if sim.mj_model is not None else [],
+        apex_descent=tr["apex_descent_mm"][idx][:n],
+        muscle=_present(tr["muscle_n_per_m"][idx][:n]),
+        rib_lift=_present(tr["rib_lift_mm"][idx][:n]),
+        regions=names,
+        vert_label=label,
+    )
 
 
 def _present(series: np.ndarray) -> np.ndarray | None:
@@ -191,10 +236,10 @@ def key_frames(fr: Frames) -> tuple[int, int, int]:
             if m[i] > m[i - 1] + tol:  # contracting again: the breath ended at i - 1
                 end = i - 1
                 break
-    if fr.apex_descent is not None and np.ptp(fr.apex_descent[:end + 1]) > 0:
-        peak = int(np.argmax(fr.apex_descent[:end + 1]))
+    if fr.apex_descent is not None and np.ptp(fr.apex_descent[: end + 1]) > 0:
+        peak = int(np.argmax(fr.apex_descent[: end + 1]))
     else:
-        peak = int(np.argmax(np.linalg.norm(fr.pos[:end + 1] - fr.pos[:1], axis=2).max(axis=1)))
+        peak = int(np.argmax(np.linalg.norm(fr.pos[: end + 1] - fr.pos[:1], axis=2).max(axis=1)))
     if peak == end and top is not None and end > 0:  # still settling (a sag): the muscle's peak
         peak = top
     return 0, peak, end
@@ -205,10 +250,14 @@ def _quat_mat(q) -> np.ndarray:
     q = np.asarray(q, float)
     q = q / np.linalg.norm(q, axis=-1, keepdims=True)
     w, x, y, z = np.moveaxis(q, -1, 0)
-    return np.stack([
-        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
-        np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
-        np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1)], -2)
+    return np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
+            np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
+            np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
+        ],
+        -2,
+    )
 
 
 def _geom_segments(fr: Frames, k: int):
@@ -252,8 +301,7 @@ def _bounds(fr: Frames, frames) -> tuple[np.ndarray, float]:
     return 0.5 * (lo + hi), 0.5 * float((hi - lo).max()) * 1.05
 
 
-def _draw_panel(ax, fr: Frames, k: int, centre, half, *, membrane: bool, title: str, px_per_m: float,
-                rest_cut=None):
+def _draw_panel(ax, fr: Frames, k: int, centre, half, *, membrane: bool, title: str, px_per_m: float, rest_cut=None):
     from mpl_toolkits.mplot3d.art3d import Line3DCollection, Poly3DCollection
 
     ax.set_xlim(centre[0] - half, centre[0] + half)
@@ -273,17 +321,27 @@ def _draw_panel(ax, fr: Frames, k: int, centre, half, *, membrane: bool, title: 
         col = fr.vert_rgba[fr.face_vert].mean(axis=1)
         col[:, :3] *= shade[:, None]
         col[:, 3] = 0.85
-        ax.add_collection3d(Poly3DCollection(tri, facecolors=np.clip(col, 0, 1),
-                                             edgecolors=(0, 0, 0, 0.12), linewidths=0.3, zorder=3))
+        ax.add_collection3d(
+            Poly3DCollection(tri, facecolors=np.clip(col, 0, 1), edgecolors=(0, 0, 0, 0.12), linewidths=0.3, zorder=3)
+        )
     segs, radii, cols, pts, psize, pcols = _geom_segments(fr, k)
     if segs:
         widths = np.maximum(np.asarray(radii) * 2 * px_per_m * 0.72, 1.0)  # points (1/72 in)
-        ax.add_collection3d(Line3DCollection(np.asarray(segs), colors=np.clip(np.asarray(cols), 0, 1),
-                                             linewidths=widths, capstyle="round", zorder=1))
+        ax.add_collection3d(
+            Line3DCollection(
+                np.asarray(segs), colors=np.clip(np.asarray(cols), 0, 1), linewidths=widths, capstyle="round", zorder=1
+            )
+        )
     if pts:
         p = np.asarray(pts)
-        ax.scatter(p[:, 0], p[:, 1], p[:, 2], s=(np.asarray(psize) * 2 * px_per_m * 0.72) ** 2,
-                   c=np.clip(np.asarray(pcols), 0, 1), zorder=2)
+        ax.scatter(
+            p[:, 0],
+            p[:, 1],
+            p[:, 2],
+            s=(np.asarray(psize) * 2 * px_per_m * 0.72) ** 2,
+            c=np.clip(np.asarray(pcols), 0, 1),
+            zorder=2,
+        )
     if rest_cut is not None:  # the rest outline (its mid-sagittal cut), over everything
         cut, y0 = rest_cut
         lines = np.stack([cut[:, :, 0], np.full(cut.shape[:2], y0), cut[:, :, 1]], axis=-1)
@@ -371,8 +429,7 @@ def _draw_section(ax, fr: Frames, k: int, y0: float, box, *, membrane: bool):
     length = _nice_length(x_hi - x_lo)
     x0, z0 = x_lo + 0.05 * (x_hi - x_lo), z_lo + 0.06 * (z_hi - z_lo)
     ax.plot([x0, x0 + length], [z0, z0], color="black", linewidth=2.5, solid_capstyle="butt", label="scale bar")
-    ax.text(x0 + 0.5 * length, z0 + 0.015 * (z_hi - z_lo), _length_text(length), ha="center", va="bottom",
-            fontsize=8)
+    ax.text(x0 + 0.5 * length, z0 + 0.015 * (z_hi - z_lo), _length_text(length), ha="center", va="bottom", fontsize=8)
     figures = []
     if fr.apex_descent is not None:
         figures.append(f"apex descent {_mm(fr.apex_descent[k])}")
@@ -404,8 +461,7 @@ def _legend(fig, fr: Frames, membrane: bool):
             if where.size:
                 handles.append(Patch(facecolor=np.clip(fr.vert_rgba[where[0]], 0, 1), label=name))
         if (label < 0).any():
-            handles.append(Patch(facecolor=np.clip(fr.vert_rgba[np.nonzero(label < 0)[0][0]], 0, 1),
-                                 label="no region"))
+            handles.append(Patch(facecolor=np.clip(fr.vert_rgba[np.nonzero(label < 0)[0][0]], 0, 1), label="no region"))
     if membrane:
         handles.append(Line2D([], [], color="black", linestyle=(0, (3, 2)), linewidth=1.0, label="rest outline"))
     if fr.body_pos is not None and fr.geoms:
@@ -418,6 +474,7 @@ def build_figure(fr: Frames, frames=None, *, membrane: bool = True, dpi: int = 1
     """The figure: a 3D view over the mid-sagittal section for each of `frames`
     (default `key_frames(fr)`), and the legend. Returns (matplotlib Figure, frames)."""
     import matplotlib
+
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
@@ -428,17 +485,26 @@ def build_figure(fr: Frames, frames=None, *, membrane: bool = True, dpi: int = 1
     titles = panel_titles(fr)
     width = 4.2 * len(frames)
     fig = plt.figure(figsize=(width, 8.0), dpi=dpi)
-    grid = fig.add_gridspec(2, len(frames), height_ratios=(4.2, 3.4), left=0, right=1, bottom=0.07, top=0.93,
-                            wspace=0, hspace=0.0)
+    grid = fig.add_gridspec(
+        2, len(frames), height_ratios=(4.2, 3.4), left=0, right=1, bottom=0.07, top=0.93, wspace=0, hspace=0.0
+    )
     px_per_m = 4.2 * dpi * 0.75 / (2 * half)  # roughly: the panel's width spans the box
     rest_cut = sagittal_section(fr.pos[0], fr.face_vert, y0)[0] if membrane else None
     for i, k in enumerate(frames):
         ax = fig.add_subplot(grid[0, i], projection="3d")
-        _draw_panel(ax, fr, k, centre, half, membrane=membrane, title=titles[i] if i < len(titles) else "",
-                    px_per_m=px_per_m, rest_cut=(rest_cut, y0) if membrane else None)
+        _draw_panel(
+            ax,
+            fr,
+            k,
+            centre,
+            half,
+            membrane=membrane,
+            title=titles[i] if i < len(titles) else "",
+            px_per_m=px_per_m,
+            rest_cut=(rest_cut, y0) if membrane else None,
+        )
         _draw_section(fig.add_subplot(grid[1, i]), fr, k, y0, box, membrane=membrane)
-    fig.suptitle(f"{fr.scene}: each view above its mid-sagittal section (the plane y = {y0 + 0.0:.3f} m)",
-                 fontsize=11)
+    fig.suptitle(f"{fr.scene}: each view above its mid-sagittal section (the plane y = {y0 + 0.0:.3f} m)", fontsize=11)
     _legend(fig, fr, membrane)
     return fig, frames
 
@@ -461,8 +527,11 @@ def write_video(fr: Frames, path: str | Path, *, fps: int = 25, every_s: float |
     try:
         import imageio_ffmpeg
     except ImportError:
-        raise HybridError("--video: no MP4 encoder; install one with `pip install -e .[video]` (imageio-ffmpeg)") from None
+        raise HybridError(
+            "--video: no MP4 encoder; install one with `pip install -e .[video]` (imageio-ffmpeg)"
+        ) from None
     import matplotlib
+
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
@@ -492,8 +561,15 @@ def write_video(fr: Frames, path: str | Path, *, fps: int = 25, every_s: float |
     return len(picks)
 
 
-def render(source: str | None, out_dir: str | Path, *, video: bool = False, duration_s: float | None = None,
-           overrides=(), without=()) -> dict:
+def render(
+    source: str | None,
+    out_dir: str | Path,
+    *,
+    video: bool = False,
+    duration_s: float | None = None,
+    overrides=(),
+    without=(),
+) -> dict:
     """Draw `source` (a run.mcap, or a scene to run with "KEY=VALUE" `overrides` and the
     terms named in `without` removed) into out_dir: figure4.png, and run.mp4 with
     `video`. Returns {"figure": path, "frames": the key frames' times (s), "titles":
@@ -502,8 +578,10 @@ def render(source: str | None, out_dir: str | Path, *, video: bool = False, dura
     if source is not None and source.endswith(".mcap"):
         given = "--set" if overrides else "--without" if without else None
         if given:
-            raise HybridError(f"{given}: changes a scene before it runs; expected a scene, received the recording "
-                              f"{source!r} (run the scene again with {given}, or render the scene itself)")
+            raise HybridError(
+                f"{given}: changes a scene before it runs; expected a scene, received the recording "
+                f"{source!r} (run the scene again with {given}, or render the scene itself)"
+            )
         fr = frames_from_recording(source)
     else:
         fr = frames_from_scene(source, duration_s, full=video, overrides=overrides, without=without)
@@ -511,8 +589,12 @@ def render(source: str | None, out_dir: str | Path, *, video: bool = False, dura
         raise HybridError(f"{source}: fewer than two frames to draw")
     fig_path = out / "figure4.png"
     picked = draw_figure(fr, fig_path)
-    result = {"figure": fig_path, "frames": [float(fr.t[k]) for k in picked],
-              "titles": [t.split(". ", 1)[-1] for t in panel_titles(fr)], "video": None}
+    result = {
+        "figure": fig_path,
+        "frames": [float(fr.t[k]) for k in picked],
+        "titles": [t.split(". ", 1)[-1] for t in panel_titles(fr)],
+        "video": None,
+    }
     if video:
         result["video"] = out / "run.mp4"
         write_video(fr, result["video"])
@@ -524,6 +606,7 @@ def has_display() -> bool:
     """Whether a window can open: an X11 or Wayland display on Linux; assumed elsewhere."""
     import os
     import sys
+
     if sys.platform.startswith("linux"):
         return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
     return True
@@ -555,8 +638,10 @@ def view(scene_arg: str | None, *, duration_s: float | None = None) -> dict:
     "membrane_geoms": geoms of the last one, "edges": the membrane's edges, "t_s":
     simulated time}. Raises HybridError where no display exists."""
     if not has_display():
-        raise HybridError("view: no display (DISPLAY and WAYLAND_DISPLAY are not set); "
-                          "use `hybrid render` for pictures and video without one")
+        raise HybridError(
+            "view: no display (DISPLAY and WAYLAND_DISPLAY are not set); "
+            "use `hybrid render` for pictures and video without one"
+        )
     import threading
     import time as _time
 

@@ -10,8 +10,8 @@ NAME`, `Scene.without`) apply to any of them.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Callable, Sequence
 
 from . import scenefile
 from .demo import membrane_demo
@@ -39,12 +39,12 @@ def _named(source: str | Path) -> Scene:
         return PYTHON_SCENES[text]()
     if text in scenefile.builtin_scenes():
         return scenefile.load_scene(scenefile.builtin_scene(text))
-    raise SceneError(f"scene {text!r}: no such scene; expected a .toml file or one of: "
-                     f"{', '.join(scene_names())}")
+    raise SceneError(f"scene {text!r}: no such scene; expected a .toml file or one of: {', '.join(scene_names())}")
 
 
-def resolve_scene(source: str | Path | Scene | None = None, *, overrides: Sequence[str] = (),
-                  without: Sequence[str] = ()) -> Scene:
+def resolve_scene(
+    source: str | Path | Scene | None = None, *, overrides: Sequence[str] = (), without: Sequence[str] = ()
+) -> Scene:
     """The `Scene` that `source` names (None: the packaged breathing trunk), with
     `overrides` ("KEY=VALUE" strings) applied, then the terms named in `without`
     removed. Raises SceneError, one line: an unknown name (listing the valid ones),
@@ -54,8 +54,9 @@ def resolve_scene(source: str | Path | Scene | None = None, *, overrides: Sequen
     elif isinstance(source, (str, Path)) or source is None:
         scene = _named(DEFAULT_SCENE if source is None else source)
     else:
-        raise SceneError(f"scene: expected a Scene, a .toml path or one of {scene_names()}, "
-                         f"received {type(source).__name__}")
+        raise SceneError(
+            f"scene: expected a Scene, a .toml path or one of {scene_names()}, received {type(source).__name__}"
+        )
     if overrides:
         scene = scenefile.apply_overrides(scene, list(overrides))
     if without:

@@ -17,7 +17,15 @@ from . import checks
 from .errors import SceneError
 from .scene import RibPair, Ribs, Rigid, RigidLink
 
-__all__ = ["RIGID_KEYS", "RIBS_KEYS", "RIB_PAIR_KEYS", "NAME_LISTS", "rigid_from_table", "rigid_to_table", "reference_angle"]
+__all__ = [
+    "RIGID_KEYS",
+    "RIBS_KEYS",
+    "RIB_PAIR_KEYS",
+    "NAME_LISTS",
+    "rigid_from_table",
+    "rigid_to_table",
+    "reference_angle",
+]
 
 #: the keys of [rigid]: the fields of Rigid
 RIGID_KEYS = tuple(f.name for f in dataclasses.fields(Rigid))
@@ -59,13 +67,20 @@ def rigid_from_table(source: str, rig, selector, schedule, field_value) -> Rigid
         for req in ("region", "body"):
             if req not in tbl:
                 _fail(f"{source}: {p}", f"missing required key {req!r}; valid keys here: ['body', 'name', 'region']")
-        lk.append(RigidLink(region=selector(f"{p}.region", tbl["region"]),
-                            body=checks.text(f"{source}: {p}.body", tbl["body"]),
-                            name=checks.text(f"{source}: {p}.name", tbl.get("name", tbl["body"]))))
-    kw = {"mjcf": checks.text(f"{where}.mjcf", rig["mjcf"]), "links": tuple(lk),
-          "prefix": checks.text(f"{where}.prefix", rig.get("prefix", "")),
-          "add_link_mass": checks.boolean(f"{where}.add_link_mass", rig.get("add_link_mass", True)),
-          "fix_root": checks.boolean(f"{where}.fix_root", rig.get("fix_root", False))}
+        lk.append(
+            RigidLink(
+                region=selector(f"{p}.region", tbl["region"]),
+                body=checks.text(f"{source}: {p}.body", tbl["body"]),
+                name=checks.text(f"{source}: {p}.name", tbl.get("name", tbl["body"])),
+            )
+        )
+    kw = {
+        "mjcf": checks.text(f"{where}.mjcf", rig["mjcf"]),
+        "links": tuple(lk),
+        "prefix": checks.text(f"{where}.prefix", rig.get("prefix", "")),
+        "add_link_mass": checks.boolean(f"{where}.add_link_mass", rig.get("add_link_mass", True)),
+        "fix_root": checks.boolean(f"{where}.fix_root", rig.get("fix_root", False)),
+    }
     for key in NAME_LISTS:
         if key in rig:
             kw[key] = _names(f"{where}.{key}", rig[key])
@@ -75,8 +90,10 @@ def rigid_from_table(source: str, rig, selector, schedule, field_value) -> Rigid
     if "ctrl" in rig:
         ctrl = rig["ctrl"]
         if not isinstance(ctrl, dict):
-            _fail(f"{where}.ctrl", f"expected a table {{actuator name or pattern = schedule}}, received "
-                                   f"{checks.show(ctrl)}")
+            _fail(
+                f"{where}.ctrl",
+                f"expected a table {{actuator name or pattern = schedule}}, received {checks.show(ctrl)}",
+            )
         kw["ctrl"] = {name: schedule(f"rigid.ctrl.{name}", v, 1) for name, v in ctrl.items()}
     if "ribs" in rig:
         kw["ribs"] = _ribs(source, rig["ribs"], field_value)
@@ -108,28 +125,32 @@ def _ribs(source: str, tbl, field_value) -> Ribs:
     kw = _kinded_table(source, "rigid.ribs", tbl, Ribs, field_value)
     pairs = tbl.get("pairs", [])
     if not isinstance(pairs, list) or not pairs or not all(isinstance(x, dict) for x in pairs):
-        _fail(f"{source}: rigid.ribs.pairs", f"expected a non-empty array of tables ([[rigid.ribs.pairs]]), "
-                                             f"received {checks.show(pairs)}")
+        _fail(
+            f"{source}: rigid.ribs.pairs",
+            f"expected a non-empty array of tables ([[rigid.ribs.pairs]]), received {checks.show(pairs)}",
+        )
     out = []
     for k, p in enumerate(pairs):
         path = f"rigid.ribs.pairs[{k}]"
         pk = _kinded_table(source, path, p, RibPair, field_value)
         if "reference_angle_deg" in p:
-            pk["reference_angle_deg"] = reference_angle(f"{source}: {path}.reference_angle_deg",
-                                                        p["reference_angle_deg"])
+            pk["reference_angle_deg"] = reference_angle(
+                f"{source}: {path}.reference_angle_deg", p["reference_angle_deg"]
+            )
         out.append(RibPair(**pk))
     return Ribs(pairs=tuple(out), **kw)
 
 
 def reference_angle(where: str, v) -> float:
     """A rib hinge's spring reference (deg), checked: a number in [-90, 90]."""
-    return checks.number(where, v, lo=-MAX_REFERENCE_ANGLE_DEG, lo_open=False, hi=MAX_REFERENCE_ANGLE_DEG,
-                         hi_open=False)
+    return checks.number(
+        where, v, lo=-MAX_REFERENCE_ANGLE_DEG, lo_open=False, hi=MAX_REFERENCE_ANGLE_DEG, hi_open=False
+    )
 
 
 def _names(where: str, v) -> tuple:
     if not isinstance(v, list):
-        _fail(where, f"expected a list of names, e.g. [\"pelvis\"], received {checks.show(v)}")
+        _fail(where, f'expected a list of names, e.g. ["pelvis"], received {checks.show(v)}')
     for k, x in enumerate(v):
         if not isinstance(x, str) or not x:
             _fail(f"{where}[{k}]", f"expected a non-empty name, received {checks.show(x)}")
@@ -139,9 +160,14 @@ def _names(where: str, v) -> tuple:
 def rigid_to_table(r: Rigid, selector_to, schedule_to) -> dict:
     """The [rigid] table of `r` (inverse of `rigid_from_table`): every key but those
     left unset (TOML has no null), so that `--set rigid.KEY...` finds each table."""
-    d = {"mjcf": str(r.mjcf), "prefix": r.prefix, "add_link_mass": r.add_link_mass,
-         "links": [{"region": selector_to(k.region), "body": k.body, "name": k.name} for k in r.links],
-         "fix_root": r.fix_root, **{key: list(getattr(r, key)) for key in NAME_LISTS}}
+    d = {
+        "mjcf": str(r.mjcf),
+        "prefix": r.prefix,
+        "add_link_mass": r.add_link_mass,
+        "links": [{"region": selector_to(k.region), "body": k.body, "name": k.name} for k in r.links],
+        "fix_root": r.fix_root,
+        **{key: list(getattr(r, key)) for key in NAME_LISTS},
+    }
     for key in _KINDED:
         if getattr(r, key) is not None:
             d[key] = getattr(r, key)

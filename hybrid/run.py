@@ -21,36 +21,61 @@ import time
 import numpy as np
 
 from .errors import HybridError, reduce_exception
+from .loads import Loads, LoadsObserver
 from .model import Model
-from .schedule import Breathing, schedule_eval, stack_schedules
-from .outputs import (FolderLock, claim_folder, default_out, holds_run, out_folder, plot_trace,
-                      write_outputs, write_summary)
+from .outputs import (
+    FolderLock,
+    claim_folder,
+    default_out,
+    holds_run,
+    out_folder,
+    plot_trace,
+    write_outputs,
+    write_summary,
+)
 from .provenance import run_provenance
+from .readouts import pitch_deg, quat_rot, swept_volumes
 from .scene import Muscle, MuscleFibres, SoftVolume, Volume
+from .schedule import Breathing, schedule_eval, stack_schedules
 from .simulation import Simulation
 from .step import F_KE, F_PRESSURE, F_TIME, F_VOLUME, capture_frame
-from .readouts import pitch_deg, quat_rot, swept_volumes
-from .loads import Loads, LoadsObserver
 from .terms.volume import face_volume
 
-__all__ = ["TRACE_KEYS", "METRIC_KEYS", "Trace", "scene_parts", "metric_table", "run", "RunFailed", "RunInterrupted", "FolderLock", "default_out", "run_steps",
-           "out_folder", "claim_folder", "holds_run", "write_summary", "write_outputs", "plot_trace"]
+__all__ = [
+    "TRACE_KEYS",
+    "METRIC_KEYS",
+    "Trace",
+    "scene_parts",
+    "metric_table",
+    "run",
+    "RunFailed",
+    "RunInterrupted",
+    "FolderLock",
+    "default_out",
+    "run_steps",
+    "out_folder",
+    "claim_folder",
+    "holds_run",
+    "write_summary",
+    "write_outputs",
+    "plot_trace",
+]
 
 
 #: the trace's series, one column each (SI units unless the name says mm); a series
 #: of a part the scene lacks is NaN throughout (README, "Metrics")
 TRACE_KEYS = (
     "t_s",
-    "volume_m3",          # enclosed volume (closed surfaces)
-    "rib_lift_mm",        # cranial (+z) displacement of the linked points' centroid (scenes with ribs)
-    "apex_descent_mm",    # caudal (-z) displacement of the apex
-    "volume_rel_error",   # |V - V0| / V0 under the exact volume constraint
-    "pressure_pa",        # gauge pressure (scenes with a volume term)
-    "muscle_n_per_m",     # the first muscle's stiffness (scenes with a muscle)
+    "volume_m3",  # enclosed volume (closed surfaces)
+    "rib_lift_mm",  # cranial (+z) displacement of the linked points' centroid (scenes with ribs)
+    "apex_descent_mm",  # caudal (-z) displacement of the apex
+    "volume_rel_error",  # |V - V0| / V0 under the exact volume constraint
+    "pressure_pa",  # gauge pressure (scenes with a volume term)
+    "muscle_n_per_m",  # the first muscle's stiffness (scenes with a muscle)
     "kinetic_energy_j",
     "volume_rel_change",  # |V - V0| / V0 whatever keeps the volume (closed surfaces)
-    "swept_volume_ml",    # volume the region named "diaphragm" swept inward from rest (scenes with one)
-    "thorax_pitch_deg",   # the thoracic body's pitch change from its start (scenes with rigid.ribs)
+    "swept_volume_ml",  # volume the region named "diaphragm" swept inward from rest (scenes with one)
+    "thorax_pitch_deg",  # the thoracic body's pitch change from its start (scenes with rigid.ribs)
 )
 #: the series a summary gives min, max and their times of (all but the time)
 METRIC_KEYS = TRACE_KEYS[1:]
@@ -74,8 +99,8 @@ class Trace:
         self._spill = spill
         rows = SPILL_ROWS if spill is not None else max(int(capacity), 1)
         self._buf = np.empty((rows, len(TRACE_KEYS)))
-        self._held = 0      # rows in _buf
-        self._written = 0   # rows in the spill file
+        self._held = 0  # rows in _buf
+        self._written = 0  # rows in the spill file
         self.lowest = np.full(len(TRACE_KEYS), np.inf)
         self.highest = np.full(len(TRACE_KEYS), -np.inf)
         self.t_lowest = np.full(len(TRACE_KEYS), np.nan)
@@ -89,21 +114,23 @@ class Trace:
         so that an interrupt between the two leaves the trace as it was."""
         if self._held + k > len(self._buf):
             if self._spill is not None and self._held:
-                self._spill.write(self._buf[:self._held].tobytes())
+                self._spill.write(self._buf[: self._held].tobytes())
                 self._written += self._held
                 self._held = 0
             if self._held + k > len(self._buf):
                 grown = np.empty((max(2 * len(self._buf), self._held + k), len(TRACE_KEYS)))
-                grown[:self._held] = self._buf[:self._held]
+                grown[: self._held] = self._buf[: self._held]
                 self._buf = grown
-        return self._buf[self._held:self._held + k]
+        return self._buf[self._held : self._held + k]
 
     def commit(self, k: int) -> None:
-        rows = self._buf[self._held:self._held + k]
+        rows = self._buf[self._held : self._held + k]
         if k:
             cols = np.arange(len(TRACE_KEYS))
-            for pick, best, when, better in ((rows.argmin(axis=0), self.lowest, self.t_lowest, np.less),
-                                             (rows.argmax(axis=0), self.highest, self.t_highest, np.greater)):
+            for pick, best, when, better in (
+                (rows.argmin(axis=0), self.lowest, self.t_lowest, np.less),
+                (rows.argmax(axis=0), self.highest, self.t_highest, np.greater),
+            ):
                 value = rows[pick, cols]
                 # a series of NaN (a part the scene lacks) stays NaN
                 new = better(value, best) | (np.isnan(value) & ~np.isnan(best))
@@ -113,15 +140,15 @@ class Trace:
 
     def last(self, k: int) -> np.ndarray:
         """The last k rows committed (k at most the rows of the last commit), a view."""
-        return self._buf[self._held - k:self._held]
+        return self._buf[self._held - k : self._held]
 
     def _table(self) -> np.ndarray:
         if self._spill is None or not self._written:
-            return self._buf[:self._held]
+            return self._buf[: self._held]
         self._spill.seek(0)
         head = np.fromfile(self._spill, dtype=float, count=self._written * len(TRACE_KEYS))
         self._spill.seek(0, 2)
-        return np.concatenate([head.reshape(-1, len(TRACE_KEYS)), self._buf[:self._held]])
+        return np.concatenate([head.reshape(-1, len(TRACE_KEYS)), self._buf[: self._held]])
 
     def arrays(self) -> dict:
         """Every series as a float array of len(self) values: copies."""
@@ -145,7 +172,7 @@ class Trace:
 
         def reduce(rows):
             for lo in range(0, len(rows), per):
-                run_ = rows[lo:lo + per]
+                run_ = rows[lo : lo + per]
                 lo_i, hi_i = run_.argmin(axis=0), run_.argmax(axis=0)
                 first, second = np.minimum(lo_i, hi_i), np.maximum(lo_i, hi_i)
                 cols = np.arange(len(TRACE_KEYS))
@@ -165,9 +192,9 @@ class Trace:
                 carry = rows[whole:]
                 left -= count
             self._spill.seek(0, 2)
-            reduce(np.concatenate([carry, self._buf[:self._held]]))
+            reduce(np.concatenate([carry, self._buf[: self._held]]))
         else:
-            reduce(self._buf[:self._held])
+            reduce(self._buf[: self._held])
         table = np.concatenate(parts)
         return {key: table[:, i] for i, key in enumerate(TRACE_KEYS)}
 
@@ -177,9 +204,14 @@ def scene_parts(model: Model) -> frozenset:
     bodies), "closed surface", "volume constraint" (the exact one), "pressure" (a
     volume term, exact or soft), "muscle" and "diaphragm" (a region of that name)."""
     on = model.arrays.term_on
-    parts = {"ribs": model.link_vert.size > 0, "closed surface": model.mesh.closed,
-             "volume constraint": bool(on[Volume.id]), "pressure": bool(on[Volume.id] or on[SoftVolume.id]),
-             "muscle": _breathing(model)[0] is not None, "diaphragm": SWEPT_REGION in model.regions}
+    parts = {
+        "ribs": model.link_vert.size > 0,
+        "closed surface": model.mesh.closed,
+        "volume constraint": bool(on[Volume.id]),
+        "pressure": bool(on[Volume.id] or on[SoftVolume.id]),
+        "muscle": _breathing(model)[0] is not None,
+        "diaphragm": SWEPT_REGION in model.regions,
+    }
     return frozenset(name for name, has in parts.items() if has)
 
 
@@ -190,8 +222,12 @@ def metric_table(trace: Trace) -> dict:
     for key in METRIC_KEYS:
         i = _COL[key]
         if np.isfinite(trace.highest[i]):
-            table[key] = {"min": float(trace.lowest[i]), "max": float(trace.highest[i]),
-                          "t_min_s": float(trace.t_lowest[i]), "t_max_s": float(trace.t_highest[i])}
+            table[key] = {
+                "min": float(trace.lowest[i]),
+                "max": float(trace.highest[i]),
+                "t_min_s": float(trace.t_lowest[i]),
+                "t_max_s": float(trace.t_highest[i]),
+            }
     return table
 
 
@@ -254,9 +290,9 @@ SWEPT_REGION = "diaphragm"
 
 
 #: steps a command-line run starts only when confirmed (--yes)
-CONFIRM_STEPS = 10 ** 8
+CONFIRM_STEPS = 10**8
 #: beyond this many steps the time t = n dt no longer grows by dt in double precision
-MAX_STEPS = 2 ** 53
+MAX_STEPS = 2**53
 
 
 def run_steps(duration_s, dt_s: float, *, confirmed: bool = True, name: str = "--duration") -> int:
@@ -269,15 +305,20 @@ def run_steps(duration_s, dt_s: float, *, confirmed: bool = True, name: str = "-
         raise HybridError(f"{name}: expected a finite time > 0 s, received {duration_s!r}")
     steps = duration_s / dt_s
     if not steps < MAX_STEPS:
-        raise HybridError(f"{name} {duration_s:g} s at dt_s = {dt_s:g} s: expected at most 2^53 = "
-                          f"{MAX_STEPS:.3g} steps (beyond, t + dt no longer advances t), received {steps:.3g}")
+        raise HybridError(
+            f"{name} {duration_s:g} s at dt_s = {dt_s:g} s: expected at most 2^53 = "
+            f"{MAX_STEPS:.3g} steps (beyond, t + dt no longer advances t), received {steps:.3g}"
+        )
     n = int(round(steps))
     if n < 1:
-        raise HybridError(f"{name} {duration_s:g} s: expected at least one step of dt_s = {dt_s:g} s, "
-                          f"received {steps:.3g} steps")
+        raise HybridError(
+            f"{name} {duration_s:g} s: expected at least one step of dt_s = {dt_s:g} s, received {steps:.3g} steps"
+        )
     if n > CONFIRM_STEPS and not confirmed:
-        raise HybridError(f"{name} {duration_s:g} s at dt_s = {dt_s:g} s is {n:.4g} steps, more than "
-                          f"{CONFIRM_STEPS:.0e}; add --yes to run them")
+        raise HybridError(
+            f"{name} {duration_s:g} s at dt_s = {dt_s:g} s is {n:.4g} steps, more than "
+            f"{CONFIRM_STEPS:.0e}; add --yes to run them"
+        )
     return n
 
 
@@ -312,8 +353,18 @@ def _count_stops(nstep: int, periods, extra) -> int:
     return sum(nstep // p for p in periods) + sum(1 for e in extra if all(e % p for p in periods))
 
 
-def run(sim: Simulation, duration_s: float, *, frame_dt_s: float = 0.01, progress: bool = False,
-        observers=(), trace_spill=None, stop=None, provenance: dict | None = None, loads=None) -> dict:
+def run(
+    sim: Simulation,
+    duration_s: float,
+    *,
+    frame_dt_s: float = 0.01,
+    progress: bool = False,
+    observers=(),
+    trace_spill=None,
+    stop=None,
+    provenance: dict | None = None,
+    loads=None,
+) -> dict:
     """Run `sim` for `duration_s`; returns `{"summary": dict, "trace": Trace}`, the
     summary one level down: `run(sim, 4.0)["summary"]["apex_descent_mm"]`
     (docs/metrics.md defines every key of both).
@@ -349,8 +400,10 @@ def run(sim: Simulation, duration_s: float, *, frame_dt_s: float = 0.01, progres
     h = model.dt_s
     nstep = run_steps(duration_s, h, name="duration_s")
     frame_steps = max(1, int(round(frame_dt_s / h)))
-    periods = sorted({min(frame_steps, MAX_STEPS_PER_CALL)}
-                     | {int(o.every_steps) for o in observers if getattr(o, "every_steps", None)})
+    periods = sorted(
+        {min(frame_steps, MAX_STEPS_PER_CALL)}
+        | {int(o.every_steps) for o in observers if getattr(o, "every_steps", None)}
+    )
     apex = _apex_vertex(model)
     link = model.link_vert
     rest = model.mesh.vert_pos
@@ -374,6 +427,7 @@ def run(sim: Simulation, duration_s: float, *, frame_dt_s: float = 0.01, progres
             return float(np.atleast_1d(muscle_fns[0][1](t))[0])
         schedule_eval(muscle_table, 0, t, muscle_val)
         return float(muscle_val[0])
+
     # the end of the last complete expiration, where the body should be back at rest
     cycle_end_step = None
     if breath is not None:
@@ -405,12 +459,14 @@ def run(sim: Simulation, duration_s: float, *, frame_dt_s: float = 0.01, progres
         closed = "closed surface" in parts
         rows[:, _COL["volume_m3"]] = vol if closed else np.nan
         rows[:, _COL["volume_rel_change"]] = np.abs(vol - v0) / v0 if closed else np.nan
-        rows[:, _COL["volume_rel_error"]] = rows[:, _COL["volume_rel_change"]] if "volume constraint" in parts \
-            else np.nan
+        rows[:, _COL["volume_rel_error"]] = (
+            rows[:, _COL["volume_rel_change"]] if "volume constraint" in parts else np.nan
+        )
         rows[:, _COL["pressure_pa"]] = scal[:, F_PRESSURE] if "pressure" in parts else np.nan
         rows[:, _COL["kinetic_energy_j"]] = scal[:, F_KE]
-        rows[:, _COL["swept_volume_ml"]] = -swept_volumes(swept_faces, rest, pos) * 1e6 \
-            if swept_faces is not None else np.nan
+        rows[:, _COL["swept_volume_ml"]] = (
+            -swept_volumes(swept_faces, rest, pos) * 1e6 if swept_faces is not None else np.nan
+        )
         if thorax is not None:
             nonlocal thorax_axis
             bq = frames.body_quat[:k, thorax[0]]
@@ -492,8 +548,11 @@ def run(sim: Simulation, duration_s: float, *, frame_dt_s: float = 0.01, progres
         "metrics": metric_table(trace),
     }
     if model.rigid is not None:  # what the rigid model runs with: the MJCF's own or the scene's
-        summary["rigid"] = {**model.rigid.settings(), "timestep_s": h,
-                            "timestep_from": "mjcf" if model.scene.dt_s is None else "scene"}
+        summary["rigid"] = {
+            **model.rigid.settings(),
+            "timestep_s": h,
+            "timestep_from": "mjcf" if model.scene.dt_s is None else "scene",
+        }
     if loads is not None:
         summary["loads"] = loads.summary()
     if error is not None:

@@ -14,21 +14,55 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Optional
 
 from . import checks
 from .errors import SceneError
+from .terms import (
+    AppliedForce,
+    Attraction,
+    Damping,
+    Gravity,
+    KeepIn,
+    MassSpring,
+    Membrane,
+    Muscle,
+    MuscleFibres,
+    Nailed,
+    PassiveFibres,
+    Prescribed,
+    Pressure,
+    ShapeMemory,
+    SoftVolume,
+    Volume,
+)
 from .terms.base import FORMULATIONS, param
-from .terms import (AppliedForce, Attraction, Damping, Gravity, KeepIn, MassSpring, Membrane, Muscle, Nailed,
-                    Prescribed, ShapeMemory, SoftVolume, Volume)
-from .terms import MuscleFibres, PassiveFibres, Pressure
 
 __all__ = [
-    "MeshSpec", "Masses",
-    "Gravity", "Damping", "ShapeMemory", "Membrane", "MassSpring", "Muscle", "AppliedForce", "Attraction",
-    "SoftVolume", "Nailed", "KeepIn", "Prescribed", "Volume", "RigidLink", "RibPair", "Ribs", "Rigid", "Scene",
-    "INTEGRATORS", "FORMULATIONS",
-    "Pressure", "MuscleFibres", "PassiveFibres",
+    "MeshSpec",
+    "Masses",
+    "Gravity",
+    "Damping",
+    "ShapeMemory",
+    "Membrane",
+    "MassSpring",
+    "Muscle",
+    "AppliedForce",
+    "Attraction",
+    "SoftVolume",
+    "Nailed",
+    "KeepIn",
+    "Prescribed",
+    "Volume",
+    "RigidLink",
+    "RibPair",
+    "Ribs",
+    "Rigid",
+    "Scene",
+    "INTEGRATORS",
+    "FORMULATIONS",
+    "Pressure",
+    "MuscleFibres",
+    "PassiveFibres",
 ]
 
 INTEGRATORS = ("explicit_euler", "symplectic_euler", "implicit_euler")
@@ -72,13 +106,14 @@ class MeshSpec:
     one through the file's points), so a level is refused for a file whose
     points are off a sphere.
     """
-    generator: Optional[str] = param("choice", "uv_sphere", choices=MESH_GENERATORS)
-    path: Optional[str] = param("text", None)
+
+    generator: str | None = param("choice", "uv_sphere", choices=MESH_GENERATORS)
+    path: str | None = param("text", None)
     radius_m: float = param("positive", 0.12, hi=checks.MAX_LENGTH_M)
     segments: int = param("integer", 13, lo=3)
     rings: int = param("integer", 7, lo=2)
     subdivisions: int = param("integer", 3, lo=0, hi=7)
-    level: Optional[int] = param("integer", None, lo=0, hi=16)
+    level: int | None = param("integer", None, lo=0, hi=16)
     conform_z_m: tuple = param("floats", ())
     conform_azimuth_deg: tuple = param("floats", ())
     center_m: tuple[float, float, float] = param("vec3", (0.0, 0.0, 0.0))
@@ -94,16 +129,19 @@ class Masses:
     last listed region wins where regions overlap; every point must be
     covered) or `per_vertex_kg` (one value per point).
     """
-    total_kg: Optional[float] = None
-    density_kg_per_m2: Optional[dict] = None
-    per_vertex_kg: Optional[tuple] = None
+
+    total_kg: float | None = None
+    density_kg_per_m2: dict | None = None
+    per_vertex_kg: tuple | None = None
 
 
 # ------------------------------------------------------------ rigid part
 
+
 @dataclass(frozen=True)
 class RigidLink:
     """Points of `region` attached to MuJoCo body `body` (paper 3.5)."""
+
     region: object
     body: str
     name: str = "rigid_link"
@@ -124,6 +162,7 @@ class RibPair:
     `reference_angle_deg` beyond that. Bodies `NAME_left`, `NAME_right`, joints
     `NAME_left_hinge`, `NAME_right_hinge`, sites `NAME_left_front`, `NAME_right_front`,
     tendon `NAME_sternum`."""
+
     name: str = param("name")
     head_m: tuple = param("vec3")
     front_m: tuple = param("vec3")
@@ -147,6 +186,7 @@ class Ribs:
     its rest length (the costal cartilage and sternum): a compliant link, as a rigid one
     (an equality) would lock two hinges whose axes differ. The thorax's pitch change is
     reported for this body (`thorax_pitch_change_deg_max`)."""
+
     body: str = param("text")
     pairs: tuple = ()  # RibPair tables ([[rigid.ribs.pairs]])
     anterior: tuple = param("vec3", (1.0, 0.0, 0.0))
@@ -168,11 +208,12 @@ class Rigid:
     starts from, actuators driven by schedules, MuJoCo's integrator. Names of joints
     and actuators may be glob patterns ("lumbar*", "*"). The model's file is only read.
     """
+
     mjcf: str
     links: tuple[RigidLink, ...] = ()
     prefix: str = ""
     add_link_mass: bool = True
-    keyframe: Optional[str] = param("text", None)
+    keyframe: str | None = param("text", None)
     fix: tuple = ()  # body names: their joints removed, each fixed to its parent where it starts
     fix_root: bool = False  # every free-floating root body fixed where it starts
     weld: tuple = ()  # body names: welded to the world where they start (a MuJoCo weld)
@@ -181,24 +222,25 @@ class Rigid:
     hold_damping_nms_per_rad: float = param("nonneg", 10.0, hi=checks.MAX_STIFFNESS_N_PER_M)
     lock: tuple = ()  # hinge or slide joint names or patterns: locked where they start
     ctrl: dict = field(default_factory=dict)  # actuator name or pattern -> schedule
-    integrator: Optional[str] = param("choice", None, choices=MUJOCO_INTEGRATORS)
+    integrator: str | None = param("choice", None, choices=MUJOCO_INTEGRATORS)
     load_joints: tuple = ()  # joint names: the points the loads' moments are taken about (hybrid.loads)
-    ribs: Optional[Ribs] = None  # articulated ribs added to the model (hybrid.rigid.ribs)
+    ribs: Ribs | None = None  # articulated ribs added to the model (hybrid.rigid.ribs)
 
 
 @dataclass(frozen=True)
 class Scene:
     """Everything a run needs. SI units. See the module docstring."""
+
     mesh: object = MeshSpec()  # MeshSpec or a hybrid.mesh.Mesh
     masses: Masses = Masses(total_kg=1.0)
     regions: dict = field(default_factory=dict)  # name -> selector, evaluated in order
     forces: tuple = ()
     constraints: tuple = ()
-    rigid: Optional[Rigid] = None
+    rigid: Rigid | None = None
     # None: the MJCF's own timestep for a scene with a rigid part, else DEFAULT_DT_S;
     # "auto": half the model's stable-step estimate, rounded down (hybrid.model.auto_dt; for
     # implicit Euler, 4 times symplectic Euler's: auto_dt_implicit)
-    dt_s: Optional[float] = param("step", None, hi=checks.MAX_DT_S)
+    dt_s: float | None = param("step", None, hi=checks.MAX_DT_S)
     integrator: str = param("choice", "symplectic_euler", choices=INTEGRATORS)
     formulation: str = param("choice", "continuum", choices=FORMULATIONS)
     # implicit Euler's Newton solve (hybrid.implicit): converged when the residual force is at
@@ -209,7 +251,7 @@ class Scene:
     # a point faster than this has run away (tissue moves at cm/s)
     max_speed_m_s: float = param("positive", 50.0)
     name: str = param("name", "scene")
-    base_dir: Optional[str] = None  # relative paths (mesh, MJCF) resolve here
+    base_dir: str | None = None  # relative paths (mesh, MJCF) resolve here
 
     def term_names(self) -> list[str]:
         """Names of all force terms, constraints and rigid links, in order."""
@@ -219,13 +261,12 @@ class Scene:
             names += [link.name for link in self.rigid.links]
         return names
 
-    def without(self, *names: str) -> "Scene":
+    def without(self, *names: str) -> Scene:
         """A copy with the named force terms / constraints / rigid links removed."""
         known = self.term_names()
         for n in names:
             if n not in known:
-                raise SceneError(f"without: no term named {n!r} in scene {self.name!r}; "
-                                 f"terms: {known}")
+                raise SceneError(f"without: no term named {n!r} in scene {self.name!r}; terms: {known}")
         drop = set(names)
         rigid = self.rigid
         if rigid is not None:

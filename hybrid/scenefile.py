@@ -71,12 +71,20 @@ from .scene import Masses, MeshSpec, Scene
 from .terms import CONSTRAINT_TYPES, FORCE_TYPES
 from .terms.base import check_value
 
-__all__ = ["load_scene", "scene_from_dict", "scene_to_dict", "scene_to_toml", "apply_overrides", "builtin_scene", "packaged_model",
-           "builtin_scenes"]
-
+__all__ = [
+    "load_scene",
+    "scene_from_dict",
+    "scene_to_dict",
+    "scene_to_toml",
+    "apply_overrides",
+    "builtin_scene",
+    "packaged_model",
+    "builtin_scenes",
+]
 
 
 # ------------------------------------------------------------------ value checks
+
 
 class _Ctx:
     """Where we are: the file name, for messages."""
@@ -143,22 +151,38 @@ def _join(path, key):
 
 # ------------------------------------------------------------------ selectors and schedules
 
-_SELECTOR_KINDS = ("border", "indices", "half_space", "ball", "box", "wedge", "nearest", "patch", "union",
-                   "intersection", "difference")
+_SELECTOR_KINDS = (
+    "border",
+    "indices",
+    "half_space",
+    "ball",
+    "box",
+    "wedge",
+    "nearest",
+    "patch",
+    "union",
+    "intersection",
+    "difference",
+)
 
 
 def _selector(ctx, path, v, depth=0):
     """A region selector (module docstring) -> a `hybrid.regions` selector."""
     if depth > R.MAX_SELECTOR_DEPTH:
-        ctx.fail(path, f"selectors nested more than {R.MAX_SELECTOR_DEPTH} levels deep; expected at most "
-                       f"{R.MAX_SELECTOR_DEPTH} (name an inner part as a region instead)")
+        ctx.fail(
+            path,
+            f"selectors nested more than {R.MAX_SELECTOR_DEPTH} levels deep; expected at most "
+            f"{R.MAX_SELECTOR_DEPTH} (name an inner part as a region instead)",
+        )
     if isinstance(v, str):
         if not v:
             ctx.fail(path, "expected a region name or a selector table, received ''")
         return v
     if not isinstance(v, dict) or len(v) != 1:
-        ctx.fail(path, f"expected a region name or a table with one selector key of {list(_SELECTOR_KINDS)}, "
-                       f"received {_show(v)}")
+        ctx.fail(
+            path,
+            f"expected a region name or a table with one selector key of {list(_SELECTOR_KINDS)}, received {_show(v)}",
+        )
     kind, arg = next(iter(v.items()))
     p = _join(path, kind)
     if kind == "border":
@@ -166,8 +190,11 @@ def _selector(ctx, path, v, depth=0):
             ctx.fail(p, f"expected true, received {_show(arg)}")
         return R.Border()
     if kind == "indices":
-        if not (isinstance(arg, list) and arg and all(isinstance(i, int) and not isinstance(i, bool) and i >= 0
-                                                      for i in arg)):
+        if not (
+            isinstance(arg, list)
+            and arg
+            and all(isinstance(i, int) and not isinstance(i, bool) and i >= 0 for i in arg)
+        ):
             ctx.fail(p, f"expected a non-empty list of vertex indices >= 0, received {_show(arg)}")
         return R.Indices(tuple(int(i) for i in arg))
     if kind == "half_space":
@@ -186,9 +213,11 @@ def _selector(ctx, path, v, depth=0):
         _table(ctx, p, arg)
         _keys(ctx, p, arg, ("from_deg", "to_deg", "center"), ("from_deg", "to_deg"))
         turn = dict(lo=-360.0, hi=360.0, lo_open=False, hi_open=False)
-        return R.Wedge(_num(ctx, f"{p}.from_deg", arg["from_deg"], **turn),
-                       _num(ctx, f"{p}.to_deg", arg["to_deg"], **turn),
-                       _vec3(ctx, f"{p}.center", arg["center"]) if "center" in arg else (0.0, 0.0, 0.0))
+        return R.Wedge(
+            _num(ctx, f"{p}.from_deg", arg["from_deg"], **turn),
+            _num(ctx, f"{p}.to_deg", arg["to_deg"], **turn),
+            _vec3(ctx, f"{p}.center", arg["center"]) if "center" in arg else (0.0, 0.0, 0.0),
+        )
     if kind == "nearest":
         return R.Nearest(_vec3_list(ctx, p, arg))
     if kind == "patch":
@@ -203,8 +232,9 @@ def _selector(ctx, path, v, depth=0):
     if kind == "difference":
         _table(ctx, p, arg)
         _keys(ctx, p, arg, ("base", "minus"), ("base", "minus"))
-        return R.Difference(_selector(ctx, f"{p}.base", arg["base"], depth + 1),
-                            _selector(ctx, f"{p}.minus", arg["minus"], depth + 1))
+        return R.Difference(
+            _selector(ctx, f"{p}.base", arg["base"], depth + 1), _selector(ctx, f"{p}.minus", arg["minus"], depth + 1)
+        )
     ctx.fail(p, f"unknown selector; expected one of {list(_SELECTOR_KINDS)} or a region name")
 
 
@@ -225,10 +255,12 @@ def _schedule(ctx, path, v, ncomp):
         _keys(ctx, p, arg, ("period_s", "inspiration_fraction", "peak", "onset_s"), ("peak",))
         return S.Breathing(
             period_s=_num(ctx, f"{p}.period_s", arg.get("period_s", 4.0), lo=0),
-            inspiration_fraction=_num(ctx, f"{p}.inspiration_fraction", arg.get("inspiration_fraction", 0.4),
-                                      lo=0, hi=1),
+            inspiration_fraction=_num(
+                ctx, f"{p}.inspiration_fraction", arg.get("inspiration_fraction", 0.4), lo=0, hi=1
+            ),
             peak=_num(ctx, f"{p}.peak", arg["peak"]),
-            onset_s=_num(ctx, f"{p}.onset_s", arg.get("onset_s", 0.0), lo=0, lo_open=False))
+            onset_s=_num(ctx, f"{p}.onset_s", arg.get("onset_s", 0.0), lo=0, lo_open=False),
+        )
     _keys(ctx, p, arg, ("t_s", "value", "periodic"), ("t_s", "value"))
     t = arg["t_s"]
     if not (isinstance(t, list) and t):
@@ -250,6 +282,7 @@ def _schedule(ctx, path, v, ncomp):
 
 
 # ------------------------------------------------------------------ the terms
+
 
 def _field(ctx, path, f, v):
     """A term field's TOML value as the dataclass holds it, checked by its kind."""
@@ -311,22 +344,26 @@ def scene_from_dict(data: dict, *, source: str = "scene", base_dir: str | Path |
     masses = _table(ctx, "masses", data["masses"])
     _keys(ctx, "masses", masses, ("total_kg", "density_kg_per_m2", "per_vertex_kg"))
     if len(masses) != 1:
-        ctx.fail("masses", f"expected exactly one of total_kg, density_kg_per_m2, per_vertex_kg, "
-                           f"received {sorted(masses) or 'none'}")
+        ctx.fail(
+            "masses",
+            f"expected exactly one of total_kg, density_kg_per_m2, per_vertex_kg, received {sorted(masses) or 'none'}",
+        )
     if "total_kg" in masses:
         kw["masses"] = Masses(total_kg=_num(ctx, "masses.total_kg", masses["total_kg"], lo=0))
     elif "density_kg_per_m2" in masses:
         dens = _table(ctx, "masses.density_kg_per_m2", masses["density_kg_per_m2"], "a table {region = kg/m^2}")
         if not dens:
             ctx.fail("masses.density_kg_per_m2", "expected at least one region")
-        kw["masses"] = Masses(density_kg_per_m2={
-            k: _num(ctx, f"masses.density_kg_per_m2.{k}", x, lo=0) for k, x in dens.items()})
+        kw["masses"] = Masses(
+            density_kg_per_m2={k: _num(ctx, f"masses.density_kg_per_m2.{k}", x, lo=0) for k, x in dens.items()}
+        )
     else:
         pv = masses["per_vertex_kg"]
         if not isinstance(pv, list) or not pv:
             ctx.fail("masses.per_vertex_kg", f"expected a list of masses, received {_show(pv)}")
-        kw["masses"] = Masses(per_vertex_kg=tuple(
-            _num(ctx, f"masses.per_vertex_kg[{k}]", x, lo=0) for k, x in enumerate(pv)))
+        kw["masses"] = Masses(
+            per_vertex_kg=tuple(_num(ctx, f"masses.per_vertex_kg[{k}]", x, lo=0) for k, x in enumerate(pv))
+        )
 
     regions = _table(ctx, "regions", data.get("regions", {}))
     kw["regions"] = {name: _selector(ctx, f"regions.{name}", sel) for name, sel in regions.items()}
@@ -334,9 +371,13 @@ def scene_from_dict(data: dict, *, source: str = "scene", base_dir: str | Path |
     kw["constraints"] = _terms(ctx, "constraints", data.get("constraints", []), CONSTRAINT_TYPES)
 
     if "rigid" in data:
-        kw["rigid"] = rigid_from_table(source, data["rigid"], lambda p, v: _selector(ctx, p, v),
-                                       lambda p, v, n: _schedule(ctx, p, v, n),
-                                       lambda p, f, v: _field(ctx, p, f, v))
+        kw["rigid"] = rigid_from_table(
+            source,
+            data["rigid"],
+            lambda p, v: _selector(ctx, p, v),
+            lambda p, v, n: _schedule(ctx, p, v, n),
+            lambda p, f, v: _field(ctx, p, f, v),
+        )
 
     if base_dir is not None:
         kw["base_dir"] = str(base_dir)
@@ -344,8 +385,11 @@ def scene_from_dict(data: dict, *, source: str = "scene", base_dir: str | Path |
     names = scene.term_names()
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:
-        ctx.fail("", f"term names must be unique (they are what --without and --set refer to); "
-                     f"{dup} used more than once: give each a distinct name")
+        ctx.fail(
+            "",
+            f"term names must be unique (they are what --without and --set refer to); "
+            f"{dup} used more than once: give each a distinct name",
+        )
     return scene
 
 
@@ -365,12 +409,15 @@ def load_scene(path: str | Path) -> Scene:
     except UnicodeDecodeError as exc:
         raise SceneError(f"{p.name}: not a UTF-8 text file ({exc.reason})") from None
     except RecursionError:  # the TOML reader recurses once per nested table or list
-        raise SceneError(f"{p.name}: tables or lists nested too deep to read; expected selectors at most "
-                         f"{R.MAX_SELECTOR_DEPTH} levels deep") from None
+        raise SceneError(
+            f"{p.name}: tables or lists nested too deep to read; expected selectors at most "
+            f"{R.MAX_SELECTOR_DEPTH} levels deep"
+        ) from None
     return scene_from_dict(data, source=p.name, base_dir=p.resolve().parent)
 
 
 # ------------------------------------------------------------------ back to a mapping
+
 
 def _sel_to(sel):
     if isinstance(sel, str):
@@ -410,11 +457,22 @@ def _sched_to(s, what):
     if isinstance(s, (tuple, list)) and len(s) == 3 and all(_is_num(x) for x in s):
         return [float(x) for x in s]
     if isinstance(s, S.Breathing):
-        return {"breathing": {"period_s": s.period_s, "inspiration_fraction": s.inspiration_fraction,
-                              "peak": s.peak, "onset_s": s.onset_s}}
+        return {
+            "breathing": {
+                "period_s": s.period_s,
+                "inspiration_fraction": s.inspiration_fraction,
+                "peak": s.peak,
+                "onset_s": s.onset_s,
+            }
+        }
     if isinstance(s, S.Table):
-        return {"table": {"t_s": list(s.t_s), "value": [list(v) if isinstance(v, (tuple, list)) else v
-                                                       for v in s.value], "periodic": s.periodic}}
+        return {
+            "table": {
+                "t_s": list(s.t_s),
+                "value": [list(v) if isinstance(v, (tuple, list)) else v for v in s.value],
+                "periodic": s.periodic,
+            }
+        }
     raise SceneError(f"{what}: a Python function schedule cannot be written as TOML; use a table")
 
 
@@ -448,10 +506,16 @@ def scene_to_dict(scene: Scene) -> dict:
     function schedules."""
     if not isinstance(scene.mesh, MeshSpec):
         raise SceneError("mesh: a hybrid.mesh.Mesh object cannot be written as TOML; use a MeshSpec")
-    d: dict = {"name": scene.name, "formulation": scene.formulation, "dt_s": scene.dt_s,
-               "integrator": scene.integrator,
-               "implicit_tol": scene.implicit_tol, "implicit_max_iter": scene.implicit_max_iter,
-               "duration_s": scene.duration_s, "max_speed_m_s": scene.max_speed_m_s}
+    d: dict = {
+        "name": scene.name,
+        "formulation": scene.formulation,
+        "dt_s": scene.dt_s,
+        "integrator": scene.integrator,
+        "implicit_tol": scene.implicit_tol,
+        "implicit_max_iter": scene.implicit_max_iter,
+        "duration_s": scene.duration_s,
+        "max_speed_m_s": scene.max_speed_m_s,
+    }
     if scene.dt_s is None:  # the MJCF's own (a rigid part) or the default
         del d["dt_s"]
     ms = scene.mesh
@@ -485,14 +549,17 @@ def scene_to_toml(scene: Scene) -> str:
 
 # ------------------------------------------------------------------ overrides
 
+
 def _parse_value(text: str):
     try:
         return tomllib.loads(f"v = {text}")["v"]
     except tomllib.TOMLDecodeError:
         return text.strip()  # a bare word: a string
     except RecursionError:  # the TOML reader recurses once per nested table or list
-        raise SceneError(f"--set value {text[:40]!r}...: tables or lists nested too deep to read; expected "
-                         f"selectors at most {R.MAX_SELECTOR_DEPTH} levels deep") from None
+        raise SceneError(
+            f"--set value {text[:40]!r}...: tables or lists nested too deep to read; expected "
+            f"selectors at most {R.MAX_SELECTOR_DEPTH} levels deep"
+        ) from None
 
 
 def apply_overrides(scene: Scene, overrides) -> Scene:
@@ -535,8 +602,7 @@ def _descend(node, part, item, where):
     if isinstance(node, dict):
         if part not in node:
             # an absent sub-table of an existing table (e.g. mesh.* keys are always present)
-            raise SceneError(f"--set {item!r}: no key {part!r} in {where or 'the scene'}; "
-                             f"keys there: {sorted(node)}")
+            raise SceneError(f"--set {item!r}: no key {part!r} in {where or 'the scene'}; keys there: {sorted(node)}")
         return node[part]
     if isinstance(node, list):
         return node[_list_index(node, part, item, where)]
@@ -556,6 +622,7 @@ def _list_index(node, part, item, where):
 
 
 # ------------------------------------------------------------------ built-in scenes
+
 
 def packaged_model(relative: str) -> Path:
     """The path of a file of the packaged models (MJCF, scene TOMLs): the repository's

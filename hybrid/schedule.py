@@ -12,16 +12,26 @@ compiled step receives a few arrays, whatever the number of schedules.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Callable, NamedTuple, Sequence, Union
+from typing import NamedTuple, Union
 
 import numpy as np
-from .kernel import kernel
 
 from .errors import SceneError
+from .kernel import kernel
 
-__all__ = ["Constant", "Table", "Breathing", "Function", "Schedule", "as_schedule",
-           "ScheduleTable", "stack_schedules", "schedule_eval"]
+__all__ = [
+    "Constant",
+    "Table",
+    "Breathing",
+    "Function",
+    "Schedule",
+    "as_schedule",
+    "ScheduleTable",
+    "stack_schedules",
+    "schedule_eval",
+]
 
 KIND_CONSTANT, KIND_TABLE, KIND_BREATHING, KIND_PYTHON = 0, 1, 2, 3
 
@@ -29,6 +39,7 @@ KIND_CONSTANT, KIND_TABLE, KIND_BREATHING, KIND_PYTHON = 0, 1, 2, 3
 @dataclass(frozen=True)
 class Constant:
     """The same value at all times."""
+
     value: float | tuple[float, float, float]
 
 
@@ -36,6 +47,7 @@ class Constant:
 class Table:
     """Piecewise-linear interpolation of (t_s, value) samples, held constant
     outside the sampled range; `periodic=True` repeats it with the table's span."""
+
     t_s: tuple[float, ...]
     value: tuple  # scalars or 3-vectors, one per time
     periodic: bool = False
@@ -51,6 +63,7 @@ class Breathing:
     same way; `onset_s` delays the first cycle (value 0 before it).
     Quiet breathing: 15 breaths/min -> period 4 s, inspiration about 40%.
     """
+
     period_s: float = 4.0
     inspiration_fraction: float = 0.4
     peak: float = 1.0
@@ -60,6 +73,7 @@ class Breathing:
 @dataclass(frozen=True)
 class Function:
     """Any Python callable f(t_s) -> scalar or 3-vector (evaluated in Python)."""
+
     fn: Callable[[float], object]
 
 
@@ -106,7 +120,9 @@ def _validate(s: Schedule, *, name: str, ncomp: int) -> None:
             raise SceneError(f"{name}: a periodic table needs at least 2 samples, received {t.size}")
     elif isinstance(s, Breathing):
         if ncomp != 1:
-            raise SceneError(f"{name}: a breathing waveform is scalar; expected a vector schedule (constant, table or function)")
+            raise SceneError(
+                f"{name}: a breathing waveform is scalar; expected a vector schedule (constant, table or function)"
+            )
         if not (s.period_s > 0 and math.isfinite(s.period_s)):
             raise SceneError(f"{name}.period_s: expected > 0, received {s.period_s!r}")
         if not (0.0 < s.inspiration_fraction < 1.0):
@@ -128,6 +144,7 @@ class ScheduleTable(NamedTuple):
     table: periodic flag); tab_len (ns,) int64; tab_t (ns, L) s; tab_v (ns, L, 3).
     Constants (and Python functions, refreshed each step) live in tab_v[:, 0].
     """
+
     kind: np.ndarray
     par: np.ndarray
     tab_len: np.ndarray
@@ -149,7 +166,7 @@ def stack_schedules(scheds: Sequence[Schedule]) -> tuple[ScheduleTable, list]:
         if isinstance(s, Constant):
             kind[row] = KIND_CONSTANT
             v = np.atleast_1d(np.asarray(s.value, float))
-            tab_v[row, 0, :v.size] = v
+            tab_v[row, 0, : v.size] = v
         elif isinstance(s, Table):
             kind[row] = KIND_TABLE
             n = len(s.t_s)
@@ -157,7 +174,7 @@ def stack_schedules(scheds: Sequence[Schedule]) -> tuple[ScheduleTable, list]:
             tab_t[row, :n] = s.t_s
             for k, v in enumerate(s.value):
                 v = np.atleast_1d(np.asarray(v, float))
-                tab_v[row, k, :v.size] = v
+                tab_v[row, k, : v.size] = v
             par[row, 0] = 1.0 if s.periodic else 0.0
         elif isinstance(s, Breathing):
             kind[row] = KIND_BREATHING

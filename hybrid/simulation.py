@@ -15,13 +15,29 @@ import numpy as np
 
 from . import readouts
 from .builds import BuildChoice
-from .terms.volume import PROJ_NO_GRADIENT, face_volume
 from .errors import ConstraintError, SceneError, SimulationDiverged
 from .implicit import IMPLICIT_NOT_CONVERGED, Info
 from .model import TERMS, Model
-from .step import (DIVERGED_NONFINITE, OK, S_MAXDISP, S_PHI, S_PRESSURE, S_TIME, VOLUME_FAILED, Frames,
-                   kinetic_energy_of, membrane_advance, membrane_forces, new_state, run_membrane,
-                   run_membrane_frames, advance_switches, force_switches, step_switches)
+from .step import (
+    DIVERGED_NONFINITE,
+    OK,
+    S_MAXDISP,
+    S_PHI,
+    S_PRESSURE,
+    S_TIME,
+    VOLUME_FAILED,
+    Frames,
+    advance_switches,
+    force_switches,
+    kinetic_energy_of,
+    membrane_advance,
+    membrane_forces,
+    new_state,
+    run_membrane,
+    run_membrane_frames,
+    step_switches,
+)
+from .terms.volume import PROJ_NO_GRADIENT, face_volume
 
 __all__ = ["Simulation"]
 
@@ -56,6 +72,7 @@ class Simulation:
         self.rigid = None
         if model.rigid is not None:
             from .coupling import Coupling  # imports mujoco only for rigid scenes
+
             self.rigid = Coupling(model)
         self.reset()
 
@@ -145,8 +162,9 @@ class Simulation:
         swept volumes add up to V - V0."""
         m = self.model
         if region not in m.regions:
-            raise SceneError(f"region {region!r}: not a region of scene {m.scene.name!r}; expected one of "
-                             f"{sorted(m.regions)}")
+            raise SceneError(
+                f"region {region!r}: not a region of scene {m.scene.name!r}; expected one of {sorted(m.regions)}"
+            )
         faces = m.region_faces(region)
         return readouts.swept_volume(m.mesh.face_vert[faces], m.arrays.vert_rest, self.state.vert_pos)
 
@@ -221,14 +239,13 @@ class Simulation:
         if self.failed is not None:
             raise self.failed
         if not self.can_step_frames:
-            raise ValueError("step_frames: expected a model without Python schedules or wrench recording; "
-                             "use step()")
+            raise ValueError("step_frames: expected a model without Python schedules or wrench recording; use step()")
         if len(stops) > frames.capacity:
-            raise ValueError(f"stops: expected at most {frames.capacity} (the frames' capacity), "
-                             f"received {len(stops)}")
+            raise ValueError(f"stops: expected at most {frames.capacity} (the frames' capacity), received {len(stops)}")
         if len(stops) and (stops[0] < self.steps_done or np.any(np.diff(stops) < 0)):
-            raise ValueError(f"stops: expected increasing step indices from {self.steps_done}, "
-                             f"received {stops[:3].tolist()}...")
+            raise ValueError(
+                f"stops: expected increasing step indices from {self.steps_done}, received {stops[:3].tolist()}..."
+            )
         i, s = 0, self.state
         while i < len(stops):  # one compiled call, or pieces timed for the choice of build
             par, k = self.builds.chunk(int(stops[-1]) - self.steps_done)
@@ -268,8 +285,9 @@ class Simulation:
             frames.pos, frames.scal = frames.pos[first:], frames.scal[first:]
             frames.body_pos, frames.body_quat = frames.body_pos[first:], frames.body_quat[first:]
         if self.rigid is None:
-            return run_membrane_frames(arrays, self.state, stops, self.steps_done, frames.pos, frames.scal,
-                                       *step_switches(arrays))
+            return run_membrane_frames(
+                arrays, self.state, stops, self.steps_done, frames.pos, frames.scal, *step_switches(arrays)
+            )
         return self.rigid.run_frames(self.state, stops, self.steps_done, frames, arrays)
 
     def _python_schedules(self, t: float) -> None:
@@ -281,10 +299,14 @@ class Simulation:
                     err = SimulationDiverged(
                         f"schedule function {getattr(fn, '__name__', fn)!r} returned {val.tolist()} at "
                         f"t = {tt:.6g} s; expected 1 or 3 finite numbers",
-                        time_s=tt, step=self.steps_done, vert=0, dt_suggested_s=h)
+                        time_s=tt,
+                        step=self.steps_done,
+                        vert=0,
+                        dt_suggested_s=h,
+                    )
                     self.failed = err
                     raise err
-                out[row, :val.size] = val
+                out[row, : val.size] = val
 
     def _raise(self) -> None:
         s, model = self.state, self.model
@@ -298,21 +320,35 @@ class Simulation:
                 f"implicit Euler did not converge at t = {t:.6g} s (step {step}): residual {info[Info.RESIDUAL]:.3g} "
                 f"of the forces after {int(info[Info.NEWTON])} Newton iterations, above implicit_tol = "
                 f"{a.implicit_tol:g} (largest at vertex {vert}); raise implicit_max_iter (now {a.implicit_max_iter}) "
-                f"or take dt_s <= {0.5 * h:.3g} s", time_s=t, step=step, vert=vert, dt_suggested_s=0.5 * h)
+                f"or take dt_s <= {0.5 * h:.3g} s",
+                time_s=t,
+                step=step,
+                vert=vert,
+                dt_suggested_s=0.5 * h,
+            )
         elif code == VOLUME_FAILED:
-            why = ("the volume gradient vanished on the free points" if s.status[3] == PROJ_NO_GRADIENT
-                   else "the volume cubic has no real root")
+            why = (
+                "the volume gradient vanished on the free points"
+                if s.status[3] == PROJ_NO_GRADIENT
+                else "the volume cubic has no real root"
+            )
             if step == 0:  # the first projection: the surface or its free points are at fault
                 err = ConstraintError(
                     f"volume projection failed at t = {t:.6g} s (step {step}): {why}; expected a closed surface "
-                    f"with free points to move")
+                    f"with free points to move"
+                )
             else:  # projections that held until now: the surface has folded, the run diverged
                 moved = float(np.sqrt(((s.vert_pos - model.arrays.vert_rest) ** 2).sum(axis=1)).max())
                 remedy, suggest = self._advice()
                 err = SimulationDiverged(
                     f"simulation diverged at t = {t:.6g} s (step {step}): the volume projection failed ({why}): "
                     f"the surface folded, a point {moved:.3g} m from rest; time step {h:.3g} s with "
-                    f"{model.scene.integrator}; {remedy}", time_s=t, step=step, vert=vert, dt_suggested_s=suggest)
+                    f"{model.scene.integrator}; {remedy}",
+                    time_s=t,
+                    step=step,
+                    vert=vert,
+                    dt_suggested_s=suggest,
+                )
         else:
             disp = float(s.scal[S_MAXDISP])
             if code == DIVERGED_NONFINITE:
@@ -323,7 +359,11 @@ class Simulation:
             err = SimulationDiverged(
                 f"simulation diverged at t = {t:.6g} s (step {step}): vertex {vert} {what}; "
                 f"time step {h:.3g} s with {model.scene.integrator}; {remedy}",
-                time_s=t, step=step, vert=vert, dt_suggested_s=suggest)
+                time_s=t,
+                step=step,
+                vert=vert,
+                dt_suggested_s=suggest,
+            )
         self.failed = err
         raise err
 
@@ -355,10 +395,12 @@ class Simulation:
             i = int(undamped[0])
             # symplectic Euler keeps a conservative spring bounded, not shape memory
             # (it excites itself below SELF_EXCITATION_DAMPING): there only damping helps
-            other = ("" if np.isin(undamped, a.sm_vert).any() else " or use integrator = 'symplectic_euler'")
-            return (f"explicit Euler grows every undamped oscillation whatever the step (vertex {i} has stiffness "
-                    f"{k[i]:.3g} N/m and no damping), so no smaller step helps; add Damping(critical_fraction=0.3)"
-                    f"{other}"), math.nan
+            other = "" if np.isin(undamped, a.sm_vert).any() else " or use integrator = 'symplectic_euler'"
+            return (
+                f"explicit Euler grows every undamped oscillation whatever the step (vertex {i} has stiffness "
+                f"{k[i]:.3g} N/m and no damping), so no smaller step helps; add Damping(critical_fraction=0.3)"
+                f"{other}"
+            ), math.nan
         bound = model.dt_stable_s
         if bound == 0.0:
             # below what the stability estimate resolves (1e-9 s): the tightest point's
@@ -373,20 +415,23 @@ class Simulation:
             stiff = f"vertex {i}: stiffness {k[i]:.3g} N/m, damping {c[i]:.3g} N s/m, mass {m[i]:.3g} kg"
             if not est > 0:
                 return f"no representable step is stable ({stiff}); lower the stiffness or damping", math.nan
-            return (f"a stable step would be about {est:.3g} s ({stiff}), {1.0 / est:.3g} steps per simulated "
-                    f"second: lower the stiffness or damping (or raise the mass) rather than the step"), 0.5 * est
+            return (
+                f"a stable step would be about {est:.3g} s ({stiff}), {1.0 / est:.3g} steps per simulated "
+                f"second: lower the stiffness or damping (or raise the mass) rather than the step"
+            ), 0.5 * est
         suggest = min(0.5 * bound, h / 4.0)
         damping = self._damping_fraction()
         if h <= bound and damping < SELF_EXCITATION_DAMPING:
             # the step is not the cause: the non-conservative shape memory excites itself
-            return (f"the step is within the stability bound {bound:.3g} s but damping is {damping:.3g} of "
-                    f"critical, below the {SELF_EXCITATION_DAMPING} where shape memory excites itself; add "
-                    f"Damping(critical_fraction=0.3)"), suggest
+            return (
+                f"the step is within the stability bound {bound:.3g} s but damping is {damping:.3g} of "
+                f"critical, below the {SELF_EXCITATION_DAMPING} where shape memory excites itself; add "
+                f"Damping(critical_fraction=0.3)"
+            ), suggest
         return f"try dt_s <= {suggest:.3g} s", suggest
 
     # ------------------------------------------------------------ a state set by hand
-    def set_state(self, *, vert_pos=None, vert_vel=None, time_s: float | None = None, qpos=None,
-                  qvel=None) -> None:
+    def set_state(self, *, vert_pos=None, vert_vel=None, time_s: float | None = None, qpos=None, qvel=None) -> None:
         """Start from another state; what is not given stays as it is.
 
         vert_pos (nvert, 3) m, vert_vel (nvert, 3) m/s: every point (the linked
@@ -414,8 +459,10 @@ class Simulation:
             if value is None:
                 continue
             if self.rigid is None:
-                raise ValueError(f"{name}: expected None (scene {self.model.scene.name!r} has no rigid part), "
-                                 f"received {_described(value)}")
+                raise ValueError(
+                    f"{name}: expected None (scene {self.model.scene.name!r} has no rigid part), "
+                    f"received {_described(value)}"
+                )
             n = int(getattr(self.mj_model, size))
             rigid[name] = _checked_array(name, value, (n,), f"values (mj_model.{size} = {n})")
         s = self.state
@@ -458,6 +505,8 @@ def _checked_array(name: str, value, shape: tuple, what: str) -> np.ndarray | No
         raise ValueError(f"{name}: expected finite {what} of shape {shape}, received {_described(value)}")
     bad = np.argwhere(~np.isfinite(arr))
     if bad.size:
-        raise ValueError(f"{name}: expected finite {what}, received {arr[tuple(bad[0])]} at index "
-                         f"{tuple(int(i) for i in bad[0])} ({len(bad)} non-finite)")
+        raise ValueError(
+            f"{name}: expected finite {what}, received {arr[tuple(bad[0])]} at index "
+            f"{tuple(int(i) for i in bad[0])} ({len(bad)} non-finite)"
+        )
     return arr

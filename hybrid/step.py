@@ -23,39 +23,98 @@ from typing import NamedTuple
 import numpy as np
 from numba import prange
 
+from .implicit import EXPLICIT, IMPLICIT_ID, implicit_pressure, implicit_start_forces, implicit_step, implicit_work
 from .kernel import CHUNK_VERTS, chunk_count, kernel, kernel_twin
-
 from .model import MembraneArrays
 from .schedule import KIND_PYTHON, schedule_eval
-from .terms import (TERMS, AppliedForce, Attraction, Damping, Gravity, KeepIn, MassSpring, Membrane, Muscle,
-                    Prescribed, ShapeMemory, SoftVolume, Volume)
+from .terms import (
+    TERMS,
+    AppliedForce,
+    Attraction,
+    Damping,
+    Gravity,
+    KeepIn,
+    MassSpring,
+    Membrane,
+    Muscle,
+    Prescribed,
+    ShapeMemory,
+    SoftVolume,
+    Volume,
+)
+from .terms.fibres import MuscleFibres, add_muscle_fibres
 from .terms.local import apply_keep_in, apply_prescribed
 from .terms.membrane import add_membrane_serial, membrane_faces_parallel, membrane_gather_parallel
 from .terms.muscle import add_muscle
+from .terms.passive_fibres import PassiveFibres, add_passive_fibres
 from .terms.pointwise import point_forces_parallel, point_forces_serial
 from .terms.shape_memory import shape_memory_frames, shape_memory_frames_parallel
 from .terms.springs import add_applied, add_attraction, add_mass_spring
-from .terms.volume import PROJ_OK, face_volume, project_volume, soft_volume_force
-from .terms.volume import volume_direction_parallel, volume_direction_serial
-from .terms.volume import Pressure, add_pressure
-from .terms.fibres import MuscleFibres, add_muscle_fibres
-from .terms.passive_fibres import PassiveFibres, add_passive_fibres
-from .implicit import EXPLICIT, IMPLICIT_ID, implicit_pressure, implicit_start_forces, implicit_step, implicit_work
+from .terms.volume import (
+    PROJ_OK,
+    Pressure,
+    add_pressure,
+    face_volume,
+    project_volume,
+    soft_volume_force,
+    volume_direction_parallel,
+    volume_direction_serial,
+)
 
-__all__ = ["Scal", "StepStatus", "FrameColumn", "MembraneState", "new_state", "membrane_forces", "membrane_advance", "run_membrane",
-           "run_membrane_frames", "capture_frame", "kinetic_energy_of", "Frames", "step_par", "FORCE_SWITCHES",
-           "ADVANCE_SWITCHES", "force_switches", "advance_switches", "step_switches"]
+__all__ = [
+    "Scal",
+    "StepStatus",
+    "FrameColumn",
+    "MembraneState",
+    "new_state",
+    "membrane_forces",
+    "membrane_advance",
+    "run_membrane",
+    "run_membrane_frames",
+    "capture_frame",
+    "kinetic_energy_of",
+    "Frames",
+    "step_par",
+    "FORCE_SWITCHES",
+    "ADVANCE_SWITCHES",
+    "force_switches",
+    "advance_switches",
+    "step_switches",
+]
 
 # each term's flag in MembraneArrays.term_on and its call counter
-(T_GRAVITY, T_APPLIED, T_ATTRACTION, T_DAMPING, T_SHAPE_MEMORY, T_MASS_SPRING, T_MUSCLE, T_SOFT_VOLUME,
- T_PRESCRIBED, T_KEEP_IN, T_VOLUME) = (Gravity.id, AppliedForce.id, Attraction.id, Damping.id, ShapeMemory.id,
-                                       MassSpring.id, Muscle.id, SoftVolume.id, Prescribed.id, KeepIn.id, Volume.id)
+(
+    T_GRAVITY,
+    T_APPLIED,
+    T_ATTRACTION,
+    T_DAMPING,
+    T_SHAPE_MEMORY,
+    T_MASS_SPRING,
+    T_MUSCLE,
+    T_SOFT_VOLUME,
+    T_PRESCRIBED,
+    T_KEEP_IN,
+    T_VOLUME,
+) = (
+    Gravity.id,
+    AppliedForce.id,
+    Attraction.id,
+    Damping.id,
+    ShapeMemory.id,
+    MassSpring.id,
+    Muscle.id,
+    SoftVolume.id,
+    Prescribed.id,
+    KeepIn.id,
+    Volume.id,
+)
 T_MEMBRANE = Membrane.id
 T_PRESSURE, T_MUSCLE_FIBRES, T_PASSIVE_FIBRES = Pressure.id, MuscleFibres.id, PassiveFibres.id
 
 
 class Scal(IntEnum):
     """The slots of `MembraneState.scal`."""
+
     TIME = 0  # s
     PRESSURE = 1  # Pa, from the last volume projection
     PHI = 2  # the last projection's multiplier
@@ -65,6 +124,7 @@ class Scal(IntEnum):
 
 class StepStatus(IntEnum):
     """What a step returns, and `MembraneState.status[0]` after a failing one."""
+
     OK = 0
     DIVERGED_NONFINITE = 1
     DIVERGED_RUNAWAY = 2
@@ -87,6 +147,7 @@ class MembraneState(NamedTuple):
     status: code, failing step, worst vertex, projection status;
     term_calls (nterm,): how many times each term's kernel ran;
     implicit: implicit Euler's work arrays (hybrid.implicit), None for the other integrators."""
+
     vert_pos: np.ndarray
     vert_vel: np.ndarray
     vert_force: np.ndarray
@@ -108,12 +169,22 @@ def new_state(arrays: MembraneArrays) -> MembraneState:
     n = arrays.vert_rest.shape[0]
     ns = arrays.sched.kind.shape[0]
     return MembraneState(
-        vert_pos=arrays.vert_rest.copy(), vert_vel=np.zeros((n, 3)), vert_force=np.zeros((n, 3)),
-        grad=np.zeros((n, 3)), face_force=np.zeros((arrays.mem_vert.shape[0], 6)), sm_sums=np.zeros((arrays.sm_vert.shape[0], 9)),
-        vert_acc=np.zeros((chunk_count(n), 4)), dirn=np.zeros((n, 3)),
+        vert_pos=arrays.vert_rest.copy(),
+        vert_vel=np.zeros((n, 3)),
+        vert_force=np.zeros((n, 3)),
+        grad=np.zeros((n, 3)),
+        face_force=np.zeros((arrays.mem_vert.shape[0], 6)),
+        sm_sums=np.zeros((arrays.sm_vert.shape[0], 9)),
+        vert_acc=np.zeros((chunk_count(n), 4)),
+        dirn=np.zeros((n, 3)),
         cubic=np.zeros(2),
-        sched_val=np.zeros((ns, 3)), sched_next=np.zeros((ns, 3)), scal=np.zeros(8),
-        status=np.zeros(4, np.int64), term_calls=np.zeros(len(TERMS), np.int64), implicit=implicit_work(arrays))
+        sched_val=np.zeros((ns, 3)),
+        sched_next=np.zeros((ns, 3)),
+        scal=np.zeros(8),
+        status=np.zeros(4, np.int64),
+        term_calls=np.zeros(len(TERMS), np.int64),
+        implicit=implicit_work(arrays),
+    )
 
 
 def step_par(arrays: MembraneArrays):
@@ -130,10 +201,18 @@ def step_par(arrays: MembraneArrays):
 # that a first run compiles only the kernels its scene uses. True (the default,
 # as when a kernel is called without its switches) compiles the branch and the
 # model's flag (`term_on`) decides at run time: the same arithmetic either way.
-FORCE_SWITCHES = {"shape_memory": T_SHAPE_MEMORY, "membrane": T_MEMBRANE, "applied": T_APPLIED,
-                  "attraction": T_ATTRACTION, "mass_spring": T_MASS_SPRING, "muscle": T_MUSCLE,
-                  "soft_volume": T_SOFT_VOLUME, "pressure": T_PRESSURE, "fibres": T_MUSCLE_FIBRES,
-                  "passive": T_PASSIVE_FIBRES}
+FORCE_SWITCHES = {
+    "shape_memory": T_SHAPE_MEMORY,
+    "membrane": T_MEMBRANE,
+    "applied": T_APPLIED,
+    "attraction": T_ATTRACTION,
+    "mass_spring": T_MASS_SPRING,
+    "muscle": T_MUSCLE,
+    "soft_volume": T_SOFT_VOLUME,
+    "pressure": T_PRESSURE,
+    "fibres": T_MUSCLE_FIBRES,
+    "passive": T_PASSIVE_FIBRES,
+}
 # shake: the volume projection's direction where the step starts (`volume_shake`)
 ADVANCE_SWITCHES = {"prescribed": T_PRESCRIBED, "keep_in": T_KEEP_IN, "volume": T_VOLUME, "shake": T_VOLUME}
 
@@ -173,8 +252,22 @@ def eval_schedules(sched, t, out):
 
 
 @kernel(inline="always")
-def membrane_forces(m, s, t, par=True, shape_memory=True, membrane=True, applied=True, attraction=True,
-                    mass_spring=True, muscle=True, soft_volume=True, pressure=True, fibres=True, passive=True):
+def membrane_forces(
+    m,
+    s,
+    t,
+    par=True,
+    shape_memory=True,
+    membrane=True,
+    applied=True,
+    attraction=True,
+    mass_spring=True,
+    muscle=True,
+    soft_volume=True,
+    pressure=True,
+    fibres=True,
+    passive=True,
+):
     """Step phase 1: the force of every term the model has, at time t. `par`: None
     when the model never runs the multi-core build (`serial_only`), which is then
     not even compiled; else m.parallel chooses at run time. The switches after it
@@ -199,8 +292,7 @@ def membrane_forces(m, s, t, par=True, shape_memory=True, membrane=True, applied
         add_applied(m.app_vert, m.app_sched, s.sched_val, s.vert_force)
         s.term_calls[T_APPLIED] += 1
     if attraction is not None and on[T_ATTRACTION]:
-        add_attraction(m.att_vert, m.att_stiff, m.att_target, m.att_sched, s.sched_val, s.vert_pos,
-                       s.vert_force)
+        add_attraction(m.att_vert, m.att_stiff, m.att_target, m.att_sched, s.sched_val, s.vert_pos, s.vert_force)
         s.term_calls[T_ATTRACTION] += 1
     if mass_spring is not None and on[T_MASS_SPRING]:
         add_mass_spring(m.spring_vert, m.spring_stiff, m.spring_rest, s.vert_pos, s.vert_force)
@@ -209,8 +301,18 @@ def membrane_forces(m, s, t, par=True, shape_memory=True, membrane=True, applied
         add_muscle(m.mus_vert, m.mus_nbr, m.mus_sched, s.sched_val, s.vert_pos, s.vert_force)
         s.term_calls[T_MUSCLE] += 1
     if soft_volume is not None and on[T_SOFT_VOLUME]:
-        s.scal[S_PRESSURE] = soft_volume_force(m.ring_ptr, m.ring_vert, m.vol0, m.soft_stiff, m.soft_bulk,
-                                               s.vert_pos, s.grad, s.cubic, s.vert_acc, s.vert_force)
+        s.scal[S_PRESSURE] = soft_volume_force(
+            m.ring_ptr,
+            m.ring_vert,
+            m.vol0,
+            m.soft_stiff,
+            m.soft_bulk,
+            s.vert_pos,
+            s.grad,
+            s.cubic,
+            s.vert_acc,
+            s.vert_force,
+        )
         s.term_calls[T_SOFT_VOLUME] += 1
     if pressure is not None and on[T_PRESSURE]:
         add_pressure(m.ring_ptr, m.ring_vert, m.pres_sched, s.sched_val, s.vert_pos, s.vert_force)
@@ -280,13 +382,41 @@ def _pointwise_forces(m, s, par, shape_memory, implicit=False):
     if par is not None and m.parallel:
         if shape_memory is not None and sm:
             shape_memory_frames_parallel(m.sm_vert, m.ring_ptr, m.ring_vert, m.ring_closed, s.vert_pos, s.sm_sums)
-        point_forces_parallel(m.vert_free, m.vert_mass, m.accel, grav, m.damp_coef, damp, m.sm_vert, m.sm_stiff,
-                               m.sm_coef, s.sm_sums, sm, s.vert_pos, s.vert_vel, s.vert_force)
+        point_forces_parallel(
+            m.vert_free,
+            m.vert_mass,
+            m.accel,
+            grav,
+            m.damp_coef,
+            damp,
+            m.sm_vert,
+            m.sm_stiff,
+            m.sm_coef,
+            s.sm_sums,
+            sm,
+            s.vert_pos,
+            s.vert_vel,
+            s.vert_force,
+        )
     else:
         if shape_memory is not None and sm:
             shape_memory_frames(m.sm_vert, m.ring_ptr, m.ring_vert, m.ring_closed, s.vert_pos, s.sm_sums)
-        point_forces_serial(m.vert_free, m.vert_mass, m.accel, grav, m.damp_coef, damp, m.sm_vert, m.sm_stiff,
-                             m.sm_coef, s.sm_sums, sm, s.vert_pos, s.vert_vel, s.vert_force)
+        point_forces_serial(
+            m.vert_free,
+            m.vert_mass,
+            m.accel,
+            grav,
+            m.damp_coef,
+            damp,
+            m.sm_vert,
+            m.sm_stiff,
+            m.sm_coef,
+            s.sm_sums,
+            sm,
+            s.vert_pos,
+            s.vert_vel,
+            s.vert_force,
+        )
     s.term_calls[T_GRAVITY] += on[T_GRAVITY]
     s.term_calls[T_DAMPING] += on[T_DAMPING]
     s.term_calls[T_SHAPE_MEMORY] += on[T_SHAPE_MEMORY]
@@ -356,11 +486,37 @@ def _after_integration(m, s, t, step, par, prescribed, keep_in, volume):
         s.term_calls[T_KEEP_IN] += 1
     if volume is not None and on[T_VOLUME]:
         if par is None:  # a None argument: the multi-core build is not compiled
-            phi, st = project_volume(m.ring_ptr, m.ring_vert, m.vol0, m.vert_weight, h, pos, vel,
-                                     s.grad, s.dirn, s.cubic, s.vert_acc, None, m.volume_shake)
+            phi, st = project_volume(
+                m.ring_ptr,
+                m.ring_vert,
+                m.vol0,
+                m.vert_weight,
+                h,
+                pos,
+                vel,
+                s.grad,
+                s.dirn,
+                s.cubic,
+                s.vert_acc,
+                None,
+                m.volume_shake,
+            )
         else:
-            phi, st = project_volume(m.ring_ptr, m.ring_vert, m.vol0, m.vert_weight, h, pos, vel,
-                                     s.grad, s.dirn, s.cubic, s.vert_acc, m.parallel, m.volume_shake)
+            phi, st = project_volume(
+                m.ring_ptr,
+                m.ring_vert,
+                m.vol0,
+                m.vert_weight,
+                h,
+                pos,
+                vel,
+                s.grad,
+                s.dirn,
+                s.cubic,
+                s.vert_acc,
+                m.parallel,
+                m.volume_shake,
+            )
         s.term_calls[T_VOLUME] += 1
         if st != PROJ_OK:
             s.status[3] = st
@@ -392,17 +548,48 @@ def _first_nonfinite(pos, vel, fallback):
 
 
 @kernel
-def run_membrane(m, s, nstep, step0, par=True, shape_memory=True, membrane=True, applied=True, attraction=True,
-                 mass_spring=True, muscle=True, soft_volume=True, pressure=True, fibres=True, passive=True,
-                 prescribed=True,
-                 keep_in=True, volume=True, shake=True):
+def run_membrane(
+    m,
+    s,
+    nstep,
+    step0,
+    par=True,
+    shape_memory=True,
+    membrane=True,
+    applied=True,
+    attraction=True,
+    mass_spring=True,
+    muscle=True,
+    soft_volume=True,
+    pressure=True,
+    fibres=True,
+    passive=True,
+    prescribed=True,
+    keep_in=True,
+    volume=True,
+    shake=True,
+):
     """nstep whole membrane steps; time advances as t0 + k h. Returns steps done.
     `par` and the switches (`step_switches`): as `membrane_forces`, `membrane_advance`."""
     t0 = s.scal[S_TIME]
     for k in range(nstep):
         t = t0 + k * m.dt
-        membrane_forces(m, s, t, par, shape_memory, membrane, applied, attraction, mass_spring, muscle,
-                        soft_volume, pressure, fibres, passive)
+        membrane_forces(
+            m,
+            s,
+            t,
+            par,
+            shape_memory,
+            membrane,
+            applied,
+            attraction,
+            mass_spring,
+            muscle,
+            soft_volume,
+            pressure,
+            fibres,
+            passive,
+        )
         if membrane_advance(m, s, t, step0 + k, par, prescribed, keep_in, volume, shake) != OK:
             return k
         s.scal[S_TIME] = t0 + (k + 1) * m.dt
@@ -411,6 +598,7 @@ def run_membrane(m, s, nstep, step0, par=True, shape_memory=True, membrane=True,
 
 class FrameColumn(IntEnum):
     """The numbers captured at each frame by the frame kernels (`Frames.scal` columns)."""
+
     TIME = 0  # s
     VOLUME = 1  # m^3
     PRESSURE = 2  # Pa
@@ -445,10 +633,29 @@ def capture_frame(m, s, pos_out, scal_out):
 
 
 @kernel
-def run_membrane_frames(m, s, stops, step0, frame_pos, frame_scal, par=True, shape_memory=True, membrane=True,
-                        applied=True, attraction=True, mass_spring=True, muscle=True, soft_volume=True,
-                        pressure=True, fibres=True, passive=True, prescribed=True, keep_in=True, volume=True,
-                        shake=True):
+def run_membrane_frames(
+    m,
+    s,
+    stops,
+    step0,
+    frame_pos,
+    frame_scal,
+    par=True,
+    shape_memory=True,
+    membrane=True,
+    applied=True,
+    attraction=True,
+    mass_spring=True,
+    muscle=True,
+    soft_volume=True,
+    pressure=True,
+    fibres=True,
+    passive=True,
+    prescribed=True,
+    keep_in=True,
+    volume=True,
+    shake=True,
+):
     """Step to each step index of stops, capturing a frame at each; returns the
     frames captured (fewer than stops when a step fails; its status is in s.status).
     A stop at the current step captures it without stepping. `par` and the
@@ -460,8 +667,22 @@ def run_membrane_frames(m, s, stops, step0, frame_pos, frame_scal, par=True, sha
         t0 = s.scal[S_TIME]
         for k in range(stops[i] - done):
             t = t0 + k * m.dt
-            membrane_forces(m, s, t, par, shape_memory, membrane, applied, attraction, mass_spring, muscle,
-                            soft_volume, pressure, fibres, passive)
+            membrane_forces(
+                m,
+                s,
+                t,
+                par,
+                shape_memory,
+                membrane,
+                applied,
+                attraction,
+                mass_spring,
+                muscle,
+                soft_volume,
+                pressure,
+                fibres,
+                passive,
+            )
             if membrane_advance(m, s, t, done + k, par, prescribed, keep_in, volume, shake) != OK:
                 return i
             s.scal[S_TIME] = t0 + (k + 1) * m.dt

@@ -61,8 +61,9 @@ import os
 import pickle
 import sys
 import traceback
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any
 
 __all__ = ["sweep", "local_workers", "TABLE_NAME"]
 
@@ -126,8 +127,12 @@ def _call(fn: Callable, p: Any, pickled: bool = True) -> tuple:
             if pickled:  # the caller must be able to rebuild it, or the pool breaks
                 pickle.loads(pickle.dumps(packed))
         except Exception:  # an attribute that does not survive pickle: keep class name and message
-            packed = (RuntimeError, (f"{type(exc).__name__}: {exc}",), {},
-                      "".join(traceback.format_exception(type(exc), exc, exc.__traceback__)))
+            packed = (
+                RuntimeError,
+                (f"{type(exc).__name__}: {exc}",),
+                {},
+                "".join(traceback.format_exception(type(exc), exc, exc.__traceback__)),
+            )
         return ("error", packed)
     return ("ok", pickle.dumps(result) if pickled else result)
 
@@ -141,8 +146,10 @@ def _outcome_value(outcome: tuple, p: Any, pickled: bool):
         try:
             return pickle.loads(value)
         except Exception as exc:  # noqa: BLE001
-            err: BaseException = RuntimeError(f"sweep: the result of the task with parameters {p!r} cannot be "
-                                              f"rebuilt in this process: {type(exc).__name__}: {exc}")
+            err: BaseException = RuntimeError(
+                f"sweep: the result of the task with parameters {p!r} cannot be "
+                f"rebuilt in this process: {type(exc).__name__}: {exc}"
+            )
     elif kind == "error":
         err = _unpack_error(value)
     else:  # "lost": the worker died; value is the pool's exception
@@ -202,11 +209,13 @@ class _Table:
     def write(self, p, value) -> None:
         row: dict = {"params": _jsonable(p)}
         if isinstance(value, BaseException):
-            attrs = {k: v for k, v in vars(value).items()
-                     if isinstance(v, (int, float, str)) and k != "sweep_params"}
-            row.update(status="failed", error=" ".join(str(value).split()),
-                       error_type=f"{type(value).__module__}.{type(value).__qualname__}",
-                       error_attrs=_jsonable(attrs))
+            attrs = {k: v for k, v in vars(value).items() if isinstance(v, (int, float, str)) and k != "sweep_params"}
+            row.update(
+                status="failed",
+                error=" ".join(str(value).split()),
+                error_type=f"{type(value).__module__}.{type(value).__qualname__}",
+                error_attrs=_jsonable(attrs),
+            )
         else:
             row.update(status="ok", result=_jsonable(value))
         self._file.write(json.dumps(row) + "\n")
@@ -217,8 +226,15 @@ class _Table:
         self._file.close()
 
 
-def sweep(fn: Callable, params: Sequence, *, scheduler: str | None = None, workers: int | None = None,
-          on_error: str = "raise", out=None) -> list:
+def sweep(
+    fn: Callable,
+    params: Sequence,
+    *,
+    scheduler: str | None = None,
+    workers: int | None = None,
+    on_error: str = "raise",
+    out=None,
+) -> list:
     """`fn(**p)` (dict `p`) or `fn(p)` for every `p` in `params`, in parallel;
     the results in the order of `params`.
 
@@ -287,8 +303,7 @@ def _sweep_local(fn, params, todo, n, finish, on_error, failed) -> None:
     saved = os.environ.get("NUMBA_NUM_THREADS")
     os.environ["NUMBA_NUM_THREADS"] = "1"
     try:
-        pool = ProcessPoolExecutor(max_workers=n, mp_context=mp.get_context("spawn"),
-                                   initializer=_worker_init)
+        pool = ProcessPoolExecutor(max_workers=n, mp_context=mp.get_context("spawn"), initializer=_worker_init)
         # the first task alone: the kernels it compiles are then in the disk cache for the others
         futures = {_first_alone(pool, fn, params[todo[0]]): todo[0]} if todo else {}
         futures.update({pool.submit(_call, fn, params[i]): i for i in todo[1:]})

@@ -17,8 +17,9 @@ def parse(doc: str, argv, name: str, more=None) -> argparse.Namespace:
     """The script's arguments; --out (default runs/scripts/NAME) created."""
     p = argparse.ArgumentParser(description=doc.strip().splitlines()[0])
     p.add_argument("--quick", action="store_true", help="a fraction of a second of simulated time (a smoke test)")
-    p.add_argument("--out", type=Path, default=Path("runs") / "scripts" / name,
-                   help=f"output folder (default runs/scripts/{name})")
+    p.add_argument(
+        "--out", type=Path, default=Path("runs") / "scripts" / name, help=f"output folder (default runs/scripts/{name})"
+    )
     if more is not None:
         more(p)
     args = p.parse_args(argv)
@@ -49,6 +50,8 @@ def write_table(rows: list[dict], out: Path, name: str) -> Path:
 def pyplot():
     """matplotlib's pyplot on the Agg backend (no display needed)."""
     import matplotlib
+
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+
     return plt

@@ -12,9 +12,9 @@ without the volume constraint they go down instead.
 
 from __future__ import annotations
 
-import hybrid
-
 from _common import parse, pyplot, write_table
+
+import hybrid
 
 
 def cases(scene: hybrid.Scene) -> list[tuple[str, tuple]]:
@@ -22,30 +22,46 @@ def cases(scene: hybrid.Scene) -> list[tuple[str, tuple]]:
     out = [("full scene", ())]
     if any(isinstance(c, hybrid.Volume) for c in scene.constraints):
         out.append(("without volume", ("volume",)))
-    out += [(f"without {t.name}", (t.name,)) for t in scene.forces
-            if isinstance(t, (hybrid.Muscle, hybrid.MuscleFibres, hybrid.PassiveFibres))]
+    out += [
+        (f"without {t.name}", (t.name,))
+        for t in scene.forces
+        if isinstance(t, (hybrid.Muscle, hybrid.MuscleFibres, hybrid.PassiveFibres))
+    ]
     return out
 
 
 def main(argv=None) -> int:
-    args = parse(__doc__, argv, "breathing_ablations", lambda p: (
-        p.add_argument("--scene", default="breathing_paper", help="a scene name or TOML file (default breathing_paper)"),
-        p.add_argument("--duration", type=float, default=4.0, help="simulated time (s), default one breath")))
+    args = parse(
+        __doc__,
+        argv,
+        "breathing_ablations",
+        lambda p: (
+            p.add_argument(
+                "--scene", default="breathing_paper", help="a scene name or TOML file (default breathing_paper)"
+            ),
+            p.add_argument("--duration", type=float, default=4.0, help="simulated time (s), default one breath"),
+        ),
+    )
     duration = 0.5 if args.quick else args.duration
     scene = hybrid.load_scene(args.scene)
     rows, traces = [], {}
     for label, drop in cases(scene):
         trace = hybrid.run(hybrid.load(scene, without=drop), duration)["trace"].arrays()
         traces[label] = trace
-        rows.append({"case": label, "removed": " ".join(drop) or "-",
-                     # min and max: without the volume constraint the ribs go down, not up
-                     "rib_lift_min_mm": float(trace["rib_lift_mm"].min()),
-                     "rib_lift_max_mm": float(trace["rib_lift_mm"].max()),
-                     "apex_descent_max_mm": float(trace["apex_descent_mm"].max()),
-                     "pressure_min_pa": float(trace["pressure_pa"].min()),
-                     "pressure_max_pa": float(trace["pressure_pa"].max()),
-                     # the volume's change from the first frame, measured: meaningful with and without the constraint
-                     "volume_rel_change_max": float(abs(trace["volume_m3"] / trace["volume_m3"][0] - 1).max())})
+        rows.append(
+            {
+                "case": label,
+                "removed": " ".join(drop) or "-",
+                # min and max: without the volume constraint the ribs go down, not up
+                "rib_lift_min_mm": float(trace["rib_lift_mm"].min()),
+                "rib_lift_max_mm": float(trace["rib_lift_mm"].max()),
+                "apex_descent_max_mm": float(trace["apex_descent_mm"].max()),
+                "pressure_min_pa": float(trace["pressure_pa"].min()),
+                "pressure_max_pa": float(trace["pressure_pa"].max()),
+                # the volume's change from the first frame, measured: meaningful with and without the constraint
+                "volume_rel_change_max": float(abs(trace["volume_m3"] / trace["volume_m3"][0] - 1).max()),
+            }
+        )
     write_table(rows, args.out, "ablations")
 
     plt = pyplot()

@@ -18,24 +18,28 @@ from __future__ import annotations
 import dataclasses
 import math
 
-import hybrid
-
 from _common import parse, pyplot, write_table
+
+import hybrid
 
 RADIUS_M, MASS_KG, YOUNGS_N_PER_M = 0.12, 4.0, 1000.0
 
 
 def dome(subdivisions: int) -> hybrid.Scene:
-    drag = 2.0 * math.sqrt(YOUNGS_N_PER_M * MASS_KG / (4 * math.pi * RADIUS_M ** 2)) / RADIUS_M  # about critical
+    drag = 2.0 * math.sqrt(YOUNGS_N_PER_M * MASS_KG / (4 * math.pi * RADIUS_M**2)) / RADIUS_M  # about critical
     return hybrid.Scene(
-        name="continuum_dome", formulation="continuum",
+        name="continuum_dome",
+        formulation="continuum",
         mesh=hybrid.MeshSpec("icosphere", radius_m=RADIUS_M, subdivisions=subdivisions),
         masses=hybrid.Masses(total_kg=MASS_KG),
         regions={"cap": hybrid.HalfSpace((0, 0, 0.05), (0, 0, 1)), "base": hybrid.Patch((0, 0, -RADIUS_M), 0.05)},
-        forces=(hybrid.Membrane(YOUNGS_N_PER_M, poisson_ratio=0.3),
-                hybrid.MuscleFibres("cap", hybrid.Breathing(4.0, 0.4, 100.0), toward_m=(0, 0, RADIUS_M)),
-                hybrid.Damping(drag_n_s_per_m3=drag)),
-        constraints=(hybrid.Nailed("base"), hybrid.Volume()))
+        forces=(
+            hybrid.Membrane(YOUNGS_N_PER_M, poisson_ratio=0.3),
+            hybrid.MuscleFibres("cap", hybrid.Breathing(4.0, 0.4, 100.0), toward_m=(0, 0, RADIUS_M)),
+            hybrid.Damping(drag_n_s_per_m3=drag),
+        ),
+        constraints=(hybrid.Nailed("base"), hybrid.Volume()),
+    )
 
 
 def metric_at(scene: hybrid.Scene, dt_s, metric: str, at_s: float) -> tuple[float, int, float]:
@@ -49,9 +53,15 @@ def metric_at(scene: hybrid.Scene, dt_s, metric: str, at_s: float) -> tuple[floa
 
 
 def main(argv=None) -> int:
-    args = parse(__doc__, argv, "convergence", lambda p: (
-        p.add_argument("--metric", default="apex_descent_mm", help="a trace key (docs/metrics.md)"),
-        p.add_argument("--at", type=float, default=1.6, help="when to read it (s); default the peak inspiration")))
+    args = parse(
+        __doc__,
+        argv,
+        "convergence",
+        lambda p: (
+            p.add_argument("--metric", default="apex_descent_mm", help="a trace key (docs/metrics.md)"),
+            p.add_argument("--at", type=float, default=1.6, help="when to read it (s); default the peak inspiration"),
+        ),
+    )
     at = 0.1 if args.quick else args.at
     steps = [1e-3, 5e-4, 2.5e-4] if args.quick else [1e-3, 5e-4, 2.5e-4, 1.25e-4, 6.25e-5]
     levels = [1, 2] if args.quick else [1, 2, 3, 4]
@@ -60,13 +70,28 @@ def main(argv=None) -> int:
     change = [abs(a - b) for a, b in zip(by_h, by_h[1:])] + [float("nan")]  # d(h) = |m(h) - m(h/2)|
     for k, h in enumerate(steps):
         order = math.log2(change[k - 1] / change[k]) if k and change[k] > 0 else float("nan")
-        rows.append({"study": "time step", "nvert": 162, "dt_s": h, args.metric: by_h[k],
-                     "change_to_next": change[k], "observed_order": order})
+        rows.append(
+            {
+                "study": "time step",
+                "nvert": 162,
+                "dt_s": h,
+                args.metric: by_h[k],
+                "change_to_next": change[k],
+                "observed_order": order,
+            }
+        )
     by_mesh = [metric_at(dome(level), None, args.metric, at) for level in levels]
     for k, (value, n, h) in enumerate(by_mesh):
-        rows.append({"study": "mesh", "nvert": n, "dt_s": h, args.metric: value,
-                     "change_to_next": abs(value - by_mesh[k + 1][0]) if k + 1 < len(by_mesh) else float("nan"),
-                     "observed_order": float("nan")})
+        rows.append(
+            {
+                "study": "mesh",
+                "nvert": n,
+                "dt_s": h,
+                args.metric: value,
+                "change_to_next": abs(value - by_mesh[k + 1][0]) if k + 1 < len(by_mesh) else float("nan"),
+                "observed_order": float("nan"),
+            }
+        )
     write_table(rows, args.out, "convergence")
 
     plt = pyplot()

@@ -14,9 +14,9 @@ from __future__ import annotations
 import importlib.util
 import sys
 
-import hybrid
-
 from _common import parse, pyplot, write_table
+
+import hybrid
 
 
 def one_case(dt_s: float, duration_s: float) -> dict:
@@ -27,9 +27,15 @@ def one_case(dt_s: float, duration_s: float) -> dict:
 
 
 def main(argv=None) -> int:
-    args = parse(__doc__, argv, "dask_sweep", lambda p: (
-        p.add_argument("--scheduler", default=None, help="an existing cluster's address (default: a local one)"),
-        p.add_argument("--duration", type=float, default=1.6, help="simulated time (s)")))
+    args = parse(
+        __doc__,
+        argv,
+        "dask_sweep",
+        lambda p: (
+            p.add_argument("--scheduler", default=None, help="an existing cluster's address (default: a local one)"),
+            p.add_argument("--duration", type=float, default=1.6, help="simulated time (s)"),
+        ),
+    )
     if importlib.util.find_spec("distributed") is None:
         sys.stderr.write('dask_sweep: needs dask.distributed: pip install -e ".[dask]"\n')
         return 2
@@ -49,8 +55,14 @@ def main(argv=None) -> int:
         if cluster is not None:
             cluster.close()
     nan = float("nan")
-    rows = [{"dt_s": h, **({"apex_descent_mm": nan, "us_per_step": nan} if isinstance(r, Exception) else r),
-             "error": f"{type(r).__name__}: {r}" if isinstance(r, Exception) else ""} for h, r in zip(steps, results)]
+    rows = [
+        {
+            "dt_s": h,
+            **({"apex_descent_mm": nan, "us_per_step": nan} if isinstance(r, Exception) else r),
+            "error": f"{type(r).__name__}: {r}" if isinstance(r, Exception) else "",
+        }
+        for h, r in zip(steps, results)
+    ]
     write_table(rows, args.out, "dask_sweep")
 
     plt = pyplot()

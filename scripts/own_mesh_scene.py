@@ -17,10 +17,9 @@ from __future__ import annotations
 
 import numpy as np
 import trimesh
+from _common import parse, pyplot, write_table
 
 import hybrid
-
-from _common import parse, pyplot, write_table
 
 HALF_AXES_M = (0.10, 0.08, 0.14)
 
@@ -73,25 +72,42 @@ def write_mesh(path) -> int:
 
 
 def main(argv=None) -> int:
-    args = parse(__doc__, argv, "own_mesh_scene", lambda p: (
-        p.add_argument("--duration", type=float, default=8.0, help="simulated time (s), default two breaths")))
+    args = parse(
+        __doc__,
+        argv,
+        "own_mesh_scene",
+        lambda p: p.add_argument("--duration", type=float, default=8.0, help="simulated time (s), default two breaths"),
+    )
     duration = 0.2 if args.quick else args.duration
     npoint = write_mesh(args.out / "ellipsoid.obj")
     (args.out / "ellipsoid.toml").write_text(SCENE_TOML.format(duration=duration))
     sim = hybrid.load(args.out / "ellipsoid.toml")
     result = hybrid.run(sim, duration)
     summary, trace = result["summary"], result["trace"].arrays()
-    write_table([{"points": npoint, "faces": len(sim.model.mesh.face_vert), "duration_s": summary["duration_s"],
-                  "apex_descent_min_mm": float(trace["apex_descent_mm"].min()),
-                  "apex_descent_max_mm": float(trace["apex_descent_mm"].max()),
-                  "pressure_max_pa": float(trace["pressure_pa"].max()),
-                  "volume_rel_error_max": float(trace["volume_rel_error"].max()),
-                  "us_per_step": summary["us_per_step"]}], args.out, "own_scene")
+    write_table(
+        [
+            {
+                "points": npoint,
+                "faces": len(sim.model.mesh.face_vert),
+                "duration_s": summary["duration_s"],
+                "apex_descent_min_mm": float(trace["apex_descent_mm"].min()),
+                "apex_descent_max_mm": float(trace["apex_descent_mm"].max()),
+                "pressure_max_pa": float(trace["pressure_pa"].max()),
+                "volume_rel_error_max": float(trace["volume_rel_error"].max()),
+                "us_per_step": summary["us_per_step"],
+            }
+        ],
+        args.out,
+        "own_scene",
+    )
 
     plt = pyplot()
     fig, axes = plt.subplots(3, 1, figsize=(7, 7), sharex=True)
-    for ax, key, label in zip(axes, ("apex_descent_mm", "pressure_pa", "volume_m3"),
-                              ("apex descent (mm, caudal +)", "pressure (Pa)", "volume (m^3)")):
+    for ax, key, label in zip(
+        axes,
+        ("apex_descent_mm", "pressure_pa", "volume_m3"),
+        ("apex descent (mm, caudal +)", "pressure (Pa)", "volume (m^3)"),
+    ):
         ax.plot(trace["t_s"], trace[key])
         ax.set_ylabel(label)
         ax.grid(alpha=0.3)

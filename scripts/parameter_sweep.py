@@ -10,9 +10,9 @@ error, the others still come back. Writes sweep.csv / sweep.md and sweep.png.
 
 from __future__ import annotations
 
-import hybrid
-
 from _common import parse, pyplot, write_table
+
+import hybrid
 
 KEY = "forces.muscle.stiffness.breathing.peak"
 
@@ -20,17 +20,27 @@ KEY = "forces.muscle.stiffness.breathing.peak"
 def one_case(peak: float, duration_s: float, scene: str) -> dict:
     """One run of the sweep (top level: the workers import it by name)."""
     trace = hybrid.run(hybrid.load(scene, overrides=[f"{KEY}={peak}"]), duration_s)["trace"].arrays()
-    return {"apex_descent_max_mm": float(trace["apex_descent_mm"].max()),
-            "rib_lift_max_mm": float(trace["rib_lift_mm"].max()),
-            "pressure_max_pa": float(trace["pressure_pa"].max())}
+    return {
+        "apex_descent_max_mm": float(trace["apex_descent_mm"].max()),
+        "rib_lift_max_mm": float(trace["rib_lift_mm"].max()),
+        "pressure_max_pa": float(trace["pressure_pa"].max()),
+    }
 
 
 def main(argv=None) -> int:
-    args = parse(__doc__, argv, "parameter_sweep", lambda p: (
-        p.add_argument("--scene", default="breathing_paper"),
-        p.add_argument("--peaks", default="25,50,75,100,125", help="peak muscle stiffnesses (N/m), comma-separated"),
-        p.add_argument("--duration", type=float, default=2.0, help="simulated time (s), past the peak inspiration"),
-        p.add_argument("--workers", type=int, default=None, help="local processes (default: every core)")))
+    args = parse(
+        __doc__,
+        argv,
+        "parameter_sweep",
+        lambda p: (
+            p.add_argument("--scene", default="breathing_paper"),
+            p.add_argument(
+                "--peaks", default="25,50,75,100,125", help="peak muscle stiffnesses (N/m), comma-separated"
+            ),
+            p.add_argument("--duration", type=float, default=2.0, help="simulated time (s), past the peak inspiration"),
+            p.add_argument("--workers", type=int, default=None, help="local processes (default: every core)"),
+        ),
+    )
     peaks = [40.0, 80.0] if args.quick else [float(x) for x in args.peaks.split(",")]
     duration = 0.3 if args.quick else args.duration
     workers = 1 if args.quick else args.workers  # --quick: in this process, no process start-up
@@ -40,9 +50,13 @@ def main(argv=None) -> int:
     for p, r in zip(peaks, results):
         failed = isinstance(r, Exception)
         nan = float("nan")
-        rows.append({"peak_n_per_m": p, **({k: nan for k in ("apex_descent_max_mm", "rib_lift_max_mm",
-                                                              "pressure_max_pa")} if failed else r),
-                     "error": f"{type(r).__name__}: {r}" if failed else ""})
+        rows.append(
+            {
+                "peak_n_per_m": p,
+                **({k: nan for k in ("apex_descent_max_mm", "rib_lift_max_mm", "pressure_max_pa")} if failed else r),
+                "error": f"{type(r).__name__}: {r}" if failed else "",
+            }
+        )
     write_table(rows, args.out, "sweep")
 
     plt = pyplot()

@@ -16,31 +16,46 @@ import sys
 from pathlib import Path
 
 import numpy as np
+from _common import parse, pyplot, write_table
 
 import hybrid
-
-from _common import parse, pyplot, write_table
 
 
 def make_recording(out: Path, scene: str, duration_s: float) -> Path:
     """A run.mcap from the command line, in out/run."""
-    subprocess.run([sys.executable, "-m", "hybrid", "run", scene, "--duration", str(duration_s),
-                    "--out", str(out / "run")], check=True)
+    subprocess.run(
+        [sys.executable, "-m", "hybrid", "run", scene, "--duration", str(duration_s), "--out", str(out / "run")],
+        check=True,
+    )
     return out / "run" / "run.mcap"
 
 
 def main(argv=None) -> int:
-    args = parse(__doc__, argv, "read_recording", lambda p: (
-        p.add_argument("--recording", type=Path, default=None, help="a run.mcap (default: record one first)"),
-        p.add_argument("--scene", default="breathing", help="the scene to record when no --recording is given")))
+    args = parse(
+        __doc__,
+        argv,
+        "read_recording",
+        lambda p: (
+            p.add_argument("--recording", type=Path, default=None, help="a run.mcap (default: record one first)"),
+            p.add_argument("--scene", default="breathing", help="the scene to record when no --recording is given"),
+        ),
+    )
     path = args.recording or make_recording(args.out, args.scene, 0.3 if args.quick else 4.0)
     data = hybrid.read(path)
     scalars = sorted(k for k, v in data.items() if k.startswith("/") and isinstance(v, dict) and "value" in v)
     rows = []
     for topic in scalars:
         t, v = data[topic]["t"], data[topic]["value"]
-        rows.append({"channel": topic, "samples": len(v), "min": float(v.min()), "t_min_s": float(t[v.argmin()]),
-                     "max": float(v.max()), "t_max_s": float(t[v.argmax()])})
+        rows.append(
+            {
+                "channel": topic,
+                "samples": len(v),
+                "min": float(v.min()),
+                "t_min_s": float(t[v.argmin()]),
+                "max": float(v.max()),
+                "t_max_s": float(t[v.argmax()]),
+            }
+        )
     write_table(rows, args.out, "recording")
 
     frames = data["membrane"]  # (nframe, nvert, 3): the apex is the highest point at rest

@@ -14,16 +14,21 @@ from __future__ import annotations
 
 import mujoco
 import numpy as np
+from _common import parse, pyplot, write_table
 
 import hybrid
 
-from _common import parse, pyplot, write_table
-
 
 def main(argv=None) -> int:
-    args = parse(__doc__, argv, "rigid_vs_mujoco", lambda p: (
-        p.add_argument("--scene", default="breathing_paper"),
-        p.add_argument("--steps", type=int, default=4000, help="steps (default one breath at 1 ms)")))
+    args = parse(
+        __doc__,
+        argv,
+        "rigid_vs_mujoco",
+        lambda p: (
+            p.add_argument("--scene", default="breathing_paper"),
+            p.add_argument("--steps", type=int, default=4000, help="steps (default one breath at 1 ms)"),
+        ),
+    )
     nstep = 300 if args.quick else args.steps
     sim = hybrid.load(args.scene)
     m, d = sim.mj_model, sim.mj_data
@@ -46,8 +51,19 @@ def main(argv=None) -> int:
     diff = np.abs(qpos - replay)
     t = sim.model.dt_s * np.arange(1, nstep + 1)
     joints = [(m.joint(j).name or f"joint{j}", int(m.jnt_qposadr[j])) for j in range(m.njnt)]
-    write_table([{"joint": name, "qpos_min": float(qpos[:, a].min()), "qpos_max": float(qpos[:, a].max()),
-                  "max_abs_difference": float(diff[:, a].max())} for name, a in joints], args.out, "rigid_vs_mujoco")
+    write_table(
+        [
+            {
+                "joint": name,
+                "qpos_min": float(qpos[:, a].min()),
+                "qpos_max": float(qpos[:, a].max()),
+                "max_abs_difference": float(diff[:, a].max()),
+            }
+            for name, a in joints
+        ],
+        args.out,
+        "rigid_vs_mujoco",
+    )
 
     plt = pyplot()
     fig, (a, b) = plt.subplots(2, 1, figsize=(7, 6), sharex=True)

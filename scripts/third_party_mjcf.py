@@ -17,10 +17,9 @@ import sys
 from pathlib import Path
 
 import numpy as np
+from _common import parse, pyplot, write_table
 
 import hybrid
-
-from _common import parse, pyplot, write_table
 
 CENTRE_M = (0.0, 0.0, 1.12)  # under the humanoid's torso at its initial pose
 
@@ -38,19 +37,32 @@ def scene(mjcf: Path) -> hybrid.Scene:
     z = CENTRE_M[2]
     ring = hybrid.Box((-1, -1, z + 0.07), (1, 1, z + 0.08))  # the border ring of the 80-point sphere
     return hybrid.Scene(
-        name="humanoid_abdomen", formulation="paper", dt_s=1e-3,
-        mesh=hybrid.MeshSpec("uv_sphere", radius_m=0.12, center_m=CENTRE_M), masses=hybrid.Masses(total_kg=4.0),
+        name="humanoid_abdomen",
+        formulation="paper",
+        dt_s=1e-3,
+        mesh=hybrid.MeshSpec("uv_sphere", radius_m=0.12, center_m=CENTRE_M),
+        masses=hybrid.Masses(total_kg=4.0),
         regions={"top": hybrid.HalfSpace((0, 0, z + 0.07), (0, 0, 1))},
-        forces=(hybrid.ShapeMemory(3000.0), hybrid.Damping(critical_fraction=0.3),
-                hybrid.Muscle("top", hybrid.Breathing(4.0, 0.4, 60.0), toward_m=(0, 0, z + 0.12))),
+        forces=(
+            hybrid.ShapeMemory(3000.0),
+            hybrid.Damping(critical_fraction=0.3),
+            hybrid.Muscle("top", hybrid.Breathing(4.0, 0.4, 60.0), toward_m=(0, 0, z + 0.12)),
+        ),
         constraints=(hybrid.Volume(),),
-        rigid=hybrid.Rigid(str(mjcf), links=(hybrid.RigidLink(ring, "torso", name="ribs"),), prefix="membrane_"))
+        rigid=hybrid.Rigid(str(mjcf), links=(hybrid.RigidLink(ring, "torso", name="ribs"),), prefix="membrane_"),
+    )
 
 
 def main(argv=None) -> int:
-    args = parse(__doc__, argv, "third_party_mjcf", lambda p: (
-        p.add_argument("--mjcf", type=Path, default=None, help="the MJCF file (default: gymnasium's humanoid.xml)"),
-        p.add_argument("--duration", type=float, default=1.0, help="simulated time (s)")))
+    args = parse(
+        __doc__,
+        argv,
+        "third_party_mjcf",
+        lambda p: (
+            p.add_argument("--mjcf", type=Path, default=None, help="the MJCF file (default: gymnasium's humanoid.xml)"),
+            p.add_argument("--duration", type=float, default=1.0, help="simulated time (s)"),
+        ),
+    )
     mjcf = args.mjcf or humanoid_xml()
     if mjcf is None:
         sys.stderr.write("third_party_mjcf: no humanoid.xml: pip install gymnasium (or hybrid[test]), or give --mjcf\n")
@@ -68,8 +80,19 @@ def main(argv=None) -> int:
     trace = hybrid.run(sim, duration, observers=[observe])["trace"].arrays()
     t = np.asarray(seen["t"])
     picks = sorted({int(np.searchsorted(t, x * duration - 1e-9)) for x in (0, 0.25, 0.5, 0.75, 1.0)})
-    write_table([{"t_s": t[k], "torso_z_m": seen["torso_z"][k], "membrane_centroid_z_m": seen["membrane_z"][k],
-                  "volume_rel_error": float(trace["volume_rel_error"][k])} for k in picks], args.out, "third_party")
+    write_table(
+        [
+            {
+                "t_s": t[k],
+                "torso_z_m": seen["torso_z"][k],
+                "membrane_centroid_z_m": seen["membrane_z"][k],
+                "volume_rel_error": float(trace["volume_rel_error"][k]),
+            }
+            for k in picks
+        ],
+        args.out,
+        "third_party",
+    )
 
     plt = pyplot()
     fig, (a, b) = plt.subplots(2, 1, figsize=(7, 6), sharex=True)

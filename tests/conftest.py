@@ -2,10 +2,9 @@
 surfaces and a Dask cluster."""
 
 import pytest
+from helpers import CLOSED
 
 from hybrid.scenefile import builtin_scene, load_scene
-
-from helpers import CLOSED
 
 
 @pytest.fixture(scope="session")
@@ -23,6 +22,5 @@ def closed_mesh(request):
 def dask_cluster():
     """A local Dask cluster of two worker processes, one thread each."""
     distributed = pytest.importorskip("dask.distributed")
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                  dashboard_address=None) as cluster:
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
         yield cluster

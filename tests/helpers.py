@@ -13,19 +13,24 @@ from hybrid.mesh import Mesh, icosphere, uv_sphere
 from hybrid.regions import HalfSpace
 from hybrid.scene import Damping, Gravity, Masses, MeshSpec, Nailed, Scene, ShapeMemory, Volume
 
-
 EPS = np.finfo(float).eps
 
 
 # ----------------------------------------------------------------- scenes
 
 # the 80-point sphere under gravity, hanging from its nailed bottom cap, incompressible
-BASE = Scene(formulation="paper",
-    mesh=MeshSpec(), masses=Masses(total_kg=4.0),
-    regions={"bottom": HalfSpace((0.0, 0.0, -0.1), (0.0, 0.0, -1.0)),
-             "top": HalfSpace((0.0, 0.0, 0.05), (0.0, 0.0, 1.0))},
+BASE = Scene(
+    formulation="paper",
+    mesh=MeshSpec(),
+    masses=Masses(total_kg=4.0),
+    regions={
+        "bottom": HalfSpace((0.0, 0.0, -0.1), (0.0, 0.0, -1.0)),
+        "top": HalfSpace((0.0, 0.0, 0.05), (0.0, 0.0, 1.0)),
+    },
     forces=(Gravity(), ShapeMemory(3000.0), Damping(critical_fraction=0.3)),
-    constraints=(Nailed("bottom"), Volume()), dt_s=1e-3)
+    constraints=(Nailed("bottom"), Volume()),
+    dt_s=1e-3,
+)
 
 
 def base_scene(**changes) -> Scene:
@@ -43,10 +48,16 @@ def with_constraint(term) -> Scene:
 def hanging_sphere(dt, integrator, kv=50.0, m=0.05):
     """Heavily damped (kv^2 > 4 m k): the explicit bound 4m / (kv + sqrt(kv^2 - 4mk))
     is then close to the paper's 2m/kv (2.1e-3 s against 2e-3 s)."""
-    return Scene(formulation="paper", mesh=MeshSpec(), masses=Masses(per_vertex_kg=(m,) * 80),
-                 regions={"bottom": HalfSpace((0.0, 0.0, -0.1), (0.0, 0.0, -1.0))},
-                 forces=(Gravity(), ShapeMemory(3000.0), Damping(coef_n_s_per_m=kv)),
-                 constraints=(Nailed("bottom"), Volume()), dt_s=dt, integrator=integrator)
+    return Scene(
+        formulation="paper",
+        mesh=MeshSpec(),
+        masses=Masses(per_vertex_kg=(m,) * 80),
+        regions={"bottom": HalfSpace((0.0, 0.0, -0.1), (0.0, 0.0, -1.0))},
+        forces=(Gravity(), ShapeMemory(3000.0), Damping(coef_n_s_per_m=kv)),
+        constraints=(Nailed("bottom"), Volume()),
+        dt_s=dt,
+        integrator=integrator,
+    )
 
 
 # ----------------------------------------------------------------- meshes
@@ -72,10 +83,12 @@ def torus(major=1.0, minor=0.3, n_major=24, n_minor=12, center=(0.0, 0.0, 0.0)) 
     i1, j1 = (i + 1) % n_major, (j + 1) % n_minor
     idx = lambda a, b: (a * n_minor + b).ravel()  # noqa: E731
     # dP/du x dP/dv points outward, so (i, j) -> (i+1, j) -> (i+1, j+1) is counter-clockwise.
-    face = np.concatenate([
-        np.stack([idx(i, j), idx(i1, j), idx(i1, j1)], axis=1),
-        np.stack([idx(i, j), idx(i1, j1), idx(i, j1)], axis=1),
-    ])
+    face = np.concatenate(
+        [
+            np.stack([idx(i, j), idx(i1, j), idx(i1, j1)], axis=1),
+            np.stack([idx(i, j), idx(i1, j1), idx(i, j1)], axis=1),
+        ]
+    )
     return Mesh.from_arrays(pos.reshape(-1, 3) + center, face, name="torus")
 
 
@@ -85,8 +98,7 @@ def dented_sphere(center=(0.0, 0.0, 0.0)) -> Mesh:
     x, y, z = base.vert_pos.T
     theta, phi = np.arccos(z), np.arctan2(y, x)
     radius = 1.0 + 0.35 * np.sin(3 * theta) * np.cos(2 * phi)
-    return Mesh.from_arrays(base.vert_pos * radius[:, None] + center, base.face_vert,
-                            name="dented")
+    return Mesh.from_arrays(base.vert_pos * radius[:, None] + center, base.face_vert, name="dented")
 
 
 def submesh(mesh: Mesh, keep_face: np.ndarray, name="sub") -> Mesh:
@@ -155,4 +167,5 @@ def decoded_messages(path, topics):
 def strict_load(path):
     def no_constant(name):
         raise ValueError(f"non-finite constant {name} in {path}")
+
     return json.loads(path.read_text(), parse_constant=no_constant)

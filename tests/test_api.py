@@ -39,6 +39,7 @@ def test_parameters_change_and_the_run_repeats(tmp_path):
 
 def test_membrane_only_scene_has_no_mujoco():
     from hybrid.demo import membrane_demo
+
     sim = hybrid.load(membrane_demo())
     assert sim.mj_model is None and sim.mj_data is None
 
@@ -59,18 +60,23 @@ def test_every_public_name_resolves_and_is_listed_once():
         assert getattr(hybrid, name) is not None, name
     # the vocabulary of a scene: every term, region selector and schedule
     from hybrid import regions, scene, schedule
-    vocabulary = (set(scene.__all__) - {"INTEGRATORS", "FORMULATIONS"} | set(regions.__all__) - {"Selector", "select", "contains", "select_faces"}
-                  | set(schedule.__all__) - {"Schedule", "as_schedule", "ScheduleTable", "stack_schedules",
-                                             "schedule_eval"})
+
+    vocabulary = (
+        set(scene.__all__) - {"INTEGRATORS", "FORMULATIONS"}
+        | set(regions.__all__) - {"Selector", "select", "contains", "select_faces"}
+        | set(schedule.__all__) - {"Schedule", "as_schedule", "ScheduleTable", "stack_schedules", "schedule_eval"}
+    )
     assert vocabulary <= set(hybrid.__all__)
     assert callable(hybrid.run) and callable(hybrid.sweep) and callable(hybrid.read)
     with pytest.raises(AttributeError, match="no attribute 'nosuchname'"):
-        hybrid.nosuchname
+        hybrid.nosuchname  # noqa: B018 (the attribute access is the test)
 
 
 def test_import_hybrid_loads_no_optional_part():
-    code = ("import sys, hybrid; heavy = ('matplotlib', 'mujoco', 'mcap', 'dask', 'hybrid.record', "
-            "'hybrid.cli'); print([m for m in heavy if m in sys.modules])")
+    code = (
+        "import sys, hybrid; heavy = ('matplotlib', 'mujoco', 'mcap', 'dask', 'hybrid.record', "
+        "'hybrid.cli'); print([m for m in heavy if m in sys.modules])"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=300)
     assert out.stdout.strip() == "[]", out.stdout
 
@@ -82,7 +88,7 @@ def _imported_modules(package: Path, path: Path):
         if isinstance(node, ast.Import):
             yield from (a.name for a in node.names)
         elif isinstance(node, ast.ImportFrom):
-            base = here[:len(here) - node.level + 1] if node.level else []
+            base = here[: len(here) - node.level + 1] if node.level else []
             module = ".".join(base + ([node.module] if node.module else []))
             yield module
             yield from (f"{module}.{a.name}" for a in node.names)
@@ -90,15 +96,16 @@ def _imported_modules(package: Path, path: Path):
 
 def test_only_the_entry_point_imports_the_command_line():
     package = Path(hybrid.__file__).parent
-    importers = sorted(str(p.relative_to(package)) for p in package.rglob("*.py")
-                       if "hybrid.cli" in set(_imported_modules(package, p)))
+    importers = sorted(
+        str(p.relative_to(package)) for p in package.rglob("*.py") if "hybrid.cli" in set(_imported_modules(package, p))
+    )
     assert importers == ["__main__.py"]
 
 
 def _readme_python_example() -> str:
     readme = (Path(__file__).resolve().parents[1] / "README.md").read_text(encoding="utf-8")
-    section = readme[readme.index("## Using it"):]
-    section = section[:section.index("\n## ", 1)]
+    section = readme[readme.index("## Using it") :]
+    section = section[: section.index("\n## ", 1)]
     blocks = re.findall(r"```python\n(.*?)```", section, flags=re.S)
     assert len(blocks) == 1, "the section 'Using it' holds one Python example"
     return blocks[0]

@@ -44,14 +44,20 @@ def test_adding_a_term_takes_the_three_edits_the_architecture_page_shows(tmp_pat
     edit2 = blocks["edit 2: hybrid/terms/__init__.py"]
     init = _insert_after(init, "from .local import KeepIn, Nailed, Prescribed\n", edit2.splitlines()[0] + "\n")
     tuple_text = re.search(r"order_terms\(\(.*?\)\)", edit2, re.S).group(0)
-    init = re.sub(r"order_terms\(\(.*?\)\)", tuple_text, init, count=1, flags=re.S)
+    init = re.sub(r"order_terms\(\s*\(.*?\),?\s*\)\n", tuple_text + "\n", init, count=1, flags=re.S)
     (pkg / "terms" / "__init__.py").write_text(init)
     # edit 3: the call in the step, and its import and id at the top
     step = (pkg / "step.py").read_text()
-    step = _insert_after(step, "from .terms.volume import PROJ_OK, face_volume, project_volume, soft_volume_force\n",
-                         blocks["edit 3: hybrid/step.py, at the top"])
-    step = _insert_after(step, "        s.term_calls[T_MUSCLE] += 1\n",
-                         blocks["edit 3: hybrid/step.py, in membrane_forces after the muscle"])
+    step = _insert_after(
+        step,
+        "from .terms.springs import add_applied, add_attraction, add_mass_spring\n",
+        blocks["edit 3: hybrid/step.py, at the top"],
+    )
+    step = _insert_after(
+        step,
+        "        s.term_calls[T_MUSCLE] += 1\n",
+        blocks["edit 3: hybrid/step.py, in membrane_forces after the muscle"],
+    )
     (pkg / "step.py").write_text(step)
 
     # a sphere dropped on the floor, written as a scene file: it comes to rest on it
@@ -73,8 +79,9 @@ sim.step(2000)  # 1 s
 print("floor" in TERMS, sim.term_calls["floor"], float(sim.vert_pos[:, 2].min()), sim.volume_rel_error)
 """
     env = {**os.environ, "PYTHONPATH": str(tmp_path), "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
-    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, env=env, cwd=tmp_path,
-                          timeout=600)
+    proc = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, env=env, cwd=tmp_path, timeout=600
+    )
     assert proc.returncode == 0, proc.stderr[-2000:]
     known, calls, z_min, vol_err = proc.stdout.split()
     assert known == "True" and int(calls) == 2000

@@ -53,6 +53,7 @@ class Stepped(BaseException):
 
 # ------------------------------------------------------------------ generated inputs
 
+
 def _records(blob: bytes):
     """(opcode, start, end) of each MCAP record: start at its opcode, end past its content."""
     pos, out = 8, []
@@ -73,18 +74,26 @@ def _flip(blob: bytes, offset: int, bit: int = 0) -> bytes:
 
 def _png() -> bytes:
     """A valid 1x1 PNG."""
+
     def chunk(kind, data):
         return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
-    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", 1, 1, 8, 2, 0, 0, 0))
-            + chunk(b"IDAT", zlib.compress(b"\x00\xff\x00\x00")) + chunk(b"IEND", b""))
+
+    return (
+        b"\x89PNG\r\n\x1a\n"
+        + chunk(b"IHDR", struct.pack(">IIBBBBB", 1, 1, 8, 2, 0, 0, 0))
+        + chunk(b"IDAT", zlib.compress(b"\x00\xff\x00\x00"))
+        + chunk(b"IEND", b"")
+    )
 
 
 def _nested_scene(depth: int) -> str:
     sel = '"all"'
     for _ in range(depth):
         sel = "{ union = [" + sel + "] }"
-    return (f"[mesh]\ngenerator = \"icosahedron\"\n[masses]\ntotal_kg = 1.0\n[regions]\ndeep = {sel}\n"
-            "[[constraints]]\ntype = \"nailed\"\nregion = \"deep\"\n")
+    return (
+        f'[mesh]\ngenerator = "icosahedron"\n[masses]\ntotal_kg = 1.0\n[regions]\ndeep = {sel}\n'
+        '[[constraints]]\ntype = "nailed"\nregion = "deep"\n'
+    )
 
 
 @pytest.fixture(scope="session")
@@ -93,8 +102,7 @@ def generated(tmp_path_factory) -> Path:
     recording, files of other kinds named .mcap, a scene nested 400 deep."""
     gen = tmp_path_factory.mktemp("bad_inputs_gen")
     rec = gen / "rec"
-    status = cli.main(["run", str(DATA / "scenes" / "tiny.toml"), "--duration", str(RECORDED_S),
-                       "--out", str(rec)])
+    status = cli.main(["run", str(DATA / "scenes" / "tiny.toml"), "--duration", str(RECORDED_S), "--out", str(rec)])
     assert status == 0
     good = (rec / "run.mcap").read_bytes()
     (gen / "good.mcap").write_bytes(good)
@@ -122,6 +130,7 @@ def generated(tmp_path_factory) -> Path:
 
 
 # ------------------------------------------------------------------ one case
+
 
 @contextlib.contextmanager
 def _memory_cap(on: bool):
@@ -162,11 +171,11 @@ def _prepare(tmp_path: Path) -> dict:
 
 def _check_left_behind(tmp_path: Path, where: dict, before: set[str]) -> None:
     out = where["out"]
-    assert not out.exists() or (out.is_dir() and not any(out.iterdir())), \
+    assert not out.exists() or (out.is_dir() and not any(out.iterdir())), (
         f"left behind in {{out}}: {sorted(_contents(out))}"
+    )
     assert not _contents(where["cwd"]), f"left behind in the working folder: {sorted(_contents(where['cwd']))}"
-    assert _contents(where["tmp"]) == before, \
-        f"changed in {{tmp}}: {sorted(_contents(where['tmp']) ^ before)}"
+    assert _contents(where["tmp"]) == before, f"changed in {{tmp}}: {sorted(_contents(where['tmp']) ^ before)}"
     extra = {p.name for p in tmp_path.iterdir()} - {"cwd", "scratch", "out"}
     assert not extra, f"written beside the working folder: {sorted(extra)}"
 
@@ -224,6 +233,7 @@ def test_bad_input_is_refused_with_one_line(case, generated, tmp_path, monkeypat
 
 # ------------------------------------------------------------------ the catalogue itself
 
+
 def test_catalogue_covers_every_kind_of_input():
     ids = [c["id"] for c in CASES]
     assert len(ids) == len(set(ids)), sorted({i for i in ids if ids.count(i) > 1})
@@ -232,7 +242,9 @@ def test_catalogue_covers_every_kind_of_input():
     assert all(c["category"] in CATEGORIES for c in CASES)
     assert min(count.values()) >= 8, count
     for c in CASES:
-        assert isinstance(c["args"], list) and c["culprit"] and all(isinstance(p, str) and p for p in c["culprit"]), c["id"]
+        assert isinstance(c["args"], list) and c["culprit"] and all(isinstance(p, str) and p for p in c["culprit"]), c[
+            "id"
+        ]
 
 
 def test_every_input_file_is_used():
@@ -260,10 +272,14 @@ def test_bad_input_in_a_fresh_process(case, generated, tmp_path):
     where = _prepare(tmp_path)
     before = _contents(where["tmp"])
     args = _expand(case["args"], {"data": DATA, "gen": generated, **where})
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(HERE.parent), os.environ.get("PYTHONPATH", "")]),
-           **case.get("env", {})}
-    proc = subprocess.run([sys.executable, "-m", "hybrid", *args], capture_output=True, text=True,
-                          cwd=where["cwd"], env=env, timeout=120)
+    env = {
+        **os.environ,
+        "PYTHONPATH": os.pathsep.join([str(HERE.parent), os.environ.get("PYTHONPATH", "")]),
+        **case.get("env", {}),
+    }
+    proc = subprocess.run(
+        [sys.executable, "-m", "hybrid", *args], capture_output=True, text=True, cwd=where["cwd"], env=env, timeout=120
+    )
     assert proc.returncode == 2, proc
     _check_line(proc.stderr, case)
     _check_left_behind(tmp_path, where, before)

@@ -17,12 +17,21 @@ def test_flex_sphere_loses_volume_under_load():
 
 def test_bench_sections_keep_their_keys_and_format():
     # each section on a tiny workload: the keys `hybrid bench --json` writes
-    result = {"membrane": bench.bench_membrane_rows((None,), repeats=1, work=2e3),
-              "coupled": bench.coupled_row(nstep=8, repeats=1),
-              "recording": bench.recording_row(duration_s=0.05, repeats=1),
-              "flex": bench.flex_rows(duration_s=0.01)}
-    assert {"nvert", "us_per_step", "ns_per_vertex_step", "serial_us_per_step", "parallel_us_per_step",
-            "default_build", "default_to_faster"} <= set(result["membrane"][0])
+    result = {
+        "membrane": bench.bench_membrane_rows((None,), repeats=1, work=2e3),
+        "coupled": bench.coupled_row(nstep=8, repeats=1),
+        "recording": bench.recording_row(duration_s=0.05, repeats=1),
+        "flex": bench.flex_rows(duration_s=0.01),
+    }
+    assert {
+        "nvert",
+        "us_per_step",
+        "ns_per_vertex_step",
+        "serial_us_per_step",
+        "parallel_us_per_step",
+        "default_build",
+        "default_to_faster",
+    } <= set(result["membrane"][0])
     assert result["membrane"][0]["nvert"] == 80
     assert set(result["coupled"]) == {"us_per_step", "mj_step_us", "ratio"}
     assert set(result["recording"]) == {"duration_s", "run_s", "recorded_s", "inline_s", "ratio", "inline_ratio"}
@@ -49,13 +58,15 @@ def test_realtime_row_at_a_level_without_a_measured_run_takes_symplectic_euler_b
     rt = bench.realtime_row("breathing", 1, duration_s=0.05, repeats=1)
     assert rt["integrator"] == "symplectic_euler"
     assert abs(0.01 / rt["dt"] - round(0.01 / rt["dt"])) < 1e-9  # divides the 10 ms frame
-    model = bench.compile_scene(bench.apply_overrides(bench.load_scene(bench.builtin_scene("breathing")),
-                                                      ["mesh.level=1"]))
+    model = bench.compile_scene(
+        bench.apply_overrides(bench.load_scene(bench.builtin_scene("breathing")), ["mesh.level=1"])
+    )
     assert 0.5 * model.dt_stable_s < rt["dt"] <= bench.REALTIME_BOUND_FRACTION * model.dt_stable_s
 
 
 def test_bench_only_some_sections_and_bad_names_in_one_line(capsys):
     from hybrid.cli import main
+
     assert main(["bench", "--only", "snore,realtime"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "snore" in err and "realtime" in err
@@ -66,11 +77,15 @@ def test_bench_only_some_sections_and_bad_names_in_one_line(capsys):
 
 def test_the_recommended_levels_realtime_run_is_implicit_euler_solved_to_a_looser_tolerance():
     from hybrid.cli import build_parser
+
     assert build_parser().parse_args(["bench"]).realtime_level == bench.RECOMMENDED_LEVEL
     integrator, dt, overrides = bench.REALTIME_RUNS[("breathing", bench.RECOMMENDED_LEVEL)]
     frames = dt / 0.01  # a whole number of 10 ms frames a step (a frame at every step), or steps a frame
-    assert integrator == "implicit_euler" and min(abs(frames - round(frames)), abs(1 / frames - round(1 / frames))) < 1e-9
-    rt = bench.realtime_row("breathing", 1, integrator="implicit_euler", dt_s=dt, overrides=overrides,
-                            duration_s=0.1, repeats=1)
+    assert (
+        integrator == "implicit_euler" and min(abs(frames - round(frames)), abs(1 / frames - round(1 / frames))) < 1e-9
+    )
+    rt = bench.realtime_row(
+        "breathing", 1, integrator="implicit_euler", dt_s=dt, overrides=overrides, duration_s=0.1, repeats=1
+    )
     assert rt["overrides"] == list(overrides) == ["implicit_tol=1e-2"] and rt["dt"] == dt
     assert "implicit_tol=1e-2" in bench.format_table({"realtime": [rt]})

@@ -37,6 +37,8 @@ def test_quiet_breathing_in_the_physiological_ranges(one_breath):
 
 def test_without_the_volume_constraint_the_ribs_rise_at_most_a_third(one_breath):
     without = run(hybrid.load("breathing", without=["volume"]), 2.0)["summary"]
-    assert without["rib_lift_mm"] <= one_breath["rib_lift_mm"] / 3.0, (without["rib_lift_mm"],
-                                                                        one_breath["rib_lift_mm"])
+    assert without["rib_lift_mm"] <= one_breath["rib_lift_mm"] / 3.0, (
+        without["rib_lift_mm"],
+        one_breath["rib_lift_mm"],
+    )
     assert without["volume_rel_change_max"] > 0.01  # the abdomen gives way instead

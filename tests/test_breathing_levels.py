@@ -17,8 +17,17 @@ from hybrid.regions import select_faces
 from hybrid.resolve import resolve_scene
 from hybrid.run import run
 
-ANATOMY = ("diaphragm", "abdomen", "rib_band", "tendon", "muscle", "rib_left_points", "rib_right_points", "pelvis",
-           "spine")
+ANATOMY = (
+    "diaphragm",
+    "abdomen",
+    "rib_band",
+    "tendon",
+    "muscle",
+    "rib_left_points",
+    "rib_right_points",
+    "pelvis",
+    "spine",
+)
 
 
 def test_levels_start_at_the_papers_sphere_and_double_the_points():
@@ -37,7 +46,7 @@ def test_fibonacci_sphere_is_closed_outward_and_even():
         area = vertex_area(m.vert_pos, m.face_vert)
         assert area.max() / area.min() < 2.0, (n, area.max() / area.min())
         # the hull of points on the sphere: a polyhedron inside it, second-order close
-        assert 4 / 3 * np.pi * 0.12 ** 3 * (1 - 8.0 / n) < m.volume() < 4 / 3 * np.pi * 0.12 ** 3
+        assert 4 / 3 * np.pi * 0.12**3 * (1 - 8.0 / n) < m.volume() < 4 / 3 * np.pi * 0.12**3
     uv = uv_sphere(0.12, 74, 35)
     a = vertex_area(uv.vert_pos, uv.face_vert)
     assert a.max() / a.min() > 10  # what the pole-free family avoids
@@ -67,8 +76,10 @@ def test_the_breathing_anatomy_exists_at_every_level(generator):
         # the regions are of physical size: the areas of their faces converge as the mesh refines
         p = m.mesh.vert_pos[m.mesh.face_vert]
         face_area = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
-        area_mm2[level] = {name: face_area[select_faces(name, m.mesh.vert_pos, m.mesh.face_vert, sc.regions,
-                                                        name=name)].sum() * 1e6 for name in ("diaphragm", "rib_band")}
+        area_mm2[level] = {
+            name: face_area[select_faces(name, m.mesh.vert_pos, m.mesh.face_vert, sc.regions, name=name)].sum() * 1e6
+            for name in ("diaphragm", "rib_band")
+        }
     # a zone of a sphere of radius 0.12 m: 2 pi R dz. Conforming circles bound the faces
     # exactly (the polyhedron's area is second order: under 0.5% at level 5); the jagged
     # border of the fibonacci sphere is off by up to a row of faces
@@ -99,8 +110,10 @@ def test_the_scene_on_a_saved_level_4_mesh_runs_as_on_the_generated_one(tmp_path
     for key, v in res[0].items():  # 17 digits read back to the same doubles: the same run
         assert res[1][key]["max"] == pytest.approx(v["max"], rel=1e-9, abs=1e-15), key
     # a level on a file mesh splits its faces (about 4 times the points)
-    assert compile_scene(dataclasses.replace(from_file, mesh=dataclasses.replace(from_file.mesh, level=1))).nvert > \
-        3 * model.nvert
+    assert (
+        compile_scene(dataclasses.replace(from_file, mesh=dataclasses.replace(from_file.mesh, level=1))).nvert
+        > 3 * model.nvert
+    )
 
 
 def test_auto_step_is_half_the_stable_estimate_rounded_down():
@@ -130,25 +143,29 @@ def test_the_trace_gives_the_diaphragms_swept_volume():
 
 def test_a_sphere_read_from_a_file_refines_onto_its_sphere(tmp_path):
     from hybrid.mesh.refine import split_faces
+
     generated = resolve_scene("breathing", overrides=["mesh.level=1"])
     path = tmp_path / "level1.obj"
     compile_scene(generated).mesh.save(path)
     center = np.asarray(generated.mesh.center_m)
     areas = []
     for level in (1, 2, 3):
-        m = compile_scene(dataclasses.replace(generated, mesh=dataclasses.replace(generated.mesh, path=str(path),
-                                                                                  level=level)))
+        m = compile_scene(
+            dataclasses.replace(generated, mesh=dataclasses.replace(generated.mesh, path=str(path), level=level))
+        )
         r = np.linalg.norm(m.mesh.vert_pos - center, axis=1)
         np.testing.assert_allclose(r, 0.12, rtol=1e-14)  # every new point on the sphere
         assert m.mesh.volume() > 0  # faces still outward (and the Mesh validated closed)
         areas.append(vertex_area(m.mesh.vert_pos, m.mesh.face_vert).sum())
     # the polyhedron's area tends to 4 pi R^2 at second order in the spacing (halved a level)
-    err = [4 * np.pi * 0.12 ** 2 - a for a in areas]
+    err = [4 * np.pi * 0.12**2 - a for a in areas]
     assert all(e > 0 for e in err) and 3.5 < err[0] / err[1] < 4.5 and 3.5 < err[1] / err[2] < 4.5
     # without a projection the split keeps the polyhedron: the same area, the same volume
     coarse = compile_scene(generated).mesh
     pos, face = split_faces(coarse.vert_pos, coarse.face_vert, 2)
-    assert vertex_area(pos, face).sum() == pytest.approx(vertex_area(coarse.vert_pos, coarse.face_vert).sum(), rel=1e-12)
+    assert vertex_area(pos, face).sum() == pytest.approx(
+        vertex_area(coarse.vert_pos, coarse.face_vert).sum(), rel=1e-12
+    )
     assert hybrid.mesh.volume(pos, face) == pytest.approx(coarse.volume(), rel=1e-12)
 
 
@@ -156,7 +173,9 @@ def test_a_level_of_a_file_mesh_off_a_sphere_is_refused(tmp_path):
     path = tmp_path / "ellipsoid.obj"
     ico = hybrid.mesh.icosphere(2, 0.1)
     hybrid.mesh.Mesh.from_arrays(ico.vert_pos * [1.0, 1.0, 1.3], ico.face_vert).save(path)
-    sc = hybrid.Scene(mesh=hybrid.MeshSpec(path=str(path), level=1), forces=(hybrid.Membrane(youngs_modulus_n_per_m=100.0),))
+    sc = hybrid.Scene(
+        mesh=hybrid.MeshSpec(path=str(path), level=1), forces=(hybrid.Membrane(youngs_modulus_n_per_m=100.0),)
+    )
     with pytest.raises(SceneError, match=r"mesh.level on a file mesh.*off the best-fitting sphere.*or no mesh.level"):
         compile_scene(sc)
     assert compile_scene(dataclasses.replace(sc, mesh=hybrid.MeshSpec(path=str(path)))).nvert == ico.nvert
@@ -173,6 +192,9 @@ def test_the_uv_and_ring_families_close_in_on_each_other():
     def maxima(*sets):
         table = run(hybrid.load("breathing", overrides=list(sets)), 1.7)["summary"]["metrics"]
         return np.array([table[k]["max"] for k in keys])
-    apart = {lv: np.abs(maxima(f"mesh.level={lv}", "mesh.generator=uv_sphere") / maxima(f"mesh.level={lv}") - 1.0)
-             for lv in (2, 5)}
+
+    apart = {
+        lv: np.abs(maxima(f"mesh.level={lv}", "mesh.generator=uv_sphere") / maxima(f"mesh.level={lv}") - 1.0)
+        for lv in (2, 5)
+    }
     assert np.all(apart[5] < 0.5 * apart[2]) and np.all(apart[5] < 0.02), dict(zip(keys, zip(apart[2], apart[5])))

@@ -12,17 +12,29 @@ from hybrid.record import read
 
 
 def run_cli(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "hybrid", *args], capture_output=True, text=True, cwd=cwd,
-                          timeout=600)
+    return subprocess.run([sys.executable, "-m", "hybrid", *args], capture_output=True, text=True, cwd=cwd, timeout=600)
 
 
 def test_run_membrane_demo_writes_summary_and_plot(tmp_path):
     out = tmp_path / "demo"
     assert main(["run", "membrane_demo", "--duration", "4", "--out", str(out)]) == 0
     summary = json.loads((out / "summary.json").read_text())
-    for key in ("scene", "steps", "dt", "duration_s", "wall_s", "us_per_step", "volume_rel_error_max",
-                "volume_rel_change_max", "pressure_min_pa", "pressure_max_pa", "apex_descent_mm", "rest_return_mm",
-                "metrics", "provenance"):
+    for key in (
+        "scene",
+        "steps",
+        "dt",
+        "duration_s",
+        "wall_s",
+        "us_per_step",
+        "volume_rel_error_max",
+        "volume_rel_change_max",
+        "pressure_min_pa",
+        "pressure_max_pa",
+        "apex_descent_mm",
+        "rest_return_mm",
+        "metrics",
+        "provenance",
+    ):
         assert key in summary, key
     assert not [key for key in summary if "rib" in key]  # no ribs in this scene
     assert summary["steps"] == 4000
@@ -35,18 +47,37 @@ def test_run_membrane_demo_writes_summary_and_plot(tmp_path):
 
 def test_set_overrides_a_python_scene_as_a_toml_one(tmp_path):
     out = tmp_path / "o"
-    assert main(["run", "membrane_demo", "--set", "dt_s=2e-3", "--without", "muscle", "--duration", "0.1",
-                 "--no-record", "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "run",
+                "membrane_demo",
+                "--set",
+                "dt_s=2e-3",
+                "--without",
+                "muscle",
+                "--duration",
+                "0.1",
+                "--no-record",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     summary = json.loads((out / "summary.json").read_text())
     assert summary["dt"] == 2e-3 and summary["steps"] == 50
 
 
-@pytest.mark.parametrize("args, culprit", [
-    (["run", "membrane_demo", "--dt", "-1"], "dt_s"),
-    (["run", "membrane_demo", "--duration", "0"], "--duration"),
-    (["run", "membrane_demo", "--without", "nosuchterm"], "nosuchterm"),
-    (["run", "membrane_demo", "--bogus"], "--bogus"),
-])
+@pytest.mark.parametrize(
+    "args, culprit",
+    [
+        (["run", "membrane_demo", "--dt", "-1"], "dt_s"),
+        (["run", "membrane_demo", "--duration", "0"], "--duration"),
+        (["run", "membrane_demo", "--without", "nosuchterm"], "nosuchterm"),
+        (["run", "membrane_demo", "--bogus"], "--bogus"),
+    ],
+)
 def test_bad_input_is_one_line_with_status_2(args, culprit, tmp_path):
     proc = run_cli(*args, "--out", str(tmp_path / "o"))
     assert proc.returncode == 2
@@ -56,8 +87,10 @@ def test_bad_input_is_one_line_with_status_2(args, culprit, tmp_path):
     assert "Traceback" not in proc.stderr
 
 
-@pytest.mark.parametrize("command", [["run", "membrane_demo", "--duration", "0.01"], ["render", "membrane_demo"],
-                                     ["study", "stability", "--small"]])
+@pytest.mark.parametrize(
+    "command",
+    [["run", "membrane_demo", "--duration", "0.01"], ["render", "membrane_demo"], ["study", "stability", "--small"]],
+)
 def test_an_output_folder_that_cannot_be_written_is_one_line_with_status_2(command, tmp_path):
     blocker = tmp_path / "a_file"
     blocker.write_text("")
@@ -89,10 +122,10 @@ def test_bench_quick_writes_json(tmp_path):
     for r in rows:
         assert r["us_per_step"] > 0
         assert r["ns_per_vertex_step"] == pytest.approx(r["us_per_step"] * 1e3 / r["nvert"])
-        assert r["serial_us_per_step"] > 0 and r["parallel_us_per_step"] > 0   # both builds, every size
+        assert r["serial_us_per_step"] > 0 and r["parallel_us_per_step"] > 0  # both builds, every size
         assert r["default_build"] in ("serial", "parallel")
         assert r["default_serial_steps"] + r["default_parallel_steps"] > 0
-    assert rows[0]["default_build"] == "serial" and rows[0]["default_parallel_steps"] == 0   # 80 points: never tried
+    assert rows[0]["default_build"] == "serial" and rows[0]["default_parallel_steps"] == 0  # 80 points: never tried
     coupled = data["coupled"]
     # the median of per-repeat ratios lies between the extremes of the two medians' ratio
     assert 0.3 < coupled["ratio"] / (coupled["us_per_step"] / coupled["mj_step_us"]) < 3
@@ -118,7 +151,9 @@ def test_a_file_system_error_during_a_run_is_one_line_with_status_2(tmp_path, mo
     monkeypatch.setattr(runner, "write_outputs", full_disk)
     assert main(["run", "membrane_demo", "--duration", "0.01", "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert err == [f"hybrid: error: cannot read or write {str(tmp_path / 'o' / 'summary.json')!r}: No space left on device"]
+    assert err == [
+        f"hybrid: error: cannot read or write {str(tmp_path / 'o' / 'summary.json')!r}: No space left on device"
+    ]
 
 
 def test_the_cli_run_that_diverges_still_writes_a_readable_recording(tmp_path, capsys):
@@ -136,6 +171,7 @@ def test_the_cli_run_that_diverges_still_writes_a_readable_recording(tmp_path, c
 def test_no_record_and_record_every(tmp_path):
     assert main(["run", "membrane_demo", "--duration", "0.1", "--out", str(tmp_path / "a"), "--no-record"]) == 0
     assert not (tmp_path / "a" / "run.mcap").exists()
-    assert main(["run", "membrane_demo", "--duration", "0.1", "--out", str(tmp_path / "b"),
-                 "--record-every", "0.05"]) == 0
+    assert (
+        main(["run", "membrane_demo", "--duration", "0.1", "--out", str(tmp_path / "b"), "--record-every", "0.05"]) == 0
+    )
     np.testing.assert_allclose(read(tmp_path / "b" / "run.mcap")["/pressure"]["t"], [0.0, 0.05, 0.1], atol=1e-9)

@@ -28,7 +28,6 @@ from hybrid.scene import Gravity, Scene
 from hybrid.simulation import Simulation
 from hybrid.step import OK, S_PRESSURE, S_TIME, membrane_advance, membrane_forces
 
-
 PERIOD_S = 4.0
 
 
@@ -54,8 +53,7 @@ def breathing_run(scene: Scene, duration_s: float, frame_steps: int = 10) -> dic
         pressure[k] = sim.pressure
         verr[k] = sim.volume_rel_error
     rest_return = float(np.linalg.norm(sim.state.vert_pos - rest, axis=1).max() * 1e3)
-    return dict(sim=sim, t=t, lift=lift, descent=descent, pressure=pressure, verr=verr,
-                rest_return_mm=rest_return)
+    return dict(sim=sim, t=t, lift=lift, descent=descent, pressure=pressure, verr=verr, rest_return_mm=rest_return)
 
 
 # ----------------------------------------------------------------- the breathing scene
@@ -111,6 +109,7 @@ def test_without_volume_the_ribs_lift_at_most_a_third(breathing):
 def python_coupled_steps(model, nstep):
     """The coupled step written plainly with public pieces (module docstring)."""
     from hybrid.step import new_state
+
     system = model.rigid.fork()
     system.reset()
     state = new_state(model.arrays)
@@ -209,10 +208,8 @@ def test_linked_points_weigh_what_the_scene_says(breathing):
     sim = Simulation(model)
     g = np.array(sim.rigid.mj_model.opt.gravity)
     # no gravity term in the scene: what MuJoCo applies to the added masses is taken back
-    np.testing.assert_allclose(sim.rigid.link_extra_force(),
-                               -model.rigid.link_mass[:, None] * g[None, :], rtol=1e-15)
-    with_gravity = compile_scene(dataclasses.replace(
-        breathing, forces=breathing.forces + (Gravity(),)))
+    np.testing.assert_allclose(sim.rigid.link_extra_force(), -model.rigid.link_mass[:, None] * g[None, :], rtol=1e-15)
+    with_gravity = compile_scene(dataclasses.replace(breathing, forces=breathing.forces + (Gravity(),)))
     assert np.abs(Simulation(with_gravity).rigid.link_extra_force()).max() == 0.0
 
 

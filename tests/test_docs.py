@@ -25,8 +25,9 @@ TO_CREATE = {"hybrid/terms/floor.py"}
 
 
 def test_the_scene_file_reference_is_the_one_the_dataclasses_generate():
-    assert docgen.DOC_PATH.read_text(encoding="utf-8") == docgen.render(), \
+    assert docgen.DOC_PATH.read_text(encoding="utf-8") == docgen.render(), (
         "docs/scene-file.md is out of date with the dataclasses: run `python -m hybrid.docgen`"
+    )
 
 
 def _sections(text: str) -> dict:
@@ -47,6 +48,7 @@ def test_every_term_and_every_field_has_its_row():
 def _bounded_fields():
     """(where, field) of every field with a kind: the scene's, the mesh's, the terms'."""
     from hybrid.scene import MeshSpec, Scene
+
     for cls in (Scene, MeshSpec, *base.TERM_CLASSES):
         for f in dataclasses.fields(cls):
             if f.metadata.get("kind") in ("positive", "nonneg", "angle_deg", "integer"):
@@ -92,6 +94,7 @@ def test_a_new_term_appears_without_an_edit_of_the_generator(monkeypatch):
     @force("floor_for_docs")
     class FloorForDocs(Term):
         """A soft floor pushing points back up."""
+
         stiffness_n_per_m: float = param("positive", hi=1e6)
         point_m: tuple = param("vec3", (0.0, 0.0, 0.0))
 
@@ -129,6 +132,7 @@ def test_the_check_command_says_when_the_file_is_stale(tmp_path, capsys):
 
 # ---------------------------------------------------------------- what the documents name
 
+
 def _tracked_top_level() -> set:
     try:
         files = subprocess.run(["git", "ls-files"], cwd=REPO, capture_output=True, text=True, check=True).stdout
@@ -157,8 +161,7 @@ def test_every_file_a_document_names_exists(doc):
     top = _tracked_top_level()
     refs = _references(doc, top)
     assert refs, "no reference found: the parser is broken"
-    missing = [r for r in refs if r not in TO_CREATE
-               and not ((doc.parent / r).exists() or (REPO / r).exists())]
+    missing = [r for r in refs if r not in TO_CREATE and not ((doc.parent / r).exists() or (REPO / r).exists())]
     assert not missing, f"{doc.name} names files not in the repository: {missing}"
 
 
@@ -181,6 +184,7 @@ def test_the_references_are_read_at_all():
 
 # ---------------------------------------------------------------- names, keys, channels
 
+
 def test_the_api_page_names_every_public_name():
     text = (REPO / "docs" / "api.md").read_text(encoding="utf-8")
     missing = [name for name in hybrid.__all__ if f"`{name}" not in text and f"hybrid.{name}" not in text]
@@ -189,6 +193,7 @@ def test_the_api_page_names_every_public_name():
 
 def test_the_metrics_page_defines_every_trace_and_summary_key():
     from hybrid.run import TRACE_KEYS
+
     text = (REPO / "docs" / "metrics.md").read_text(encoding="utf-8")
     result = hybrid.run(hybrid.load("membrane_demo"), 0.05)
     keys = set(TRACE_KEYS) | set(result["summary"])
@@ -199,6 +204,7 @@ def test_the_metrics_page_defines_every_trace_and_summary_key():
 
 def test_the_recording_page_lists_every_channel():
     from hybrid.record import TOPICS
+
     text = (REPO / "docs" / "recording.md").read_text(encoding="utf-8")
     missing = [t for t in TOPICS if f"`{t}`" not in text and f'"{t}"' not in text]
     assert not missing, f"docs/recording.md does not list {missing}"
@@ -209,6 +215,7 @@ def test_the_reference_example_is_a_valid_scene():
 
     from hybrid.model import compile_scene
     from hybrid.scenefile import scene_from_dict
+
     example = re.search(r"```toml\n(.*?)```", docgen.render(), re.S)[1]
     scene = scene_from_dict(tomllib.loads(example), source="docs/scene-file.md")
     assert compile_scene(scene).nvert == 162 and scene.formulation == "continuum"

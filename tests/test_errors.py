@@ -41,7 +41,7 @@ def _package_exceptions() -> list[type]:
             continue
         module = importlib.import_module(info.name)
         for obj in vars(module).values():
-            if (inspect.isclass(obj) and issubclass(obj, BaseException) and obj.__module__ == info.name):
+            if inspect.isclass(obj) and issubclass(obj, BaseException) and obj.__module__ == info.name:
                 found[f"{obj.__module__}.{obj.__qualname__}"] = obj
     return [found[k] for k in sorted(found)]
 
@@ -50,7 +50,8 @@ def _instance(cls: type) -> BaseException:
     """cls built from sample arguments, with an attribute and a note added later."""
     init = cls.__init__
     if init in (Exception.__init__, BaseException.__init__) or any(
-            init is base.__init__ for base in (ValueError, RuntimeError, KeyboardInterrupt, UserWarning)):
+        init is base.__init__ for base in (ValueError, RuntimeError, KeyboardInterrupt, UserWarning)
+    ):
         exc = cls(_SAMPLES["str"])
     else:
         args, kwargs = [], {}
@@ -71,8 +72,7 @@ def _instance(cls: type) -> BaseException:
 
 def _same(a, b) -> bool:
     if isinstance(a, BaseException):
-        return (type(a) is type(b) and a.args == b.args and str(a) == str(b)
-                and _same(vars(a), vars(b)))
+        return type(a) is type(b) and a.args == b.args and str(a) == str(b) and _same(vars(a), vars(b))
     if isinstance(a, dict):
         return type(b) is dict and a.keys() == b.keys() and all(_same(a[k], b[k]) for k in a)
     if isinstance(a, np.ndarray):

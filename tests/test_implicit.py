@@ -8,8 +8,20 @@ import dataclasses
 import numpy as np
 import pytest
 
-from hybrid import (Damping, Gravity, HalfSpace, Masses, Membrane, MeshSpec, MuscleFibres, Nailed, Scene,
-                    Simulation, Volume, compile_scene)
+from hybrid import (
+    Damping,
+    Gravity,
+    HalfSpace,
+    Masses,
+    Membrane,
+    MeshSpec,
+    MuscleFibres,
+    Nailed,
+    Scene,
+    Simulation,
+    Volume,
+    compile_scene,
+)
 from hybrid.demo import membrane_demo
 from hybrid.errors import SceneError, SimulationDiverged
 from hybrid.implicit import Info
@@ -20,11 +32,19 @@ YOUNGS = 800.0  # N/m, the continuum membrane's sheet modulus
 def trunk(youngs=YOUNGS, tau=0.0, drag=20.0, **kw):
     """The paper's 80-point sphere in the continuum formulation: pelvis nailed,
     a muscular dome, gravity, incompressible."""
-    return Scene(mesh=MeshSpec(generator="uv_sphere", radius_m=0.12), masses=Masses(total_kg=4.0),
-                 regions={"pelvis": HalfSpace((0, 0, -0.09), (0, 0, -1)), "dome": HalfSpace((0, 0, 0.05), (0, 0, 1))},
-                 forces=(Gravity(), Membrane(youngs, damping_time_s=tau), Damping(drag_n_s_per_m3=drag),
-                         MuscleFibres("dome", 30.0, toward_m=(0, 0, 0.12))),
-                 constraints=(Nailed("pelvis"), Volume()), **kw)
+    return Scene(
+        mesh=MeshSpec(generator="uv_sphere", radius_m=0.12),
+        masses=Masses(total_kg=4.0),
+        regions={"pelvis": HalfSpace((0, 0, -0.09), (0, 0, -1)), "dome": HalfSpace((0, 0, 0.05), (0, 0, 1))},
+        forces=(
+            Gravity(),
+            Membrane(youngs, damping_time_s=tau),
+            Damping(drag_n_s_per_m3=drag),
+            MuscleFibres("dome", 30.0, toward_m=(0, 0, 0.12)),
+        ),
+        constraints=(Nailed("pelvis"), Volume()),
+        **kw,
+    )
 
 
 def test_a_stiff_membrane_at_ten_times_the_explicit_bound():
@@ -67,8 +87,13 @@ def test_a_free_undamped_body_loses_energy_in_proportion_to_the_step():
     """Backward Euler damps an oscillation of frequency w by 1 / (1 + h^2 w^2) in
     energy per step: over a fixed time the logarithm of the energy left halves with
     the step, and so does the decay per period."""
-    free = Scene(mesh=MeshSpec(generator="uv_sphere", radius_m=0.12), masses=Masses(total_kg=4.0),
-                 forces=(Membrane(YOUNGS),), integrator="implicit_euler", implicit_tol=1e-10)
+    free = Scene(
+        mesh=MeshSpec(generator="uv_sphere", radius_m=0.12),
+        masses=Masses(total_kg=4.0),
+        forces=(Membrane(YOUNGS),),
+        integrator="implicit_euler",
+        implicit_tol=1e-10,
+    )
     window = 0.2  # s, about three periods of the breathing mode
     log_left = []
     for h in (2e-3, 1e-3, 5e-4):
@@ -84,14 +109,19 @@ def test_a_free_undamped_body_loses_energy_in_proportion_to_the_step():
     assert 1.8 <= log_left[0] / log_left[1] <= 2.2 and 1.8 <= log_left[1] / log_left[2] <= 2.2
 
 
-
 def test_where_the_exact_hessian_curves_down_the_projected_one_takes_over():
     """A light body crumpled to 0.8 of its size, released at 20 ms: the Newton
     matrix with the exact Hessian has negative curvature along the first
     conjugate-gradient direction once, that iteration is solved with the
     per-element projected Hessian, and every step converges."""
-    scene = Scene(mesh=MeshSpec(generator="uv_sphere", radius_m=0.12), masses=Masses(total_kg=0.1),
-                  forces=(Membrane(YOUNGS),), integrator="implicit_euler", dt_s=0.02, implicit_max_iter=200)
+    scene = Scene(
+        mesh=MeshSpec(generator="uv_sphere", radius_m=0.12),
+        masses=Masses(total_kg=0.1),
+        forces=(Membrane(YOUNGS),),
+        integrator="implicit_euler",
+        dt_s=0.02,
+        implicit_max_iter=200,
+    )
     sim = Simulation(compile_scene(scene))
     rest = sim.model.arrays.vert_rest
     sim.set_state(vert_pos=0.8 * rest + 0.005 * np.random.default_rng(0).standard_normal(rest.shape))
@@ -99,6 +129,7 @@ def test_where_the_exact_hessian_curves_down_the_projected_one_takes_over():
     info = sim.state.implicit.info
     assert info[Info.PROJECTED_TOTAL] >= 1
     assert info[Info.RESIDUAL] <= 1e-6
+
 
 def test_first_order_against_a_fine_reference():
     """Positions after 0.1 s of the sagging trunk (viscous membrane, drag, fibres,
@@ -109,6 +140,7 @@ def test_first_order_against_a_fine_reference():
         sim = Simulation(compile_scene(dataclasses.replace(base, dt_s=h, integrator=integ, implicit_tol=1e-10)))
         sim.step(int(round(0.1 / h)))
         return sim.vert_pos.copy()
+
     ref = run(1e-5, "symplectic_euler")
     err = np.array([np.abs(run(h, "implicit_euler") - ref).max() for h in (1e-3, 5e-4, 2.5e-4)])
     order = np.log2(err[:-1] / err[1:])
@@ -136,7 +168,6 @@ def test_implicit_euler_needs_the_continuum_formulation():
         compile_scene(trunk(integrator="implicit_euler", implicit_max_iter=0))
 
 
-
 def test_muscle_fibres_x100_contract_without_collapse_at_the_rigid_models_step():
     """The extremes catalogue's continuum_muscle_x100 (peak tension 2000 N/m against a sheet
     of 500 N/m) with implicit Euler at 1 ms through the peak of inspiration (1.6 s): the
@@ -144,8 +175,10 @@ def test_muscle_fibres_x100_contract_without_collapse_at_the_rigid_models_step()
     it, Newton stopped at 0.51 s on collapsed triangles); the volume exact."""
     from hybrid.run import run
     from hybrid.studies.extremes import _schedule_x, continuum_demo
-    sc = dataclasses.replace(_schedule_x(continuum_demo(), MuscleFibres, "tension_n_per_m", 100.0),
-                             integrator="implicit_euler")
+
+    sc = dataclasses.replace(
+        _schedule_x(continuum_demo(), MuscleFibres, "tension_n_per_m", 100.0), integrator="implicit_euler"
+    )
     sim = Simulation(compile_scene(sc))
     summary = run(sim, 1.7)["summary"]
     assert summary["status"] == "ok" and summary["volume_rel_error_max"] <= 1e-12
@@ -155,6 +188,7 @@ def test_muscle_fibres_x100_contract_without_collapse_at_the_rigid_models_step()
 
     def area(x):
         return 0.5 * np.linalg.norm(np.cross(x[f[:, 1]] - x[f[:, 0]], x[f[:, 2]] - x[f[:, 0]]), axis=1)
+
     # measured 0.28 of its rest area at the smallest (0.003 without the force-length relation)
     assert (area(p) / area(p0)).min() > 0.1
 
@@ -166,8 +200,11 @@ def test_serial_and_parallel_builds_agree_to_the_bit():
     explicit terms and the volume projection in each build's own)."""
     from hybrid import resolve_scene
 
-    model = compile_scene(resolve_scene("breathing", overrides=["mesh.level=5", "integrator=implicit_euler",
-                                                                "dt_s=0.01", "implicit_tol=1e-3"]))
+    model = compile_scene(
+        resolve_scene(
+            "breathing", overrides=["mesh.level=5", "integrator=implicit_euler", "dt_s=0.01", "implicit_tol=1e-3"]
+        )
+    )
     assert model.arrays.parallel
     pos = {}
     for build in ("serial", "parallel"):

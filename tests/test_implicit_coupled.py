@@ -53,8 +53,9 @@ def test_a_residual_at_its_round_off_floor_ends_the_solve():
     Newton ran out of its 50 iterations at the first step)."""
     from hybrid.implicit import Info
 
-    model = compile_scene(hybrid.load_scene("breathing", overrides=["mesh.level=6", "integrator=implicit_euler",
-                                                                     "dt_s=0.01"]))
+    model = compile_scene(
+        hybrid.load_scene("breathing", overrides=["mesh.level=6", "integrator=implicit_euler", "dt_s=0.01"])
+    )
     assert model.arrays.implicit_tol == 1e-6
     sim = hybrid.Simulation(model, build="serial")
     sim.step(3)
@@ -72,8 +73,9 @@ def test_the_newton_tolerance_is_of_the_larger_of_the_forces_and_their_run_mean(
     from hybrid.implicit import Info
 
     tol, h = 1e-2, 0.03
-    sim = hybrid.Simulation(compile_scene(dataclasses.replace(scene, dt_s=h, integrator="implicit_euler",
-                                                              implicit_tol=tol)), build="serial")
+    sim = hybrid.Simulation(
+        compile_scene(dataclasses.replace(scene, dt_s=h, integrator="implicit_euler", implicit_tol=tol)), build="serial"
+    )
     info = sim.state.implicit.info
     force, residual = [], []
     for _ in range(150):  # 4.5 s: a breath and the start of the next
@@ -83,7 +85,7 @@ def test_the_newton_tolerance_is_of_the_larger_of_the_forces_and_their_run_mean(
     # the bookkeeping: the sum and count are the run's, step by step (the same additions)
     assert info[Info.SOLVED] == 150
     assert info[Info.FORCE_SUM] == pytest.approx(sum(force), rel=1e-12)
-    mean = [sum(force[:k + 1]) / (k + 1) for k in range(150)]
+    mean = [sum(force[: k + 1]) / (k + 1) for k in range(150)]
     quiet = [k for k in range(150) if force[k] < 0.1 * mean[k]]
     assert len(quiet) >= 5  # the case it is for: forces a tenth of their mean or less
     assert max(residual) <= tol  # every step converged, relative to the larger scale

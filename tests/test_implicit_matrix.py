@@ -20,11 +20,21 @@ H = 2e-3
 def assembled():
     """The module's matrix: (arrays, rows, face, fib, pf, mat), assembled."""
     mesh = irregular_sphere(40, R, seed=3)
-    a = compile_scene(Scene(mesh=mesh, masses=Masses(total_kg=1.0), integrator="implicit_euler", forces=(
-        Membrane(800.0, damping_time_s=0.02), PassiveFibres(modulus_n_per_m=600.0, around_axis=(0.0, 0.0, 1.0)),
-        MuscleFibres(HalfSpace((0.0, 0.0, -0.03), (0.0, 0.0, 1.0)), 40.0, toward_m=(0.0, 0.0, R),
-                     force_length_width=0.5),
-        Damping(drag_n_s_per_m3=30.0)))).arrays
+    a = compile_scene(
+        Scene(
+            mesh=mesh,
+            masses=Masses(total_kg=1.0),
+            integrator="implicit_euler",
+            forces=(
+                Membrane(800.0, damping_time_s=0.02),
+                PassiveFibres(modulus_n_per_m=600.0, around_axis=(0.0, 0.0, 1.0)),
+                MuscleFibres(
+                    HalfSpace((0.0, 0.0, -0.03), (0.0, 0.0, 1.0)), 40.0, toward_m=(0.0, 0.0, R), force_length_width=0.5
+                ),
+                Damping(drag_n_s_per_m3=30.0),
+            ),
+        )
+    ).arrays
     # points below z = -0.06 m not integrated (as linked ones): their rows and columns are not assembled
     a = a._replace(vert_free=(a.vert_rest[:, 2] >= -0.06).astype(np.uint8))
     n = a.vert_rest.shape[0]
@@ -66,18 +76,20 @@ def blocks_of(mat, n, blocks):
         for k in range(mat.row_ptr[f], mat.row_ptr[f + 1]):
             assert mat.col[k] >= f
             i, j = mat.free[f], mat.free[mat.col[k]]
-            out[3 * i:3 * i + 3, 3 * j:3 * j + 3] = blocks[k].reshape(3, 3)
-            out[3 * j:3 * j + 3, 3 * i:3 * i + 3] = blocks[k].reshape(3, 3).T
+            out[3 * i : 3 * i + 3, 3 * j : 3 * j + 3] = blocks[k].reshape(3, 3)
+            out[3 * j : 3 * j + 3, 3 * i : 3 * i + 3] = blocks[k].reshape(3, 3).T
     return out
 
 
 def on_every_point(mat, kernel):
     """kernel(u, y) on the matrix's (nfree, 3) vectors as a map of (n, 3) ones (zero on fixed points)."""
+
     def apply(u, y):
         out = np.zeros((mat.free.size, 3))
         kernel(np.ascontiguousarray(u[mat.free]), out)
         y[:] = 0.0
         y[mat.free] = out
+
     return apply
 
 
@@ -85,8 +97,9 @@ def test_the_assembled_blocks_are_the_element_products(setup):
     a, rows, face, fib, pf, mat = setup
     n = a.vert_rest.shape[0]
     free = np.repeat(a.vert_free != 0, 3)
-    want, proj = (dense(n, lambda u, y: newton_product(a, rows, face, fib, pf, H, project, u, y))
-                  for project in (False, True))
+    want, proj = (
+        dense(n, lambda u, y: newton_product(a, rows, face, fib, pf, H, project, u, y)) for project in (False, True)
+    )
     for m_ in (want, proj):
         m_[~free, :] = 0.0
         m_[:, ~free] = 0.0
@@ -96,8 +109,8 @@ def test_the_assembled_blocks_are_the_element_products(setup):
     assert np.abs(want - one * want).max() > 1e-3 * scale  # the blocks couple points
     product = on_every_point(mat, lambda u, y: matrix_product(mat, u, y))
     assert np.abs(dense(n, product) - want).max() <= 1e-12 * scale
-    pdiag = np.stack([proj[3 * i:3 * i + 3, 3 * i:3 * i + 3].ravel() for i in range(n)])
-    exact_diag = np.stack([want[3 * i:3 * i + 3, 3 * i:3 * i + 3].ravel() for i in range(n)])
+    pdiag = np.stack([proj[3 * i : 3 * i + 3, 3 * i : 3 * i + 3].ravel() for i in range(n)])
+    exact_diag = np.stack([want[3 * i : 3 * i + 3, 3 * i : 3 * i + 3].ravel() for i in range(n)])
     assert np.abs(pdiag - exact_diag).max() > 0.0  # the projection changes some
     fr = a.vert_free != 0
     assert np.abs(mat.pdiag[fr] - pdiag[fr]).max() <= 1e-12 * scale
@@ -109,7 +122,7 @@ def sweep_diagonal(mat, n):
     """The sweep's D on every point (zero on fixed points)."""
     diag = np.zeros((3 * n, 3 * n))
     for f, i in enumerate(mat.free):
-        diag[3 * i:3 * i + 3, 3 * i:3 * i + 3] = mat.sdiag[f].reshape(3, 3)
+        diag[3 * i : 3 * i + 3, 3 * i : 3 * i + 3] = mat.sdiag[f].reshape(3, 3)
     return diag
 
 
@@ -205,8 +218,9 @@ def test_the_assembled_matrix_is_the_same_compiled_or_loaded_from_the_cache(tmp_
     out = []
     for k in range(2):
         path = tmp_path / f"matrix{k}.npy"
-        subprocess.run([sys.executable, "-c", ASSEMBLE_SCRIPT, str(path), os.path.dirname(__file__)], env=env,
-                       check=True)
+        subprocess.run(
+            [sys.executable, "-c", ASSEMBLE_SCRIPT, str(path), os.path.dirname(__file__)], env=env, check=True
+        )
         out.append(np.load(path))
     assert (tmp_path / "cache").is_dir() and any((tmp_path / "cache").rglob("*.nbi"))  # the second run loaded
     assert np.array_equal(out[0], out[1])

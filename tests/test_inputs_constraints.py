@@ -22,13 +22,17 @@ def _keep_in(name="table", region=TOP):
     return KeepIn(region=region, shape="half_space", point_m=(0.0, 0.0, -0.05), normal=(0.0, 0.0, 1.0), name=name)
 
 
-@pytest.mark.parametrize("first, second, said", [
-    (_nailed(), _prescribed(), "nailed"),
-    (_nailed(), _keep_in(), "nailed"),
-    (_prescribed(), _keep_in(), "prescribed"),
-    (_keep_in(), _nailed(), "kept in a region"),
-    (_prescribed("a"), _prescribed("b"), "prescribed"),
-], ids=["nailed+prescribed", "nailed+keep_in", "prescribed+keep_in", "keep_in+nailed", "prescribed+prescribed"])
+@pytest.mark.parametrize(
+    "first, second, said",
+    [
+        (_nailed(), _prescribed(), "nailed"),
+        (_nailed(), _keep_in(), "nailed"),
+        (_prescribed(), _keep_in(), "prescribed"),
+        (_keep_in(), _nailed(), "kept in a region"),
+        (_prescribed("a"), _prescribed("b"), "prescribed"),
+    ],
+    ids=["nailed+prescribed", "nailed+keep_in", "prescribed+keep_in", "keep_in+nailed", "prescribed+prescribed"],
+)
 def test_two_point_constraints_that_cannot_both_hold_are_refused(first, second, said):
     """Item 4: the points of the top cap both nailed and prescribed (they moved
     50 mm), nailed and kept in a region (74.8 mm), ... : one line naming a few
@@ -56,7 +60,11 @@ def test_constraints_that_agree_or_do_not_share_points_compile():
     a nail beside a prescribed point on other points is fine."""
     compile_scene(Scene(formulation="paper", constraints=(_nailed(), Nailed(region=Indices([0, 1]), name="more"))))
     compile_scene(Scene(formulation="paper", constraints=(_keep_in("a"), _keep_in("b"))))
-    compile_scene(Scene(formulation="paper", constraints=(Nailed(region=Indices([0]), name="n"), _prescribed(region=Indices([1])))))
+    compile_scene(
+        Scene(
+            formulation="paper", constraints=(Nailed(region=Indices([0]), name="n"), _prescribed(region=Indices([1])))
+        )
+    )
 
 
 def test_a_linked_point_kept_in_a_region_is_refused_by_the_same_check():
@@ -65,8 +73,12 @@ def test_a_linked_point_kept_in_a_region_is_refused_by_the_same_check():
     pytest.importorskip("mujoco")
     from hybrid.scene import Rigid, RigidLink
 
-    scene = Scene(formulation="paper", masses=Masses(total_kg=4.0), constraints=(_keep_in(),),
-                  rigid=Rigid(mjcf="trunk", links=(RigidLink(TOP, "rib_left"),)))
+    scene = Scene(
+        formulation="paper",
+        masses=Masses(total_kg=4.0),
+        constraints=(_keep_in(),),
+        rigid=Rigid(mjcf="trunk", links=(RigidLink(TOP, "rib_left"),)),
+    )
     with pytest.raises(SceneError) as err:
         compile_scene(scene)
     message = str(err.value)

@@ -57,8 +57,10 @@ def _write_obj(path, pos, face, style):
 def _write_ply(path, pos, face, encoding):
     """PLY with double coordinates (trimesh writes float32), ascii or binary."""
     fmt = "ascii" if encoding == "ascii" else "binary_little_endian"
-    header = (f"ply\nformat {fmt} 1.0\nelement vertex {len(pos)}\nproperty double x\nproperty double y\n"
-              f"property double z\nelement face {len(face)}\nproperty list uchar int vertex_indices\nend_header\n")
+    header = (
+        f"ply\nformat {fmt} 1.0\nelement vertex {len(pos)}\nproperty double x\nproperty double y\n"
+        f"property double z\nelement face {len(face)}\nproperty list uchar int vertex_indices\nend_header\n"
+    )
     if encoding == "ascii":
         rows = [f"{x!r} {y!r} {z!r}" for x, y, z in pos.tolist()] + [f"3 {a} {b} {c}" for a, b, c in face.tolist()]
         path.write_text(header + "\n".join(rows) + "\n")
@@ -79,8 +81,11 @@ def _first_appearance(pos, face):
 
 
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(level=st.integers(0, 2), seed=st.integers(0, 2**32 - 1),
-       fmt=st.sampled_from(["obj plain", "obj slashes", "obj negative", "ply ascii", "ply binary", "off", "stl"]))
+@given(
+    level=st.integers(0, 2),
+    seed=st.integers(0, 2**32 - 1),
+    fmt=st.sampled_from(["obj plain", "obj slashes", "obj negative", "ply ascii", "ply binary", "off", "stl"]),
+)
 def test_mesh_files_read_back_with_the_same_vertices_in_order_and_the_same_faces(tmp_path, level, seed, fmt):
     """Item 8 (property): a random valid mesh (an icosphere with its vertices
     shuffled, moved and its faces shuffled and rotated) written as OBJ, PLY,
@@ -127,8 +132,13 @@ def test_self_intersecting_closed_mesh_is_refused_under_a_volume_term(term):
     through itself, so its signed volume is not the body's: refused at compile,
     one line naming the crossing faces and their count."""
     mesh = _pushed_through()
-    scene = Scene(formulation="paper", mesh=mesh, masses=Masses(total_kg=1.0), constraints=(term,) if isinstance(term, Volume) else (),
-                  forces=() if isinstance(term, Volume) else (term,))
+    scene = Scene(
+        formulation="paper",
+        mesh=mesh,
+        masses=Masses(total_kg=1.0),
+        constraints=(term,) if isinstance(term, Volume) else (),
+        forces=() if isinstance(term, Volume) else (term,),
+    )
     with pytest.raises((MeshError, SceneError)) as err:
         compile_scene(scene)
     message = str(err.value)

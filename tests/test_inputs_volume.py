@@ -22,11 +22,18 @@ def _exact_volume(pos, face) -> float:
 
 
 @settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(level=st.integers(0, 3), log_size=st.floats(-3, 0), log_flat=st.floats(-3, 0),
-       axis=st.integers(0, 2), offset_dir=st.tuples(*[st.floats(-1, 1)] * 3),
-       log_offset=st.floats(0, 3), seed=st.integers(0, 2**32 - 1))
-def test_projected_step_keeps_the_volume_of_a_small_flat_body_far_away(level, log_size, log_flat, axis,
-                                                                       offset_dir, log_offset, seed):
+@given(
+    level=st.integers(0, 3),
+    log_size=st.floats(-3, 0),
+    log_flat=st.floats(-3, 0),
+    axis=st.integers(0, 2),
+    offset_dir=st.tuples(*[st.floats(-1, 1)] * 3),
+    log_offset=st.floats(0, 3),
+    seed=st.integers(0, 2**32 - 1),
+)
+def test_projected_step_keeps_the_volume_of_a_small_flat_body_far_away(
+    level, log_size, log_flat, axis, offset_dir, log_offset, seed
+):
     """Item 12: a random closed mesh (icosphere level 0..3, size 1 mm..1 m,
     flattened along one axis down to 1e-3, randomly perturbed) moved up to 1e3
     times its thickness away from its rest place keeps its volume to 1e-12
@@ -38,20 +45,23 @@ def test_projected_step_keeps_the_volume_of_a_small_flat_body_far_away(level, lo
     about the rest centroid, lost another factor of (offset / t) * sqrt(n).
     """
     rng = np.random.default_rng(seed)
-    size = 10.0 ** log_size
+    size = 10.0**log_size
     scale = np.full(3, size)
-    scale[axis] *= 10.0 ** log_flat
+    scale[axis] *= 10.0**log_flat
     base = icosphere(level)
     pos = base.vert_pos * scale
     edge = np.min(np.linalg.norm(pos[base.edge_vert[:, 0]] - pos[base.edge_vert[:, 1]], axis=1))
     pos = pos + rng.uniform(-0.1, 0.1, pos.shape) * edge
     mesh = Mesh(pos, base.face_vert)
-    sim = Simulation(compile_scene(Scene(formulation="paper", mesh=mesh, masses=Masses(total_kg=1.0), constraints=(Volume(),),
-                                         dt_s=1e-3)))
+    sim = Simulation(
+        compile_scene(
+            Scene(formulation="paper", mesh=mesh, masses=Masses(total_kg=1.0), constraints=(Volume(),), dt_s=1e-3)
+        )
+    )
     v0 = mesh.volume()
     direction = np.asarray(offset_dir) + 1e-3
     thickness = float(np.min(scale))
-    shift = direction / np.linalg.norm(direction) * thickness * 10.0 ** log_offset
+    shift = direction / np.linalg.norm(direction) * thickness * 10.0**log_offset
     moved = pos + shift + rng.uniform(-0.05, 0.05, pos.shape) * edge  # off the constraint
     sim.set_state(vert_pos=moved, vert_vel=np.zeros_like(pos))
     sim.step(1)

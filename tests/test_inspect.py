@@ -47,7 +47,7 @@ def test_an_mjcf_file(tmp_path, capsys):
 
 
 def test_a_scene_with_its_regions_nails_links_and_stable_step(capsys):
-    r = _json(capsys, "breathing", "--set", "rigid.hold=[\"*\"]")
+    r = _json(capsys, "breathing", "--set", 'rigid.hold=["*"]')
     model = compile_scene(resolve_scene("breathing"))
     area = vertex_area(model.mesh.vert_pos, model.mesh.face_vert)
     assert set(r["regions"]) == set(model.regions)
@@ -69,12 +69,15 @@ def test_a_scene_with_its_regions_nails_links_and_stable_step(capsys):
     assert "the step is larger" in capsys.readouterr().out
 
 
-@pytest.mark.parametrize("argv, words", [
-    (["no_such.xml"], ["MJCF file 'no_such.xml': no such file"]),
-    (["no_such_scene"], ["no such scene"]),
-    (["breathing", "--set", "rigid.fix=[\"spnie\"]"], ["rigid.fix[0]", "'spnie'", "close body names: spine"]),
-    ([str(TRUNK_XML), "--set", "dt_s=1"], ["apply to a scene"]),
-])
+@pytest.mark.parametrize(
+    "argv, words",
+    [
+        (["no_such.xml"], ["MJCF file 'no_such.xml': no such file"]),
+        (["no_such_scene"], ["no such scene"]),
+        (["breathing", "--set", 'rigid.fix=["spnie"]'], ["rigid.fix[0]", "'spnie'", "close body names: spine"]),
+        ([str(TRUNK_XML), "--set", "dt_s=1"], ["apply to a scene"]),
+    ],
+)
 def test_what_cannot_be_read_is_one_line_and_status_2(capsys, argv, words):
     assert main(["inspect", *argv]) == 2
     err = capsys.readouterr().err

@@ -9,21 +9,24 @@ import os
 import shutil
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
-from pathlib import Path
 
 from hybrid.kernel import prune_old_caches
 from hybrid.model import compile_scene
 
 
 def test_cache_folder_follows_numba_cache_dir_and_saves_are_locked(tmp_path):
-    code = ("import hybrid.kernel as k, numba.core.caching as c; "
-            "print(k.CACHE_DIR); print(getattr(c.IndexDataCacheFile.save, '_hybrid_locked', False))")
+    code = (
+        "import hybrid.kernel as k, numba.core.caching as c; "
+        "print(k.CACHE_DIR); print(getattr(c.IndexDataCacheFile.save, '_hybrid_locked', False))"
+    )
     env = {**__import__("os").environ, "NUMBA_CACHE_DIR": str(tmp_path)}
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env,
-                         check=True).stdout.split()
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True
+    ).stdout.split()
     assert out[0].startswith(str(tmp_path / "numba-"))
     assert out[1] == "True"
 
@@ -79,9 +82,11 @@ def test_a_kernel_compiled_beside_cached_parallel_twins_loads_in_a_new_process(t
     null call, exit -11) before hybrid started numba's threading layer at import.
     (Below the threshold the twins are not compiled at all: `hybrid.step.step_par`.)"""
     env = {**__import__("os").environ, "NUMBA_CACHE_DIR": str(tmp_path)}
-    large = ("import dataclasses, hybrid, numpy as np; from hybrid.bench import bench_membrane; "
-             "model = hybrid.compile_scene(bench_membrane(4)); "
-             "sim = hybrid.Simulation(dataclasses.replace(model, arrays=model.arrays._replace(parallel=True))); ")
+    large = (
+        "import dataclasses, hybrid, numpy as np; from hybrid.bench import bench_membrane; "
+        "model = hybrid.compile_scene(bench_membrane(4)); "
+        "sim = hybrid.Simulation(dataclasses.replace(model, arrays=model.arrays._replace(parallel=True))); "
+    )
     frames = large + "sim.step_frames(np.array([1, 2]), sim.frames_buffer(2))"
     for code in (large + "sim.step(2)", frames, frames):
         done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
@@ -123,8 +128,9 @@ def test_the_command_line_prunes_and_import_does_not(tmp_path):
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
     old = _folder(tmp_path, "numba-aaaaaaaaaaaaaaaa", 1_000_000_000.0)
     where = "import hybrid.kernel as k; print(k.CACHE_DIR)"
-    current = subprocess.run([sys.executable, "-c", where], capture_output=True, text=True, env=env,
-                             check=True).stdout.strip()
+    current = subprocess.run(
+        [sys.executable, "-c", where], capture_output=True, text=True, env=env, check=True
+    ).stdout.strip()
     mark = os.path.join(current, ".last_used")
     assert old.exists() and not os.path.exists(mark)  # import hybrid: nothing marked, nothing removed
     subprocess.run([sys.executable, "-m", "hybrid", "--help"], capture_output=True, env=env, check=True)
@@ -136,7 +142,6 @@ def test_parallel_build_matches_the_serial_build():
     """Large meshes run the multi-core build of the per-point passes
     (hybrid.kernel); its partial sums are reduced serially in the same order,
     so the two builds must agree to the last bits over a run."""
-    import dataclasses
 
     from hybrid.bench import bench_membrane
     from hybrid.simulation import Simulation
@@ -156,7 +161,6 @@ def test_parallel_build_matches_the_serial_build():
 
 # ---------------------------------------------------------------- the build chosen as it runs
 import math
-import os
 
 import numba
 
@@ -187,7 +191,7 @@ def _drive(choice, us_of, nstep=10_000, calls=3):
 @pytest.mark.parametrize("par_us, want_parallel", [(500.0, False), (40.0, True)])
 def test_auto_runs_the_build_that_is_faster_here(monkeypatch, par_us, want_parallel):
     choice = _choice(monkeypatch)
-    _drive(choice, lambda par: par_us if par else 100.0, nstep=1000)   # 0.3 s of steps: one probe
+    _drive(choice, lambda par: par_us if par else 100.0, nstep=1000)  # 0.3 s of steps: one probe
     assert choice.parallel is want_parallel and choice.probes == 1
     slow = not want_parallel
     # the probe ran the slower build for a few short pieces only: its loss is the probe's
@@ -198,10 +202,10 @@ def test_auto_runs_the_build_that_is_faster_here(monkeypatch, par_us, want_paral
 
 def test_auto_probes_again_within_its_budget(monkeypatch):
     choice = _choice(monkeypatch)
-    _drive(choice, lambda par: 500.0 if par else 100.0, nstep=10_000, calls=200)   # 200 s of steps
-    assert not choice.parallel and choice.probes > 5   # timed again now and then ...
+    _drive(choice, lambda par: 500.0 if par else 100.0, nstep=10_000, calls=200)  # 200 s of steps
+    assert not choice.parallel and choice.probes > 5  # timed again now and then ...
     lost_s = choice.steps[True] * (500.0 - 100.0) * 1e-6
-    assert lost_s < choice.PROBE_BUDGET * 200.0   # ... losing less than the budget
+    assert lost_s < choice.PROBE_BUDGET * 200.0  # ... losing less than the budget
 
 
 def test_auto_times_both_again_when_the_running_build_slows_down(monkeypatch):
@@ -231,11 +235,11 @@ def test_threads_respect_numba_threads_and_cpu_affinity(monkeypatch):
     finally:
         numba.set_num_threads(threads)
     if hasattr(os, "sched_getaffinity") and threads > 1:
-        monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0})   # e.g. taskset -c 0
+        monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0})  # e.g. taskset -c 0
         try:
             choice = BuildChoice(True, "auto")
             assert usable_threads() == 1 and not choice.active
-            assert numba.get_num_threads() == 1   # no more threads than CPUs to run them
+            assert numba.get_num_threads() == 1  # no more threads than CPUs to run them
         finally:
             numba.set_num_threads(threads)
 
@@ -243,7 +247,6 @@ def test_threads_respect_numba_threads_and_cpu_affinity(monkeypatch):
 def test_auto_switching_builds_mid_run_changes_no_bit(monkeypatch):
     """Probing at every call, the auto run alternates builds within calls and within
     the frames of a run; its positions and trace equal the serial run's to the bit."""
-    import dataclasses
 
     from hybrid.bench import bench_membrane
     from hybrid.run import run
@@ -251,9 +254,9 @@ def test_auto_switching_builds_mid_run_changes_no_bit(monkeypatch):
 
     model = compile_scene(bench_membrane(4))
     model = model.with_dt(0.25 * model.dt_stable_s)
-    monkeypatch.setattr(builds_mod, "usable_threads", lambda: 2)   # a choice even where numba has one thread
+    monkeypatch.setattr(builds_mod, "usable_threads", lambda: 2)  # a choice even where numba has one thread
     for k, v in (("PROBE_EVERY_S", 0.0), ("PROBE_BUDGET", math.inf), ("PROBE_S", 1e-9)):
-        monkeypatch.setattr(BuildChoice, k, v)   # a probe at every call, pieces of one step
+        monkeypatch.setattr(BuildChoice, k, v)  # a probe at every call, pieces of one step
     traces = {}
     for build in ("serial", "auto"):
         sim = Simulation(model, build=build)

@@ -27,8 +27,10 @@ LAYERS = (
     ("simulation", ("simulation", "builds")),
     ("observers", ("run", "loads", "record", "record.*", "render", "sweep", "grid", "outputs", "provenance")),
     ("public API", ("",)),  # hybrid/__init__.py
-    ("bench, command line, studies", ("bench", "bench.*", "bench_rigid", "cli", "__main__", "docgen", "inspection", "studies",
-                                      "studies.*")),
+    (
+        "bench, command line, studies",
+        ("bench", "bench.*", "bench_rigid", "cli", "__main__", "docgen", "inspection", "studies", "studies.*"),
+    ),
 )
 # the door to MuJoCo: model time (rigid) and step time (coupling)
 MUJOCO_DOOR = ("rigid", "rigid.*", "coupling")
@@ -58,16 +60,16 @@ def imports_of(path: Path, root: Path, modules: set) -> tuple[set, set]:
         if isinstance(node, ast.Import):
             for a in node.names:
                 if a.name == "hybrid" or a.name.startswith("hybrid."):
-                    ours.add(a.name[len("hybrid."):] if a.name != "hybrid" else "")
+                    ours.add(a.name[len("hybrid.") :] if a.name != "hybrid" else "")
                 else:
                     others.add(a.name.split(".")[0])
         elif isinstance(node, ast.ImportFrom):
             if node.level:
                 base = package.split(".") if package else []
-                base = base[:len(base) - (node.level - 1)]
+                base = base[: len(base) - (node.level - 1)]
                 target = ".".join([*base, *(node.module.split(".") if node.module else [])])
             elif node.module == "hybrid" or (node.module or "").startswith("hybrid."):
-                target = node.module[len("hybrid."):] if node.module != "hybrid" else ""
+                target = node.module[len("hybrid.") :] if node.module != "hybrid" else ""
             else:
                 others.add((node.module or "").split(".")[0])
                 continue
@@ -100,8 +102,10 @@ def violations(root: Path) -> list[str]:
             if dep not in graph:
                 out.append(f"hybrid.{name} imports hybrid.{dep}, which does not exist")
             elif layer_of(dep) > mine:
-                out.append(f"hybrid.{name} ({LAYERS[mine][0]}) imports hybrid.{dep or '(package)'} "
-                           f"({LAYERS[layer_of(dep)][0]}): an upward import")
+                out.append(
+                    f"hybrid.{name} ({LAYERS[mine][0]}) imports hybrid.{dep or '(package)'} "
+                    f"({LAYERS[layer_of(dep)][0]}): an upward import"
+                )
         if "mujoco" in external[name] and not any(fnmatch.fnmatchcase(name, p) for p in MUJOCO_DOOR):
             out.append(f"hybrid.{name or '(package)'} imports mujoco outside hybrid.rigid and hybrid.coupling")
     out += [f"import circle: {' -> '.join('hybrid.' + m for m in c)}" for c in _circles(graph)]
@@ -161,18 +165,21 @@ def _fake_package(tmp_path: Path, files: dict) -> Path:
     return root
 
 
-@pytest.mark.parametrize("files,expect", [
-    # an upward import: the mesh (geometry) importing the simulation
-    ({"mesh.py": "from .simulation import Simulation\n", "simulation.py": ""}, "an upward import"),
-    # hidden in a function, as lazy imports are
-    ({"mesh.py": "def f():\n    from . import model\n", "model.py": ""}, "an upward import"),
-    # a circle within one layer
-    ({"scene.py": "from . import scenefile\n", "scenefile.py": "from .scene import Scene\n"}, "import circle"),
-    # MuJoCo outside its door
-    ({"render.py": "import mujoco\n"}, "imports mujoco outside"),
-    # a module nobody placed
-    ({"newthing.py": ""}, "in no layer"),
-])
+@pytest.mark.parametrize(
+    "files,expect",
+    [
+        # an upward import: the mesh (geometry) importing the simulation
+        ({"mesh.py": "from .simulation import Simulation\n", "simulation.py": ""}, "an upward import"),
+        # hidden in a function, as lazy imports are
+        ({"mesh.py": "def f():\n    from . import model\n", "model.py": ""}, "an upward import"),
+        # a circle within one layer
+        ({"scene.py": "from . import scenefile\n", "scenefile.py": "from .scene import Scene\n"}, "import circle"),
+        # MuJoCo outside its door
+        ({"render.py": "import mujoco\n"}, "imports mujoco outside"),
+        # a module nobody placed
+        ({"newthing.py": ""}, "in no layer"),
+    ],
+)
 def test_the_checker_catches_what_it_is_for(tmp_path, files, expect):
     root = _fake_package(tmp_path, {"__init__.py": "", **files})
     found = violations(root)
@@ -180,9 +187,16 @@ def test_the_checker_catches_what_it_is_for(tmp_path, files, expect):
 
 
 def test_the_checker_accepts_downward_and_sideways_imports(tmp_path):
-    root = _fake_package(tmp_path, {"__init__.py": "from .simulation import Simulation\n",
-                                    "simulation.py": "from .model import Model\nfrom . import step\n",
-                                    "step.py": "from .terms import base\n", "model.py": "",
-                                    "terms/__init__.py": "from .base import Term\n", "terms/base.py": "",
-                                    "rigid/__init__.py": "import mujoco\n"})
+    root = _fake_package(
+        tmp_path,
+        {
+            "__init__.py": "from .simulation import Simulation\n",
+            "simulation.py": "from .model import Model\nfrom . import step\n",
+            "step.py": "from .terms import base\n",
+            "model.py": "",
+            "terms/__init__.py": "from .base import Term\n",
+            "terms/base.py": "",
+            "rigid/__init__.py": "import mujoco\n",
+        },
+    )
     assert violations(root) == []

@@ -49,7 +49,7 @@ def test_each_body_receives_the_force_of_its_linked_points(trunk):
     for g in bodies:
         f = v[names.index(f"body/{g.name}/force_n")]
         m_origin = v[names.index(f"body/{g.name}/moment_n_m")]
-        for j, (jname, jid) in enumerate(loads.joints):
+        for _j, (jname, jid) in enumerate(loads.joints):
             m_joint = v[names.index(f"body/{g.name}/moment_about/{jname}_n_m")]
             shift = np.cross(trunk.mj_data.xpos[g.body_id] - trunk.mj_data.xanchor[jid], f)
             assert np.abs(m_joint - (m_origin + shift)).max() <= 1e-12 * max(1e-3, np.abs(m_joint).max())
@@ -79,8 +79,12 @@ def test_a_run_gives_the_loads_range_in_its_summary(tmp_path):
     s = run(sim, 0.1, loads=True)["summary"]["loads"]
     assert s["about"]["body/rib_left"].startswith("the body's origin")
     assert "moment_about/rib_left_hinge" in s["about"]
-    for key in ("body/rib_left/force_n", "nail/spine/force_n", "nail/pelvis/moment_n_m",
-                "iap/moment_about/rib_right_hinge_n_m"):
+    for key in (
+        "body/rib_left/force_n",
+        "nail/spine/force_n",
+        "nail/pelvis/moment_n_m",
+        "iap/moment_about/rib_right_hinge_n_m",
+    ):
         assert np.all(np.array(s[key]["min"]) <= np.array(s[key]["max"]))
         assert s[key]["norm_max"] > 0.0
     # not asked for: no loads
@@ -88,20 +92,30 @@ def test_a_run_gives_the_loads_range_in_its_summary(tmp_path):
 
 
 def test_an_unknown_load_joint_is_refused_naming_close_ones():
-    with pytest.raises(RigidError, match=r"rigid.load_joints\[0\]: no joint named 'rib_left_hing'.*"
-                                         r"close joint names: rib_left_hinge"):
+    with pytest.raises(
+        RigidError,
+        match=r"rigid.load_joints\[0\]: no joint named 'rib_left_hing'.*"
+        r"close joint names: rib_left_hinge",
+    ):
         hybrid.load("breathing", overrides=['rigid.load_joints=["rib_left_hing"]'])
 
 
 def _balloon(pressure_pa):
     """A continuum sphere under a uniform inner pressure, its top and bottom caps nailed."""
     r = 0.1
-    return Scene(formulation="continuum", mesh=MeshSpec(generator="ring_sphere", radius_m=r, level=1),
-                 masses=Masses(total_kg=1.0),
-                 regions={"top": HalfSpace((0, 0, 0.7 * r), (0, 0, 1)), "bottom": HalfSpace((0, 0, -0.5 * r), (0, 0, -1))},
-                 forces=(Membrane(youngs_modulus_n_per_m=2000.0, poisson_ratio=0.3, name="skin"),
-                         Pressure(pressure_pa=pressure_pa), Damping(drag_n_s_per_m3=3000.0)),
-                 constraints=(Nailed("top", name="top"), Nailed("bottom", name="bottom")), dt_s=2e-4)
+    return Scene(
+        formulation="continuum",
+        mesh=MeshSpec(generator="ring_sphere", radius_m=r, level=1),
+        masses=Masses(total_kg=1.0),
+        regions={"top": HalfSpace((0, 0, 0.7 * r), (0, 0, 1)), "bottom": HalfSpace((0, 0, -0.5 * r), (0, 0, -1))},
+        forces=(
+            Membrane(youngs_modulus_n_per_m=2000.0, poisson_ratio=0.3, name="skin"),
+            Pressure(pressure_pa=pressure_pa),
+            Damping(drag_n_s_per_m3=3000.0),
+        ),
+        constraints=(Nailed("top", name="top"), Nailed("bottom", name="bottom")),
+        dt_s=2e-4,
+    )
 
 
 def test_nail_reactions_balance_the_pressure_of_a_static_membrane():
@@ -174,21 +188,49 @@ def test_hybrid_run_writes_the_loads_and_refuses_an_unknown_joint_in_one_line(tm
     from hybrid.record import read
 
     out = tmp_path / "run"
-    assert main(["run", "breathing", "--duration", "0.03", "--out", str(out),
-                 "--set", 'rigid.load_joints=["rib_left_hinge"]']) == 0
+    assert (
+        main(
+            [
+                "run",
+                "breathing",
+                "--duration",
+                "0.03",
+                "--out",
+                str(out),
+                "--set",
+                'rigid.load_joints=["rib_left_hinge"]',
+            ]
+        )
+        == 0
+    )
     s = json.loads((out / "summary.json").read_text())["loads"]
     assert "iap/moment_about/rib_left_hinge_n_m" in s and "nail/pelvis/force_n" in s
     assert len(read(out / "run.mcap")["/loads/nail/pelvis/force_n/z"]["value"]) == 3
     capsys.readouterr()
-    assert main(["run", "breathing", "--duration", "0.03", "--out", str(tmp_path / "bad"),
-                 "--set", 'rigid.load_joints=["rib_lft_hinge"]']) == 2
+    assert (
+        main(
+            [
+                "run",
+                "breathing",
+                "--duration",
+                "0.03",
+                "--out",
+                str(tmp_path / "bad"),
+                "--set",
+                'rigid.load_joints=["rib_lft_hinge"]',
+            ]
+        )
+        == 2
+    )
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "rigid.load_joints[0]: no joint named 'rib_lft_hinge'" in err[0]
     assert "close joint names: rib_left_hinge" in err[0]
 
 
-@pytest.mark.skipif(__import__("importlib").util.find_spec("myo_sim") is None,
-                    reason="myo_sim (PyPI myo-sim) is not installed: pip install -e '.[myo]'")
+@pytest.mark.skipif(
+    __import__("importlib").util.find_spec("myo_sim") is None,
+    reason="myo_sim (PyPI myo-sim) is not installed: pip install -e '.[myo]'",
+)
 def test_the_abdomen_extends_myotorsos_lumbosacral_joint_through_the_added_ribs():
     """L5/S1 is myotorso's `flex_extension` (lumbar5 on the sacrum; its axis -x, the
     model's +x to the left and -y anterior), named in the packaged scene's

@@ -39,11 +39,16 @@ def _install_like_a_wheel(site: Path) -> None:
 
 def test_pyproject_names_every_package_and_every_model_file():
     packages = set(SETUPTOOLS["packages"])
-    in_tree = {".".join(("hybrid", *p.parent.relative_to(REPO / "hybrid").parts))
-               for p in (REPO / "hybrid").rglob("__init__.py")}
+    in_tree = {
+        ".".join(("hybrid", *p.parent.relative_to(REPO / "hybrid").parts))
+        for p in (REPO / "hybrid").rglob("__init__.py")
+    }
     # every folder of models/ is a package of the wheel (its data files need one)
-    models = {".".join(("hybrid", "models", *d.relative_to(REPO / "models").parts))
-              for d in [REPO / "models", *(REPO / "models").rglob("*")] if d.is_dir() and d.name != "__pycache__"}
+    models = {
+        ".".join(("hybrid", "models", *d.relative_to(REPO / "models").parts))
+        for d in [REPO / "models", *(REPO / "models").rglob("*")]
+        if d.is_dir() and d.name != "__pycache__"
+    }
     assert packages == in_tree | models
     data = SETUPTOOLS["package-data"]
     for f in (REPO / "models").rglob("*"):
@@ -56,12 +61,15 @@ def test_builtin_scenes_and_trunk_resolve_inside_the_installed_package(tmp_path)
     site = tmp_path / "site"
     _install_like_a_wheel(site)
     assert not (site / "models").exists()  # nothing to find beside the package
-    code = ("import hybrid.scenefile as s, hybrid.rigid as r; "
-            "print(s.builtin_scenes()); print(s.builtin_scene('breathing')); "
-            "print(s.builtin_scene('myotorso_breathing')); print(r.TRUNK_XML)")
+    code = (
+        "import hybrid.scenefile as s, hybrid.rigid as r; "
+        "print(s.builtin_scenes()); print(s.builtin_scene('breathing')); "
+        "print(s.builtin_scene('myotorso_breathing')); print(r.TRUNK_XML)"
+    )
     env = {**os.environ, "PYTHONPATH": str(site), "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, cwd=tmp_path,
-                         check=True).stdout.splitlines()
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, env=env, cwd=tmp_path, check=True
+    ).stdout.splitlines()
     assert out[0] == "['breathing', 'breathing_paper', 'myotorso_breathing']"
     models = site / "hybrid" / "models"
     for line, expected in zip(out[1:], ("scenes/breathing.toml", "scenes/myotorso_breathing.toml", "trunk.xml")):

@@ -14,8 +14,10 @@ from hybrid.regions import Difference, Patch, nearest_surface_point, select
 from hybrid.scene import Masses, Nailed, Scene, Volume
 
 R = 0.1
-FAMILIES = {"icosphere": [icosphere(k, R) for k in (2, 3, 4)],
-            "uv_sphere": [uv_sphere(R, s, s // 2) for s in (16, 32, 64)]}
+FAMILIES = {
+    "icosphere": [icosphere(k, R) for k in (2, 3, 4)],
+    "uv_sphere": [uv_sphere(R, s, s // 2) for s in (16, 32, 64)],
+}
 
 
 def _select(mesh, sel, name="patch"):
@@ -50,9 +52,12 @@ def test_the_nearest_surface_point_lies_on_a_face_not_only_at_a_vertex():
 @pytest.mark.parametrize("family", FAMILIES)
 def test_a_patch_larger_than_the_body_is_refused_naming_it(family):
     mesh = FAMILIES[family][1]
-    with pytest.raises(SceneError, match=r"region 'pubis': a patch of radius_m = 0.3 m covers 0.12\d* m\^2 of this "
-                                         r"mesh, expected pi r\^2 = 0.2827 m\^2 within .* m\^2 \(a rim of one edge "
-                                         r"length, .* m\); widen the patch or refine the mesh") as err:
+    with pytest.raises(
+        SceneError,
+        match=r"region 'pubis': a patch of radius_m = 0.3 m covers 0.12\d* m\^2 of this "
+        r"mesh, expected pi r\^2 = 0.2827 m\^2 within .* m\^2 \(a rim of one edge "
+        r"length, .* m\); widen the patch or refine the mesh",
+    ) as err:
         _select(mesh, Patch((0.0, 0.0, -R), 0.3), "pubis")
     assert "\n" not in str(err.value)
 
@@ -72,14 +77,21 @@ def test_a_patch_cut_by_the_border_of_an_open_sheet_is_refused():
 
 def test_a_patch_in_a_scene_and_its_file():
     """A nail of physical size in a continuum scene, inside a difference; through the scene file."""
-    scene = Scene(mesh=hybrid.MeshSpec(generator="icosphere", subdivisions=3, radius_m=R),
-                  masses=Masses(total_kg=1.0),
-                  regions={"pubis": Difference(Patch((0.0, 0.0, -0.15), 0.02), Patch((0.0, 0.0, 0.15), 0.02))},
-                  constraints=(Nailed("pubis"), Volume()))
+    scene = Scene(
+        mesh=hybrid.MeshSpec(generator="icosphere", subdivisions=3, radius_m=R),
+        masses=Masses(total_kg=1.0),
+        regions={"pubis": Difference(Patch((0.0, 0.0, -0.15), 0.02), Patch((0.0, 0.0, 0.15), 0.02))},
+        constraints=(Nailed("pubis"), Volume()),
+    )
     model = hybrid.compile_scene(scene)
     assert 3 <= model.regions["pubis"].size <= 40
     back = hybrid.scenefile.scene_from_dict(hybrid.scenefile.scene_to_dict(scene))
     assert back.regions == scene.regions
     with pytest.raises(SceneError, match=r"regions.pin.patch.radius_m: expected a number > 0, received -1"):
-        hybrid.scenefile.scene_from_dict({"mesh": {"generator": "icosahedron"}, "masses": {"total_kg": 1.0},
-                                          "regions": {"pin": {"patch": {"center": [0, 0, 1], "radius_m": -1}}}})
+        hybrid.scenefile.scene_from_dict(
+            {
+                "mesh": {"generator": "icosahedron"},
+                "masses": {"total_kg": 1.0},
+                "regions": {"pin": {"patch": {"center": [0, 0, 1], "radius_m": -1}}},
+            }
+        )

@@ -10,21 +10,30 @@ import pytest
 import hybrid
 from hybrid.cli import main
 from hybrid.record import Recorder
-from hybrid.render import (STILL_TITLES, build_figure, draw_figure, frames_from_recording, frames_from_scene,
-                           key_frames, sagittal_section, write_video)
+from hybrid.render import (
+    STILL_TITLES,
+    build_figure,
+    draw_figure,
+    frames_from_recording,
+    frames_from_scene,
+    key_frames,
+    sagittal_section,
+    write_video,
+)
 from hybrid.run import run
 
 
 def _image(path):
     import matplotlib.image as mpimg
+
     img = mpimg.imread(path)[..., :3]
     h = img.shape[0]
-    return img[int(0.12 * h):int(0.92 * h)]  # below the titles, above the legend (which spans the panels)
+    return img[int(0.12 * h) : int(0.92 * h)]  # below the titles, above the legend (which spans the panels)
 
 
 def _panels(img):
     w = img.shape[1] // 3
-    return [img[:, i * w:(i + 1) * w] for i in range(3)]
+    return [img[:, i * w : (i + 1) * w] for i in range(3)]
 
 
 @pytest.fixture(scope="module")
@@ -93,8 +102,9 @@ def test_the_figure_overlays_the_rest_outline_and_has_a_scale_and_a_legend(recor
             np.testing.assert_allclose(np.asarray(rest[0].get_segments()), rest_cut)
             # the deformed section: the frame's own cut
             deformed = [c for c in section.collections if c.get_label() == "deformed"]
-            np.testing.assert_allclose(np.asarray(deformed[0].get_segments()),
-                                       sagittal_section(fr.pos[k], fr.face_vert, y0)[0])
+            np.testing.assert_allclose(
+                np.asarray(deformed[0].get_segments()), sagittal_section(fr.pos[k], fr.face_vert, y0)[0]
+            )
             # a scale bar of the length it says, on an equal-aspect section
             bar = [line for line in section.lines if line.get_label() == "scale bar"][0]
             assert section.get_aspect() == 1.0
@@ -104,10 +114,14 @@ def test_the_figure_overlays_the_rest_outline_and_has_a_scale_and_a_legend(recor
         assert rest_cut[:, :, 1].max() - peak_cut[:, :, 1].max() > 0.01
         legend = [t.get_text() for t in fig.legends[0].get_texts()]
         assert set(fr.regions) <= set(legend) and "rest outline" in legend and "ribs and spine" in legend
-        assert [ax.get_title().split("  ")[0] for ax in views] == ["a. rest", "b. peak inspiration",
-                                                                    "c. end of expiration"]
+        assert [ax.get_title().split("  ")[0] for ax in views] == [
+            "a. rest",
+            "b. peak inspiration",
+            "c. end of expiration",
+        ]
     finally:
         import matplotlib.pyplot as plt
+
         plt.close(fig)
 
 
@@ -124,18 +138,31 @@ def test_a_sagittal_section_of_the_sphere_is_a_closed_polygon_inside_it():
 def test_render_takes_set_and_without_like_run(tmp_path, capsys):
     out = tmp_path / "fig"
     # no muscle: the scene does not breathe, and the panels are not called inspiration and expiration
-    args = ["render", "membrane_demo", "--without", "muscle", "--set", "forces.gravity.accel_m_s2=[0, 0, -30]",
-            "--duration", "0.3", "--out", str(out)]
+    args = [
+        "render",
+        "membrane_demo",
+        "--without",
+        "muscle",
+        "--set",
+        "forces.gravity.accel_m_s2=[0, 0, -30]",
+        "--duration",
+        "0.3",
+        "--out",
+        str(out),
+    ]
     assert main(args) == 0
     said = capsys.readouterr().out
     assert "largest displacement t =" in said and "last frame" in said and "inspiration" not in said
     assert (out / "figure4.png").is_file()
-    heavy = frames_from_scene("membrane_demo", 0.3, without=["muscle"], overrides=["forces.gravity.accel_m_s2=[0, 0, -30]"])
+    heavy = frames_from_scene(
+        "membrane_demo", 0.3, without=["muscle"], overrides=["forces.gravity.accel_m_s2=[0, 0, -30]"]
+    )
     plain = frames_from_scene("membrane_demo", 0.3, without=["muscle"])
     assert not np.any(heavy.muscle) and heavy.apex_descent[-1] > 2 * plain.apex_descent[-1] > 0
     fig, _ = build_figure(heavy)
     assert [ax.get_title().split("  ")[0] for ax in fig.axes if ax.name == "3d"] == list(STILL_TITLES)
     import matplotlib.pyplot as plt
+
     plt.close(fig)
 
 
@@ -202,16 +229,24 @@ def test_view_runs_in_mujocos_viewer_on_a_virtual_display():
     if xvfb is None:
         pytest.skip("Xvfb is not installed (.ci/run installs it)")
     number = 100 + os.getpid() % 800
-    server = subprocess.Popen([xvfb, f":{number}", "-screen", "0", "800x600x24", "-nolisten", "tcp"],
-                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    server = subprocess.Popen(
+        [xvfb, f":{number}", "-screen", "0", "800x600x24", "-nolisten", "tcp"],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     try:
         deadline = time.monotonic() + 20
         while not os.path.exists(f"/tmp/.X11-unix/X{number}") and time.monotonic() < deadline:
             time.sleep(0.05)
         env = {**os.environ, "DISPLAY": f":{number}"}
         for scene in ([], ["membrane_demo"]):  # the coupled trunk, and a membrane alone
-            done = subprocess.run([sys.executable, "-m", "hybrid", "view", *scene, "--duration", "0.3"],
-                                  env=env, capture_output=True, text=True, timeout=300)
+            done = subprocess.run(
+                [sys.executable, "-m", "hybrid", "view", *scene, "--duration", "0.3"],
+                env=env,
+                capture_output=True,
+                text=True,
+                timeout=300,
+            )
             assert done.returncode == 0, (scene, done.returncode, done.stderr[-2000:])
             shown = re.search(r"viewed (\d+) frames .* drawn as (\d+) of its (\d+) edges", done.stdout)
             assert shown, done.stdout

@@ -46,13 +46,16 @@ def test_geom_group_filter_keeps_the_visible_bones_only():
 
 def _image(path):
     import matplotlib.image as mpimg
+
     img = mpimg.imread(path)[..., :3]
     h = img.shape[0]
-    return img[int(0.12 * h):int(0.5 * h)]  # the 3D views, below the titles
+    return img[int(0.12 * h) : int(0.5 * h)]  # the 3D views, below the titles
 
 
-@pytest.mark.skipif(importlib.util.find_spec("myo_sim") is None,
-                    reason="myo_sim (PyPI myo-sim) is not installed: pip install -e '.[myo]'")
+@pytest.mark.skipif(
+    importlib.util.find_spec("myo_sim") is None,
+    reason="myo_sim (PyPI myo-sim) is not installed: pip install -e '.[myo]'",
+)
 def test_render_of_a_myotorso_recording_shows_the_membrane_in_every_panel(tmp_path, capsys):
     run_dir = tmp_path / "run"
     assert main(["run", "myotorso_breathing", "--duration", "0.3", "--out", str(run_dir)]) == 0
@@ -68,7 +71,7 @@ def test_render_of_a_myotorso_recording_shows_the_membrane_in_every_panel(tmp_pa
     bare = _image(tmp_path / "bare.png")
     w = img.shape[1] // 3
     for i in range(3):
-        shown = np.abs(img[:, i * w:(i + 1) * w] - bare[:, i * w:(i + 1) * w]).max(axis=2) > 0.1
+        shown = np.abs(img[:, i * w : (i + 1) * w] - bare[:, i * w : (i + 1) * w]).max(axis=2) > 0.1
         assert shown.mean() > 0.2, f"panel {i}: {shown.mean():.4f} of its pixels are the membrane's"
 
 
@@ -76,10 +79,9 @@ def test_panels_are_named_after_a_breath_only_where_the_frames_hold_one():
     from hybrid.render import PANEL_TITLES, STILL_TITLES, Frames, breathes, panel_titles
 
     t = np.linspace(0.0, 4.0, 41)
-    rise = np.minimum(t, 1.6)                           # a run stopped during its first inspiration
+    rise = np.minimum(t, 1.6)  # a run stopped during its first inspiration
     breath = np.where(t < 1.6, t, np.maximum(3.2 - t, 0.0))
     pos = np.zeros((len(t), 3, 3))
     for muscle, titles in ((rise, STILL_TITLES), (breath, PANEL_TITLES), (None, STILL_TITLES)):
-        fr = Frames(scene="s", t=t, pos=pos, face_vert=np.array([[0, 1, 2]]), vert_rgba=np.ones((3, 4)),
-                    muscle=muscle)
+        fr = Frames(scene="s", t=t, pos=pos, face_vert=np.array([[0, 1, 2]]), vert_rgba=np.ones((3, 4)), muscle=muscle)
         assert panel_titles(fr) == titles and breathes(fr) == (titles == PANEL_TITLES)

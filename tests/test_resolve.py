@@ -50,9 +50,13 @@ def test_overrides_and_removed_terms_apply_to_any_source():
         assert scene.dt_s == 5e-4
         assert "damping" not in scene.term_names() and "damping" in resolve_scene(source).term_names()
     changed = resolve_scene("membrane_demo", overrides=["forces.shape_memory.stiffness_n_per_m=100"])
-    assert changed == dataclasses.replace(membrane_demo(), forces=tuple(
-        dataclasses.replace(f, stiffness_n_per_m=100.0) if f.name == "shape_memory" else f
-        for f in membrane_demo().forces))
+    assert changed == dataclasses.replace(
+        membrane_demo(),
+        forces=tuple(
+            dataclasses.replace(f, stiffness_n_per_m=100.0) if f.name == "shape_memory" else f
+            for f in membrane_demo().forces
+        ),
+    )
     with pytest.raises(SceneError, match="nosuchterm"):
         resolve_scene("membrane_demo", without=["nosuchterm"])
     with pytest.raises(SceneError, match="expected KEY=VALUE"):

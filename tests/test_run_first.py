@@ -19,8 +19,24 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def _run(cache: Path, out: Path) -> subprocess.CompletedProcess:
     env = dict(os.environ, PYTHONPATH=str(ROOT), NUMBA_CACHE_DIR=str(cache))
-    return subprocess.run([sys.executable, "-m", "hybrid", "run", "membrane_demo", "--duration", "0.01",
-                           "--no-record", "--out", str(out)], capture_output=True, text=True, env=env, timeout=900)
+    return subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "hybrid",
+            "run",
+            "membrane_demo",
+            "--duration",
+            "0.01",
+            "--no-record",
+            "--out",
+            str(out),
+        ],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=900,
+    )
 
 
 def test_a_first_run_says_it_compiles_and_a_second_does_not(tmp_path):
@@ -29,8 +45,7 @@ def test_a_first_run_says_it_compiles_and_a_second_does_not(tmp_path):
     cold = _run(cache, tmp_path / "a")
     assert cold.returncode == 0, cold.stderr
     lines = cold.stderr.splitlines()
-    assert re.fullmatch(r"hybrid: compiling kernels for this scene, first run only, about \d+ s", lines[0]), \
-        cold.stderr
+    assert re.fullmatch(r"hybrid: compiling kernels for this scene, first run only, about \d+ s", lines[0]), cold.stderr
     assert lines[-1].startswith("hybrid: compiled in ") and str(cache) in lines[-1]
     assert "Traceback" not in cold.stderr
     warm = _run(cache, tmp_path / "b")
@@ -80,8 +95,9 @@ def test_a_first_run_compiles_only_the_kernels_its_scene_uses(tmp_path):
     terms its scene has and no other (their branches are pruned when the step
     compiles: `hybrid.step.step_switches`), and one step loop: the frames' loop."""
     env = dict(os.environ, PYTHONPATH=str(ROOT), NUMBA_CACHE_DIR=str(tmp_path / "cache"))
-    proc = subprocess.run([sys.executable, "-c", _COMPILED, str(tmp_path / "out")], capture_output=True, text=True,
-                          env=env, timeout=900)
+    proc = subprocess.run(
+        [sys.executable, "-c", _COMPILED, str(tmp_path / "out")], capture_output=True, text=True, env=env, timeout=900
+    )
     assert proc.returncode == 0, proc.stderr[-2000:]
     got = json.loads(proc.stdout.splitlines()[-1])
     assert got["code"] == 0

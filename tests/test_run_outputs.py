@@ -18,8 +18,18 @@ from hybrid.record import read
 from hybrid.run import METRIC_KEYS, TRACE_KEYS, Trace, metric_table
 from hybrid.scenefile import scene_from_dict
 
-PROVENANCE_KEYS = {"version", "git_commit", "command", "scene_toml", "overrides", "without", "integrator", "dt_s",
-                   "threads", "machine"}
+PROVENANCE_KEYS = {
+    "version",
+    "git_commit",
+    "command",
+    "scene_toml",
+    "overrides",
+    "without",
+    "integrator",
+    "dt_s",
+    "threads",
+    "machine",
+}
 
 
 def _summary(out):
@@ -84,8 +94,20 @@ def test_provenance_in_the_summary_and_the_recording(tmp_path):
     scene as TOML (loading back to the scene run), the overrides and removed terms as
     given, the step and integrator used, threads and machine."""
     out = tmp_path / "o"
-    args = ["run", "membrane_demo", "--set", "forces.muscle.stiffness.breathing.peak=100", "--without", "damping",
-            "--dt", "5e-4", "--duration", "0.05", "--out", str(out)]
+    args = [
+        "run",
+        "membrane_demo",
+        "--set",
+        "forces.muscle.stiffness.breathing.peak=100",
+        "--without",
+        "damping",
+        "--dt",
+        "5e-4",
+        "--duration",
+        "0.05",
+        "--out",
+        str(out),
+    ]
     assert main(args) == 0
     p = _summary(out)["provenance"]
     assert PROVENANCE_KEYS <= set(p)
@@ -95,8 +117,9 @@ def test_provenance_in_the_summary_and_the_recording(tmp_path):
     assert isinstance(p["threads"]["numba_threads"], int) and p["threads"]["parallel_build"] is False
     assert p["machine"]["cpu_count"] >= 1 and p["version"]
     scene = scene_from_dict(tomllib.loads(p["scene_toml"]))
-    expected = hybrid.load_scene("membrane_demo", overrides=["forces.muscle.stiffness.breathing.peak=100"],
-                                 without=["damping"])
+    expected = hybrid.load_scene(
+        "membrane_demo", overrides=["forces.muscle.stiffness.breathing.peak=100"], without=["damping"]
+    )
     assert scene == dataclasses.replace(expected, dt_s=5e-4)
     assert read(out / "run.mcap")["model"]["provenance"] == p
 

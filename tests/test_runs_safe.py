@@ -32,8 +32,15 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def _cli(*args, cwd=None, **kw):
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    return subprocess.Popen([sys.executable, "-m", "hybrid", *args], cwd=cwd, env=env, text=True,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, **kw)
+    return subprocess.Popen(
+        [sys.executable, "-m", "hybrid", *args],
+        cwd=cwd,
+        env=env,
+        text=True,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        **kw,
+    )
 
 
 def _one_line(err: str) -> str:
@@ -60,9 +67,17 @@ def _wait_running(folder: Path, proc, timeout_s: float = 120.0) -> dict:
 # ------------------------------------------------------------------ item 1: the name is a name
 
 
-@pytest.mark.parametrize("name, why", [("../../x", "path separator"), ("/elsewhere/x", "path separator"),
-                                       ("..", "'..'"), ("a\\b", "path separator"), ("", "empty"),
-                                       ("a\0b", "NUL")])
+@pytest.mark.parametrize(
+    "name, why",
+    [
+        ("../../x", "path separator"),
+        ("/elsewhere/x", "path separator"),
+        ("..", "'..'"),
+        ("a\\b", "path separator"),
+        ("", "empty"),
+        ("a\0b", "NUL"),
+    ],
+)
 def test_a_scene_name_that_is_a_path_is_refused_as_a_folder(name, why):
     """Item 1: runs/<name> only for a plain name."""
     with pytest.raises(HybridError, match=f"scene name: expected a plain name.*{why}.*--out"):
@@ -188,6 +203,7 @@ def test_a_failed_rerun_replaces_the_earlier_summary(tmp_path, capsys):
 def test_an_interrupted_run_writes_its_summary(tmp_path, monkeypatch, capsys):
     """Item 9: Ctrl-C in the middle of a run: "interrupted", the time reached, the plot."""
     import importlib
+
     runner = importlib.import_module("hybrid.run")
     real = runner.run
 
@@ -195,6 +211,7 @@ def test_an_interrupted_run_writes_its_summary(tmp_path, monkeypatch, capsys):
         def stop(s, trace):
             if s.steps_done >= 250:
                 raise KeyboardInterrupt
+
         return real(sim, duration_s, **{**kw, "observers": [*kw["observers"], stop]})
 
     monkeypatch.setattr(runner, "run", interrupted_run)
@@ -222,15 +239,18 @@ def test_a_load_error_leaves_no_folder(tmp_path, capsys):
 # ------------------------------------------------------------------ items 7 and 10: lengths that cannot run
 
 
-@pytest.mark.parametrize("args, expected", [
-    (["--duration", "inf"], "--duration: expected a finite time > 0 s, received inf"),
-    (["--duration", "nan"], "--duration: expected a finite time > 0 s, received nan"),
-    (["--duration", "1e20"], "expected at most 2^53"),
-    (["--dt", "1e-300"], "expected at most 2^53"),
-    (["--dt", "1e-9"], "is 4e+09 steps, more than 1e+08; add --yes to run them"),
-    (["--duration", "1e-4"], "--duration 0.0001 s: expected at least one step of dt_s = 0.001 s"),
-    (["--set", "dt_s=1e300"], "dt_s: expected a number > 0 and <= 1000"),  # past the physical bound
-])
+@pytest.mark.parametrize(
+    "args, expected",
+    [
+        (["--duration", "inf"], "--duration: expected a finite time > 0 s, received inf"),
+        (["--duration", "nan"], "--duration: expected a finite time > 0 s, received nan"),
+        (["--duration", "1e20"], "expected at most 2^53"),
+        (["--dt", "1e-300"], "expected at most 2^53"),
+        (["--dt", "1e-9"], "is 4e+09 steps, more than 1e+08; add --yes to run them"),
+        (["--duration", "1e-4"], "--duration 0.0001 s: expected at least one step of dt_s = 0.001 s"),
+        (["--set", "dt_s=1e300"], "dt_s: expected a number > 0 and <= 1000"),  # past the physical bound
+    ],
+)
 def test_run_lengths_that_cannot_run_are_one_line(args, expected, tmp_path, monkeypatch, capsys):
     """Items 7 and 10: each one line, exit 2, nothing written."""
     monkeypatch.chdir(tmp_path)
@@ -270,8 +290,9 @@ print(code, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
 
 def _peak_kib(duration_s: float, out: Path) -> int:
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    proc = subprocess.run([sys.executable, "-c", _PEAK, str(duration_s), str(out)], capture_output=True,
-                          text=True, env=env, timeout=900)
+    proc = subprocess.run(
+        [sys.executable, "-c", _PEAK, str(duration_s), str(out)], capture_output=True, text=True, env=env, timeout=900
+    )
     code, kib = proc.stdout.splitlines()[-1].split()
     assert code == "0", proc.stderr
     return int(kib)
@@ -312,9 +333,16 @@ def test_a_streamed_trace_reads_back_as_the_one_in_memory(tmp_path):
 
 
 def _sphere(integrator, forces, dt_s=1e-3, m=0.05):
-    return Scene(formulation="paper", mesh=MeshSpec(), masses=Masses(per_vertex_kg=(m,) * 80),
-                 regions={"bottom": HalfSpace((0.0, 0.0, -0.1), (0.0, 0.0, -1.0))},
-                 forces=forces, constraints=(Nailed("bottom"), Volume()), dt_s=dt_s, integrator=integrator)
+    return Scene(
+        formulation="paper",
+        mesh=MeshSpec(),
+        masses=Masses(per_vertex_kg=(m,) * 80),
+        regions={"bottom": HalfSpace((0.0, 0.0, -0.1), (0.0, 0.0, -1.0))},
+        forces=forces,
+        constraints=(Nailed("bottom"), Volume()),
+        dt_s=dt_s,
+        integrator=integrator,
+    )
 
 
 def _diverge(scene, steps=20000) -> SimulationDiverged:
@@ -333,8 +361,7 @@ def test_undamped_explicit_euler_is_not_told_to_shrink_the_step():
     assert "no smaller step helps; add Damping(critical_fraction=0.3)" in msg
     assert "try dt_s" not in msg and math.isnan(err.dt_suggested_s)
     # the advice holds: the same step with that damping runs
-    hybrid.load(_sphere("explicit_euler", (Gravity(), ShapeMemory(3000.0), Damping(critical_fraction=0.3)))
-                ).step(20000)
+    hybrid.load(_sphere("explicit_euler", (Gravity(), ShapeMemory(3000.0), Damping(critical_fraction=0.3)))).step(20000)
 
 
 @pytest.mark.parametrize("integrator", ["symplectic_euler", "explicit_euler"])
@@ -358,8 +385,14 @@ def test_free_fall_of_a_small_body_is_not_a_runaway():
     """Item 11: a 1 cm sphere (its bounding box's diagonal 17 mm) falls freely for 2.5 s,
     to 24.5 m/s or 24.5 mm a step: not a divergence (the body's size called it one
     after 1.8 s). Symplectic Euler's discrete fall z_n = -g h^2 n (n + 1) / 2 to rounding."""
-    scene = Scene(formulation="paper", mesh=MeshSpec(radius_m=0.005), masses=Masses(total_kg=0.01), forces=(Gravity(),),
-                  constraints=(Volume(),), dt_s=1e-3)
+    scene = Scene(
+        formulation="paper",
+        mesh=MeshSpec(radius_m=0.005),
+        masses=Masses(total_kg=0.01),
+        forces=(Gravity(),),
+        constraints=(Volume(),),
+        dt_s=1e-3,
+    )
     sim = hybrid.load(scene)
     n = 2500
     sim.step(n)
@@ -374,13 +407,20 @@ def test_a_recording_interval_that_is_not_a_whole_number_of_steps_is_refused(tmp
     """Item 11: dt 2.3 ms and 10 ms: refused, naming the steps that divide (2.5 and 2 ms)
     and the intervals that fit (9.2 and 11.5 ms); it recorded frames 18.4 ms apart."""
     sim = hybrid.load(dataclasses.replace(membrane_demo(), dt_s=2.3e-3))
-    with pytest.raises(HybridError, match=r"every_s: expected a whole number of steps of dt_s = 0.0023 s, received "
-                                          r"0.01 s \(4.34783 steps\); a step dt_s = 0.0025 s or 0.002 s \(4 or 5 steps\) "
-                                          r"divides it, or record every 0.0092 s or 0.0115 s"):
+    with pytest.raises(
+        HybridError,
+        match=r"every_s: expected a whole number of steps of dt_s = 0.0023 s, received "
+        r"0.01 s \(4.34783 steps\); a step dt_s = 0.0025 s or 0.002 s \(4 or 5 steps\) "
+        r"divides it, or record every 0.0092 s or 0.0115 s",
+    ):
         Recorder(tmp_path / "r.mcap", sim, every_s=0.01)
     out = tmp_path / "o"
-    assert main(["run", "membrane_demo", "--dt", "0.0023", "--record-every", "0.01", "--duration", "0.1",
-                 "--out", str(out)]) == 2
+    assert (
+        main(
+            ["run", "membrane_demo", "--dt", "0.0023", "--record-every", "0.01", "--duration", "0.1", "--out", str(out)]
+        )
+        == 2
+    )
     assert "--record-every: expected a whole number of steps" in _one_line(capsys.readouterr().err)
     assert not out.exists()
     # without --record-every: the steps nearest 10 ms, frames exactly that far apart

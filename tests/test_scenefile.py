@@ -64,12 +64,17 @@ def test_bad_scenes_exit_with_status_2_and_one_stderr_line(tmp_path, capsys):
         assert header(path)[0][0] in err, (path.name, err)
     # once in a fresh process, as a user would run it
     path = HERE / "data" / "bad_scenes" / "bad_scene_negative_stiffness.toml"
-    proc = subprocess.run([sys.executable, "-m", "hybrid.cli", "run", str(path), "--out", str(tmp_path / "p")],
-                          capture_output=True, text=True, timeout=300)
+    proc = subprocess.run(
+        [sys.executable, "-m", "hybrid.cli", "run", str(path), "--out", str(tmp_path / "p")],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert proc.returncode == 2
     assert proc.stderr.strip().splitlines() == [
         "hybrid: error: bad_scene_negative_stiffness.toml: forces[2].stiffness_n_per_m: "
-        "expected a number > 0, received -3"]
+        "expected a number > 0, received -3"
+    ]
 
 
 def test_missing_scene_file_names_it(tmp_path):
@@ -79,11 +84,13 @@ def test_missing_scene_file_names_it(tmp_path):
 
 # ----------------------------------------------------------------- same fields as the dataclasses
 
+
 @pytest.mark.parametrize("table", ["FORCE_TYPES", "CONSTRAINT_TYPES"])
 def test_every_term_field_has_a_kind_the_reader_knows(table):
     """The TOML keys of a term are its dataclass fields (hybrid.terms.base): each
     needs a kind that says how the file spells and checks it."""
     from hybrid.terms import base
+
     types = getattr(sf, table)
     assert types, table
     for typ, cls in types.items():
@@ -97,6 +104,7 @@ def test_every_term_field_has_a_kind_the_reader_knows(table):
 
 def test_every_scene_field_is_a_toml_key():
     from hybrid.scene import Scene
+
     fields = {f.name for f in dataclasses.fields(Scene)} - {"base_dir"}
     assert fields == set(sf._TOP)
     assert set(sf.scene_to_dict(sf.load_scene(sf.builtin_scene()))) == fields
@@ -172,11 +180,13 @@ def test_every_selector_and_schedule_form(tmp_path):
 
 def test_a_mesh_file_resolves_in_the_scene_files_folder(tmp_path, monkeypatch):
     import trimesh
+
     folder = tmp_path / "scenes"
     folder.mkdir()
     trimesh.creation.icosphere(subdivisions=1, radius=0.1).export(folder / "ball.obj")
-    (folder / "ball.toml").write_text('[mesh]\npath = "ball.obj"\n[masses]\ntotal_kg = 1.0\n'
-                                      '[[constraints]]\ntype = "volume"\n')
+    (folder / "ball.toml").write_text(
+        '[mesh]\npath = "ball.obj"\n[masses]\ntotal_kg = 1.0\n[[constraints]]\ntype = "volume"\n'
+    )
     monkeypatch.chdir(tmp_path)
     model = compile_scene(sf.load_scene("scenes/ball.toml"))
     assert model.nvert == 42
@@ -184,11 +194,20 @@ def test_a_mesh_file_resolves_in_the_scene_files_folder(tmp_path, monkeypatch):
 
 # ----------------------------------------------------------------- overrides
 
+
 def test_overrides_follow_dotted_paths_through_named_terms():
     scene = sf.load_scene(sf.builtin_scene("breathing_paper"))
-    new = sf.apply_overrides(scene, ["dt_s=5e-4", "forces.muscle.stiffness.breathing.peak=80",
-                                     "forces.4.critical_fraction=0.5", "integrator=explicit_euler",
-                                     "rigid.links.rib_left.body=rib_left_attach", "mesh.radius_m = 0.11"])
+    new = sf.apply_overrides(
+        scene,
+        [
+            "dt_s=5e-4",
+            "forces.muscle.stiffness.breathing.peak=80",
+            "forces.4.critical_fraction=0.5",
+            "integrator=explicit_euler",
+            "rigid.links.rib_left.body=rib_left_attach",
+            "mesh.radius_m = 0.11",
+        ],
+    )
     assert new.dt_s == 5e-4 and new.integrator == "explicit_euler" and new.mesh.radius_m == 0.11
     assert new.forces[2].stiffness == Breathing(4.0, 0.4, 80.0)
     assert new.forces[4].critical_fraction == 0.5
@@ -197,15 +216,18 @@ def test_overrides_follow_dotted_paths_through_named_terms():
     assert sf.apply_overrides(scene, []) == scene
 
 
-@pytest.mark.parametrize("item, culprit", [
-    ("dt_s", "expected KEY=VALUE"),
-    ("forces.nomuscle.stiffness=3", "no element named 'nomuscle'"),
-    ("forces.9.stiffness=3", "no index 9"),
-    ("mesh.radius=0.1", "mesh.radius: unknown key"),
-    ("dt_s=-1", "dt_s: expected a number > 0, received -1"),
-    ("forces.muscle.stiffness.breathing.peak=high", "forces[2].stiffness.breathing.peak"),
-    ("regions.nowhere.half_space.point=[0, 0, 0]", "no key 'nowhere'"),
-])
+@pytest.mark.parametrize(
+    "item, culprit",
+    [
+        ("dt_s", "expected KEY=VALUE"),
+        ("forces.nomuscle.stiffness=3", "no element named 'nomuscle'"),
+        ("forces.9.stiffness=3", "no index 9"),
+        ("mesh.radius=0.1", "mesh.radius: unknown key"),
+        ("dt_s=-1", "dt_s: expected a number > 0, received -1"),
+        ("forces.muscle.stiffness.breathing.peak=high", "forces[2].stiffness.breathing.peak"),
+        ("regions.nowhere.half_space.point=[0, 0, 0]", "no key 'nowhere'"),
+    ],
+)
 def test_bad_overrides_name_the_culprit(item, culprit):
     scene = sf.load_scene(sf.builtin_scene("breathing_paper"))
     with pytest.raises(SceneError) as err:

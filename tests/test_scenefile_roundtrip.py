@@ -10,9 +10,27 @@ from hypothesis import strategies as st
 
 from hybrid import regions as R
 from hybrid import scenefile as sf
-from hybrid.scene import (AppliedForce, Attraction, Damping, Gravity, KeepIn, Masses, MassSpring, MeshSpec, Muscle,
-                          MuscleFibres, Nailed, Prescribed, Pressure, Rigid, RigidLink, Scene, ShapeMemory, SoftVolume,
-                          Volume)
+from hybrid.scene import (
+    AppliedForce,
+    Attraction,
+    Damping,
+    Gravity,
+    KeepIn,
+    Masses,
+    MassSpring,
+    MeshSpec,
+    Muscle,
+    MuscleFibres,
+    Nailed,
+    Prescribed,
+    Pressure,
+    Rigid,
+    RigidLink,
+    Scene,
+    ShapeMemory,
+    SoftVolume,
+    Volume,
+)
 from hybrid.schedule import Breathing, Constant, Table
 
 finite = st.floats(-1e3, 1e3, allow_nan=False, allow_infinity=False)
@@ -25,30 +43,39 @@ name = st.text("abcdefghijklmnopqrstuvwxyz_", min_size=1, max_size=8)
 
 def selectors(depth: int = 2):
     leaf = st.one_of(
-        st.just("all"), st.just(R.Border()),
+        st.just("all"),
+        st.just(R.Border()),
         st.builds(R.Indices, st.lists(st.integers(0, 500), min_size=1, max_size=5).map(tuple)),
-        st.builds(R.HalfSpace, vec3, vec3), st.builds(R.Ball, vec3, positive), st.builds(R.Box, vec3, vec3),
+        st.builds(R.HalfSpace, vec3, vec3),
+        st.builds(R.Ball, vec3, positive),
+        st.builds(R.Box, vec3, vec3),
         st.builds(R.Wedge, st.floats(-360, 360), st.floats(-360, 360), vec3),
         st.builds(R.Nearest, st.lists(vec3, min_size=1, max_size=3).map(tuple)),
-        st.builds(R.Patch, vec3, positive))
+        st.builds(R.Patch, vec3, positive),
+    )
     if depth == 0:
         return leaf
     inner = selectors(depth - 1)
-    return st.one_of(leaf, st.builds(R.Union_, st.lists(inner, min_size=1, max_size=3).map(tuple)),
-                     st.builds(R.Intersection, st.lists(inner, min_size=1, max_size=3).map(tuple)),
-                     st.builds(R.Difference, inner, inner))
+    return st.one_of(
+        leaf,
+        st.builds(R.Union_, st.lists(inner, min_size=1, max_size=3).map(tuple)),
+        st.builds(R.Intersection, st.lists(inner, min_size=1, max_size=3).map(tuple)),
+        st.builds(R.Difference, inner, inner),
+    )
 
 
 def tables(ncomp: int):
     def build(times, values, periodic):
-        return Table(tuple(times), tuple(values[:len(times)]), periodic)
+        return Table(tuple(times), tuple(values[: len(times)]), periodic)
+
     value = finite if ncomp == 1 else vec3
     times = st.lists(st.floats(0, 100), min_size=2, max_size=5, unique=True).map(sorted)
     return st.builds(build, times, st.lists(value, min_size=5, max_size=5), st.booleans())
 
 
-scalar_schedule = st.one_of(st.builds(Constant, finite), tables(1),
-                            st.builds(Breathing, positive, fraction, finite, st.floats(0, 10)))
+scalar_schedule = st.one_of(
+    st.builds(Constant, finite), tables(1), st.builds(Breathing, positive, fraction, finite, st.floats(0, 10))
+)
 vector_schedule = st.one_of(st.builds(Constant, vec3), tables(3))
 
 forces = st.one_of(
@@ -66,18 +93,28 @@ forces = st.one_of(
     st.builds(Damping, drag_n_s_per_m3=st.floats(0, 1e3), region=selectors()),
     st.builds(Pressure, scalar_schedule),
     st.builds(MuscleFibres, selectors(), scalar_schedule, axis=vec3),
-    st.builds(MuscleFibres, selectors(), scalar_schedule, toward_m=vec3))
+    st.builds(MuscleFibres, selectors(), scalar_schedule, toward_m=vec3),
+)
 constraints = st.one_of(
-    st.builds(Nailed, selectors()), st.just(Volume()),
+    st.builds(Nailed, selectors()),
+    st.just(Volume()),
     st.builds(Prescribed, selectors(), vector_schedule),
     st.builds(KeepIn, selectors(), st.just("half_space"), point_m=vec3, normal=vec3),
     st.builds(KeepIn, selectors(), st.just("ball"), center_m=vec3, radius_m=positive),
-    st.builds(KeepIn, selectors(), st.just("box"), lo_m=vec3, hi_m=vec3))
+    st.builds(KeepIn, selectors(), st.just("box"), lo_m=vec3, hi_m=vec3),
+)
 meshes = st.one_of(
-    st.builds(MeshSpec, st.just("uv_sphere"), radius_m=positive, segments=st.integers(3, 40),
-              rings=st.integers(2, 30), center_m=vec3),
+    st.builds(
+        MeshSpec,
+        st.just("uv_sphere"),
+        radius_m=positive,
+        segments=st.integers(3, 40),
+        rings=st.integers(2, 30),
+        center_m=vec3,
+    ),
     st.builds(MeshSpec, st.just("icosphere"), radius_m=positive, subdivisions=st.integers(0, 7), center_m=vec3),
-    st.builds(MeshSpec, generator=st.none(), path=st.just("body.stl"), unit_scale=positive))
+    st.builds(MeshSpec, generator=st.none(), path=st.just("body.stl"), unit_scale=positive),
+)
 
 
 @st.composite
@@ -86,14 +123,29 @@ def scenes(draw):
     cs = draw(st.lists(constraints, max_size=3))
     names = draw(st.lists(name, min_size=len(fs) + len(cs) + 2, max_size=len(fs) + len(cs) + 2, unique=True))
     fs = tuple(f.__class__(**{**f.__dict__, "name": n}) for f, n in zip(fs, names))
-    cs = tuple(c.__class__(**{**c.__dict__, "name": n}) for c, n in zip(cs, names[len(fs):]))
-    rigid = draw(st.one_of(st.none(), st.builds(
-        Rigid, st.just("trunk"), st.just((RigidLink("all", "rib_left", names[-1]),)), name, st.booleans())))
-    return Scene(formulation=draw(st.sampled_from(["paper", "continuum"])), mesh=draw(meshes), masses=draw(st.builds(Masses, total_kg=positive)),
-                 regions=draw(st.dictionaries(name, selectors(1), max_size=3)), forces=fs, constraints=cs,
-                 rigid=rigid, dt_s=draw(positive), integrator=draw(st.sampled_from(["explicit_euler",
-                                                                                     "symplectic_euler"])),
-                 duration_s=draw(positive), max_speed_m_s=draw(positive), name=draw(name))
+    cs = tuple(c.__class__(**{**c.__dict__, "name": n}) for c, n in zip(cs, names[len(fs) :]))
+    rigid = draw(
+        st.one_of(
+            st.none(),
+            st.builds(
+                Rigid, st.just("trunk"), st.just((RigidLink("all", "rib_left", names[-1]),)), name, st.booleans()
+            ),
+        )
+    )
+    return Scene(
+        formulation=draw(st.sampled_from(["paper", "continuum"])),
+        mesh=draw(meshes),
+        masses=draw(st.builds(Masses, total_kg=positive)),
+        regions=draw(st.dictionaries(name, selectors(1), max_size=3)),
+        forces=fs,
+        constraints=cs,
+        rigid=rigid,
+        dt_s=draw(positive),
+        integrator=draw(st.sampled_from(["explicit_euler", "symplectic_euler"])),
+        duration_s=draw(positive),
+        max_speed_m_s=draw(positive),
+        name=draw(name),
+    )
 
 
 @settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.too_slow])

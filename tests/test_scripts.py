@@ -35,6 +35,7 @@ def _table(path: Path) -> list[dict]:
 
 def _figure_drawn(path: Path) -> None:
     import matplotlib.image as mpimg
+
     img = mpimg.imread(path)[..., :3]
     assert img.shape[0] > 200 and img.shape[1] > 300
     assert (img.min(axis=2) < 0.5).mean() > 0.005  # lines, not a blank page
@@ -64,8 +65,9 @@ def test_scripts_use_only_the_public_api(name):
 def test_a_script_runs_as_a_command():
     """`python scripts/NAME.py --help`: the helper module is found beside the script
     (the others are run in this process below, to share their imports)."""
-    done = subprocess.run([sys.executable, str(SCRIPTS / "parameter_sweep.py"), "--help"], capture_output=True,
-                          text=True, timeout=120)
+    done = subprocess.run(
+        [sys.executable, str(SCRIPTS / "parameter_sweep.py"), "--help"], capture_output=True, text=True, timeout=120
+    )
     assert done.returncode == 0 and "--quick" in done.stdout and "--out" in done.stdout, done.stderr
 
 

@@ -9,19 +9,18 @@ import subprocess
 import sys
 import textwrap
 
+import helpers
 import numpy as np
 import pytest
+from helpers import BASE, with_force
 
 import hybrid
-import helpers
 from hybrid.demo import membrane_demo
 from hybrid.errors import SimulationDiverged
 from hybrid.model import compile_scene
 from hybrid.scene import Muscle
 from hybrid.schedule import Function
 from hybrid.simulation import Simulation
-
-from helpers import BASE, with_force
 
 
 @pytest.fixture(scope="module")
@@ -83,13 +82,19 @@ def test_a_failed_run_steps_again_from_a_state_set_by_hand(membrane_model):
 
 def test_a_projection_failing_after_it_held_is_a_divergence_and_at_the_first_step_the_surfaces_fault():
     from hybrid.scene import Gravity
+
     model = hybrid.compile_scene(helpers.base_scene(forces=(Gravity(),)))
     still = np.zeros((model.nvert, 3))
     # every point at one place, at rest: gravity moves the free points alike, so the volume
     # gradient on them vanishes and the projection fails
-    for steps, error, words in ((3, hybrid.SimulationDiverged, ["diverged at t = 0.003 s", "projection failed",
-                                                               "surface folded", "m from rest", "try dt_s <="]),
-                                (0, hybrid.ConstraintError, ["projection failed at t = 0 s", "closed surface"])):
+    for steps, error, words in (
+        (
+            3,
+            hybrid.SimulationDiverged,
+            ["diverged at t = 0.003 s", "projection failed", "surface folded", "m from rest", "try dt_s <="],
+        ),
+        (0, hybrid.ConstraintError, ["projection failed at t = 0 s", "closed surface"]),
+    ):
         sim = hybrid.Simulation(model)
         sim.step(steps)
         sim.set_state(vert_pos=np.broadcast_to(sim.vert_pos.mean(axis=0), still.shape).copy(), vert_vel=still)
@@ -98,18 +103,21 @@ def test_a_projection_failing_after_it_held_is_a_divergence_and_at_the_first_ste
         assert all(w in str(e.value) for w in words) and "\n" not in str(e.value), str(e.value)
 
 
-@pytest.mark.parametrize("kwargs, words", [
-    (dict(vert_pos=np.zeros((79, 3))), ["vert_pos", "(80, 3)", "(79, 3)"]),
-    (dict(vert_vel=np.zeros(240)), ["vert_vel", "(80, 3)", "(240,)"]),
-    (dict(vert_vel=[[0.0, 0.0], [0.0]]), ["vert_vel", "(80, 3)", "ragged list"]),
-    (dict(vert_pos="rest"), ["vert_pos", "(80, 3)", "'rest'"]),
-    (dict(vert_vel=np.full((80, 3), np.inf)), ["vert_vel", "finite", "inf", "(0, 0)", "240 non-finite"]),
-    (dict(time_s=-1.0), ["time_s", ">= 0", "-1.0"]),
-    (dict(time_s=float("nan")), ["time_s", "finite", "nan"]),
-    (dict(time_s="0"), ["time_s", "'0'"]),
-    (dict(qpos=[0.1, 0.2]), ["qpos", "no rigid part", "(2,)"]),
-    (dict(qvel=[0.0]), ["qvel", "no rigid part", "(1,)"]),
-])
+@pytest.mark.parametrize(
+    "kwargs, words",
+    [
+        (dict(vert_pos=np.zeros((79, 3))), ["vert_pos", "(80, 3)", "(79, 3)"]),
+        (dict(vert_vel=np.zeros(240)), ["vert_vel", "(80, 3)", "(240,)"]),
+        (dict(vert_vel=[[0.0, 0.0], [0.0]]), ["vert_vel", "(80, 3)", "ragged list"]),
+        (dict(vert_pos="rest"), ["vert_pos", "(80, 3)", "'rest'"]),
+        (dict(vert_vel=np.full((80, 3), np.inf)), ["vert_vel", "finite", "inf", "(0, 0)", "240 non-finite"]),
+        (dict(time_s=-1.0), ["time_s", ">= 0", "-1.0"]),
+        (dict(time_s=float("nan")), ["time_s", "finite", "nan"]),
+        (dict(time_s="0"), ["time_s", "'0'"]),
+        (dict(qpos=[0.1, 0.2]), ["qpos", "no rigid part", "(2,)"]),
+        (dict(qvel=[0.0]), ["qvel", "no rigid part", "(1,)"]),
+    ],
+)
 def test_bad_values_name_the_argument_what_was_expected_and_what_came(membrane_model, kwargs, words):
     sim = hybrid.Simulation(membrane_model)
     sim.step(5)
@@ -178,8 +186,11 @@ def test_a_python_schedule_returning_a_wrong_size_is_named():
         return [1.0, 2.0]  # neither a number nor a 3-vector
 
     sim = Simulation(compile_scene(with_force(Muscle("top", Function(contraction), toward_m=(0, 0, 0.12)))))
-    with pytest.raises(SimulationDiverged, match=r"schedule function 'contraction' returned \[1\.0, 2\.0\] at "
-                                                 r"t = 0 s; expected 1 or 3 finite numbers"):
+    with pytest.raises(
+        SimulationDiverged,
+        match=r"schedule function 'contraction' returned \[1\.0, 2\.0\] at "
+        r"t = 0 s; expected 1 or 3 finite numbers",
+    ):
         sim.step(1)
 
 
@@ -216,8 +227,9 @@ def test_step_frames_keeps_the_frames_before_a_divergence():
     assert frames.count == 0
 
 
-@pytest.mark.parametrize("stops, expected", [([5, 3], "increasing"), ([-1], "increasing"),
-                                             (list(range(1, 12)), "capacity")])
+@pytest.mark.parametrize(
+    "stops, expected", [([5, 3], "increasing"), ([-1], "increasing"), (list(range(1, 12)), "capacity")]
+)
 def test_step_frames_refuses_bad_stops(stops, expected):
     sim = hybrid.load(membrane_demo())
     with pytest.raises(ValueError, match=expected):

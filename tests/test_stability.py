@@ -32,23 +32,22 @@ import math
 
 import numpy as np
 import pytest
+from helpers import hanging_sphere
 from scipy.optimize import linear_sum_assignment
 
 from hybrid.mesh import Mesh, icosahedron
 from hybrid.model import compile_scene
 from hybrid.regions import All, Difference, Indices
-from hybrid.scene import Damping, MassSpring, Masses, Nailed, Scene, ShapeMemory
+from hybrid.scene import Damping, Masses, MassSpring, Nailed, Scene, ShapeMemory
 from hybrid.simulation import Simulation
 from hybrid.stability import max_stable_dt, step_matrix, table1_eigenvalues
 
-from helpers import hanging_sphere
-
 # (h s, k N/m, kv N s/m, m kg): underdamped and overdamped, stable and unstable
 CASES = [
-    (1e-3, 3000.0, 2.0, 0.05),   # complex pair, the trunk's shape memory at its usual step
-    (4e-3, 100.0, 20.0, 0.05),   # real pair (strong damping)
-    (2e-2, 50.0, 1.0, 0.2),      # complex pair, large step
-    (1e-3, 1e4, 0.5, 0.01),      # |lambda| > 1: an unstable step, same formulas
+    (1e-3, 3000.0, 2.0, 0.05),  # complex pair, the trunk's shape memory at its usual step
+    (4e-3, 100.0, 20.0, 0.05),  # real pair (strong damping)
+    (2e-2, 50.0, 1.0, 0.2),  # complex pair, large step
+    (1e-3, 1e4, 0.5, 0.01),  # |lambda| > 1: an unstable step, same formulas
 ]
 
 
@@ -90,21 +89,26 @@ def test_table1_mass_spring(h, k, kv, m):
     # third-order transverse force (~k dx^3 / L^2) vanishes exactly. (A step
     # like 1e-7 with L = 0.05 errs by ~1e-11: the length's roundoff eps L is
     # then 1e-10 of the step, and the cubic term adds (dx / L)^2 ~ 4e-12.)
-    L = 2.0 ** -4  # m
+    L = 2.0**-4  # m
     pos = np.array([[0, 0, 0], [-L, 0, 0], [L, 0, 0], [0, L, 0], [0, -L, 0]], float)
     face = np.array([[0, 2, 3], [0, 3, 1], [0, 1, 4], [0, 4, 2]])  # P's closed fan N2, A, N1, B
     mesh = Mesh.from_arrays(pos, face, name="three_points")
-    scene = Scene(formulation="paper",
-        mesh=mesh, masses=Masses(per_vertex_kg=(m,) * 5),
+    scene = Scene(
+        formulation="paper",
+        mesh=mesh,
+        masses=Masses(per_vertex_kg=(m,) * 5),
         # springs are the mesh edges with both ends in the region: P-N1, P-N2 (and N1-N2? not an edge)
         regions={"springs": Indices((0, 1, 2)), "fixed": Indices((1, 2, 3, 4))},
         forces=(MassSpring(2.0 * k / 3.0, region="springs"), Damping(coef_n_s_per_m=kv)),
-        constraints=(Nailed("fixed"),), dt_s=h, integrator="explicit_euler")
+        constraints=(Nailed("fixed"),),
+        dt_s=h,
+        integrator="explicit_euler",
+    )
     model = compile_scene(scene)
     springs = {tuple(sorted(e)) for e in model.arrays.spring_vert.tolist()}
     assert {(0, 1), (0, 2)} <= springs and not any(0 in e and e not in {(0, 1), (0, 2)} for e in springs)
     sim = Simulation(model)
-    jac = step_jacobian(sim, 0, np.zeros(3), np.zeros(3), dx=L * 2.0 ** -26, dv=2.0 ** -10)
+    jac = step_jacobian(sim, 0, np.zeros(3), np.zeros(3), dx=L * 2.0**-26, dv=2.0**-10)
     got = np.linalg.eigvals(jac)
     table = table1_eigenvalues("mass_spring", h, k, kv, m)
     want = np.concatenate([table, [1.0, 1.0 - h * kv / m]])  # the second transverse direction
@@ -117,11 +121,16 @@ def test_table1_mass_spring(h, k, kv, m):
 def test_table1_shape_memory(h, k, kv, m):
     base = icosahedron(0.1)
     mesh = icosahedron(0.1, center=tuple(-base.vert_pos[0]))  # the free apex P at the origin
-    scene = Scene(formulation="paper",
-        mesh=mesh, masses=Masses(per_vertex_kg=(m,) * 12),
+    scene = Scene(
+        formulation="paper",
+        mesh=mesh,
+        masses=Masses(per_vertex_kg=(m,) * 12),
         regions={"P": Indices((0,)), "others": Difference(All(), Indices((0,)))},
         forces=(ShapeMemory(k, region="P"), Damping(coef_n_s_per_m=kv)),
-        constraints=(Nailed("others"),), dt_s=h, integrator="explicit_euler")
+        constraints=(Nailed("others"),),
+        dt_s=h,
+        integrator="explicit_euler",
+    )
     sim = Simulation(compile_scene(scene))
     # the map is affine, so central differences are exact up to roundoff for any step
     jac = step_jacobian(sim, 0, mesh.vert_pos[0], np.zeros(3), dx=1e-4, dv=1e-3)
@@ -165,13 +174,13 @@ def h_max_symplectic(m, k, c) -> float:
 
 
 STEP_CASES = [  # (m kg, k N/m, c N s/m)
-    (0.05, 3000.0, 0.0),      # undamped
+    (0.05, 3000.0, 0.0),  # undamped
     (0.05, 3000.0, 0.3 * 2 * math.sqrt(3000.0 * 0.05)),  # 0.3 of critical (the trunk's setting)
     (0.05, 3000.0, 1.5 * 2 * math.sqrt(3000.0 * 0.05)),  # overdamped
-    (3.9e-4, 3000.0, 0.65),   # an icosphere(5) point
+    (3.9e-4, 3000.0, 0.65),  # an icosphere(5) point
     (0.2, 50.0, 1.0),
-    (0.05, 0.0, 2.0),         # damping only: the paper's 2m/kv
-    (1.0, 1e-3, 5.0),         # nearly no stiffness
+    (0.05, 0.0, 2.0),  # damping only: the paper's 2m/kv
+    (1.0, 1e-3, 5.0),  # nearly no stiffness
 ]
 
 
@@ -256,8 +265,12 @@ def test_explicit_euler_with_volume_is_stable_below_m_over_c_only():
     m, c = 0.05, 50.0
     model = compile_scene(_damped_incompressible_sphere("explicit_euler", 1e-3, m, c, gravity=True))
     assert model.dt_stable_s <= m / c * (1 + 1e-12)
-    assert compile_scene(_damped_incompressible_sphere("explicit_euler", 1e-3, m, c, gravity=True)
-                         .without("volume")).dt_stable_s > 2 * m / c  # the per-point bound alone
+    assert (
+        compile_scene(
+            _damped_incompressible_sphere("explicit_euler", 1e-3, m, c, gravity=True).without("volume")
+        ).dt_stable_s
+        > 2 * m / c
+    )  # the per-point bound alone
     speeds = {}
     for factor in (0.95, 1.05):
         sim = Simulation(model.with_dt(factor * m / c))

@@ -11,6 +11,7 @@ import re
 
 import numpy as np
 import pytest
+from helpers import hanging_sphere
 
 from hybrid.errors import SimulationDiverged
 from hybrid.model import compile_scene
@@ -18,9 +19,6 @@ from hybrid.regions import Indices
 from hybrid.scene import AppliedForce, Gravity, Masses, MeshSpec, Scene
 from hybrid.schedule import Function
 from hybrid.simulation import Simulation
-
-from helpers import hanging_sphere
-
 
 G = np.array([0.0, 0.0, -9.81])
 
@@ -39,8 +37,14 @@ def test_free_fall_matches_the_closed_form(integrator):
     errors = {}
     for h in (1e-3, 5e-4):
         n = int(round(0.5 / h))  # 0.5 s
-        scene = Scene(formulation="paper", mesh=MeshSpec(), masses=Masses(total_kg=4.0), forces=(Gravity(),), dt_s=h,
-                      integrator=integrator)
+        scene = Scene(
+            formulation="paper",
+            mesh=MeshSpec(),
+            masses=Masses(total_kg=4.0),
+            forces=(Gravity(),),
+            dt_s=h,
+            integrator=integrator,
+        )
         sim = Simulation(compile_scene(scene))
         x0 = np.array(sim.vert_pos)
         sim.state.vert_vel[:] = v0
@@ -53,15 +57,15 @@ def test_free_fall_matches_the_closed_form(integrator):
         # roundoff: n additions of h v to coordinates of ~1 m: ~n eps / 2 ~ 1e-13 of the motion
         travel = np.abs(x - x0).max()
         assert np.abs(x - discrete).max() <= 1e-12 * travel
-        np.testing.assert_allclose(sim.vert_vel, np.broadcast_to(v0 + G * t, x.shape), rtol=0,
-                                   atol=1e-12 * np.linalg.norm(v0 + G * t))
+        np.testing.assert_allclose(
+            sim.vert_vel, np.broadcast_to(v0 + G * t, x.shape), rtol=0, atol=1e-12 * np.linalg.norm(v0 + G * t)
+        )
         continuous = x0 + v0 * t + 0.5 * G * t * t
         err = x - continuous
         bound = np.linalg.norm(G) * h * t / 2  # |g| h t / 2
         sign = -1.0 if integrator == "explicit_euler" else 1.0
         # the whole error is the O(h) term, along g, of exactly this size
-        np.testing.assert_allclose(err, np.broadcast_to(sign * G * h * t / 2, x.shape), rtol=0,
-                                   atol=1e-9 * bound)
+        np.testing.assert_allclose(err, np.broadcast_to(sign * G * h * t / 2, x.shape), rtol=0, atol=1e-9 * bound)
         assert np.abs(err).max() <= bound * (1 + 1e-9)
         errors[h] = np.abs(err).max()
     assert errors[5e-4] / errors[1e-3] == pytest.approx(0.5, rel=1e-6)
@@ -124,8 +128,13 @@ def test_divergence_of_a_batch_stops_at_the_failing_step():
 
 def test_non_finite_force_is_detected():
     """A force so large that the kinetic energy overflows: 'non-finite', not NaN positions."""
-    scene = Scene(formulation="paper", mesh=MeshSpec(), masses=Masses(total_kg=4.0),
-                  forces=(AppliedForce(Indices((5,)), (1e308, 0.0, 0.0)),), dt_s=1e-3)
+    scene = Scene(
+        formulation="paper",
+        mesh=MeshSpec(),
+        masses=Masses(total_kg=4.0),
+        forces=(AppliedForce(Indices((5,)), (1e308, 0.0, 0.0)),),
+        dt_s=1e-3,
+    )
     sim = Simulation(compile_scene(scene))
     with pytest.raises(SimulationDiverged, match="non-finite") as info:
         sim.step(10)
@@ -138,8 +147,13 @@ def test_python_schedule_returning_nan_is_detected():
     def bad_force(t):
         return (0.0, 0.0, math.nan if t > 0.0095 else 1.0)
 
-    scene = Scene(formulation="paper", mesh=MeshSpec(), masses=Masses(total_kg=4.0),
-                  forces=(AppliedForce(Indices((3,)), Function(bad_force)),), dt_s=1e-3)
+    scene = Scene(
+        formulation="paper",
+        mesh=MeshSpec(),
+        masses=Masses(total_kg=4.0),
+        forces=(AppliedForce(Indices((3,)), Function(bad_force)),),
+        dt_s=1e-3,
+    )
     sim = Simulation(compile_scene(scene))
     with pytest.raises(SimulationDiverged, match="bad_force"):
         sim.step(100)
@@ -162,8 +176,13 @@ def test_runaway_speed_is_detected_and_the_limit_is_a_scene_setting():
     # 1 kg over 80 points, 100 N per point: the lightest point crosses 50 m/s
     # after a few ms, while one step of 1e-4 s moves it a few mm, far less
     # than the 0.24 m body
-    scene = Scene(formulation="paper", mesh=MeshSpec(), masses=Masses(total_kg=1.0),
-                  forces=(AppliedForce("all", (100.0, 0.0, 0.0)),), dt_s=1e-4)
+    scene = Scene(
+        formulation="paper",
+        mesh=MeshSpec(),
+        masses=Masses(total_kg=1.0),
+        forces=(AppliedForce("all", (100.0, 0.0, 0.0)),),
+        dt_s=1e-4,
+    )
     model = compile_scene(scene)
     sim = Simulation(model)
     with pytest.raises(SimulationDiverged, match="max_speed_m_s") as exc:

@@ -14,8 +14,17 @@ The package's rooms:
 from __future__ import annotations
 
 from .geometry import vertex_area, volume, volume_gradient
-from .spheres import (ICOSPHERE_MAX_SUBDIVISIONS, MAX_LEVEL, fibonacci_sphere, icosahedron, icosphere, irregular_sphere,
-                      level_counts, ring_sphere, uv_sphere)
+from .spheres import (
+    ICOSPHERE_MAX_SUBDIVISIONS,
+    MAX_LEVEL,
+    fibonacci_sphere,
+    icosahedron,
+    icosphere,
+    irregular_sphere,
+    level_counts,
+    ring_sphere,
+    uv_sphere,
+)
 from .surface import LOAD_SUFFIXES, Mesh
 
 __all__ = [

@@ -72,14 +72,16 @@ def _faces_meet(pos, face, f, g):
     if shared >= 2:
         return False
     if shared == 1:  # the edge opposite the shared corner, of each face, against the other
-        return (_segment_meets(pos[face[f, (kf + 1) % 3]], pos[face[f, (kf + 2) % 3]],
-                               pos[face[g, 0]], pos[face[g, 1]], pos[face[g, 2]])
-                or _segment_meets(pos[face[g, (kg + 1) % 3]], pos[face[g, (kg + 2) % 3]],
-                                  pos[face[f, 0]], pos[face[f, 1]], pos[face[f, 2]]))
+        return _segment_meets(
+            pos[face[f, (kf + 1) % 3]], pos[face[f, (kf + 2) % 3]], pos[face[g, 0]], pos[face[g, 1]], pos[face[g, 2]]
+        ) or _segment_meets(
+            pos[face[g, (kg + 1) % 3]], pos[face[g, (kg + 2) % 3]], pos[face[f, 0]], pos[face[f, 1]], pos[face[f, 2]]
+        )
     for t, o in ((f, g), (g, f)):
         for k in range(3):
-            if _segment_meets(pos[face[t, k]], pos[face[t, (k + 1) % 3]],
-                              pos[face[o, 0]], pos[face[o, 1]], pos[face[o, 2]]):
+            if _segment_meets(
+                pos[face[t, k]], pos[face[t, (k + 1) % 3]], pos[face[o, 0]], pos[face[o, 1]], pos[face[o, 2]]
+            ):
                 return True
     return False
 
@@ -152,13 +154,24 @@ def crossing_faces(vert_pos: np.ndarray, face_vert: np.ndarray, *, most: int = 1
     fid = np.repeat(np.arange(nface), count)
     local = np.arange(len(fid)) - np.repeat(np.cumsum(count) - count, count)
     sx, sy = span[fid, 0], span[fid, 1]
-    cell_of = np.stack([ilo[fid, 0] + local % sx, ilo[fid, 1] + (local // sx) % sy,
-                        ilo[fid, 2] + local // (sx * sy)], axis=1)
+    cell_of = np.stack(
+        [ilo[fid, 0] + local % sx, ilo[fid, 1] + (local // sx) % sy, ilo[fid, 2] + local // (sx * sy)], axis=1
+    )
     key = (cell_of[:, 2] * dims[1] + cell_of[:, 1]) * dims[0] + cell_of[:, 0]
     order = np.argsort(key, kind="stable")
     out = np.empty((most, 2), dtype=np.int64)
     test = _plain_test_cells() if nface <= PLAIN_MAX_FACES else _test_cells
-    found = test(pos, face, lo, hi, origin, cell, key[order], fid[order],
-                 np.ascontiguousarray(cell_of[order], dtype=np.float64), out)
-    pairs = out[:min(found, most)]
+    found = test(
+        pos,
+        face,
+        lo,
+        hi,
+        origin,
+        cell,
+        key[order],
+        fid[order],
+        np.ascontiguousarray(cell_of[order], dtype=np.float64),
+        out,
+    )
+    pairs = out[: min(found, most)]
     return pairs[np.lexsort(pairs.T[::-1])], int(found)

@@ -45,8 +45,10 @@ def read_obj(path: str):
             except ValueError:
                 xyz = []
             if len(xyz) != 3:
-                raise MeshError(f"mesh file {path!r} line {number}: expected 'v x y z' with three numbers; "
-                                f"received {line.strip()[:80]!r}")
+                raise MeshError(
+                    f"mesh file {path!r} line {number}: expected 'v x y z' with three numbers; "
+                    f"received {line.strip()[:80]!r}"
+                )
             verts.append(xyz)
         elif words[0] == "f":
             corners = []
@@ -57,12 +59,16 @@ def read_obj(path: str):
                 except ValueError:
                     k = 0
                 if k == 0 or (k < 0 and -k > len(verts)):
-                    raise MeshError(f"mesh file {path!r} line {number}: face corner {word!r} is not a vertex "
-                                    f"index (1..{len(verts)}, or -1..-{len(verts)} counting back)")
+                    raise MeshError(
+                        f"mesh file {path!r} line {number}: face corner {word!r} is not a vertex "
+                        f"index (1..{len(verts)}, or -1..-{len(verts)} counting back)"
+                    )
                 corners.append(k - 1 if k > 0 else len(verts) + k)
             if len(corners) < 3:
-                raise MeshError(f"mesh file {path!r} line {number}: a face needs at least three corners; "
-                                f"received {line.strip()[:80]!r}")
+                raise MeshError(
+                    f"mesh file {path!r} line {number}: a face needs at least three corners; "
+                    f"received {line.strip()[:80]!r}"
+                )
             faces.extend((corners[0], corners[j], corners[j + 1]) for j in range(1, len(corners) - 1))
     if not faces:
         raise MeshError(f"mesh file {path!r}: no faces ('f' statements); expected a triangle surface")

@@ -18,8 +18,9 @@ from hybrid.errors import MeshError
 __all__ = ["split_faces", "fit_sphere"]
 
 
-def split_faces(vert_pos: np.ndarray, face_vert: np.ndarray, times: int = 1, *,
-                center=None, radius_m: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+def split_faces(
+    vert_pos: np.ndarray, face_vert: np.ndarray, times: int = 1, *, center=None, radius_m: float | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """(vert_pos, face_vert) after `times` levels of splitting each face into four.
 
     With `center` (3,) m and `radius_m`, each new point is moved along the ray
@@ -40,8 +41,14 @@ def split_faces(vert_pos: np.ndarray, face_vert: np.ndarray, times: int = 1, *,
         pos = np.concatenate([pos, mid])
         a, b, c = face.T
         ab, bc, ca = mid_index.T
-        face = np.concatenate([np.stack([a, ab, ca], axis=1), np.stack([b, bc, ab], axis=1),
-                               np.stack([c, ca, bc], axis=1), np.stack([ab, bc, ca], axis=1)])
+        face = np.concatenate(
+            [
+                np.stack([a, ab, ca], axis=1),
+                np.stack([b, bc, ab], axis=1),
+                np.stack([c, ca, bc], axis=1),
+                np.stack([ab, bc, ca], axis=1),
+            ]
+        )
     return pos, face
 
 
@@ -58,6 +65,8 @@ def fit_sphere(vert_pos: np.ndarray, rel_tol: float, who: str) -> tuple[np.ndarr
     radius = float(np.sqrt(sol[3] + c @ c))
     off = float(np.max(np.abs(np.linalg.norm(rel - c, axis=1) - radius)) / radius)
     if not off <= rel_tol:
-        raise MeshError(f"{who}: expected points on a sphere (within {rel_tol:g} of its radius), received points "
-                        f"off the best-fitting sphere (radius {radius:.6g} m) by up to {off:.3g} of it")
+        raise MeshError(
+            f"{who}: expected points on a sphere (within {rel_tol:g} of its radius), received points "
+            f"off the best-fitting sphere (radius {radius:.6g} m) by up to {off:.3g} of it"
+        )
     return o + c, radius

@@ -15,9 +15,17 @@ from hybrid.errors import MeshError
 from .refine import split_faces
 from .surface import Mesh
 
-__all__ = ["uv_sphere", "icosahedron", "icosphere", "irregular_sphere", "fibonacci_sphere", "ring_sphere",
-           "level_counts",
-           "ICOSPHERE_MAX_SUBDIVISIONS", "MAX_LEVEL"]
+__all__ = [
+    "uv_sphere",
+    "icosahedron",
+    "icosphere",
+    "irregular_sphere",
+    "fibonacci_sphere",
+    "ring_sphere",
+    "level_counts",
+    "ICOSPHERE_MAX_SUBDIVISIONS",
+    "MAX_LEVEL",
+]
 
 
 def _check_sphere_args(radius, center, who: str) -> np.ndarray:
@@ -33,8 +41,10 @@ def _conform_angles(conform_z, who: str) -> np.ndarray:
     """The polar angles (rad, increasing) of the latitudes conform_z (unit sphere, z in (-1, 1))."""
     z = np.asarray(conform_z, float).reshape(-1)
     if z.size and not (np.all(np.isfinite(z)) and np.all(np.abs(z) < 1.0)):
-        raise MeshError(f"{who}: conform_z must be heights strictly inside the sphere (|z| < radius); "
-                        f"received {list(conform_z)!r} (in radii)")
+        raise MeshError(
+            f"{who}: conform_z must be heights strictly inside the sphere (|z| < radius); "
+            f"received {list(conform_z)!r} (in radii)"
+        )
     return np.unique(np.arccos(z))
 
 
@@ -59,8 +69,7 @@ def _polar_angles(rings: int, conform_z, who: str) -> np.ndarray:
     brk = np.concatenate([[0.0], _conform_angles(conform_z, who), [np.pi]])
     span = np.diff(brk)
     if rings < span.size:
-        raise MeshError(f"{who}: {span.size - 1} latitudes to conform to need rings >= {span.size}; "
-                        f"received {rings}")
+        raise MeshError(f"{who}: {span.size - 1} latitudes to conform to need rings >= {span.size}; received {rings}")
     gaps = _share(rings, span)
     return np.concatenate([brk[i] + span[i] * np.arange(1, gaps[i] + 1) / gaps[i] for i in range(span.size)])[:-1]
 
@@ -81,15 +90,20 @@ def _segment_azimuths(segments: int, azim: np.ndarray, who: str) -> np.ndarray:
     if not azim.size:
         return 2.0 * np.pi * np.arange(segments) / segments
     if segments < azim.size:
-        raise MeshError(f"{who}: {azim.size} azimuths to conform to need segments >= {azim.size}; "
-                        f"received {segments}")
+        raise MeshError(f"{who}: {azim.size} azimuths to conform to need segments >= {azim.size}; received {segments}")
     arc = np.diff(np.concatenate([azim, [azim[0] + 2.0 * np.pi]]))
     n = _share(segments, arc)
     return np.concatenate([azim[i] + arc[i] * np.arange(n[i]) / n[i] for i in range(azim.size)])
 
 
-def uv_sphere(radius: float = 1.0, segments: int = 13, rings: int = 7,
-              center=(0.0, 0.0, 0.0), conform_z=(), conform_azimuth_deg=()) -> Mesh:
+def uv_sphere(
+    radius: float = 1.0,
+    segments: int = 13,
+    rings: int = 7,
+    center=(0.0, 0.0, 0.0),
+    conform_z=(),
+    conform_azimuth_deg=(),
+) -> Mesh:
     """The paper's sphere: two poles and rings - 1 latitude circles of `segments` points.
 
     radius (m), center (3,) m. Vertex 0 is the north pole (+z), the last the
@@ -111,8 +125,10 @@ def uv_sphere(radius: float = 1.0, segments: int = 13, rings: int = 7,
     conform_m = np.asarray(conform_z, float).reshape(-1)
     conform_z = tuple(conform_m / radius)
     if segments * (rings - 1) + 2 > MAX_POINTS:  # before any array is allocated
-        raise MeshError(f"uv_sphere: segments = {segments} x rings = {rings} gives {segments * (rings - 1) + 2} "
-                        f"points; expected at most {MAX_POINTS}")
+        raise MeshError(
+            f"uv_sphere: segments = {segments} x rings = {rings} gives {segments * (rings - 1) + 2} "
+            f"points; expected at most {MAX_POINTS}"
+        )
 
     theta = _polar_angles(rings, conform_z, "uv_sphere")  # polar angle of each circle
     phi = _segment_azimuths(segments, _conform_azimuths(conform_azimuth_deg, "uv_sphere"), "uv_sphere")
@@ -138,17 +154,46 @@ def uv_sphere(radius: float = 1.0, segments: int = 13, rings: int = 7,
 
 
 _PHI = (1.0 + 5.0**0.5) / 2.0
-_ICO_VERT = np.array([
-    [-1, _PHI, 0], [1, _PHI, 0], [-1, -_PHI, 0], [1, -_PHI, 0],
-    [0, -1, _PHI], [0, 1, _PHI], [0, -1, -_PHI], [0, 1, -_PHI],
-    [_PHI, 0, -1], [_PHI, 0, 1], [-_PHI, 0, -1], [-_PHI, 0, 1],
-]) / np.sqrt(1.0 + _PHI**2)
-_ICO_FACE = np.array([
-    [0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11],
-    [1, 5, 9], [5, 11, 4], [11, 10, 2], [10, 7, 6], [7, 1, 8],
-    [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8], [3, 8, 9],
-    [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1],
-])
+_ICO_VERT = np.array(
+    [
+        [-1, _PHI, 0],
+        [1, _PHI, 0],
+        [-1, -_PHI, 0],
+        [1, -_PHI, 0],
+        [0, -1, _PHI],
+        [0, 1, _PHI],
+        [0, -1, -_PHI],
+        [0, 1, -_PHI],
+        [_PHI, 0, -1],
+        [_PHI, 0, 1],
+        [-_PHI, 0, -1],
+        [-_PHI, 0, 1],
+    ]
+) / np.sqrt(1.0 + _PHI**2)
+_ICO_FACE = np.array(
+    [
+        [0, 11, 5],
+        [0, 5, 1],
+        [0, 1, 7],
+        [0, 7, 10],
+        [0, 10, 11],
+        [1, 5, 9],
+        [5, 11, 4],
+        [11, 10, 2],
+        [10, 7, 6],
+        [7, 1, 8],
+        [3, 9, 4],
+        [3, 4, 2],
+        [3, 2, 6],
+        [3, 6, 8],
+        [3, 8, 9],
+        [4, 9, 5],
+        [2, 4, 11],
+        [6, 2, 10],
+        [8, 6, 7],
+        [9, 8, 1],
+    ]
+)
 
 
 def icosahedron(radius: float = 1.0, center=(0.0, 0.0, 0.0)) -> Mesh:
@@ -184,7 +229,7 @@ def _spiral_points(npoint: int) -> np.ndarray:
     equal-area bands in z, no poles, every point's neighbourhood alike."""
     k = np.arange(npoint) + 0.5
     z = 1.0 - 2.0 * k / npoint
-    phi = np.pi * (1.0 + 5.0 ** 0.5) * k
+    phi = np.pi * (1.0 + 5.0**0.5) * k
     r = np.sqrt(1.0 - z * z)
     return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
 
@@ -192,6 +237,7 @@ def _spiral_points(npoint: int) -> np.ndarray:
 def _hull_mesh(p: np.ndarray, radius: float, ctr: np.ndarray, name: str) -> Mesh:
     """The convex hull's triangles of the unit vectors p, faces outward, scaled and moved."""
     from scipy.spatial import ConvexHull
+
     faces = ConvexHull(p).simplices.astype(np.int64)
     # outward: each face's normal along its centroid
     a, b, c = p[faces[:, 0]], p[faces[:, 1]], p[faces[:, 2]]
@@ -235,12 +281,15 @@ def _conform_azimuths(conform_azimuth_deg, who: str) -> np.ndarray:
     """The azimuths (rad in [0, 2 pi), increasing, distinct) of conform_azimuth_deg."""
     a = np.asarray(conform_azimuth_deg, float).reshape(-1)
     if a.size and not (np.all(np.isfinite(a)) and np.all(np.abs(a) <= 360.0)):
-        raise MeshError(f"{who}: conform_azimuth_deg must be angles in [-360, 360] degrees; "
-                        f"received {list(conform_azimuth_deg)!r}")
+        raise MeshError(
+            f"{who}: conform_azimuth_deg must be angles in [-360, 360] degrees; received {list(conform_azimuth_deg)!r}"
+        )
     a = np.unique(np.round(np.mod(np.deg2rad(a), 2.0 * np.pi), 12) % (2.0 * np.pi))
     if a.size == 1:
-        raise MeshError(f"{who}: conform_azimuth_deg needs at least two distinct azimuths (the borders of a "
-                        f"wedge); received {list(conform_azimuth_deg)!r}")
+        raise MeshError(
+            f"{who}: conform_azimuth_deg needs at least two distinct azimuths (the borders of a "
+            f"wedge); received {list(conform_azimuth_deg)!r}"
+        )
     return a
 
 
@@ -258,8 +307,7 @@ def _circle_azimuths(m: int, azim: np.ndarray, per_rad: float):
     return np.concatenate([azim[i] + arc[i] * np.arange(n[i]) / n[i] for i in range(azim.size)])
 
 
-def ring_sphere(npoint: int, radius: float = 1.0, center=(0.0, 0.0, 0.0), conform_z=(),
-                conform_azimuth_deg=()) -> Mesh:
+def ring_sphere(npoint: int, radius: float = 1.0, center=(0.0, 0.0, 0.0), conform_z=(), conform_azimuth_deg=()) -> Mesh:
     """A pole-free sphere of about `npoint` evenly spaced points on circles of latitude:
     each circle has as many points as its length holds at the spacing h of an even
     triangle lattice of npoint points (h^2 sqrt(3) / 2 per point), none at the poles
@@ -307,8 +355,9 @@ def ring_sphere(npoint: int, radius: float = 1.0, center=(0.0, 0.0, 0.0), confor
     mesh = _hull_mesh(p, radius, ctr, f"ring_sphere_{p.shape[0]}")
     if not conform_m.size:
         return mesh
-    return Mesh.from_arrays(_place_conforming(mesh.vert_pos.copy(), ctr, radius, conform_m), mesh.face_vert,
-                            name=mesh.name)
+    return Mesh.from_arrays(
+        _place_conforming(mesh.vert_pos.copy(), ctr, radius, conform_m), mesh.face_vert, name=mesh.name
+    )
 
 
 #: the paper's sphere: 13 segments x 7 rings, 80 points (mesh level 0 of both families)

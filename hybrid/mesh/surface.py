@@ -31,8 +31,15 @@ from hybrid.errors import MeshError
 
 from .geometry import cross_rows, scatter_corners, volume, volume_gradient
 from .obj import read_obj
-from .validate import FEW, border_edges, check_face_vert, check_vert_pos, few, merge_identical_vertices, \
-    validate_and_build
+from .validate import (
+    FEW,
+    border_edges,
+    check_face_vert,
+    check_vert_pos,
+    few,
+    merge_identical_vertices,
+    validate_and_build,
+)
 
 if TYPE_CHECKING:  # trimesh is imported only when a file is loaded or exported
     import trimesh
@@ -64,8 +71,17 @@ class Mesh:
     """
 
     __slots__ = (
-        "vert_pos", "face_vert", "nvert", "nface", "closed", "ring_ptr", "ring_vert",
-        "ring_closed", "edge_vert", "border_vert", "name",
+        "vert_pos",
+        "face_vert",
+        "nvert",
+        "nface",
+        "closed",
+        "ring_ptr",
+        "ring_vert",
+        "ring_closed",
+        "edge_vert",
+        "border_vert",
+        "name",
     )
 
     def __init__(self, vert_pos, face_vert, *, name: str = "mesh"):
@@ -74,7 +90,12 @@ class Mesh:
         face = check_face_vert(face_vert, len(pos), name)
         topo = validate_and_build(pos, face, name)
         fields = dict(
-            vert_pos=pos, face_vert=face, nvert=len(pos), nface=len(face), name=name, **topo,
+            vert_pos=pos,
+            face_vert=face,
+            nvert=len(pos),
+            nface=len(face),
+            name=name,
+            **topo,
         )
         for key, value in fields.items():
             if isinstance(value, np.ndarray):
@@ -136,8 +157,7 @@ class Mesh:
                 face_vert = np.asarray(loaded.faces, dtype=np.int64).reshape(-1, 3)
             except Exception as exc:  # trimesh raises many types on bad input
                 raise MeshError(
-                    f"mesh file {str(path)!r} cannot be read as a triangle mesh: "
-                    f"{type(exc).__name__}: {exc}"
+                    f"mesh file {str(path)!r} cannot be read as a triangle mesh: {type(exc).__name__}: {exc}"
                 ) from exc
         if suffix == ".stl":
             vert_pos, face_vert = merge_identical_vertices(vert_pos, face_vert)
@@ -152,10 +172,12 @@ class Mesh:
         """Write the surface to an OBJ file (`hybrid.mesh.obj.write_obj`): vertex k
         stays vertex k and every position reads back to the same double."""
         from .obj import write_obj
+
         path = Path(path)
         if path.suffix.lower() != ".obj":
-            raise MeshError(f"mesh file {str(path)!r}: expected a .obj path to save to, received suffix "
-                            f"{path.suffix!r}")
+            raise MeshError(
+                f"mesh file {str(path)!r}: expected a .obj path to save to, received suffix {path.suffix!r}"
+            )
         write_obj(path, self.vert_pos, self.face_vert)
 
     # -- immutability -------------------------------------------------------
@@ -183,8 +205,7 @@ class Mesh:
         pos = np.asarray(vert_pos, dtype=np.float64)
         if pos.shape != (self.nvert, 3):
             raise MeshError(
-                f"mesh {self.name!r}: vert_pos must have shape ({self.nvert}, 3); "
-                f"received shape {pos.shape}"
+                f"mesh {self.name!r}: vert_pos must have shape ({self.nvert}, 3); received shape {pos.shape}"
             )
         return pos
 
@@ -255,8 +276,10 @@ class Mesh:
         import trimesh
 
         return trimesh.Trimesh(
-            vertices=np.array(self.vert_pos), faces=np.array(self.face_vert, dtype=np.int64),
-            process=False, validate=False,
+            vertices=np.array(self.vert_pos),
+            faces=np.array(self.face_vert, dtype=np.int64),
+            process=False,
+            validate=False,
         )
 
 

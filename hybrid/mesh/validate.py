@@ -18,8 +18,15 @@ from hybrid.errors import MeshError
 
 from .geometry import cross_rows, volume
 
-__all__ = ["check_vert_pos", "check_face_vert", "validate_and_build", "merge_identical_vertices",
-           "border_edges", "few", "FEW"]
+__all__ = [
+    "check_vert_pos",
+    "check_face_vert",
+    "validate_and_build",
+    "merge_identical_vertices",
+    "border_edges",
+    "few",
+    "FEW",
+]
 
 #: a face is degenerate if its area is below this times the mean edge length squared
 _AREA_RTOL = 1e-14
@@ -50,8 +57,7 @@ def _face(face: np.ndarray, f: int) -> str:
     return f"face {f} {face[f].tolist()}"
 
 
-def _rows_of_three(value, field: str, rows: str, min_rows: int, kinds: str, of_what: str,
-                   name: str) -> np.ndarray:
+def _rows_of_three(value, field: str, rows: str, min_rows: int, kinds: str, of_what: str, name: str) -> np.ndarray:
     """value as an array of shape (rows, 3) with at least min_rows rows and a dtype
     kind in `kinds` (not yet copied); MeshError naming `field` otherwise.
 
@@ -67,8 +73,7 @@ def _rows_of_three(value, field: str, rows: str, min_rows: int, kinds: str, of_w
         raise MeshError(f"{expected}; received dtype {arr.dtype}")
     if arr.ndim != 2 or arr.shape[1] != 3 or arr.shape[0] < min_rows:
         raise MeshError(
-            f"mesh {name!r}: {field} must have shape ({rows}, 3) with {rows} >= {min_rows}; "
-            f"received shape {arr.shape}"
+            f"mesh {name!r}: {field} must have shape ({rows}, 3) with {rows} >= {min_rows}; received shape {arr.shape}"
         )
     return arr
 
@@ -83,8 +88,7 @@ def check_vert_pos(vert_pos, name: str) -> np.ndarray:
     if bad.size:
         listed = few(bad, lambda v: f"vertex {v} {pos[v].tolist()}")
         raise MeshError(
-            f"mesh {name!r}: vert_pos must be finite; {bad.size} vertices have "
-            f"non-finite coordinates: {listed}"
+            f"mesh {name!r}: vert_pos must be finite; {bad.size} vertices have non-finite coordinates: {listed}"
         )
     return pos
 
@@ -156,24 +160,36 @@ def validate_and_build(pos: np.ndarray, face: np.ndarray, name: str) -> dict:
     where = f"mesh {name!r}"
 
     # Degenerate: a repeated index.
-    repeated = np.flatnonzero(
-        (face[:, 0] == face[:, 1]) | (face[:, 1] == face[:, 2]) | (face[:, 2] == face[:, 0])
+    repeated = np.flatnonzero((face[:, 0] == face[:, 1]) | (face[:, 1] == face[:, 2]) | (face[:, 2] == face[:, 0]))
+    _refuse(
+        where,
+        repeated,
+        "degenerate faces repeat a vertex index",
+        lambda f: _face(face, f),
+        "expected three distinct vertices per face",
     )
-    _refuse(where, repeated, "degenerate faces repeat a vertex index", lambda f: _face(face, f),
-            "expected three distinct vertices per face")
 
     # Duplicate faces: the same vertex set, whatever the order or orientation.
     first = _first_identical(np.sort(face, axis=1))
     dup = np.flatnonzero(first != np.arange(nface))
-    _refuse(where, dup, "duplicate faces (same vertices in any order)",
-            lambda f: f"{_face(face, f)} repeats {_face(face, first[f])}", "expected each triangle once")
+    _refuse(
+        where,
+        dup,
+        "duplicate faces (same vertices in any order)",
+        lambda f: f"{_face(face, f)} repeats {_face(face, first[f])}",
+        "expected each triangle once",
+    )
 
     # Duplicate vertices: identical coordinates (they would split the surface).
     first = _first_identical(pos)
     dup = np.flatnonzero(first != np.arange(nvert))
-    _refuse(where, dup, "duplicate vertices (identical coordinates)",
-            lambda v: f"vertex {v} repeats vertex {first[v]} at {pos[v].tolist()}",
-            "expected distinct points (merge them and re-index face_vert)")
+    _refuse(
+        where,
+        dup,
+        "duplicate vertices (identical coordinates)",
+        lambda v: f"vertex {v} repeats vertex {first[v]} at {pos[v].tolist()}",
+        "expected distinct points (merge them and re-index face_vert)",
+    )
 
     # Unused vertices: in no face (they would be mass points with no neighbours).
     used = np.zeros(nvert, dtype=bool)
@@ -181,8 +197,7 @@ def validate_and_build(pos: np.ndarray, face: np.ndarray, name: str) -> dict:
     unused = np.flatnonzero(~used)
     if unused.size:
         raise MeshError(
-            f"{where}: {unused.size} vertices are in no face: vertices "
-            f"{few(unused)}; expected every vertex in a face"
+            f"{where}: {unused.size} vertices are in no face: vertices {few(unused)}; expected every vertex in a face"
         )
 
     # Degenerate: zero area relative to the mean edge length squared.
@@ -191,33 +206,46 @@ def validate_and_build(pos: np.ndarray, face: np.ndarray, name: str) -> dict:
     edge_len = np.linalg.norm(np.concatenate([b - a, c - b, a - c]), axis=1)
     area_min = _AREA_RTOL * np.mean(edge_len) ** 2
     flat = np.flatnonzero(area < area_min)
-    _refuse(where, flat, "degenerate faces have (nearly) zero area",
-            lambda f: f"{_face(face, f)} (area {area[f]:.3g} m^2)",
-            f"expected area >= {area_min:.3g} m^2 ({_AREA_RTOL:g} * mean edge length^2)")
+    _refuse(
+        where,
+        flat,
+        "degenerate faces have (nearly) zero area",
+        lambda f: f"{_face(face, f)} (area {area[f]:.3g} m^2)",
+        f"expected area >= {area_min:.3g} m^2 ({_AREA_RTOL:g} * mean edge length^2)",
+    )
 
     # Edges: half-edge a->b of face f is (he_from, he_to, he_face).
     he_from = face.ravel().astype(np.int64)
     he_to = face[:, [1, 2, 0]].ravel().astype(np.int64)
     he_face = np.repeat(np.arange(nface), 3)
     undirected = np.minimum(he_from, he_to) * nvert + np.maximum(he_from, he_to)
-    edge_key, he_edge, edge_count = np.unique(
-        undirected, return_inverse=True, return_counts=True
-    )
+    edge_key, he_edge, edge_count = np.unique(undirected, return_inverse=True, return_counts=True)
     he_edge = he_edge.ravel()
 
     crowded = np.flatnonzero(edge_count > 2)
-    _refuse(where, crowded, "non-manifold edges",
-            lambda e: f"edge ({edge_key[e] // nvert}, {edge_key[e] % nvert}) in {edge_count[e]} faces "
-                      f"{he_face[he_edge == e].tolist()}",
-            "expected each edge in one face (border) or two faces")
+    _refuse(
+        where,
+        crowded,
+        "non-manifold edges",
+        lambda e: (
+            f"edge ({edge_key[e] // nvert}, {edge_key[e] % nvert}) in {edge_count[e]} faces "
+            f"{he_face[he_edge == e].tolist()}"
+        ),
+        "expected each edge in one face (border) or two faces",
+    )
 
     directed = he_from * nvert + he_to
     order = np.argsort(directed, kind="stable")
     same = np.flatnonzero(directed[order][1:] == directed[order][:-1])
     if same.size:
-        listed = few(same, lambda k: f"edge ({he_from[order[k]]} -> {he_to[order[k]]}) in faces "
-                                     f"{he_face[order[k]]} {face[he_face[order[k]]].tolist()} and "
-                                     f"{he_face[order[k + 1]]} {face[he_face[order[k + 1]]].tolist()}")
+        listed = few(
+            same,
+            lambda k: (
+                f"edge ({he_from[order[k]]} -> {he_to[order[k]]}) in faces "
+                f"{he_face[order[k]]} {face[he_face[order[k]]].tolist()} and "
+                f"{he_face[order[k + 1]]} {face[he_face[order[k + 1]]].tolist()}"
+            ),
+        )
         raise MeshError(
             f"{where}: inconsistent face orientation, {same.size} edges are used twice in "
             f"the same direction: {listed}; expected neighbouring faces to run along "
@@ -329,13 +357,18 @@ def _build_fans(face: np.ndarray, nvert: int, name: str):
 
 def _raise_fan_error(bad_vert, centre, face_of, face, name):
     """Raise MeshError for vertices whose faces form several fans (error path only)."""
+
     def fans_of(v):
         faces = np.sort(face_of[centre == v])
         return f"vertex {v} ({_count_fans(face[faces], v)} fans from faces {faces.tolist()})"
 
-    _refuse(f"mesh {name!r}", bad_vert,
-            "non-manifold vertices, whose faces do not form a single fan (surfaces touching at a point)",
-            fans_of, "expected the faces around each vertex to form one closed or open fan")
+    _refuse(
+        f"mesh {name!r}",
+        bad_vert,
+        "non-manifold vertices, whose faces do not form a single fan (surfaces touching at a point)",
+        fans_of,
+        "expected the faces around each vertex to form one closed or open fan",
+    )
 
 
 def _count_fans(faces: np.ndarray, v: int) -> int:

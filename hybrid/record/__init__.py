@@ -53,9 +53,33 @@ thread); `mcap_reader` (the file's records read back and verified, chunk by chun
 
 from .reader import TOPICS, RecordingError, RecordingWarning, frames, read
 from .recorder import Recorder, record_steps
-from .schemas import (GEOM_BOX, GEOM_CAPSULE, GEOM_CYLINDER, GEOM_ELLIPSOID, GEOM_SPHERE, MESH_EVERY_FRAME_MAX,
-                      SCALAR_CHANNELS, body_geoms, region_colours)
+from .schemas import (
+    GEOM_BOX,
+    GEOM_CAPSULE,
+    GEOM_CYLINDER,
+    GEOM_ELLIPSOID,
+    GEOM_SPHERE,
+    MESH_EVERY_FRAME_MAX,
+    SCALAR_CHANNELS,
+    body_geoms,
+    region_colours,
+)
 
-__all__ = ["Recorder", "record_steps", "read", "frames", "RecordingError", "RecordingWarning", "TOPICS",
-           "region_colours", "body_geoms", "SCALAR_CHANNELS", "MESH_EVERY_FRAME_MAX",
-           "GEOM_SPHERE", "GEOM_CAPSULE", "GEOM_ELLIPSOID", "GEOM_CYLINDER", "GEOM_BOX"]
+__all__ = [
+    "Recorder",
+    "record_steps",
+    "read",
+    "frames",
+    "RecordingError",
+    "RecordingWarning",
+    "TOPICS",
+    "region_colours",
+    "body_geoms",
+    "SCALAR_CHANNELS",
+    "MESH_EVERY_FRAME_MAX",
+    "GEOM_SPHERE",
+    "GEOM_CAPSULE",
+    "GEOM_ELLIPSOID",
+    "GEOM_CYLINDER",
+    "GEOM_BOX",
+]

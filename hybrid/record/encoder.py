@@ -12,13 +12,13 @@ from ..kernel import jit
 # one per channel: each op is (code, a, b), run in order. A first pass over a program
 # sizes its nested messages (protobuf puts a message's length before it); only the
 # time stamps change size from frame to frame.
-OP_CONST = 0      # bytes const[a:b] (fields encoded once, by protobuf)
-OP_BEGIN = 1      # a nested message, field tag a, up to its OP_END
+OP_CONST = 0  # bytes const[a:b] (fields encoded once, by protobuf)
+OP_BEGIN = 1  # a nested message, field tag a, up to its OP_END
 OP_END = 2
-OP_STAMP = 3      # the frame's time as a google.protobuf.Timestamp, field tag a
-OP_DOUBLE = 4     # number slot b of the frame as a double, field tag a
-OP_POINTS = 5     # the frame's points as repeated foxglove.Point3, field tag a
-OP_CLOUD = 6      # the frame's point cloud bytes, field tag a
+OP_STAMP = 3  # the frame's time as a google.protobuf.Timestamp, field tag a
+OP_DOUBLE = 4  # number slot b of the frame as a double, field tag a
+OP_POINTS = 5  # the frame's points as repeated foxglove.Point3, field tag a
+OP_CLOUD = 6  # the frame's point cloud bytes, field tag a
 OP_IF_FINITE = 7  # write the message only if number slot a is finite
 
 RECORD_HEAD = 31  # MCAP message record: opcode 1, length 8, channel 2, sequence 4, log and publish time 8 + 8
@@ -119,8 +119,9 @@ def _leaf_len(op, a, nvert, ncloud, stamp_body):  # pragma: no cover - compiled
 
 
 @jit(nogil=True)
-def _encode_frames(t_ns, number, number_bits, cloud, pos_bits, frame0, const, prog, channels, out, index,
-                   size, nest):  # pragma: no cover - compiled
+def _encode_frames(
+    t_ns, number, number_bits, cloud, pos_bits, frame0, const, prog, channels, out, index, size, nest
+):  # pragma: no cover - compiled
     """The MCAP message records of nframe frames, written into out; index[m] =
     (channel, log time ns, offset in out) of each. Returns (bytes written, messages).
 
@@ -217,8 +218,21 @@ def encode_frames(t_ns, number, cloud, pos, frame0, const, prog, channels, out, 
     """`_encode_frames` of float64 C-contiguous number (nframe, nslot) and pos
     (nframe, 3 nvert): their bits viewed, the nesting scratch made, here. Returns
     (bytes written, messages)."""
-    return _encode_frames(t_ns, number, number.view(np.uint64), cloud, pos.view(np.uint64), frame0, const, prog,
-                          channels, out, index, size, np.zeros((2, MAX_DEPTH), np.int64))
+    return _encode_frames(
+        t_ns,
+        number,
+        number.view(np.uint64),
+        cloud,
+        pos.view(np.uint64),
+        frame0,
+        const,
+        prog,
+        channels,
+        out,
+        index,
+        size,
+        np.zeros((2, MAX_DEPTH), np.int64),
+    )
 
 
 def _load_encoder() -> None:
@@ -227,7 +241,16 @@ def _load_encoder() -> None:
     the run waits for it), with the argument types `_FrameWriter.write` passes."""
     if _encode_frames.signatures:
         return
-    encode_frames(np.zeros(1, np.int64), np.zeros((1, 1)), np.zeros((1, 16), np.uint8), np.zeros((1, 3)), 0,
-                  np.zeros(1, np.uint8), np.zeros((0, 3), np.int64), np.zeros((0, 4), np.int64),
-                  np.zeros(1, np.uint8), np.zeros((0, 3), np.int64), np.zeros(0, np.int64))
-
+    encode_frames(
+        np.zeros(1, np.int64),
+        np.zeros((1, 1)),
+        np.zeros((1, 16), np.uint8),
+        np.zeros((1, 3)),
+        0,
+        np.zeros(1, np.uint8),
+        np.zeros((0, 3), np.int64),
+        np.zeros((0, 4), np.int64),
+        np.zeros(1, np.uint8),
+        np.zeros((0, 3), np.int64),
+        np.zeros(0, np.int64),
+    )

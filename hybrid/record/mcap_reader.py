@@ -17,9 +17,9 @@ import json
 import struct
 import warnings
 import zlib
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterator
 
 import numpy as np
 
@@ -65,7 +65,7 @@ class _Cursor:
     def take(self, n: int):
         if n < 0 or self.k + n > len(self.b):
             raise _Cut
-        v = self.b[self.k:self.k + n]
+        v = self.b[self.k : self.k + n]
         self.k += n
         return v
 
@@ -144,6 +144,7 @@ def _implied_length(op: int, prefix) -> int:
 @dataclass
 class _Chunk:
     """Where a chunk is, and what its header (or the summary's index of it) says."""
+
     offset: int
     length: int  # the whole record, opcode and length included
     t_lo: int
@@ -205,8 +206,10 @@ def _description(data: dict, f: _File, offset: int) -> dict:
         raise f.error(f"the metadata record at byte offset {offset} has no 'description'")
     crc = data.get("description_crc32")
     if crc is not None and crc != f"{zlib.crc32(text.encode()):08x}":
-        raise f.error(f"the model's description (metadata record at byte offset {offset}) is corrupt: its CRC "
-                      f"is {zlib.crc32(text.encode()):08x}, the record gives {crc}")
+        raise f.error(
+            f"the model's description (metadata record at byte offset {offset}) is corrupt: its CRC "
+            f"is {zlib.crc32(text.encode()):08x}, the record gives {crc}"
+        )
     try:
         meta = json.loads(text)
         meta["face_vert"] = np.asarray(meta["face_vert"], np.int64).reshape(-1, 3)
@@ -214,8 +217,10 @@ def _description(data: dict, f: _File, offset: int) -> dict:
         meta["vert_rgba"] = np.asarray(meta["vert_rgba"], float)
         meta["link_vert"] = np.asarray(meta["link_vert"], int)
     except (ValueError, KeyError, TypeError) as exc:
-        raise f.error(f"the model's description (metadata record at byte offset {offset}) is unreadable: "
-                      f"{type(exc).__name__}: {exc}") from None
+        raise f.error(
+            f"the model's description (metadata record at byte offset {offset}) is unreadable: "
+            f"{type(exc).__name__}: {exc}"
+        ) from None
     return meta
 
 
@@ -251,8 +256,10 @@ def _check_foreign(f: _File) -> None:
     """Refuse what hybrid did not write (the encoding first: earlier hybrids wrote JSON)."""
     for topic, encoding, _ in f.channels.values():
         if encoding != "protobuf":
-            raise f.error(f"channel {topic} is encoded in {encoding!r}; expected 'protobuf' (a recording of an "
-                          "earlier hybrid, which wrote JSON: run the scene again to record it anew)")
+            raise f.error(
+                f"channel {topic} is encoded in {encoding!r}; expected 'protobuf' (a recording of an "
+                "earlier hybrid, which wrote JSON: run the scene again to record it anew)"
+            )
     if f.library is not None and f.library != "hybrid":
         raise f.error(f"not a recording of hybrid: its header names the library {f.library!r}, expected 'hybrid'")
 
@@ -264,17 +271,22 @@ def _read_summary(fh, f: _File) -> None:
     footer = fh.read(_FOOTER_BYTES)
     op, n, summary_start, offset_start, crc = struct.unpack("<BQQQI", footer)
     if op != FOOTER or n != 20:
-        raise f.error(f"the footer at byte offset {end} is corrupt (opcode {op:#04x}, length {n}; "
-                      "expected 0x02 and 20)")
+        raise f.error(
+            f"the footer at byte offset {end} is corrupt (opcode {op:#04x}, length {n}; expected 0x02 and 20)"
+        )
     if not 8 < summary_start <= offset_start <= end:
-        raise f.error(f"the footer at byte offset {end} is corrupt: its summary starts at byte {summary_start} "
-                      f"and its offsets at {offset_start}, expected 8 < start <= offsets <= {end}")
+        raise f.error(
+            f"the footer at byte offset {end} is corrupt: its summary starts at byte {summary_start} "
+            f"and its offsets at {offset_start}, expected 8 < start <= offsets <= {end}"
+        )
     fh.seek(summary_start)
     summary = fh.read(end - summary_start)
     actual = zlib.crc32(footer[:-4], zlib.crc32(summary))
     if actual != crc:
-        raise f.error(f"the summary (bytes {summary_start} to {end}) is corrupt: its CRC is {actual:08x}, the "
-                      f"footer gives {crc:08x}")
+        raise f.error(
+            f"the summary (bytes {summary_start} to {end}) is corrupt: its CRC is {actual:08x}, the "
+            f"footer gives {crc:08x}"
+        )
     index, meta_at, nchunk = [], [], None
     c = _Cursor(summary)
     try:
@@ -295,16 +307,28 @@ def _read_summary(fh, f: _File) -> None:
                 t_lo, t_hi, start, length = body.u64(), body.u64(), body.u64(), body.u64()
                 offsets = body.map(_Cursor.u16, _Cursor.u64)
                 index_len, compression, csize, usize = body.u64(), body.str(), body.u64(), body.u64()
-                index.append(_Chunk(offset=start, length=length, t_lo=t_lo, t_hi=t_hi, usize=usize,
-                                    compression=compression, csize=csize, index_at=start + length,
-                                    index_len=index_len, index_offsets=offsets))
+                index.append(
+                    _Chunk(
+                        offset=start,
+                        length=length,
+                        t_lo=t_lo,
+                        t_hi=t_hi,
+                        usize=usize,
+                        compression=compression,
+                        csize=csize,
+                        index_at=start + length,
+                        index_len=index_len,
+                        index_offsets=offsets,
+                    )
+                )
             elif op == METADATA_INDEX:
                 meta_at.append((body.u64(), body.u64(), body.str()))
             elif op not in _SUMMARY_OPS:
                 raise _Bad(f"a record of opcode {op:#04x} at byte offset {at}, which a summary does not hold")
     except (_Cut, _Bad) as exc:
-        raise f.error(f"the summary (bytes {summary_start} to {end}) is malformed: "
-                      f"{exc or 'a record overruns it'}") from None
+        raise f.error(
+            f"the summary (bytes {summary_start} to {end}) is malformed: {exc or 'a record overruns it'}"
+        ) from None
     # the header, and the data section's end
     fh.seek(8)
     prefix = fh.read(_PREFIX_MAX)
@@ -326,9 +350,11 @@ def _read_summary(fh, f: _File) -> None:
     k = data_start
     for i, ch in enumerate(index):
         if ch.offset < k or ch.offset + ch.length + ch.index_len > data_end:
-            raise f.error(f"the chunk index's entry {i + 1} of {len(index)} (t {ch.t_lo * 1e-9:.6g} to "
-                          f"{ch.t_hi * 1e-9:.6g} s) puts it at bytes {ch.offset} to {ch.offset + ch.length}, "
-                          f"outside the data section's free bytes {k} to {data_end}")
+            raise f.error(
+                f"the chunk index's entry {i + 1} of {len(index)} (t {ch.t_lo * 1e-9:.6g} to "
+                f"{ch.t_hi * 1e-9:.6g} s) puts it at bytes {ch.offset} to {ch.offset + ch.length}, "
+                f"outside the data section's free bytes {k} to {data_end}"
+            )
         k = ch.offset + ch.length + ch.index_len
     f.chunks = index
     for offset, length, name in meta_at:
@@ -342,8 +368,9 @@ def _read_summary(fh, f: _File) -> None:
                 raise _Bad("its opcode or length differs from the summary's index of it")
             _parse_body(METADATA, c.take(length - 9), f, offset)
         except (_Cut, _Bad) as exc:
-            raise f.error(f"the metadata record at byte offset {offset} is corrupt: "
-                          f"{exc or 'it overruns its length'}") from None
+            raise f.error(
+                f"the metadata record at byte offset {offset} is corrupt: {exc or 'it overruns its length'}"
+            ) from None
         break
 
 
@@ -370,8 +397,9 @@ def _scan(fh, f: _File, strict: bool) -> None:
                 head = _chunk_header(_Cursor(prefix)) if op == CHUNK else None
             except _Cut:
                 if len(prefix) == want < n:
-                    f.truncated = (f"the file ends at byte {f.size}, inside the fields of a record of opcode "
-                                   f"{op:#04x} at byte {k}")
+                    f.truncated = (
+                        f"the file ends at byte {f.size}, inside the fields of a record of opcode {op:#04x} at byte {k}"
+                    )
                     break
                 raise _Bad(f"its fields overrun its length of {n} bytes") from None
             if implied != n:
@@ -384,8 +412,9 @@ def _scan(fh, f: _File, strict: bool) -> None:
                 what += f" (after chunk {len(f.chunks)}, t {last.t_lo * 1e-9:.6g} to {last.t_hi * 1e-9:.6g} s)"
             if strict:
                 raise f.error(what + "; read with strict=False to keep the chunks before it") from None
-            warnings.warn(f"recording {str(f.path)!r}: {what}; skipped the rest of the file", RecordingWarning,
-                          stacklevel=4)
+            warnings.warn(
+                f"recording {str(f.path)!r}: {what}; skipped the rest of the file", RecordingWarning, stacklevel=4
+            )
             break
         if n > avail:
             kind = {CHUNK: "a chunk", MESSAGE_INDEX: "a chunk's message index"}.get(op, f"a record ({op:#04x})")
@@ -393,8 +422,16 @@ def _scan(fh, f: _File, strict: bool) -> None:
             break
         if op == CHUNK:
             t_lo, t_hi, usize, _, compression, csize = head
-            last = _Chunk(offset=k, length=9 + n, t_lo=t_lo, t_hi=t_hi, usize=usize, compression=compression,
-                          csize=csize, index_at=k + 9 + n)
+            last = _Chunk(
+                offset=k,
+                length=9 + n,
+                t_lo=t_lo,
+                t_hi=t_hi,
+                usize=usize,
+                compression=compression,
+                csize=csize,
+                index_at=k + 9 + n,
+            )
             f.chunks.append(last)
         elif op == MESSAGE_INDEX:
             last.index_len += 9 + n
@@ -413,8 +450,9 @@ def _scan(fh, f: _File, strict: bool) -> None:
             try:
                 _parse_body(op, prefix, f, k)
             except (_Cut, _Bad) as exc:
-                raise f.error(f"the record of opcode {op:#04x} at byte offset {k} is corrupt: "
-                              f"{exc or 'it overruns its length'}") from None
+                raise f.error(
+                    f"the record of opcode {op:#04x} at byte offset {k} is corrupt: {exc or 'it overruns its length'}"
+                ) from None
             if op == HEADER:
                 _check_foreign(f)
         k += 9 + n
@@ -439,15 +477,15 @@ def _scan_summary(fh, f: _File, k: int) -> None:
             tail = fh.read(8)
             if n == 20 and len(tail) < 8 and MAGIC.startswith(tail):
                 break
-            raise f.error(f"the end of the file after its footer at byte offset {k} is corrupt: expected the "
-                          f"8 bytes {MAGIC!r}")
+            raise f.error(
+                f"the end of the file after its footer at byte offset {k} is corrupt: expected the 8 bytes {MAGIC!r}"
+            )
         k += 9 + n
     f.truncated = f"the file ends at byte {f.size}, inside its summary (the run was stopped while finishing it)"
 
 
 def _where(f: _File, i: int, c: _Chunk) -> str:
-    return (f"chunk {i + 1} of {len(f.chunks)} (t {c.t_lo * 1e-9:.6g} to "
-            f"{c.t_hi * 1e-9:.6g} s, byte offset {c.offset})")
+    return f"chunk {i + 1} of {len(f.chunks)} (t {c.t_lo * 1e-9:.6g} to {c.t_hi * 1e-9:.6g} s, byte offset {c.offset})"
 
 
 def _load(fh, f: _File, c: _Chunk) -> tuple[bytes, list]:
@@ -464,12 +502,14 @@ def _load(fh, f: _File, c: _Chunk) -> tuple[bytes, list]:
     t_lo, t_hi, usize, crc, compression, csize = _chunk_header(cur)
     head = (t_lo, t_hi, usize, compression, csize)
     if head != (c.t_lo, c.t_hi, c.usize, c.compression, c.csize):
-        raise _Bad(f"its header (t {t_lo} to {t_hi} ns, {usize} bytes, {compression!r}, {csize} compressed) "
-                   f"differs from the summary's index of it (t {c.t_lo} to {c.t_hi} ns, {c.usize} bytes, "
-                   f"{c.compression!r}, {c.csize} compressed)")
+        raise _Bad(
+            f"its header (t {t_lo} to {t_hi} ns, {usize} bytes, {compression!r}, {csize} compressed) "
+            f"differs from the summary's index of it (t {c.t_lo} to {c.t_hi} ns, {c.usize} bytes, "
+            f"{c.compression!r}, {c.csize} compressed)"
+        )
     if cur.k + csize != len(rec):
         raise _Bad(f"its data ({csize} bytes) overruns the record")
-    data = rec[cur.k:]
+    data = rec[cur.k :]
     if compression == "zstd":
         try:
             raw = zstandard.ZstdDecompressor().decompress(data, max_output_size=usize)
@@ -491,8 +531,10 @@ def _load(fh, f: _File, c: _Chunk) -> tuple[bytes, list]:
             raise _Bad(f"it ends inside a message's head at byte {k} of its records")
         op, n, ch, _, t, _ = _MSG_HEAD.unpack_from(raw, k)
         if op != MESSAGE or n < 22 or k + 9 + n > len(raw):
-            raise _Bad(f"the record at byte {k} of its records (opcode {op:#04x}, length {n}) is not a message "
-                       "within the chunk")
+            raise _Bad(
+                f"the record at byte {k} of its records (opcode {op:#04x}, length {n}) is not a message "
+                "within the chunk"
+            )
         if ch not in f.channels:
             raise _Bad(f"the message at byte {k} of its records is on channel {ch}, which the file does not declare")
         msgs.append((ch, t, k + _MSG_HEAD.size, k + 9 + n))
@@ -520,8 +562,9 @@ def _check_message_index(fh, c: _Chunk, msgs: list) -> None:
         if op != MESSAGE_INDEX or body.k != n or len(records) % 16:
             raise _Bad(f"its message index at byte offset {at} is malformed")
         if c.index_offsets is not None and c.index_offsets.get(ch) != at:
-            raise _Bad(f"its message index of channel {ch} is at byte offset {at}, the summary says "
-                       f"{c.index_offsets.get(ch)}")
+            raise _Bad(
+                f"its message index of channel {ch} is at byte offset {at}, the summary says {c.index_offsets.get(ch)}"
+            )
         indexed[ch] = np.frombuffer(records, "<u8").reshape(-1, 2)
     by_channel: dict[int, list] = {}
     for ch, t, start, _ in msgs:
@@ -554,5 +597,8 @@ def _chunks(fh, f: _File, lo_ns: int, hi_ns: int, strict: bool, decode) -> Itera
 
 def _warn_truncated(f: _File) -> None:
     if f.truncated is not None:
-        warnings.warn(f"recording {str(f.path)!r}: {f.truncated}; read up to its last complete chunk",
-                      RecordingWarning, stacklevel=3)
+        warnings.warn(
+            f"recording {str(f.path)!r}: {f.truncated}; read up to its last complete chunk",
+            RecordingWarning,
+            stacklevel=3,
+        )

@@ -7,6 +7,7 @@ import struct
 
 import numpy as np
 
+
 class _McapWriter:
     """A chunked, indexed MCAP writer with a fast message path.
 
@@ -48,6 +49,7 @@ class _McapWriter:
 
     def schema(self, name: str, encoding: str, data: bytes) -> int:
         from mcap.records import Schema
+
         s = Schema(id=len(self.schemas) + 1, name=name, encoding=encoding, data=data)
         self.schemas.append(s)
         s.write(self.b)
@@ -56,8 +58,8 @@ class _McapWriter:
 
     def channel(self, topic: str, encoding: str, schema_id: int) -> int:
         from mcap.records import Channel
-        c = Channel(id=len(self.channels) + 1, topic=topic, message_encoding=encoding, schema_id=schema_id,
-                    metadata={})
+
+        c = Channel(id=len(self.channels) + 1, topic=topic, message_encoding=encoding, schema_id=schema_id, metadata={})
         self.channels.append(c)
         self.counts[c.id] = 0
         c.write(self.b)
@@ -66,6 +68,7 @@ class _McapWriter:
 
     def metadata(self, name: str, data: dict) -> None:
         from mcap.records import Metadata, MetadataIndex
+
         self.flush_chunk()
         offset = self.f.tell()
         Metadata(name=name, metadata=data).write(self.b)
@@ -123,8 +126,14 @@ class _McapWriter:
         if self._zstd is None:
             self._zstd = zstandard.ZstdCompressor(level=-3)  # fast: the chunks are written during the run
         data = self._zstd.compress(raw)
-        chunk = Chunk(compression="zstd", data=data, message_start_time=t_lo, message_end_time=t_hi,
-                      uncompressed_crc=zlib.crc32(raw), uncompressed_size=len(raw))
+        chunk = Chunk(
+            compression="zstd",
+            data=data,
+            message_start_time=t_lo,
+            message_end_time=t_hi,
+            uncompressed_crc=zlib.crc32(raw),
+            uncompressed_size=len(raw),
+        )
         start = self.f.tell()
         chunk.write(self.b)
         length = self.b.count
@@ -140,10 +149,19 @@ class _McapWriter:
             parts.append(rec)
             count += len(rec)
         self.f.write(b"".join(parts))
-        self.chunk_indexes.append(ChunkIndex(
-            message_start_time=t_lo, message_end_time=t_hi, chunk_start_offset=start,
-            chunk_length=length, message_index_offsets=offsets, message_index_length=count,
-            compression="zstd", compressed_size=len(data), uncompressed_size=len(raw)))
+        self.chunk_indexes.append(
+            ChunkIndex(
+                message_start_time=t_lo,
+                message_end_time=t_hi,
+                chunk_start_offset=start,
+                chunk_length=length,
+                message_index_offsets=offsets,
+                message_index_length=count,
+                compression="zstd",
+                compressed_size=len(data),
+                uncompressed_size=len(raw),
+            )
+        )
         self.nmsg += sum(len(r) for r in index.values())
         self.t_first = t_lo if self.t_first is None else min(self.t_first, t_lo)
         self.t_last = t_hi if self.t_last is None else max(self.t_last, t_hi)
@@ -166,21 +184,30 @@ class _McapWriter:
         summary_start = self.f.tell()
         sb = RecordBuilder()
         offsets = []
-        stats = Statistics(attachment_count=0, channel_count=len(self.channels),
-                           channel_message_counts=dict(self.counts), chunk_count=self.nchunk,
-                           message_count=self.nmsg, message_end_time=self.t_last or 0,
-                           message_start_time=self.t_first or 0, metadata_count=len(self.meta_indexes),
-                           schema_count=len(self.schemas))
-        for opcode, records in ((Opcode.SCHEMA, self.schemas), (Opcode.CHANNEL, self.channels),
-                                (Opcode.STATISTICS, [stats]), (Opcode.CHUNK_INDEX, self.chunk_indexes),
-                                (Opcode.METADATA_INDEX, self.meta_indexes)):
+        stats = Statistics(
+            attachment_count=0,
+            channel_count=len(self.channels),
+            channel_message_counts=dict(self.counts),
+            chunk_count=self.nchunk,
+            message_count=self.nmsg,
+            message_end_time=self.t_last or 0,
+            message_start_time=self.t_first or 0,
+            metadata_count=len(self.meta_indexes),
+            schema_count=len(self.schemas),
+        )
+        for opcode, records in (
+            (Opcode.SCHEMA, self.schemas),
+            (Opcode.CHANNEL, self.channels),
+            (Opcode.STATISTICS, [stats]),
+            (Opcode.CHUNK_INDEX, self.chunk_indexes),
+            (Opcode.METADATA_INDEX, self.meta_indexes),
+        ):
             if not records:
                 continue
             g = sb.count
             for r in records:
                 r.write(sb)
-            offsets.append(SummaryOffset(group_opcode=opcode, group_start=summary_start + g,
-                                         group_length=sb.count - g))
+            offsets.append(SummaryOffset(group_opcode=opcode, group_start=summary_start + g, group_length=sb.count - g))
         offset_start = summary_start + sb.count
         for o in offsets:
             o.write(sb)
@@ -192,4 +219,3 @@ class _McapWriter:
         self._out()
         self.f.write(MCAP0_MAGIC)
         self.f.flush()
-

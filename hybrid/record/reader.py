@@ -20,8 +20,8 @@ the window skipped unread. Memory is that of the window's arrays and one chunk.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Iterator
 
 import numpy as np
 
@@ -33,13 +33,12 @@ __all__ = ["read", "frames", "RecordingError", "RecordingWarning", "TOPICS"]
 
 #: the topics a hybrid recording may hold ("membrane": the frames' points, from the
 #: point cloud where there is one, else from the triangle list)
-TOPICS = ("membrane", "/membrane/mesh", "/membrane/points", "/rigid/transforms", "/rigid/geoms",
-          *SCALAR_CHANNELS)
+TOPICS = ("membrane", "/membrane/mesh", "/membrane/points", "/rigid/transforms", "/rigid/geoms", *SCALAR_CHANNELS)
 
 
 def _window(t_s) -> tuple[int, int]:
     if t_s is None:
-        return 0, 2 ** 64 - 1
+        return 0, 2**64 - 1
     try:
         a, b = t_s
         ok = all(not isinstance(v, bool) and isinstance(v, (int, float)) and not math.isnan(v) for v in (a, b))
@@ -47,8 +46,8 @@ def _window(t_s) -> tuple[int, int]:
         ok = False
     if not ok or a > b:
         raise HybridError(f"t_s: expected a window (start, end) in s with start <= end, received {t_s!r}")
-    lo = 0 if a <= 0 else min(math.ceil(a * 1e9 - 0.5), 2 ** 64 - 1)
-    hi = -1 if b < 0 else min(math.floor(b * 1e9 + 0.5), 2 ** 64 - 1)
+    lo = 0 if a <= 0 else min(math.ceil(a * 1e9 - 0.5), 2**64 - 1)
+    hi = -1 if b < 0 else min(math.floor(b * 1e9 + 0.5), 2**64 - 1)
     return lo, hi
 
 
@@ -58,8 +57,7 @@ def _topics(topics) -> set | None:
     names = [topics] if isinstance(topics, str) else list(topics)
     unknown = [t for t in names if t not in TOPICS and not str(t).startswith("/loads/")]
     if unknown:
-        raise HybridError(f"topics: expected names among {', '.join(TOPICS)} or /loads/...; "
-                          f"received {unknown[0]!r}")
+        raise HybridError(f"topics: expected names among {', '.join(TOPICS)} or /loads/...; received {unknown[0]!r}")
     return set(names)
 
 
@@ -148,13 +146,18 @@ class _Decoder:
             if topic in self.rgba:
                 out[topic]["rgba"] = self.rgba[topic]
             if topic == "/rigid/transforms":
-                out[topic] = {"t": out[topic]["t"], "bodies": self.bodies, "pos": out[topic]["pos"],
-                              "quat": out[topic]["quat"]}
+                out[topic] = {
+                    "t": out[topic]["t"],
+                    "bodies": self.bodies,
+                    "pos": out[topic]["pos"],
+                    "quat": out[topic]["quat"],
+                }
         return out
 
 
-def read(path: str | Path, *, t_s: tuple[float, float] | None = None, topics=None,
-         strict: bool = True) -> dict[str, dict]:
+def read(
+    path: str | Path, *, t_s: tuple[float, float] | None = None, topics=None, strict: bool = True
+) -> dict[str, dict]:
     """The recorded channels of `path` as numpy arrays, by topic.
 
     - "membrane": every recorded frame's points, {"t": (nframe,) s, "pos": (nframe,
@@ -198,8 +201,9 @@ def read(path: str | Path, *, t_s: tuple[float, float] | None = None, topics=Non
     return out
 
 
-def frames(path: str | Path, *, t_s: tuple[float, float] | None = None,
-           strict: bool = True) -> Iterator[tuple[float, np.ndarray]]:
+def frames(
+    path: str | Path, *, t_s: tuple[float, float] | None = None, strict: bool = True
+) -> Iterator[tuple[float, np.ndarray]]:
     """The membrane's recorded frames as (t s, points (nvert, 3) m), one at a time,
     in order: memory is one chunk's, whatever the file's length. `t_s` and `strict`
     as for `read`."""
@@ -214,5 +218,4 @@ def frames(path: str | Path, *, t_s: tuple[float, float] | None = None,
         for decoded in _chunks(fh, f, lo, hi, strict, lambda raw, msgs: dec.chunk(raw, msgs, lo, hi)):
             part = decoded.get(topic)
             if part is not None:
-                for t, pos in zip(part["t"].tolist(), part["pos"]):
-                    yield t, pos
+                yield from zip(part["t"].tolist(), part["pos"])

@@ -13,14 +13,13 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import HybridError
-from ..provenance import run_provenance
-from ..step import F_PRESSURE, F_TIME, F_VOLUME
 from ..loads import Loads, LoadsObserver
+from ..provenance import run_provenance
+from ..run import TRACE_KEYS, scene_parts
+from ..step import F_PRESSURE, F_TIME, F_VOLUME
 from .channels import _frame_bytes_estimate, _FrameWriter, _load_slot, _nslot, _plan
 from .encoder import _load_encoder
 from .schemas import MESH_EVERY_FRAME_MAX, SCALAR_CHANNELS
-from ..run import TRACE_KEYS, scene_parts
-
 
 #: the recording interval when none is given (s), as a whole number of steps
 DEFAULT_EVERY_S = 0.01
@@ -33,8 +32,9 @@ def record_steps(every_s: float | None, dt_s: float, *, name: str = "every_s") -
     of steps nearest `DEFAULT_EVERY_S`, at least one."""
     if every_s is None:
         return max(1, round(DEFAULT_EVERY_S / dt_s))
-    if not (isinstance(every_s, (int, float)) and not isinstance(every_s, bool) and math.isfinite(every_s)
-            and every_s > 0):
+    if not (
+        isinstance(every_s, (int, float)) and not isinstance(every_s, bool) and math.isfinite(every_s) and every_s > 0
+    ):
         raise HybridError(f"{name}: expected a finite time > 0 s, received {every_s!r}")
     n = every_s / dt_s
     k = round(n)
@@ -44,8 +44,10 @@ def record_steps(every_s: float | None, dt_s: float, *, name: str = "every_s") -
     pair = n > 1  # between two whole numbers of steps; below one, only one step fits
     steps = f"{every_s / lo:.6g} s" + (f" or {every_s / hi:.6g} s ({lo} or {hi} steps)" if pair else " (1 step)")
     intervals = f"{lo * dt_s:.6g} s" + (f" or {hi * dt_s:.6g} s" if pair else "")
-    raise HybridError(f"{name}: expected a whole number of steps of dt_s = {dt_s:.6g} s, received {every_s:.6g} s "
-                      f"({n:.6g} steps); a step dt_s = {steps} divides it, or record every {intervals}")
+    raise HybridError(
+        f"{name}: expected a whole number of steps of dt_s = {dt_s:.6g} s, received {every_s:.6g} s "
+        f"({n:.6g} steps); a step dt_s = {steps} divides it, or record every {intervals}"
+    )
 
 
 class _Frames:
@@ -63,7 +65,7 @@ class _Frames:
         nbody = self.xpos.shape[1]
         if nbody:
             b0 = 1 + len(SCALAR_CHANNELS)
-            body = self.number[:nframe, b0:b0 + 7 * nbody].reshape(nframe, nbody, 7)
+            body = self.number[:nframe, b0 : b0 + 7 * nbody].reshape(nframe, nbody, 7)
             body[:, :, :3] = self.xpos[:nframe]
             body[:, :, 3:] = self.xquat[:nframe]
         return self.number[:nframe]
@@ -98,9 +100,19 @@ class Recorder:
     then fills this recorder's (`self.loads`, its summary's too) and steps frame by frame.
     """
 
-    def __init__(self, path: str | Path, sim, *, every_s: float | None = None, mesh_every: int | None = None,
-                 chunk_size: int = 1 << 20, flush_s: float = 1.0, background: bool = True,
-                 provenance: dict | None = None, loads=False):
+    def __init__(
+        self,
+        path: str | Path,
+        sim,
+        *,
+        every_s: float | None = None,
+        mesh_every: int | None = None,
+        chunk_size: int = 1 << 20,
+        flush_s: float = 1.0,
+        background: bool = True,
+        provenance: dict | None = None,
+        loads=False,
+    ):
         self.every_steps = record_steps(every_s, sim.model.dt_s)
         if loads is True:  # the membrane's loads on the skeleton, where the scene has a skeleton
             found = Loads(sim)
@@ -145,8 +157,7 @@ class Recorder:
         self._todo: queue.Queue | None = None
         if background:
             self._todo = queue.Queue()
-            self._thread = threading.Thread(target=self._work, args=(make_writer,), name="hybrid-recorder",
-                                            daemon=True)
+            self._thread = threading.Thread(target=self._work, args=(make_writer,), name="hybrid-recorder", daemon=True)
             self._thread.start()
         else:
             self._fw = make_writer()
@@ -171,9 +182,9 @@ class Recorder:
             buf.xquat[k] = self._body_src[1]
         row = buf.number[k]
         if trace is not None:
-            row[1:1 + len(SCALAR_CHANNELS)] = trace.last(1)[0, _SCALAR_COLS]
+            row[1 : 1 + len(SCALAR_CHANNELS)] = trace.last(1)[0, _SCALAR_COLS]
         else:
-            row[1:1 + len(SCALAR_CHANNELS)] = np.nan
+            row[1 : 1 + len(SCALAR_CHANNELS)] = np.nan
             row[1], row[2], row[3] = sim.volume, sim.volume_rel_error, sim.pressure
             row[1:4][~self._has] = np.nan  # nothing claimed of a part the scene lacks
         self._put_loads(sim, row, step)
@@ -196,7 +207,7 @@ class Recorder:
         rows = trace.last(k) if trace is not None else None
         while len(pick):
             buf, held = self._buf, self._held
-            part, pick = pick[:len(buf.pos) - held], pick[len(buf.pos) - held:]
+            part, pick = pick[: len(buf.pos) - held], pick[len(buf.pos) - held :]
             end = held + len(part)
             buf.number[held:end, 0] = t[part]
             buf.pos[held:end] = frames.pos[part]
@@ -204,10 +215,10 @@ class Recorder:
                 buf.xpos[held:end] = frames.body_pos[part]
                 buf.xquat[held:end] = frames.body_quat[part]
             if rows is not None:
-                buf.number[held:end, 1:1 + len(SCALAR_CHANNELS)] = rows[part][:, _SCALAR_COLS]
+                buf.number[held:end, 1 : 1 + len(SCALAR_CHANNELS)] = rows[part][:, _SCALAR_COLS]
             else:
                 vol, v0 = frames.scal[part, F_VOLUME], sim.model.arrays.vol0
-                buf.number[held:end, 1:1 + len(SCALAR_CHANNELS)] = np.nan
+                buf.number[held:end, 1 : 1 + len(SCALAR_CHANNELS)] = np.nan
                 buf.number[held:end, 1] = vol
                 buf.number[held:end, 2] = np.abs(vol - v0) / v0 if v0 else np.nan
                 buf.number[held:end, 3] = frames.scal[part, F_PRESSURE]
@@ -228,7 +239,7 @@ class Recorder:
         if self.loads is None:
             return
         v = self.loads.current(sim) if step == sim.steps_done else None
-        row[self._load0:] = np.nan if v is None else v.ravel()
+        row[self._load0 :] = np.nan if v is None else v.ravel()
 
     def _hand_over(self, last: bool = False) -> None:
         """Pass the frames held to the writer (the thread, or now); `last`: no frames follow."""
@@ -312,4 +323,3 @@ class Recorder:
     def __exit__(self, *exc):
         self.close()
         return False
-

@@ -24,9 +24,18 @@ SCALAR_CHANNELS = {
 MESH_EVERY_FRAME_MAX = 2000
 
 # a qualitative palette (r, g, b) in 0..1, one colour per region in order
-_PALETTE = [(0.84, 0.37, 0.30), (0.30, 0.52, 0.78), (0.45, 0.70, 0.35), (0.93, 0.66, 0.22),
-            (0.58, 0.40, 0.74), (0.55, 0.34, 0.29), (0.89, 0.47, 0.76), (0.50, 0.50, 0.50),
-            (0.74, 0.74, 0.13), (0.09, 0.75, 0.81)]
+_PALETTE = [
+    (0.84, 0.37, 0.30),
+    (0.30, 0.52, 0.78),
+    (0.45, 0.70, 0.35),
+    (0.93, 0.66, 0.22),
+    (0.58, 0.40, 0.74),
+    (0.55, 0.34, 0.29),
+    (0.89, 0.47, 0.76),
+    (0.50, 0.50, 0.50),
+    (0.74, 0.74, 0.13),
+    (0.09, 0.75, 0.81),
+]
 _UNLABELLED = (0.80, 0.80, 0.80)
 
 
@@ -51,7 +60,6 @@ def region_colours(model) -> tuple[list[str], np.ndarray, np.ndarray]:
     return names, label, colours
 
 
-
 SCALAR_PROTO = "hybrid/Scalar.proto"
 
 
@@ -63,8 +71,13 @@ def _scalar_file():
     f = descriptor_pb2.FileDescriptorProto(name=SCALAR_PROTO, package="hybrid", syntax="proto3")
     msg = f.message_type.add(name="Scalar")
     for number, name in ((1, "t"), (2, "value")):
-        msg.field.add(name=name, number=number, type=descriptor_pb2.FieldDescriptorProto.TYPE_DOUBLE,
-                      label=descriptor_pb2.FieldDescriptorProto.LABEL_OPTIONAL, json_name=name)
+        msg.field.add(
+            name=name,
+            number=number,
+            type=descriptor_pb2.FieldDescriptorProto.TYPE_DOUBLE,
+            label=descriptor_pb2.FieldDescriptorProto.LABEL_OPTIONAL,
+            json_name=name,
+        )
     return f
 
 
@@ -90,13 +103,14 @@ def _descriptor_set(file_descriptor) -> bytes:
 @functools.lru_cache(maxsize=1)
 def _schemas() -> dict[str, bytes]:
     """The schemas written here, by name: foxglove's (from foxglove-schemas-protobuf) and hybrid.Scalar."""
-    from google.protobuf import descriptor_pb2
     from foxglove_schemas_protobuf.FrameTransforms_pb2 import FrameTransforms
     from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
     from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate
+    from google.protobuf import descriptor_pb2
 
-    out = {m.DESCRIPTOR.full_name: _descriptor_set(m.DESCRIPTOR.file)
-           for m in (SceneUpdate, FrameTransforms, PointCloud)}
+    out = {
+        m.DESCRIPTOR.full_name: _descriptor_set(m.DESCRIPTOR.file) for m in (SceneUpdate, FrameTransforms, PointCloud)
+    }
     out["hybrid.Scalar"] = descriptor_pb2.FileDescriptorSet(file=[_scalar_file()]).SerializeToString()
     return out
 
@@ -124,15 +138,22 @@ def body_geoms(mj_model) -> list[dict]:
     out = []
     for g in range(mj_model.ngeom):
         body = int(mj_model.geom_bodyid[g])
-        out.append({"body": mj_model.body(body).name or f"body{body}", "body_id": body,
-                    "type": int(mj_model.geom_type[g]), "size": mj_model.geom_size[g].tolist(),
-                    "pos": mj_model.geom_pos[g].tolist(), "quat": mj_model.geom_quat[g].tolist(),
-                    "rgba": mj_model.geom_rgba[g].tolist(), "name": mj_model.geom(g).name,
-                    "group": int(mj_model.geom_group[g])})
+        out.append(
+            {
+                "body": mj_model.body(body).name or f"body{body}",
+                "body_id": body,
+                "type": int(mj_model.geom_type[g]),
+                "size": mj_model.geom_size[g].tolist(),
+                "pos": mj_model.geom_pos[g].tolist(),
+                "quat": mj_model.geom_quat[g].tolist(),
+                "rgba": mj_model.geom_rgba[g].tolist(),
+                "name": mj_model.geom(g).name,
+                "group": int(mj_model.geom_group[g]),
+            }
+        )
     return out
 
 
 # mjtGeom values (stable in MuJoCo's C API): plane 0, hfield 1, sphere 2, capsule 3,
 # ellipsoid 4, cylinder 5, box 6, mesh 7
 GEOM_SPHERE, GEOM_CAPSULE, GEOM_ELLIPSOID, GEOM_CYLINDER, GEOM_BOX = 2, 3, 4, 5, 6
-

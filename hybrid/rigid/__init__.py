@@ -19,15 +19,20 @@ lazily, so that a membrane-only scene never loads MuJoCo. By concern:
 - `references`: MuJoCo alone, what the benchmark times our step against.
 """
 
-
 from .compose import add_sites, attach_points, build_rigid, free_body_spec
 from .draw import draw_capsules, empty_world, launch_viewer, show_geom_groups
-from .mjcf import (BUILTIN_MJCF, PACKAGE_MJCF, TRUNK_XML, compile_spec, load_rigid_spec, load_spec,
-                   resolve_mjcf)
+from .mjcf import BUILTIN_MJCF, PACKAGE_MJCF, TRUNK_XML, compile_spec, load_rigid_spec, load_spec, resolve_mjcf
 from .references import BareStepper, FlexSphere
 from .replay import replay_states, replay_wrenches
-from .system import (STATE_SPEC, CoupledRigid, RigidSystem, get_state, mj_step_ctypes, point_wrench_kernel,
-                     site_vel_kernel)
+from .system import (
+    STATE_SPEC,
+    CoupledRigid,
+    RigidSystem,
+    get_state,
+    mj_step_ctypes,
+    point_wrench_kernel,
+    site_vel_kernel,
+)
 
 __all__ = [
     "TRUNK_XML",

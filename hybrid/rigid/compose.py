@@ -44,8 +44,14 @@ def _taken_sites(spec: mujoco.MjSpec, site_names: Sequence[str]) -> list[str]:
     return [s for s in site_names if spec.site(s) is not None]
 
 
-def add_sites(spec: mujoco.MjSpec, model0: mujoco.MjModel, body_names: Sequence[str],
-              point_pos: np.ndarray, site_names: Sequence[str], key_id: int = -1) -> np.ndarray:
+def add_sites(
+    spec: mujoco.MjSpec,
+    model0: mujoco.MjModel,
+    body_names: Sequence[str],
+    point_pos: np.ndarray,
+    site_names: Sequence[str],
+    key_id: int = -1,
+) -> np.ndarray:
     """Add site `site_names[j]` to body `body_names[j]` at world position `point_pos[j]`
     (m) of the model's pose at `qpos0` (or at keyframe key_id); model0 is `spec` compiled
     (before the sites). Returns (n, 3) m, the sites' positions in their bodies' frames."""
@@ -55,13 +61,13 @@ def add_sites(spec: mujoco.MjSpec, model0: mujoco.MjModel, body_names: Sequence[
         bid = model0.body(name).id
         rot = data0.xmat[bid].reshape(3, 3)
         local[j] = rot.T @ (p - data0.xpos[bid])
-        spec.body(name).add_site(name=site_names[j], pos=local[j].tolist(), size=_SITE_SIZE_M,
-                                 group=_SITE_GROUP)
+        spec.body(name).add_site(name=site_names[j], pos=local[j].tolist(), size=_SITE_SIZE_M, group=_SITE_GROUP)
     return local
 
 
-def attach_points(spec: mujoco.MjSpec, body_names: Sequence[str], point_pos: np.ndarray,
-                  prefix: str = "hybrid_link_") -> list[str]:
+def attach_points(
+    spec: mujoco.MjSpec, body_names: Sequence[str], point_pos: np.ndarray, prefix: str = "hybrid_link_"
+) -> list[str]:
     """Add one site per linked point to its body, at the point's world rest position.
 
     The spec is compiled once to get the bodies' world poses at `qpos0`; each point is
@@ -89,8 +95,7 @@ def attach_points(spec: mujoco.MjSpec, body_names: Sequence[str], point_pos: np.
     if pos.ndim != 2 or pos.shape[1] != 3:
         raise RigidError(f"point_pos: expected shape (n, 3), got {pos.shape}")
     if len(names) != pos.shape[0]:
-        raise RigidError(f"body_names: expected {pos.shape[0]} names (one per point), "
-                         f"got {len(names)}")
+        raise RigidError(f"body_names: expected {pos.shape[0]} names (one per point), got {len(names)}")
     if not np.all(np.isfinite(pos)):
         bad = int(np.flatnonzero(~np.isfinite(pos).all(axis=1))[0])
         raise RigidError(f"point_pos[{bad}]: expected finite coordinates, got {pos[bad]}")
@@ -100,9 +105,11 @@ def attach_points(spec: mujoco.MjSpec, body_names: Sequence[str], point_pos: np.
     site_names = [f"{prefix}{i}" for i in range(len(names))]
     taken = _taken_sites(spec, site_names)
     if taken:
-        raise RigidError(f"site name(s) already in the model: {taken[:5]}"
-                         f"{' ...' if len(taken) > 5 else ''}; choose another prefix than "
-                         f"{prefix!r}")
+        raise RigidError(
+            f"site name(s) already in the model: {taken[:5]}"
+            f"{' ...' if len(taken) > 5 else ''}; choose another prefix than "
+            f"{prefix!r}"
+        )
     add_sites(spec, compile_spec(spec), names, pos, site_names)
     return site_names
 
@@ -142,14 +149,24 @@ def build_rigid(scene: Scene, mesh, regions: dict, vert_mass: np.ndarray) -> tup
             raise SceneError(f"{what}: expected a hybrid.scene.RigidLink, received {type(link).__name__}")
         body = _link_body(spec, link.body)
         if body is None:
-            raise RigidError(f"{what}.body: no body or site named {link.body!r} in {label}; "
-                             f"available bodies: {bodies}; sites: {sites}")
-        idx = _regions.select(link.region, mesh.vert_pos, name=f"{what}.region", regions=regions,
-                              border_vert=mesh.border_vert, face_vert=mesh.face_vert)
+            raise RigidError(
+                f"{what}.body: no body or site named {link.body!r} in {label}; "
+                f"available bodies: {bodies}; sites: {sites}"
+            )
+        idx = _regions.select(
+            link.region,
+            mesh.vert_pos,
+            name=f"{what}.region",
+            regions=regions,
+            border_vert=mesh.border_vert,
+            face_vert=mesh.face_vert,
+        )
         twice = [int(i) for i in idx if int(i) in owner]
         if twice:
-            raise SceneError(f"{what}.region: vertices {twice[:8]} are already linked by "
-                             f"rigid.links[{owner[twice[0]]}]; expected each point linked to one body")
+            raise SceneError(
+                f"{what}.region: vertices {twice[:8]} are already linked by "
+                f"rigid.links[{owner[twice[0]]}]; expected each point linked to one body"
+            )
         for i in idx:
             owner[int(i)] = k
             link_body_of[int(i)] = body
@@ -162,8 +179,10 @@ def build_rigid(scene: Scene, mesh, regions: dict, vert_mass: np.ndarray) -> tup
     site_names = [f"{rig.prefix}{_SITE_STEM}{int(i)}" for i in link_vert]
     taken = _taken_sites(spec, site_names)
     if taken:
-        raise RigidError(f"rigid.prefix: site name(s) {taken[:3]} already exist in {label}; "
-                         f"choose another prefix than {rig.prefix!r}")
+        raise RigidError(
+            f"rigid.prefix: site name(s) {taken[:3]} already exist in {label}; "
+            f"choose another prefix than {rig.prefix!r}"
+        )
     local = add_sites(spec, model0, body_names, mesh.vert_pos[link_vert], site_names, controls.key_id)
 
     link_mass = np.asarray(vert_mass, float)[link_vert]
@@ -173,9 +192,18 @@ def build_rigid(scene: Scene, mesh, regions: dict, vert_mass: np.ndarray) -> tup
         _add_point_masses(spec, model0, body_names, local, link_mass, mass_added)
 
     # MuJoCo keeps the MJCF's own timestep unless the scene sets dt_s
-    system = CoupledRigid(spec, site_names, timestep=scene.dt_s, link_vert=link_vert,
-                          link_body=body_names, link_mass=link_mass, mass_added=mass_added,
-                          mjcf_path=source, controls=controls, ribs=ribs)
+    system = CoupledRigid(
+        spec,
+        site_names,
+        timestep=scene.dt_s,
+        link_vert=link_vert,
+        link_body=body_names,
+        link_mass=link_mass,
+        mass_added=mass_added,
+        mjcf_path=source,
+        controls=controls,
+        ribs=ribs,
+    )
     return system, link_vert
 
 
@@ -198,14 +226,26 @@ def _check_not_constrained(scene: Scene, mesh, regions: dict, link_vert: np.ndar
     for con in scene.constraints:
         if isinstance(con, (Nailed, Prescribed, KeepIn)):
             what = f"constraints[{con.name!r}].region"
-            idx = _regions.select(con.region, mesh.vert_pos, name=what, regions=regions,
-                                  border_vert=mesh.border_vert, face_vert=mesh.face_vert)
+            idx = _regions.select(
+                con.region,
+                mesh.vert_pos,
+                name=what,
+                regions=regions,
+                border_vert=mesh.border_vert,
+                face_vert=mesh.face_vert,
+            )
             kind = "keep_in" if isinstance(con, KeepIn) else type(con).__name__.lower()
             claim_points(claims[:1], idx, kind, what)
 
 
-def _add_point_masses(spec: mujoco.MjSpec, model0: mujoco.MjModel, body_names: Sequence[str],
-                      local: np.ndarray, mass: np.ndarray, added: np.ndarray) -> None:
+def _add_point_masses(
+    spec: mujoco.MjSpec,
+    model0: mujoco.MjModel,
+    body_names: Sequence[str],
+    local: np.ndarray,
+    mass: np.ndarray,
+    added: np.ndarray,
+) -> None:
     """Add point masses (kg) at body-frame positions `local` (m) to their bodies.
 
     When the model takes every inertia from its geoms (`inertiafromgeom="true"`), each
@@ -222,9 +262,16 @@ def _add_point_masses(spec: mujoco.MjSpec, model0: mujoco.MjModel, body_names: S
         body = spec.body(name)
         if from_geoms:
             for j in js:
-                body.add_geom(name=f"{name}_{_SITE_STEM}mass_{j}", size=[_POINT_GEOM_RADIUS, 0, 0],
-                              pos=local[j].tolist(), mass=float(mass[j]), contype=0, conaffinity=0,
-                              group=5, rgba=[0, 0, 0, 0])
+                body.add_geom(
+                    name=f"{name}_{_SITE_STEM}mass_{j}",
+                    size=[_POINT_GEOM_RADIUS, 0, 0],
+                    pos=local[j].tolist(),
+                    mass=float(mass[j]),
+                    contype=0,
+                    conaffinity=0,
+                    group=5,
+                    rgba=[0, 0, 0, 0],
+                )
             continue
         bid = model0.body(name).id
         m_b = float(model0.body_mass[bid])
@@ -250,9 +297,15 @@ def _add_point_masses(spec: mujoco.MjSpec, model0: mujoco.MjModel, body_names: S
         body.inertia = [0.0, 0.0, 0.0]  # a diagonal inertia given by the MJCF would conflict (myotorso's)
 
 
-def free_body_spec(mass: float, inertia: Sequence[float], point: Sequence[float],
-                   force: Sequence[float], *, integrator: str = "RK4",
-                   timestep: float = 1e-3) -> mujoco.MjSpec:
+def free_body_spec(
+    mass: float,
+    inertia: Sequence[float],
+    point: Sequence[float],
+    force: Sequence[float],
+    *,
+    integrator: str = "RK4",
+    timestep: float = 1e-3,
+) -> mujoco.MjSpec:
     """A single free rigid body, no gravity, no contact, pushed by a body-fixed point force.
 
     The body frame is its principal frame at the centre of mass, so that `qpos[0:3]`
@@ -277,18 +330,21 @@ def free_body_spec(mass: float, inertia: Sequence[float], point: Sequence[float]
     spec.modelname = "free_body"
     spec.option.gravity = [0.0, 0.0, 0.0]
     spec.option.timestep = float(timestep)
-    names = {"euler": "mjINT_EULER", "rk4": "mjINT_RK4", "implicit": "mjINT_IMPLICIT",
-             "implicitfast": "mjINT_IMPLICITFAST"}
+    names = {
+        "euler": "mjINT_EULER",
+        "rk4": "mjINT_RK4",
+        "implicit": "mjINT_IMPLICIT",
+        "implicitfast": "mjINT_IMPLICITFAST",
+    }
     if integrator.lower() not in names:
         raise RigidError(f"integrator: expected one of {sorted(names)}, got {integrator!r}")
     spec.option.integrator = getattr(mujoco.mjtIntegrator, names[integrator.lower()])
-    body = spec.worldbody.add_body(name="body", mass=float(mass),
-                                   inertia=[float(v) for v in inertia],
-                                   explicitinertial=True)
+    body = spec.worldbody.add_body(
+        name="body", mass=float(mass), inertia=[float(v) for v in inertia], explicitinertial=True
+    )
     body.add_freejoint(name="free")
     body.add_site(name="push", pos=[float(v) for v in point])
     direction = f / fnorm if fnorm > 0 else np.array([1.0, 0.0, 0.0])
-    act = spec.add_actuator(name="push", target="push",
-                            trntype=mujoco.mjtTrn.mjTRN_SITE)
+    act = spec.add_actuator(name="push", target="push", trntype=mujoco.mjtTrn.mjTRN_SITE)
     act.gear = [*direction.tolist(), 0.0, 0.0, 0.0]
     return spec

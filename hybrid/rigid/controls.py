@@ -36,8 +36,12 @@ from .mjcf import compile_spec
 __all__ = ["Controls", "apply_controls", "close_names", "start_data"]
 
 _FREE = mujoco.mjtJoint.mjJNT_FREE
-_JOINT_KINDS = {int(mujoco.mjtJoint.mjJNT_FREE): "free", int(mujoco.mjtJoint.mjJNT_BALL): "ball",
-                int(mujoco.mjtJoint.mjJNT_SLIDE): "slide", int(mujoco.mjtJoint.mjJNT_HINGE): "hinge"}
+_JOINT_KINDS = {
+    int(mujoco.mjtJoint.mjJNT_FREE): "free",
+    int(mujoco.mjtJoint.mjJNT_BALL): "ball",
+    int(mujoco.mjtJoint.mjJNT_SLIDE): "slide",
+    int(mujoco.mjtJoint.mjJNT_HINGE): "hinge",
+}
 # weld and lock constraints as hard as MuJoCo's soft constraints go (impedance 0.99-0.999)
 _SOLIMP = [0.99, 0.999, 0.001, 0.5, 2.0]
 _NQ = {"free": 7, "ball": 4, "slide": 1, "hinge": 1}
@@ -51,6 +55,7 @@ class Controls:
     joints, for `qpos_spring` of the compiled model; ctrl_actuators (nc,) names and
     ctrl_schedules (nc,) the schedules that drive them; settings: what the summary
     records (JSON values); load_joints: the joints `hybrid.loads` takes moments about."""
+
     key_id: int = -1
     spring_qpos: dict = field(default_factory=dict)
     ctrl_actuators: tuple = ()
@@ -63,11 +68,11 @@ class Controls:
         spring reference cannot be set in the spec)."""
         for name, q in self.spring_qpos.items():
             adr = model.jnt_qposadr[model.joint(name).id]
-            model.qpos_spring[adr:adr + len(q)] = q
+            model.qpos_spring[adr : adr + len(q)] = q
 
 
 def close_names(name: str, names, kind: str) -> str:
-    """"; close KIND names: a, b" (difflib), or the first names of that kind."""
+    """ "; close KIND names: a, b" (difflib), or the first names of that kind."""
     unnamed = sum(1 for n in names if not n)
     names = [n for n in names if n]
     near = difflib.get_close_matches(str(name), names, n=5, cutoff=0.5)
@@ -97,8 +102,7 @@ def _match(what: str, patterns, names: list[str], kind: str, label: str) -> list
     for k, pat in enumerate(patterns):
         hit = [n for n in names if fnmatch.fnmatchcase(n, pat)]
         if not hit:
-            raise RigidError(f"{what}[{k}]: no {kind} named {pat!r} in {label}; "
-                             f"{close_names(pat, names, kind)}")
+            raise RigidError(f"{what}[{k}]: no {kind} named {pat!r} in {label}; {close_names(pat, names, kind)}")
         chosen += [n for n in hit if n not in chosen]
     return chosen
 
@@ -142,8 +146,9 @@ def apply_controls(spec: mujoco.MjSpec, rig: Rigid, label: str, timestep_s: floa
     if rig.keyframe is not None:
         key = checks.text("rigid.keyframe", rig.keyframe)
         if key not in keys:
-            raise RigidError(f"rigid.keyframe: no keyframe named {key!r} in {label}; "
-                             f"{close_names(key, keys, 'keyframe')}")
+            raise RigidError(
+                f"rigid.keyframe: no keyframe named {key!r} in {label}; {close_names(key, keys, 'keyframe')}"
+            )
         out.key_id = keys.index(key)
     data0 = start_data(model0, out.key_id)
     qstart = data0.qpos.copy()
@@ -151,19 +156,28 @@ def apply_controls(spec: mujoco.MjSpec, rig: Rigid, label: str, timestep_s: floa
     # bodies fixed to their parents: joints removed, the body put at its start pose
     fixed = [_body(f"rigid.fix[{k}]", n, bodies, label) for k, n in enumerate(_name_list("rigid.fix", rig.fix))]
     if checks.boolean("rigid.fix_root", rig.fix_root):
-        roots = [bodies[b] for b in range(1, model0.nbody) if model0.body_parentid[b] == 0
-                 and model0.body_jntnum[b] and model0.jnt_type[model0.body_jntadr[b]] == _FREE]
+        roots = [
+            bodies[b]
+            for b in range(1, model0.nbody)
+            if model0.body_parentid[b] == 0
+            and model0.body_jntnum[b]
+            and model0.jnt_type[model0.body_jntadr[b]] == _FREE
+        ]
         if not roots:
-            raise RigidError(f"rigid.fix_root: {label} has no free-floating root body (a body on the world "
-                             f"with a free joint); bodies on the world: "
-                             f"{[bodies[b] for b in range(1, model0.nbody) if model0.body_parentid[b] == 0]}")
+            raise RigidError(
+                f"rigid.fix_root: {label} has no free-floating root body (a body on the world "
+                f"with a free joint); bodies on the world: "
+                f"{[bodies[b] for b in range(1, model0.nbody) if model0.body_parentid[b] == 0]}"
+            )
         fixed += [b for b in roots if b not in fixed]
     drop_q, drop_v = [], []
-    for k, name in enumerate(fixed):
+    for name in fixed:
         b = model0.body(name).id
         if model0.body_jntnum[b] == 0:
-            raise RigidError(f"rigid.fix: body {name!r} has no joint: it is fixed to its parent "
-                             f"{bodies[model0.body_parentid[b]]!r} already")
+            raise RigidError(
+                f"rigid.fix: body {name!r} has no joint: it is fixed to its parent "
+                f"{bodies[model0.body_parentid[b]]!r} already"
+            )
         for j in range(model0.body_jntadr[b], model0.body_jntadr[b] + model0.body_jntnum[b]):
             _refuse_driven(model0, j, name)
             kind = _JOINT_KINDS[int(model0.jnt_type[j])]
@@ -174,8 +188,9 @@ def apply_controls(spec: mujoco.MjSpec, rig: Rigid, label: str, timestep_s: floa
             spec.delete(jnt)
         pos, quat = _rel_pose(data0, int(model0.body_parentid[b]), b)
         if sb.frame is not None:
-            raise RigidError(f"rigid.fix: body {name!r} is placed through an MJCF <frame>; fix its parent or "
-                             f"weld it instead")
+            raise RigidError(
+                f"rigid.fix: body {name!r} is placed through an MJCF <frame>; fix its parent or weld it instead"
+            )
         sb.alt.type = mujoco.mjtOrientation.mjORIENTATION_QUAT
         sb.pos, sb.quat = pos.tolist(), quat.tolist()
     if drop_q:
@@ -195,8 +210,7 @@ def apply_controls(spec: mujoco.MjSpec, rig: Rigid, label: str, timestep_s: floa
         if b == 0:
             raise RigidError("rigid.weld: 'world' cannot be welded to itself; expected a body of the model")
         rot = data0.xmat[b].reshape(3, 3)
-        eq = spec.add_equality(type=mujoco.mjtEq.mjEQ_WELD, name1=name, name2="world",
-                               objtype=mujoco.mjtObj.mjOBJ_BODY)
+        eq = spec.add_equality(type=mujoco.mjtEq.mjEQ_WELD, name1=name, name2="world", objtype=mujoco.mjtObj.mjOBJ_BODY)
         eq.data[0:11] = [0.0, 0.0, 0.0, *(rot.T @ -data0.xpos[b]), *_quat_inv_mul(data0.xquat[b], [1, 0, 0, 0]), 1.0]
         eq.solref, eq.solimp = [2.0 * dt, 1.0], _SOLIMP
 
@@ -207,14 +221,21 @@ def apply_controls(spec: mujoco.MjSpec, rig: Rigid, label: str, timestep_s: floa
     both = sorted(set(held) & set(locked))
     if both:
         raise SceneError(f"rigid.hold and rigid.lock: joints {both} are in both; expected each held or locked")
-    k_hold = checks.positive("rigid.hold_stiffness_nm_per_rad", rig.hold_stiffness_nm_per_rad,
-                             checks.MAX_STIFFNESS_N_PER_M)
-    c_hold = checks.number("rigid.hold_damping_nms_per_rad", rig.hold_damping_nms_per_rad, lo=0, lo_open=False,
-                           hi=checks.MAX_STIFFNESS_N_PER_M, hi_open=False)
+    k_hold = checks.positive(
+        "rigid.hold_stiffness_nm_per_rad", rig.hold_stiffness_nm_per_rad, checks.MAX_STIFFNESS_N_PER_M
+    )
+    c_hold = checks.number(
+        "rigid.hold_damping_nms_per_rad",
+        rig.hold_damping_nms_per_rad,
+        lo=0,
+        lo_open=False,
+        hi=checks.MAX_STIFFNESS_N_PER_M,
+        hi_open=False,
+    )
     for name in held:
         j = model0.joint(name).id
         adr = model0.jnt_qposadr[j]
-        q = qstart[adr:adr + _NQ[kinds[name]]]
+        q = qstart[adr : adr + _NQ[kinds[name]]]
         sj = spec.joint(name)
         _set_linear(sj, "stiffness", k_hold)
         _set_linear(sj, "damping", c_hold)
@@ -230,20 +251,25 @@ def apply_controls(spec: mujoco.MjSpec, rig: Rigid, label: str, timestep_s: floa
     actuators = _names(model0, "actuator", model0.nu)
     ctrl = rig.ctrl
     if not isinstance(ctrl, dict):
-        raise SceneError(f"rigid.ctrl: expected a table {{actuator name or pattern = schedule}}, "
-                         f"received {checks.show(ctrl)}")
+        raise SceneError(
+            f"rigid.ctrl: expected a table {{actuator name or pattern = schedule}}, received {checks.show(ctrl)}"
+        )
     owner: dict[str, str] = {}
     for pat, sched in ctrl.items():
         what = f"rigid.ctrl.{pat}"
         hit = _match("rigid.ctrl", [pat], actuators, "actuator", label)
         sched = S.as_schedule(sched, name=what, ncomp=1)
         if isinstance(sched, S.Function):
-            raise SceneError(f"{what}: a Python function cannot drive an actuator in the compiled step; "
-                             f"expected a number, a breathing waveform or a table")
+            raise SceneError(
+                f"{what}: a Python function cannot drive an actuator in the compiled step; "
+                f"expected a number, a breathing waveform or a table"
+            )
         for a in hit:
             if a in owner:
-                raise SceneError(f"{what}: actuator {a!r} is driven by rigid.ctrl.{owner[a]} already; expected "
-                                 f"each actuator driven once")
+                raise SceneError(
+                    f"{what}: actuator {a!r} is driven by rigid.ctrl.{owner[a]} already; expected "
+                    f"each actuator driven once"
+                )
             owner[a] = pat
             out.ctrl_actuators += (a,)
             out.ctrl_schedules += (sched,)
@@ -252,8 +278,10 @@ def apply_controls(spec: mujoco.MjSpec, rig: Rigid, label: str, timestep_s: floa
     for k, name in enumerate(_name_list("rigid.load_joints", rig.load_joints)):
         if name not in free_names:
             why = " (removed: its body is fixed)" if name in gone else ""
-            raise RigidError(f"rigid.load_joints[{k}]: no joint named {name!r} in {label}{why}; "
-                             f"{close_names(name, free_names, 'joint')}")
+            raise RigidError(
+                f"rigid.load_joints[{k}]: no joint named {name!r} in {label}{why}; "
+                f"{close_names(name, free_names, 'joint')}"
+            )
     out.load_joints = tuple(rig.load_joints)
 
     if rig.integrator is not None:
@@ -264,8 +292,13 @@ def apply_controls(spec: mujoco.MjSpec, rig: Rigid, label: str, timestep_s: floa
         "mjcf_timestep_s": float(model0.opt.timestep),
         "integrator": integ.get(int(spec.option.integrator), str(spec.option.integrator)),
         "integrator_from": "mjcf" if rig.integrator is None else "scene",
-        "keyframe": rig.keyframe, "fixed": fixed, "welded": welded, "held": held, "locked": locked,
-        "driven": list(out.ctrl_actuators)}
+        "keyframe": rig.keyframe,
+        "fixed": fixed,
+        "welded": welded,
+        "held": held,
+        "locked": locked,
+        "driven": list(out.ctrl_actuators),
+    }
     if fixed:
         _check_fixed_where_they_start(spec, label, out.key_id, fixed, data0, model0)
     return out
@@ -276,9 +309,11 @@ def _refuse_driven(model, j: int, body: str) -> None:
     joint_trn = (int(mujoco.mjtTrn.mjTRN_JOINT), int(mujoco.mjtTrn.mjTRN_JOINTINPARENT))
     for a in range(model.nu):
         if int(model.actuator_trntype[a]) in joint_trn and int(model.actuator_trnid[a, 0]) == j:
-            raise RigidError(f"rigid.fix: body {body!r}: its joint {model.joint(j).name!r} is driven by actuator "
-                             f"{model.actuator(a).name!r}; expected a body whose joints no actuator drives "
-                             f"(lock or hold the joint instead)")
+            raise RigidError(
+                f"rigid.fix: body {body!r}: its joint {model.joint(j).name!r} is driven by actuator "
+                f"{model.actuator(a).name!r}; expected a body whose joints no actuator drives "
+                f"(lock or hold the joint instead)"
+            )
 
 
 def _set_linear(joint, attr: str, value: float) -> None:
@@ -301,16 +336,22 @@ def _joints(what: str, patterns, names: list[str], kinds: dict, label: str, refu
     patterns = _name_list(what, patterns)
     for k, pat in enumerate(patterns):
         if pat in kinds and kinds[pat] in refused:
-            hint = "fix its body (rigid.fix, rigid.fix_root) or weld it" if kinds[pat] == "free" else \
-                "hold it, or fix its body"
-            raise RigidError(f"{what}[{k}]: joint {pat!r} is a {kinds[pat]} joint; expected a "
-                             f"{' or '.join(k2 for k2 in ('hinge', 'slide', 'ball') if k2 not in refused)} "
-                             f"joint; {hint}")
+            hint = (
+                "fix its body (rigid.fix, rigid.fix_root) or weld it"
+                if kinds[pat] == "free"
+                else "hold it, or fix its body"
+            )
+            raise RigidError(
+                f"{what}[{k}]: joint {pat!r} is a {kinds[pat]} joint; expected a "
+                f"{' or '.join(k2 for k2 in ('hinge', 'slide', 'ball') if k2 not in refused)} "
+                f"joint; {hint}"
+            )
     usable = [n for n in names if kinds[n] not in refused]
     for k, pat in enumerate(patterns):
         if pat in kinds and pat not in names:
-            raise RigidError(f"{what}[{k}]: joint {pat!r} belongs to a fixed body (rigid.fix); expected a joint "
-                             f"that is kept")
+            raise RigidError(
+                f"{what}[{k}]: joint {pat!r} belongs to a fixed body (rigid.fix); expected a joint that is kept"
+            )
     return _match(what, patterns, usable, "joint", label)
 
 
@@ -323,5 +364,7 @@ def _check_fixed_where_they_start(spec, label, key_id, fixed, data0, model0) -> 
         b0, b1 = model0.body(name).id, model1.body(name).id
         err = np.abs(data1.xpos[b1] - data0.xpos[b0]).max()
         if err > 1e-9:
-            raise RigidError(f"rigid.fix: body {name!r} would move by {err:.3g} m when fixed in {label}; "
-                             f"expected it to stay where it starts (weld it instead)")
+            raise RigidError(
+                f"rigid.fix: body {name!r} would move by {err:.3g} m when fixed in {label}; "
+                f"expected it to stay where it starts (weld it instead)"
+            )

@@ -9,11 +9,18 @@ import numpy as np
 
 __all__ = ["describe_model", "describe_spec"]
 
-_JOINT = {int(mujoco.mjtJoint.mjJNT_FREE): "free", int(mujoco.mjtJoint.mjJNT_BALL): "ball",
-          int(mujoco.mjtJoint.mjJNT_SLIDE): "slide", int(mujoco.mjtJoint.mjJNT_HINGE): "hinge"}
-_INTEGRATOR = {int(mujoco.mjtIntegrator.mjINT_EULER): "Euler", int(mujoco.mjtIntegrator.mjINT_RK4): "RK4",
-               int(mujoco.mjtIntegrator.mjINT_IMPLICIT): "implicit",
-               int(mujoco.mjtIntegrator.mjINT_IMPLICITFAST): "implicitfast"}
+_JOINT = {
+    int(mujoco.mjtJoint.mjJNT_FREE): "free",
+    int(mujoco.mjtJoint.mjJNT_BALL): "ball",
+    int(mujoco.mjtJoint.mjJNT_SLIDE): "slide",
+    int(mujoco.mjtJoint.mjJNT_HINGE): "hinge",
+}
+_INTEGRATOR = {
+    int(mujoco.mjtIntegrator.mjINT_EULER): "Euler",
+    int(mujoco.mjtIntegrator.mjINT_RK4): "RK4",
+    int(mujoco.mjtIntegrator.mjINT_IMPLICIT): "implicit",
+    int(mujoco.mjtIntegrator.mjINT_IMPLICITFAST): "implicitfast",
+}
 
 
 def _floats(a) -> list:
@@ -23,9 +30,14 @@ def _floats(a) -> list:
 def _target(model: mujoco.MjModel, a: int) -> str:
     """The actuator's transmission target, "joint:NAME", "tendon:NAME", ..."""
     trn = mujoco.mjtTrn(int(model.actuator_trntype[a])).name.removeprefix("mjTRN_").lower()
-    obj = {"joint": mujoco.mjtObj.mjOBJ_JOINT, "jointinparent": mujoco.mjtObj.mjOBJ_JOINT,
-           "tendon": mujoco.mjtObj.mjOBJ_TENDON, "site": mujoco.mjtObj.mjOBJ_SITE,
-           "body": mujoco.mjtObj.mjOBJ_BODY, "slidercrank": mujoco.mjtObj.mjOBJ_SITE}.get(trn)
+    obj = {
+        "joint": mujoco.mjtObj.mjOBJ_JOINT,
+        "jointinparent": mujoco.mjtObj.mjOBJ_JOINT,
+        "tendon": mujoco.mjtObj.mjOBJ_TENDON,
+        "site": mujoco.mjtObj.mjOBJ_SITE,
+        "body": mujoco.mjtObj.mjOBJ_BODY,
+        "slidercrank": mujoco.mjtObj.mjOBJ_SITE,
+    }.get(trn)
     tid = int(model.actuator_trnid[a, 0])
     name = mujoco.mj_id2name(model, obj, tid) if obj is not None and tid >= 0 else None
     return f"{trn}:{name}" if name else trn
@@ -38,25 +50,50 @@ def describe_model(model: mujoco.MjModel) -> dict:
     with its target and control range, each keyframe with its qpos."""
     data = mujoco.MjData(model)
     mujoco.mj_kinematics(model, data)
-    bodies = [{"name": model.body(b).name, "parent": model.body(int(model.body_parentid[b])).name,
-               "mass_kg": float(model.body_mass[b]), "pos_m": _floats(data.xpos[b])}
-              for b in range(model.nbody)]
+    bodies = [
+        {
+            "name": model.body(b).name,
+            "parent": model.body(int(model.body_parentid[b])).name,
+            "mass_kg": float(model.body_mass[b]),
+            "pos_m": _floats(data.xpos[b]),
+        }
+        for b in range(model.nbody)
+    ]
     joints = []
     for j in range(model.njnt):
         kind = _JOINT[int(model.jnt_type[j])]
         adr = int(model.jnt_qposadr[j])
         size = {"free": 7, "ball": 4}.get(kind, 1)
-        joints.append({"name": model.joint(j).name, "type": kind, "body": model.body(int(model.jnt_bodyid[j])).name,
-                       "qpos0": _floats(model.qpos0[adr:adr + size]),
-                       "range": _floats(model.jnt_range[j]) if model.jnt_limited[j] else None})
-    actuators = [{"name": model.actuator(a).name, "target": _target(model, a),
-                  "ctrlrange": _floats(model.actuator_ctrlrange[a]) if model.actuator_ctrllimited[a] else None}
-                 for a in range(model.nu)]
+        joints.append(
+            {
+                "name": model.joint(j).name,
+                "type": kind,
+                "body": model.body(int(model.jnt_bodyid[j])).name,
+                "qpos0": _floats(model.qpos0[adr : adr + size]),
+                "range": _floats(model.jnt_range[j]) if model.jnt_limited[j] else None,
+            }
+        )
+    actuators = [
+        {
+            "name": model.actuator(a).name,
+            "target": _target(model, a),
+            "ctrlrange": _floats(model.actuator_ctrlrange[a]) if model.actuator_ctrllimited[a] else None,
+        }
+        for a in range(model.nu)
+    ]
     keyframes = [{"name": model.key(k).name, "qpos": _floats(model.key_qpos[k])} for k in range(model.nkey)]
-    return {"timestep_s": float(model.opt.timestep),
-            "integrator": _INTEGRATOR.get(int(model.opt.integrator), str(int(model.opt.integrator))),
-            "gravity_m_s2": _floats(model.opt.gravity), "nq": int(model.nq), "nv": int(model.nv),
-            "nu": int(model.nu), "bodies": bodies, "joints": joints, "actuators": actuators, "keyframes": keyframes}
+    return {
+        "timestep_s": float(model.opt.timestep),
+        "integrator": _INTEGRATOR.get(int(model.opt.integrator), str(int(model.opt.integrator))),
+        "gravity_m_s2": _floats(model.opt.gravity),
+        "nq": int(model.nq),
+        "nv": int(model.nv),
+        "nu": int(model.nu),
+        "bodies": bodies,
+        "joints": joints,
+        "actuators": actuators,
+        "keyframes": keyframes,
+    }
 
 
 def describe_spec(source: str) -> dict:

@@ -37,6 +37,7 @@ BUILTIN_MJCF = {"trunk": TRUNK_XML, "builtin:trunk": TRUNK_XML}
 
 def _myo_sim_spec(name: str) -> mujoco.MjSpec:
     import myo_sim
+
     return myo_sim.load_spec(name)
 
 
@@ -98,8 +99,10 @@ def resolve_mjcf(scene: Scene) -> Path:
     if str(mjcf) in BUILTIN_MJCF:
         return BUILTIN_MJCF[str(mjcf)]
     if _package_model(str(mjcf)) is not None:
-        raise RigidError(f"rigid.mjcf: {str(mjcf)!r} is built in memory by a package, it has no file; "
-                         f"use hybrid.rigid.load_rigid_spec")
+        raise RigidError(
+            f"rigid.mjcf: {str(mjcf)!r} is built in memory by a package, it has no file; "
+            f"use hybrid.rigid.load_rigid_spec"
+        )
     path = scene.resolve(str(mjcf))
     if not path.is_file():
         raise RigidError(f"rigid.mjcf: no such file {str(path)!r}; expected 'trunk' or the path of an MJCF file")
@@ -125,11 +128,11 @@ def load_rigid_spec(scene: Scene) -> tuple[mujoco.MjSpec, str, Path | str]:
     try:
         __import__(module)
     except ImportError as exc:
-        raise RigidError(f"rigid.mjcf {str(mjcf)!r}: needs the package {module!r}, which is not installed "
-                         f"({exc}); {install}") from exc
+        raise RigidError(
+            f"rigid.mjcf {str(mjcf)!r}: needs the package {module!r}, which is not installed ({exc}); {install}"
+        ) from exc
     try:
         spec = builder(name)
     except (ValueError, KeyError) as exc:
-        raise RigidError(f"rigid.mjcf {str(mjcf)!r}: {module} cannot build {name!r}: "
-                         f"{one_line(exc)}") from exc
+        raise RigidError(f"rigid.mjcf {str(mjcf)!r}: {module} cannot build {name!r}: {one_line(exc)}") from exc
     return spec, str(mjcf), str(mjcf)

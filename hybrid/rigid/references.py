@@ -41,8 +41,16 @@ class FlexSphere:
     raises RigidError if MuJoCo reset the simulation (a blow-up).
     """
 
-    def __init__(self, vert_pos: np.ndarray, face_vert: np.ndarray, *, total_kg: float = 4.0,
-                 young_pa: float = 3e4, thickness_m: float = 0.01, timestep_s: float = 1e-3):
+    def __init__(
+        self,
+        vert_pos: np.ndarray,
+        face_vert: np.ndarray,
+        *,
+        total_kg: float = 4.0,
+        young_pa: float = 3e4,
+        thickness_m: float = 0.01,
+        timestep_s: float = 1e-3,
+    ):
         pts = " ".join(f"{x:.6f}" for x in np.asarray(vert_pos, float).ravel())
         el = " ".join(str(int(i)) for i in np.asarray(face_vert).ravel())
         z0 = float(-np.min(vert_pos[:, 2])) + 0.005
@@ -79,8 +87,10 @@ class FlexSphere:
         for _ in range(nstep):
             mujoco.mj_step(model, data)
         if sum(int(w.number) for w in data.warning):
-            raise RigidError("flex sphere: MuJoCo reported a blow-up and reset the simulation; "
-                             "expected a stable run (lower the time step or the stiffness)")
+            raise RigidError(
+                "flex sphere: MuJoCo reported a blow-up and reset the simulation; "
+                "expected a stable run (lower the time step or the stiffness)"
+            )
 
     def volume_change(self) -> float:
         return (self._volume() - self._v0) / self._v0

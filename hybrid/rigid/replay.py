@@ -12,8 +12,9 @@ from hybrid.errors import RigidError
 from .system import STATE_SPEC
 
 
-def replay_wrenches(model: mujoco.MjModel, initial_state: np.ndarray, xfrc: np.ndarray, *,
-                    data: mujoco.MjData | None = None) -> np.ndarray:
+def replay_wrenches(
+    model: mujoco.MjModel, initial_state: np.ndarray, xfrc: np.ndarray, *, data: mujoco.MjData | None = None
+) -> np.ndarray:
     """Replay recorded applied wrenches through MuJoCo alone (`mujoco.rollout`).
 
     Step k applies `xfrc[k]` as `xfrc_applied` and calls `mj_step`; controls, applied
@@ -35,8 +36,7 @@ def replay_wrenches(model: mujoco.MjModel, initial_state: np.ndarray, xfrc: np.n
     nstate = mujoco.mj_stateSize(model, STATE_SPEC)
     state0 = np.asarray(initial_state, dtype=float)
     if state0.shape != (nstate,):
-        raise RigidError(f"initial_state: expected shape ({nstate},) "
-                         f"(mjSTATE_FULLPHYSICS), got {state0.shape}")
+        raise RigidError(f"initial_state: expected shape ({nstate},) (mjSTATE_FULLPHYSICS), got {state0.shape}")
     x = np.asarray(xfrc, dtype=float)
     if x.ndim != 3 or x.shape[1:] != (model.nbody, 6):
         raise RigidError(f"xfrc: expected shape (nstep, {model.nbody}, 6), got {x.shape}")
@@ -44,13 +44,15 @@ def replay_wrenches(model: mujoco.MjModel, initial_state: np.ndarray, xfrc: np.n
     if data is None:
         data = mujoco.MjData(model)
     control = np.ascontiguousarray(x.reshape(1, nstep, model.nbody * 6))
-    state, _ = _rollout.rollout(model, data, state0[None, :], control,
-                                control_spec=int(mujoco.mjtState.mjSTATE_XFRC_APPLIED))
-    return state[0, :, 1:1 + model.nq].copy()
+    state, _ = _rollout.rollout(
+        model, data, state0[None, :], control, control_spec=int(mujoco.mjtState.mjSTATE_XFRC_APPLIED)
+    )
+    return state[0, :, 1 : 1 + model.nq].copy()
 
 
-def replay_states(model: mujoco.MjModel, initial_state: np.ndarray, xfrc: np.ndarray,
-                  ctrl: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+def replay_states(
+    model: mujoco.MjModel, initial_state: np.ndarray, xfrc: np.ndarray, ctrl: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """`replay_wrenches` with the actuators' controls too: step k applies `xfrc[k]`
     and `ctrl[k]` (nstep, nu) (None: the initial state's ctrl throughout). Returns
     (qpos (nstep, nq), qvel (nstep, nv)) after each step."""
@@ -71,4 +73,4 @@ def replay_states(model: mujoco.MjModel, initial_state: np.ndarray, xfrc: np.nda
         spec |= int(mujoco.mjtState.mjSTATE_CTRL)
     control = np.ascontiguousarray(np.concatenate(parts, axis=1)[None])
     state, _ = _rollout.rollout(model, mujoco.MjData(model), state0[None, :], control, control_spec=spec)
-    return state[0, :, 1:1 + model.nq].copy(), state[0, :, 1 + model.nq:1 + model.nq + model.nv].copy()
+    return state[0, :, 1 : 1 + model.nq].copy(), state[0, :, 1 + model.nq : 1 + model.nq + model.nv].copy()

@@ -48,6 +48,7 @@ class RibsAdded:
     """What `add_ribs` added: the thoracic body; the model's unit directions (anterior,
     cranial, left) in the world; per pair its bodies, hinge joints, front sites and tendon
     (names); settings: what the summary records (JSON values)."""
+
     body: str
     anterior: np.ndarray
     cranial: np.ndarray
@@ -58,8 +59,12 @@ class RibsAdded:
     tendons: list = field(default_factory=list)
 
     def settings(self) -> dict:
-        return {"body": self.body, "rib_bodies": list(self.bodies), "rib_joints": list(self.joints),
-                "sternum_tendons": list(self.tendons)}
+        return {
+            "body": self.body,
+            "rib_bodies": list(self.bodies),
+            "rib_joints": list(self.joints),
+            "sternum_tendons": list(self.tendons),
+        }
 
 
 def _unit(where: str, v) -> np.ndarray:
@@ -76,8 +81,15 @@ def _value(where: str, obj, name: str):
     return check_value(f"{where}.{name}", f.metadata["kind"], getattr(obj, name), f.metadata)
 
 
-def rib_arc(head: np.ndarray, front: np.ndarray, outward: np.ndarray, lateral_head: float,
-            lateral_front: float, half_width_m: float, n: int = SEGMENTS) -> np.ndarray:
+def rib_arc(
+    head: np.ndarray,
+    front: np.ndarray,
+    outward: np.ndarray,
+    lateral_head: float,
+    lateral_front: float,
+    half_width_m: float,
+    n: int = SEGMENTS,
+) -> np.ndarray:
     """(n + 1, 3) m: points along a rib from its head to its anterior end, bowed outward
     (unit `outward`, away from the midline) so that its middle lies half_width_m from the
     midline: the chord plus (half_width_m - mean lateral offset) sin(pi t) outward."""
@@ -107,7 +119,7 @@ def _inertia(points: np.ndarray, mass: float) -> tuple[np.ndarray, np.ndarray]:
     for mk, c, s, ell in zip(m, mid, seg, length):
         r = c - com
         u = s / ell
-        tensor += mk * (r @ r * np.eye(3) - np.outer(r, r)) + mk * ell ** 2 / 12.0 * (np.eye(3) - np.outer(u, u))
+        tensor += mk * (r @ r * np.eye(3) - np.outer(r, r)) + mk * ell**2 / 12.0 * (np.eye(3) - np.outer(u, u))
     return com, tensor
 
 
@@ -122,14 +134,18 @@ def add_ribs(spec: mujoco.MjSpec, ribs: Ribs, label: str, key_id: int = -1) -> R
     bodies = [model0.body(i).name for i in range(model0.nbody)]
     body = checks.text("rigid.ribs.body", ribs.body)
     if body not in bodies or body == "world" or model0.body(body).id == 0:
-        raise RigidError(f"rigid.ribs.body: no body named {body!r} in {label} (the thoracic body the ribs "
-                         f"hang on); {close_names(body, bodies[1:], 'body')}")
+        raise RigidError(
+            f"rigid.ribs.body: no body named {body!r} in {label} (the thoracic body the ribs "
+            f"hang on); {close_names(body, bodies[1:], 'body')}"
+        )
     anterior = _unit("rigid.ribs.anterior", ribs.anterior)
     cranial = _unit("rigid.ribs.cranial", ribs.cranial)
     if abs(anterior @ cranial) > _PERPENDICULAR_TOL:
-        raise SceneError(f"rigid.ribs.cranial: expected a direction perpendicular to rigid.ribs.anterior "
-                         f"{list(ribs.anterior)}, received {list(ribs.cranial)} (at "
-                         f"{np.degrees(np.arccos(np.clip(anterior @ cranial, -1, 1))):.3g} degrees)")
+        raise SceneError(
+            f"rigid.ribs.cranial: expected a direction perpendicular to rigid.ribs.anterior "
+            f"{list(ribs.anterior)}, received {list(ribs.cranial)} (at "
+            f"{np.degrees(np.arccos(np.clip(anterior @ cranial, -1, 1))):.3g} degrees)"
+        )
     cranial = cranial - (anterior @ cranial) * anterior
     cranial /= np.linalg.norm(cranial)
     left = np.cross(cranial, anterior)
@@ -138,8 +154,9 @@ def add_ribs(spec: mujoco.MjSpec, ribs: Ribs, label: str, key_id: int = -1) -> R
     c_sternum = _value("rigid.ribs", ribs, "sternum_damping_n_s_per_m")
     pairs = ribs.pairs
     if not isinstance(pairs, (tuple, list)) or not pairs:
-        raise SceneError(f"rigid.ribs.pairs: expected at least one rib pair ([[rigid.ribs.pairs]]), received "
-                         f"{checks.show(pairs)}")
+        raise SceneError(
+            f"rigid.ribs.pairs: expected at least one rib pair ([[rigid.ribs.pairs]]), received {checks.show(pairs)}"
+        )
 
     data0 = start_data(model0, key_id)
     bid = model0.body(body).id
@@ -167,24 +184,32 @@ def add_ribs(spec: mujoco.MjSpec, ribs: Ribs, label: str, key_id: int = -1) -> R
         lat_head, lat_front = float((head - origin) @ left), float((front - origin) @ left)
         for key, lat in (("head_m", lat_head), ("front_m", lat_front)):
             if lat < radius:
-                raise SceneError(f"{where}.{key}: expected the left rib's point, at least radius_m ({radius:g} m) "
-                                 f"left of the mid-sagittal plane (left = cranial x anterior = "
-                                 f"{np.round(left, 6).tolist()}, the plane through {body!r}'s origin "
-                                 f"{np.round(origin, 6).tolist()}), received {lat:.4g} m from it")
+                raise SceneError(
+                    f"{where}.{key}: expected the left rib's point, at least radius_m ({radius:g} m) "
+                    f"left of the mid-sagittal plane (left = cranial x anterior = "
+                    f"{np.round(left, 6).tolist()}, the plane through {body!r}'s origin "
+                    f"{np.round(origin, 6).tolist()}), received {lat:.4g} m from it"
+                )
         if width <= max(lat_head, lat_front):
-            raise SceneError(f"{where}.half_width_m: expected more than the head's and the anterior end's distance "
-                             f"from the mid-sagittal plane ({max(lat_head, lat_front):.4g} m), received {width:g}")
+            raise SceneError(
+                f"{where}.half_width_m: expected more than the head's and the anterior end's distance "
+                f"from the mid-sagittal plane ({max(lat_head, lat_front):.4g} m), received {width:g}"
+            )
         if np.linalg.norm(front - head) < 4.0 * radius:
-            raise SceneError(f"{where}.front_m: expected the anterior end at least 4 radius_m from the head "
-                             f"{head.tolist()}, received {front.tolist()}")
+            raise SceneError(
+                f"{where}.front_m: expected the anterior end at least 4 radius_m from the head "
+                f"{head.tolist()}, received {front.tolist()}"
+            )
         names = {f"{name}_{s}": "body" for s in _SIDES}
         names.update({f"{name}_{s}_hinge": "joint" for s in _SIDES})
         names.update({f"{name}_{s}_front": "site" for s in _SIDES})
         names[f"{name}_sternum"] = "tendon"
         taken = _names_taken(spec, names)
         if taken:
-            raise RigidError(f"{where}.name: {label} has a {taken} already; expected a rib pair name whose bodies, "
-                             f"joints, sites and tendon are new")
+            raise RigidError(
+                f"{where}.name: {label} has a {taken} already; expected a rib pair name whose bodies, "
+                f"joints, sites and tendon are new"
+            )
         for side, sign in (("left", 1.0), ("right", -1.0)):
             if sign > 0:
                 h, f = head, front
@@ -200,8 +225,12 @@ def add_ribs(spec: mujoco.MjSpec, ribs: Ribs, label: str, key_id: int = -1) -> R
             rib.explicitinertial = True
             rib.mass, rib.ipos = float(mass), com.tolist()
             rib.fullinertia = [tensor[0, 0], tensor[1, 1], tensor[2, 2], tensor[0, 1], tensor[0, 2], tensor[1, 2]]
-            joint = rib.add_joint(name=f"{name}_{side}_hinge", type=mujoco.mjtJoint.mjJNT_HINGE,
-                                  axis=(rot.T @ axis).tolist(), pos=[0.0, 0.0, 0.0])
+            joint = rib.add_joint(
+                name=f"{name}_{side}_hinge",
+                type=mujoco.mjtJoint.mjJNT_HINGE,
+                axis=(rot.T @ axis).tolist(),
+                pos=[0.0, 0.0, 0.0],
+            )
             # not the model's joint defaults (limits, armature, friction): a free hinge with its spring
             joint.limited = mujoco.mjtLimited.mjLIMITED_FALSE
             joint.armature, joint.frictionloss = 0.0, 0.0
@@ -212,12 +241,20 @@ def add_ribs(spec: mujoco.MjSpec, ribs: Ribs, label: str, key_id: int = -1) -> R
             joint.springref = float(ref - weight_torque / stiff)
             seg_len = np.linalg.norm(np.diff(local, axis=0), axis=1)
             for j in range(SEGMENTS):
-                rib.add_geom(name=f"{name}_{side}_{j}", type=mujoco.mjtGeom.mjGEOM_CAPSULE,
-                             fromto=[*local[j], *local[j + 1]], size=[radius, 0.0, 0.0],
-                             mass=float(mass * seg_len[j] / seg_len.sum()), contype=0, conaffinity=0,
-                             group=_GROUP, rgba=_RGBA)
-            rib.add_site(name=f"{name}_{side}_front", pos=local[-1].tolist(), size=[radius, radius, radius],
-                         group=_GROUP)
+                rib.add_geom(
+                    name=f"{name}_{side}_{j}",
+                    type=mujoco.mjtGeom.mjGEOM_CAPSULE,
+                    fromto=[*local[j], *local[j + 1]],
+                    size=[radius, 0.0, 0.0],
+                    mass=float(mass * seg_len[j] / seg_len.sum()),
+                    contype=0,
+                    conaffinity=0,
+                    group=_GROUP,
+                    rgba=_RGBA,
+                )
+            rib.add_site(
+                name=f"{name}_{side}_front", pos=local[-1].tolist(), size=[radius, radius, radius], group=_GROUP
+            )
             out.bodies.append(f"{name}_{side}")
             out.joints.append(f"{name}_{side}_hinge")
             out.fronts.append(f"{name}_{side}_front")

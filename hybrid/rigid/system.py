@@ -35,7 +35,6 @@ import numpy as np
 
 from hybrid.errors import RigidError
 from hybrid.kernel import jit
-
 from hybrid.schedule import schedule_eval, stack_schedules
 
 from .controls import Controls
@@ -81,8 +80,7 @@ def point_wrench_kernel(site_xpos, xipos, site_id, site_body, forces, xfrc):  # 
 
 
 @jit(_nrt=False)
-def site_vel_kernel(site_xpos, cvel, subtree_com, site_id, site_body, site_root,
-                    out):  # pragma: no cover
+def site_vel_kernel(site_xpos, cvel, subtree_com, site_id, site_body, site_root, out):  # pragma: no cover
     """World linear velocities of sites, as mj_objectVelocity(flg_local=0) (compiled).
 
     # Data in:  site_xpos (nsite, 3) m, cvel (nbody, 6) [rad/s, m/s], subtree_com (nbody, 3) m
@@ -111,8 +109,11 @@ def mj_step_ctypes() -> tuple[ctypes._CFuncPtr, ctypes._CFuncPtr, ctypes._CFuncP
     `mujoco.mj_step`. Python's call overhead (about 0.5 us a call) disappears.
     """
     folder = Path(mujoco.__file__).resolve().parent
-    candidates = sorted(folder.glob("libmujoco.so*")) + sorted(folder.glob("libmujoco*.dylib")) \
+    candidates = (
+        sorted(folder.glob("libmujoco.so*"))
+        + sorted(folder.glob("libmujoco*.dylib"))
         + sorted(folder.glob("mujoco.dll"))
+    )
     if not candidates:
         raise RigidError(f"MuJoCo's C library: not found in {str(folder)!r}")
     lib = ctypes.CDLL(str(candidates[0]))
@@ -148,8 +149,7 @@ class RigidSystem:
     body_id : (nb,) int     the distinct bodies that carry attachment sites
     """
 
-    def __init__(self, spec: mujoco.MjSpec, site_names: Sequence[str] = (), *,
-                 timestep: float | None = None):
+    def __init__(self, spec: mujoco.MjSpec, site_names: Sequence[str] = (), *, timestep: float | None = None):
         model = compile_spec(spec)
         if timestep is not None:
             if not (np.isfinite(timestep) and timestep > 0):
@@ -230,8 +230,9 @@ class RigidSystem:
         They stay applied at every following step until set again.
         """
         d = self._data
-        point_wrench_kernel(d.site_xpos, d.xipos, self.site_id, self.site_body,
-                            self._check_forces(forces), d.xfrc_applied)
+        point_wrench_kernel(
+            d.site_xpos, d.xipos, self.site_id, self.site_body, self._check_forces(forces), d.xfrc_applied
+        )
 
     def _check_forces(self, forces: np.ndarray) -> np.ndarray:
         f = np.ascontiguousarray(forces, dtype=float)
@@ -265,8 +266,7 @@ class RigidSystem:
         """
         d = self._data
         out = np.empty((len(self.site_id), 3))
-        site_vel_kernel(d.site_xpos, d.cvel, d.subtree_com, self.site_id, self.site_body,
-                        self.site_root, out)
+        site_vel_kernel(d.site_xpos, d.cvel, d.subtree_com, self.site_id, self.site_body, self.site_root, out)
         return out
 
     def reset(self) -> None:
@@ -292,8 +292,20 @@ class CoupledRigid(RigidSystem):
     (the MJCF's Path, or the "SCHEME:NAME" string of a package model).
     """
 
-    def __init__(self, spec, site_names, *, timestep, link_vert, link_body, link_mass, mass_added,
-                 mjcf_path, controls: Controls | None = None, ribs=None):
+    def __init__(
+        self,
+        spec,
+        site_names,
+        *,
+        timestep,
+        link_vert,
+        link_body,
+        link_mass,
+        mass_added,
+        mjcf_path,
+        controls: Controls | None = None,
+        ribs=None,
+    ):
         super().__init__(spec, site_names, timestep=timestep)
         self.controls = Controls() if controls is None else controls
         self.controls.finish(self._model)
@@ -309,8 +321,16 @@ class CoupledRigid(RigidSystem):
         self.mjcf_path = mjcf_path
         #: the ribs added to the model (`hybrid.rigid.ribs.RibsAdded`), or None
         self.ribs = ribs
-        for arr in (self.link_vert, self.link_mass, self.mass_added, self.site_id, self.site_body,
-                    self.site_root, self.body_id, self.ctrl_act):
+        for arr in (
+            self.link_vert,
+            self.link_mass,
+            self.mass_added,
+            self.site_id,
+            self.site_body,
+            self.site_root,
+            self.body_id,
+            self.ctrl_act,
+        ):
             arr.flags.writeable = False
 
     def settings(self) -> dict:
@@ -333,7 +353,7 @@ class CoupledRigid(RigidSystem):
             schedule_eval(self.ctrl_sched, j, float(t), val)
             self._data.ctrl[a] = val[0]
 
-    def fork(self, timestep: float | None = None) -> "CoupledRigid":
+    def fork(self, timestep: float | None = None) -> CoupledRigid:
         """A copy with its own `MjModel` (a full copy: changing its parameters leaves this
         system's alone) and a fresh `MjData`; `timestep` (s) replaces the copy's
         `opt.timestep` if given. The site and link arrays (read-only) are shared."""

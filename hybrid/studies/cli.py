@@ -37,39 +37,74 @@ class _Parser(argparse.ArgumentParser):
 def build_study_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="hybrid study", description="Numerical studies of hybrid: JSON, Markdown and plots.")
     sub = p.add_subparsers(dest="study", required=True, parser_class=_Parser)
-    for name, help_ in (("stability", "the paper's stability comparison (6.1) and beyond"),
-                        ("extremes", "a catalogue of stiff and extreme cases: stable, diverged or refused"),
-                        ("work-precision", "error against run time of both integrators, breathing and "
-                                           "membrane-only scenes"),
-                        ("verification", "the continuum formulation against closed forms and conservation laws "
-                                         "on three mesh families"),
-                        ("convergence", "a scene's metrics on a grid of mesh levels x time steps: limits, "
-                                        "orders, and the cheapest run for 10%, 3% and 1% error")):
+    for name, help_ in (
+        ("stability", "the paper's stability comparison (6.1) and beyond"),
+        ("extremes", "a catalogue of stiff and extreme cases: stable, diverged or refused"),
+        ("work-precision", "error against run time of both integrators, breathing and membrane-only scenes"),
+        ("verification", "the continuum formulation against closed forms and conservation laws on three mesh families"),
+        (
+            "convergence",
+            "a scene's metrics on a grid of mesh levels x time steps: limits, "
+            "orders, and the cheapest run for 10%, 3% and 1% error",
+        ),
+    ):
         s = sub.add_parser(name, help=help_)
         if name == "convergence":
-            s.add_argument("scene", nargs="?", default="breathing",
-                           help="a scene whose mesh refines by level (default: breathing)")
+            s.add_argument(
+                "scene", nargs="?", default="breathing", help="a scene whose mesh refines by level (default: breathing)"
+            )
         s.add_argument("--out", required=True, metavar="DIR", help="output folder (created)")
         s.add_argument("--small", action="store_true", help="a small version (seconds; for tests)")
-        s.add_argument("--scheduler", metavar="ADDRESS", default=None,
-                       help="run on an existing Dask cluster (tcp://HOST:PORT) instead of the local cores")
+        s.add_argument(
+            "--scheduler",
+            metavar="ADDRESS",
+            default=None,
+            help="run on an existing Dask cluster (tcp://HOST:PORT) instead of the local cores",
+        )
         if name == "work-precision":
-            s.add_argument("--scene", default="breathing_paper",
-                           help="the coupled scene (default: breathing_paper, the paper's trunk at its 1 ms step)")
+            s.add_argument(
+                "--scene",
+                default="breathing_paper",
+                help="the coupled scene (default: breathing_paper, the paper's trunk at its 1 ms step)",
+            )
         if name == "convergence":
-            s.add_argument("--metric", action="append", metavar="NAME",
-                           help="a trace series whose largest value is studied (repeatable; default: "
-                                "rib_lift_mm, apex_descent_mm, pressure_pa, swept_volume_ml)")
-            s.add_argument("--levels", metavar="K0-K1", help="the mesh levels (default 0-7, --small 0-2; a mesh file: 0-2, --small 0-1)")
+            s.add_argument(
+                "--metric",
+                action="append",
+                metavar="NAME",
+                help="a trace series whose largest value is studied (repeatable; default: "
+                "rib_lift_mm, apex_descent_mm, pressure_pa, swept_volume_ml)",
+            )
+            s.add_argument(
+                "--levels",
+                metavar="K0-K1",
+                help="the mesh levels (default 0-7, --small 0-2; a mesh file: 0-2, --small 0-1)",
+            )
             s.add_argument("--steps", type=int, metavar="N", help="time steps per level, halving (default 3)")
-            s.add_argument("--duration", type=float, metavar="S", help="simulated time per run (s; default 4, one breath; --small 0.5)")
-            s.add_argument("--integrator", metavar="NAME",
-                           help="the membrane's integrator (as --set integrator=NAME; implicit_euler steps from its own "
-                                "step, not the explicit bound)")
-            s.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                           help="a scene override for every run (e.g. mesh.generator=fibonacci_sphere)")
-    r = sub.add_parser("rigid", help="a scene's rigid part: recorded wrenches replayed through MuJoCo alone, "
-                                     "point forces against the wrench, the paper's rigid algorithm's order")
+            s.add_argument(
+                "--duration",
+                type=float,
+                metavar="S",
+                help="simulated time per run (s; default 4, one breath; --small 0.5)",
+            )
+            s.add_argument(
+                "--integrator",
+                metavar="NAME",
+                help="the membrane's integrator (as --set integrator=NAME; implicit_euler steps from its own "
+                "step, not the explicit bound)",
+            )
+            s.add_argument(
+                "--set",
+                action="append",
+                default=[],
+                metavar="KEY=VALUE",
+                help="a scene override for every run (e.g. mesh.generator=fibonacci_sphere)",
+            )
+    r = sub.add_parser(
+        "rigid",
+        help="a scene's rigid part: recorded wrenches replayed through MuJoCo alone, "
+        "point forces against the wrench, the paper's rigid algorithm's order",
+    )
     r.add_argument("scene", nargs="?", help="a scene with a rigid part (default: breathing)")
     r.add_argument("--out", required=True, metavar="DIR", help="output folder (created)")
     r.add_argument("--small", action="store_true", help="200 coupled steps instead of 2000 (for tests)")
@@ -77,7 +112,7 @@ def build_study_parser() -> argparse.ArgumentParser:
 
 
 def _levels(text):
-    """"K0-K1" or "K0,K1,..." as a tuple of levels."""
+    """ "K0-K1" or "K0,K1,..." as a tuple of levels."""
     if text is None:
         return None
     try:
@@ -92,14 +127,24 @@ def _levels(text):
 def _convergence(args) -> None:
     from . import convergence
     from .convergence import DEFAULT_METRICS
-    r = convergence.run(args.out, scene=args.scene, metrics=tuple(args.metric or DEFAULT_METRICS),
-                        small=args.small, levels=_levels(args.levels), nstep=args.steps,
-                        duration_s=args.duration, scheduler=args.scheduler,
-                        overrides=tuple(args.set) + ((f"integrator={args.integrator}",) if args.integrator else ()))
+
+    r = convergence.run(
+        args.out,
+        scene=args.scene,
+        metrics=tuple(args.metric or DEFAULT_METRICS),
+        small=args.small,
+        levels=_levels(args.levels),
+        nstep=args.steps,
+        duration_s=args.duration,
+        scheduler=args.scheduler,
+        overrides=tuple(args.set) + ((f"integrator={args.integrator}",) if args.integrator else ()),
+    )
     order = ", ".join(f"{k} {_num(e['observed_order_space'], '.2f')}" for k, e in r["estimate"].items() if e)
     change = ", ".join(f"{k} {v:.2%}" for k, v in r["finest_change"].items())
-    print(f"convergence: {len(r['runs'])} runs, {len(r['failures'])} failed; order in space: {order}; "
-          f"change between the two finest levels: {change}; {r['runtime_s']:.1f} s -> {args.out}/convergence.json")
+    print(
+        f"convergence: {len(r['runs'])} runs, {len(r['failures'])} failed; order in space: {order}; "
+        f"change between the two finest levels: {change}; {r['runtime_s']:.1f} s -> {args.out}/convergence.json"
+    )
 
 
 def _num(x, spec):
@@ -108,49 +153,68 @@ def _num(x, spec):
 
 def _rigid(args) -> None:
     from . import rigid_check
+
     r = rigid_check.run(args.out, args.scene, small=args.small)
-    print(f"rigid: {r['scene']}, {r['steps']} steps: replay max |qpos| {r['replay_max_abs_qpos']:.1e}, "
-          f"|qvel| {r['replay_max_abs_qvel']:.1e}; wrench relative error {r['wrench_rel_error']:.1e}; paper "
-          f"algorithm order {r['paper_algorithm_order']:.3f}; {r['runtime_s']:.1f} s -> {args.out}/rigid.json")
+    print(
+        f"rigid: {r['scene']}, {r['steps']} steps: replay max |qpos| {r['replay_max_abs_qpos']:.1e}, "
+        f"|qvel| {r['replay_max_abs_qvel']:.1e}; wrench relative error {r['wrench_rel_error']:.1e}; paper "
+        f"algorithm order {r['paper_algorithm_order']:.3f}; {r['runtime_s']:.1f} s -> {args.out}/rigid.json"
+    )
 
 
 def _stability(args) -> None:
     from . import stability
+
     r = stability.run(args.out, small=args.small, scheduler=args.scheduler)
-    print(f"stability: Table 1 max |error| {r['table1_max_abs_error']:.1e}; Table 3 h_max "
-          + ", ".join(f"{t['model']} {t['perturbation']} l0: {t['h_max']:.3g} (paper {t['paper_h_max']})"
-                      for t in r["table3"])
-          + f"; {r['runtime_s']:.1f} s -> {args.out}/stability.json")
+    print(
+        f"stability: Table 1 max |error| {r['table1_max_abs_error']:.1e}; Table 3 h_max "
+        + ", ".join(
+            f"{t['model']} {t['perturbation']} l0: {t['h_max']:.3g} (paper {t['paper_h_max']})" for t in r["table3"]
+        )
+        + f"; {r['runtime_s']:.1f} s -> {args.out}/stability.json"
+    )
 
 
 def _extremes(args) -> None:
     from . import extremes
+
     r = extremes.run(args.out, small=args.small, scheduler=args.scheduler)
     counts = {k: sum(c["outcome"] == k for c in r["cases"]) for k in ("stable", "diverged", "refused")}
-    print(f"extremes: {len(r['cases'])} cases, " + ", ".join(f"{n} {k}" for k, n in counts.items())
-          + f"; reasonable cases failing: {', '.join(r['reasonable_failures']) or 'none'}; "
-          f"{len(r['bugs'])} bug(s); {r['runtime_s']:.1f} s -> {args.out}/extremes.json")
+    print(
+        f"extremes: {len(r['cases'])} cases, "
+        + ", ".join(f"{n} {k}" for k, n in counts.items())
+        + f"; reasonable cases failing: {', '.join(r['reasonable_failures']) or 'none'}; "
+        f"{len(r['bugs'])} bug(s); {r['runtime_s']:.1f} s -> {args.out}/extremes.json"
+    )
 
 
 def _work_precision(args) -> None:
     from . import work_precision
+
     r = work_precision.run(args.out, small=args.small, scheduler=args.scheduler, scene=args.scene)
-    print("work-precision: observed order " + ", ".join(f"{k} {p:.2f}" for k, p in r["order"].items())
-          + "; reference converged: " + ", ".join(f"{s} {v['converged']}" for s, v in r["reference"].items())
-          + f"; {len(r['failures'])} failed run(s); {r['runtime_s']:.1f} s -> {args.out}/work_precision.json")
+    print(
+        "work-precision: observed order "
+        + ", ".join(f"{k} {p:.2f}" for k, p in r["order"].items())
+        + "; reference converged: "
+        + ", ".join(f"{s} {v['converged']}" for s, v in r["reference"].items())
+        + f"; {len(r['failures'])} failed run(s); {r['runtime_s']:.1f} s -> {args.out}/work_precision.json"
+    )
 
 
 def _verification(args) -> None:
     from . import verification
+
     r = verification.run(args.out, small=args.small)
     worst = {}
     for row in r["rows"]:
         if row["rel_error"] is not None and row["oracle"] in ("pressure_sphere", "hanging_sphere"):
             worst[(row["oracle"], row["mesh_family"])] = row  # the finest level comes last
-    print("verification: " + ", ".join(f"{o} {f} {row['rel_error']:.2%} at {row['nvert']} points"
-                                      for (o, f), row in worst.items())
-          + f"; hanging sphere across families {r['hanging_finest_spread']:.2%}; "
-          f"{r['runtime_s']:.1f} s -> {args.out}/verification.json")
+    print(
+        "verification: "
+        + ", ".join(f"{o} {f} {row['rel_error']:.2%} at {row['nvert']} points" for (o, f), row in worst.items())
+        + f"; hanging sphere across families {r['hanging_finest_spread']:.2%}; "
+        f"{r['runtime_s']:.1f} s -> {args.out}/verification.json"
+    )
 
 
 def main_study(argv) -> int:
@@ -159,9 +223,14 @@ def main_study(argv) -> int:
     args = build_study_parser().parse_args(list(argv))
     try:
         out_folder(Path(args.out))
-        {"stability": _stability, "extremes": _extremes,
-         "work-precision": _work_precision, "verification": _verification,
-         "convergence": _convergence, "rigid": _rigid}[args.study](args)
+        {
+            "stability": _stability,
+            "extremes": _extremes,
+            "work-precision": _work_precision,
+            "verification": _verification,
+            "convergence": _convergence,
+            "rigid": _rigid,
+        }[args.study](args)
         return 0
     except HybridError as exc:
         sys.stderr.write(f"hybrid study: error: {' '.join(str(exc).split())}\n")

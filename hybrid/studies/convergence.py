@@ -56,8 +56,10 @@ RATIO_TIME = 2.0
 #: (levels, steps per level, duration s or None for the scene's) by size
 #: (the full size: levels 0-7, whose two finest change by under 2% on the breathing scene, over
 #: one breath of the packaged scenes, 4 s)
-SIZES = {False: dict(levels=(0, 1, 2, 3, 4, 5, 6, 7), nstep=3, duration_s=4.0),
-         True: dict(levels=(0, 1, 2), nstep=2, duration_s=0.5)}
+SIZES = {
+    False: dict(levels=(0, 1, 2, 3, 4, 5, 6, 7), nstep=3, duration_s=4.0),
+    True: dict(levels=(0, 1, 2), nstep=2, duration_s=0.5),
+}
 #: the default levels of a mesh read from a file (full, small)
 FILE_LEVELS = {False: (0, 1, 2), True: (0, 1)}
 #: an observed order outside this range is not trusted for extrapolation: the
@@ -68,6 +70,7 @@ ORDER_RANGE = (0.5, 4.0)
 def _model(scene, overrides, level, dt):
     from ..model import compile_scene
     from ..resolve import resolve_scene
+
     sets = [*overrides, f"mesh.level={level}"]
     if dt is not None:
         sets.append(f"dt_s={dt!r}")
@@ -77,6 +80,7 @@ def _model(scene, overrides, level, dt):
 def base_step(scene, overrides, level) -> tuple[float, int]:
     """(dt0, nvert) at a level: the scene's step there (see the module docstring)."""
     from ..model import auto_dt
+
     m = _model(scene, overrides, level, None)
     if m.scene.integrator == "implicit_euler":  # not bounded by stability: its own step ("auto": 4x symplectic's)
         return m.dt_s, m.nvert
@@ -86,8 +90,10 @@ def base_step(scene, overrides, level) -> tuple[float, int]:
 def simulate(scene, overrides, level, dt, duration_s, metrics) -> dict:
     """One run of the grid (a sweep task): {"values": {metric: its max}, "wall_s",
     "nvert", "status"}."""
-    from ..run import RunFailed, run as run_scene
+    from ..run import RunFailed
+    from ..run import run as run_scene
     from ..simulation import Simulation
+
     model = _model(scene, overrides, level, dt)
     Simulation(model).step(1)  # compiles (or loads the cache) outside the timing
     sim = Simulation(model)
@@ -98,10 +104,16 @@ def simulate(scene, overrides, level, dt, duration_s, metrics) -> dict:
     table = summary["metrics"]
     missing = [k for k in metrics if k not in table]
     if missing:
-        raise HybridError(f"--metric: scene {model.scene.name!r} has no series {missing}; "
-                          f"expected some of {sorted(table)}")
-    return {"values": {k: table[k]["max"] for k in metrics}, "wall_s": summary["wall_s"],
-            "nvert": model.nvert, "status": summary["status"], "error": summary.get("error")}
+        raise HybridError(
+            f"--metric: scene {model.scene.name!r} has no series {missing}; expected some of {sorted(table)}"
+        )
+    return {
+        "values": {k: table[k]["max"] for k in metrics},
+        "wall_s": summary["wall_s"],
+        "nvert": model.nvert,
+        "status": summary["status"],
+        "error": summary.get("error"),
+    }
 
 
 def richardson(values, ratio: float, order: float | None = None):
@@ -114,11 +126,14 @@ def richardson(values, ratio: float, order: float | None = None):
         d1, d2 = v[-2] - v[-3], v[-1] - v[-2]
         if d1 != 0 and d2 != 0 and d1 * d2 > 0:
             observed = math.log(abs(d1 / d2)) / math.log(ratio)
-    p = order if order is not None else (observed if observed is not None and
-                                         ORDER_RANGE[0] <= observed <= ORDER_RANGE[1] else 1.0)
+    p = (
+        order
+        if order is not None
+        else (observed if observed is not None and ORDER_RANGE[0] <= observed <= ORDER_RANGE[1] else 1.0)
+    )
     if len(v) < 2:
         return float(v[-1]), observed, p
-    return float(v[-1] + (v[-1] - v[-2]) / (ratio ** p - 1.0)), observed, p
+    return float(v[-1] + (v[-1] - v[-2]) / (ratio**p - 1.0)), observed, p
 
 
 #: the finest levels the spatial fit uses (the coarse ones are not yet asymptotic)
@@ -140,7 +155,7 @@ def fit_space(levels, values, nfit: int = FIT_LEVELS, ratio: float = RATIO_SPACE
     h = ratio ** (-lv)
 
     def solve(p, hh, xx):
-        a = np.stack([np.ones_like(hh), hh ** p], axis=1)
+        a = np.stack([np.ones_like(hh), hh**p], axis=1)
         coef, *_ = np.linalg.lstsq(a, xx, rcond=None)
         return coef, float(np.sqrt(np.mean((a @ coef - xx) ** 2)))
 
@@ -148,7 +163,7 @@ def fit_space(levels, values, nfit: int = FIT_LEVELS, ratio: float = RATIO_SPACE
     (coef, rms), p = min(fits, key=lambda f: f[0][1])
     observed = float(p)
     if p in (FIT_ORDERS[0], FIT_ORDERS[-1]):  # no order fits: the values are not yet asymptotic
-        observed, p = None, 1.0                # the formal order of the regions' borders
+        observed, p = None, 1.0  # the formal order of the regions' borders
         coef, rms = solve(p, h, x)
     coarser = solve(p, h[:-1], x[:-1])[0][0] if len(x) >= 3 else None
     return float(coef[0]), observed, rms, (float(coarser) if coarser is not None else None)
@@ -161,8 +176,7 @@ def estimate(runs: list, metrics, levels, ratio: float = RATIO_SPACE) -> dict:
     for k in metrics:
         per_level, orders_t = [], []
         for level in levels:
-            rows = sorted((r for r in runs if r["level"] == level and r["status"] == "ok"),
-                          key=lambda r: -r["dt"])
+            rows = sorted((r for r in runs if r["level"] == level and r["status"] == "ok"), key=lambda r: -r["dt"])
             if not rows:
                 continue
             x0, q_obs, _ = richardson([r["values"][k] for r in rows], RATIO_TIME)
@@ -182,11 +196,17 @@ def estimate(runs: list, metrics, levels, ratio: float = RATIO_SPACE) -> dict:
             limit, p_obs, p = richardson(xs, ratio)
             err_est = None
         scale = abs(limit) if limit != 0 else 1.0
-        out[k] = {"metric": k, "limit": limit, "limit_error_estimate": err_est,
-                  "observed_order_space": p_obs, "order_used_space": p,
-                  "observed_order_time": float(np.median(orders_t)) if orders_t else None,
-                  "levels": [lv for lv, _ in per_level], "value_by_level": xs,  # at dt -> 0
-                  "error_by_level": [abs(x - limit) / scale for x in xs]}
+        out[k] = {
+            "metric": k,
+            "limit": limit,
+            "limit_error_estimate": err_est,
+            "observed_order_space": p_obs,
+            "order_used_space": p,
+            "observed_order_time": float(np.median(orders_t)) if orders_t else None,
+            "levels": [lv for lv, _ in per_level],
+            "value_by_level": xs,  # at dt -> 0
+            "error_by_level": [abs(x - limit) / scale for x in xs],
+        }
         for r in runs:
             if r["status"] == "ok":
                 r.setdefault("rel_error", {})[k] = abs(r["values"][k] - limit) / scale
@@ -206,12 +226,27 @@ def recommend(runs: list, est: dict, metrics, targets=TARGETS, ratio: float = RA
             meet = [r for r in ok if r["rel_error"][k] <= target]
             if meet:
                 best = min(meet, key=lambda r: r["wall_s_per_sim_s"])
-                rows.append({"metric": k, "target_rel_error": target, "level": best["level"],
-                             "nvert": best["nvert"], "dt": best["dt"], "rel_error": best["rel_error"][k],
-                             "wall_s_per_sim_s": best["wall_s_per_sim_s"], "predicted": False})
+                rows.append(
+                    {
+                        "metric": k,
+                        "target_rel_error": target,
+                        "level": best["level"],
+                        "nvert": best["nvert"],
+                        "dt": best["dt"],
+                        "rel_error": best["rel_error"][k],
+                        "wall_s_per_sim_s": best["wall_s_per_sim_s"],
+                        "predicted": False,
+                    }
+                )
             elif finest is not None:
-                rows.append({"metric": k, "target_rel_error": target, "predicted": True,
-                             **_predict(e, runs, finest, target, ratio)})
+                rows.append(
+                    {
+                        "metric": k,
+                        "target_rel_error": target,
+                        "predicted": True,
+                        **_predict(e, runs, finest, target, ratio),
+                    }
+                )
     return rows
 
 
@@ -226,8 +261,7 @@ def _predict(e: dict, runs: list, finest: dict, target: float, ratio: float = RA
     p = e["order_used_space"]
     need = target / 2
     k_last = levels[-1]
-    level = k_last if err[-1] <= need else \
-        k_last + math.ceil(math.log(err[-1] / need) / (p * math.log(ratio)))
+    level = k_last if err[-1] <= need else k_last + math.ceil(math.log(err[-1] / need) / (p * math.log(ratio)))
     same = sorted((r for r in runs if r["level"] == k_last and r["status"] == "ok"), key=lambda r: r["dt"])
     scale = abs(e["limit"]) or 1.0
     # the stable step's fall per level, as the two finest levels' own steps show (at most halving)
@@ -242,11 +276,21 @@ def _predict(e: dict, runs: list, finest: dict, target: float, ratio: float = RA
     return {"level": level, "nvert": nvert, "dt": dt, "rel_error": None, "wall_s_per_sim_s": cost}
 
 
-def run(out_dir, *, scene: str = "breathing", metrics=DEFAULT_METRICS, small: bool = False,
-        levels=None, nstep: int | None = None, duration_s: float | None = None, overrides=(),
-        scheduler: str | None = None) -> dict:
+def run(
+    out_dir,
+    *,
+    scene: str = "breathing",
+    metrics=DEFAULT_METRICS,
+    small: bool = False,
+    levels=None,
+    nstep: int | None = None,
+    duration_s: float | None = None,
+    overrides=(),
+    scheduler: str | None = None,
+) -> dict:
     """The study (module docstring); returns what convergence.json holds."""
     from ..resolve import resolve_scene
+
     t0 = time.perf_counter()
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -258,15 +302,26 @@ def run(out_dir, *, scene: str = "breathing", metrics=DEFAULT_METRICS, small: bo
     levels = tuple(levels)
     nstep = size["nstep"] if nstep is None else int(nstep)
     if nstep < 1 or len(levels) < 2:
-        raise HybridError(f"convergence: expected at least two mesh levels and one step per level, "
-                          f"received levels {list(levels)} and {nstep} step(s)")
+        raise HybridError(
+            f"convergence: expected at least two mesh levels and one step per level, "
+            f"received levels {list(levels)} and {nstep} step(s)"
+        )
     duration = float(size["duration_s"] or sc.duration_s) if duration_s is None else float(duration_s)
     metrics = tuple(metrics)
     grid = []
     for level in levels:
         dt0, _ = base_step(scene, overrides, level)
-        grid += [dict(scene=scene, overrides=tuple(overrides), level=level, dt=dt0 / 2 ** j,
-                      duration_s=duration, metrics=metrics) for j in range(nstep)]
+        grid += [
+            dict(
+                scene=scene,
+                overrides=tuple(overrides),
+                level=level,
+                dt=dt0 / 2**j,
+                duration_s=duration,
+                metrics=metrics,
+            )
+            for j in range(nstep)
+        ]
     results = sweep(simulate, grid, scheduler=scheduler, on_error="return", out=out / "runs")
     runs, failures = [], []
     for g, r in zip(grid, results):
@@ -275,16 +330,31 @@ def run(out_dir, *, scene: str = "breathing", metrics=DEFAULT_METRICS, small: bo
                 raise r
             failures.append({"level": g["level"], "dt": g["dt"], "error": str(r)})
             continue
-        row = {"level": g["level"], "nvert": r["nvert"], "dt": g["dt"], "values": r["values"],
-               "wall_s": r["wall_s"], "wall_s_per_sim_s": r["wall_s"] / duration, "status": r["status"]}
+        row = {
+            "level": g["level"],
+            "nvert": r["nvert"],
+            "dt": g["dt"],
+            "values": r["values"],
+            "wall_s": r["wall_s"],
+            "wall_s_per_sim_s": r["wall_s"] / duration,
+            "status": r["status"],
+        }
         if r["status"] != "ok":
             failures.append({"level": g["level"], "dt": g["dt"], "error": r["error"]})
         runs.append(row)
     ratio = RATIO_SPACE_FILE if from_file else RATIO_SPACE
-    res = {"scene": sc.name, "overrides": list(overrides), "metrics": list(metrics), "duration_s": duration,
-           "spacing_ratio": ratio,
-           "levels": list(levels), "steps_per_level": nstep, "runs": runs, "failures": failures,
-           "runtime_s": time.perf_counter() - t0}
+    res = {
+        "scene": sc.name,
+        "overrides": list(overrides),
+        "metrics": list(metrics),
+        "duration_s": duration,
+        "spacing_ratio": ratio,
+        "levels": list(levels),
+        "steps_per_level": nstep,
+        "runs": runs,
+        "failures": failures,
+        "runtime_s": time.perf_counter() - t0,
+    }
     return write(out, res)
 
 
@@ -297,8 +367,12 @@ def write(out, res: dict) -> dict:
         r.pop("rel_error", None)
     ratio = res.get("spacing_ratio", RATIO_SPACE)
     est = estimate(runs, metrics, levels, ratio)
-    res = {**res, "estimate": est, "recommendation": recommend(runs, est, metrics, ratio=ratio),
-           "finest_change": _finest_change(runs, metrics, levels)}
+    res = {
+        **res,
+        "estimate": est,
+        "recommendation": recommend(runs, est, metrics, ratio=ratio),
+        "finest_change": _finest_change(runs, metrics, levels),
+    }
     write_json(out / "convergence.json", res)
     (out / "convergence.md").write_text(_markdown(res))
     _plot(out / "convergence.png", res)
@@ -323,40 +397,64 @@ def _fmt(x, spec=".4g"):
 
 
 def _markdown(res: dict) -> str:
-    lines = [f"# Convergence of `{res['scene']}` in space and time", "",
-             f"Mesh levels {res['levels']} x {res['steps_per_level']} time steps per level, "
-             f"{res['duration_s']:g} s simulated per run; overrides {res['overrides'] or 'none'}. "
-             "Errors are relative to the Richardson limit.", "",
-             "| metric | limit | its error estimate | order in space | order in time | change between the two finest levels |",
-             "|---|---|---|---|---|---|"]
+    lines = [
+        f"# Convergence of `{res['scene']}` in space and time",
+        "",
+        f"Mesh levels {res['levels']} x {res['steps_per_level']} time steps per level, "
+        f"{res['duration_s']:g} s simulated per run; overrides {res['overrides'] or 'none'}. "
+        "Errors are relative to the Richardson limit.",
+        "",
+        "| metric | limit | its error estimate | order in space | order in time | change between the two finest levels |",
+        "|---|---|---|---|---|---|",
+    ]
     for k in res["metrics"]:
         e = res["estimate"].get(k)
         if e is None:
             continue
-        lines.append(f"| {k} | {_fmt(e['limit'])} | {_fmt(e['limit_error_estimate'], '.2g')} | "
-                     f"{_fmt(e['observed_order_space'], '.2f')} | {_fmt(e['observed_order_time'], '.2f')} | "
-                     f"{_fmt(res['finest_change'].get(k), '.2%')} |")
-    lines += ["", "## Runs", "", "| level | points | dt (s) | " + " | ".join(res["metrics"]) + " | wall s per sim s |",
-              "|---|---|---|" + "---|" * len(res["metrics"]) + "---|"]
+        lines.append(
+            f"| {k} | {_fmt(e['limit'])} | {_fmt(e['limit_error_estimate'], '.2g')} | "
+            f"{_fmt(e['observed_order_space'], '.2f')} | {_fmt(e['observed_order_time'], '.2f')} | "
+            f"{_fmt(res['finest_change'].get(k), '.2%')} |"
+        )
+    lines += [
+        "",
+        "## Runs",
+        "",
+        "| level | points | dt (s) | " + " | ".join(res["metrics"]) + " | wall s per sim s |",
+        "|---|---|---|" + "---|" * len(res["metrics"]) + "---|",
+    ]
     for r in res["runs"]:
-        lines.append(f"| {r['level']} | {r['nvert']} | {r['dt']:.3g} | "
-                     + " | ".join(_fmt(r["values"][k]) for k in res["metrics"]) + f" | {r['wall_s_per_sim_s']:.3g} |")
-    lines += ["", "## Recommendation", "",
-              "| metric | target | level | points | dt (s) | error | wall s per sim s | |", "|---|---|---|---|---|---|---|---|"]
+        lines.append(
+            f"| {r['level']} | {r['nvert']} | {r['dt']:.3g} | "
+            + " | ".join(_fmt(r["values"][k]) for k in res["metrics"])
+            + f" | {r['wall_s_per_sim_s']:.3g} |"
+        )
+    lines += [
+        "",
+        "## Recommendation",
+        "",
+        "| metric | target | level | points | dt (s) | error | wall s per sim s | |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
     for r in res["recommendation"]:
-        lines.append(f"| {r['metric']} | {r['target_rel_error']:.0%} | {r['level']} | {r['nvert']} | {r['dt']:.3g} | "
-                     f"{_fmt(r['rel_error'], '.2%')} | {r['wall_s_per_sim_s']:.3g} | "
-                     f"{'predicted' if r['predicted'] else 'measured'} |")
+        lines.append(
+            f"| {r['metric']} | {r['target_rel_error']:.0%} | {r['level']} | {r['nvert']} | {r['dt']:.3g} | "
+            f"{_fmt(r['rel_error'], '.2%')} | {r['wall_s_per_sim_s']:.3g} | "
+            f"{'predicted' if r['predicted'] else 'measured'} |"
+        )
     if res["failures"]:
-        lines += ["", "## Failed runs", ""] + [f"- level {f['level']}, dt {f['dt']:.3g} s: {f['error']}"
-                                               for f in res["failures"]]
+        lines += ["", "## Failed runs", ""] + [
+            f"- level {f['level']}, dt {f['dt']:.3g} s: {f['error']}" for f in res["failures"]
+        ]
     return "\n".join(lines) + "\n"
 
 
 def _plot(path: Path, res: dict) -> None:
     import matplotlib
+
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+
     ok = [r for r in res["runs"] if r["status"] == "ok" and "rel_error" in r]
     ms = [k for k in res["metrics"] if res["estimate"].get(k)]
     fig, axes = plt.subplots(1, max(len(ms), 1), figsize=(4.2 * max(len(ms), 1), 3.8), squeeze=False)
@@ -364,8 +462,12 @@ def _plot(path: Path, res: dict) -> None:
         for lv in res["levels"]:  # one curve per level, across time steps
             rows = sorted((r for r in ok if r["level"] == lv), key=lambda r: r["wall_s_per_sim_s"])
             if rows:
-                ax.loglog([r["wall_s_per_sim_s"] for r in rows], [max(r["rel_error"][k], 1e-16) for r in rows],
-                          "o-", label=f"level {lv}")
+                ax.loglog(
+                    [r["wall_s_per_sim_s"] for r in rows],
+                    [max(r["rel_error"][k], 1e-16) for r in rows],
+                    "o-",
+                    label=f"level {lv}",
+                )
         for j in range(res["steps_per_level"]):  # one per time step index, across levels
             rows = []
             for lv in res["levels"]:
@@ -373,8 +475,14 @@ def _plot(path: Path, res: dict) -> None:
                 if len(same) > j:
                     rows.append(same[j])
             if len(rows) > 1:
-                ax.loglog([r["wall_s_per_sim_s"] for r in rows], [max(r["rel_error"][k], 1e-16) for r in rows],
-                          "k--", lw=0.8, alpha=0.5, label="dt0/%d, across levels" % 2 ** j if j == 0 else None)
+                ax.loglog(
+                    [r["wall_s_per_sim_s"] for r in rows],
+                    [max(r["rel_error"][k], 1e-16) for r in rows],
+                    "k--",
+                    lw=0.8,
+                    alpha=0.5,
+                    label=f"dt0/{2**j}, across levels" if j == 0 else None,
+                )
         ax.set_title(k)
         ax.set_xlabel("wall s per simulated s")
         ax.set_ylabel("relative error")

@@ -34,19 +34,19 @@ import tempfile
 import time
 import traceback
 import xml.etree.ElementTree as ET
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
-from ..rigid import resolve_mjcf
 from ..demo import membrane_demo
 from ..errors import ConstraintError, HybridError, SimulationDiverged
 from ..mesh import Mesh, uv_sphere
 from ..model import Model, compile_scene
 from ..regions import HalfSpace
 from ..resolve import resolve_scene
+from ..rigid import resolve_mjcf
 from ..scene import AppliedForce, Damping, Gravity, Membrane, MeshSpec, Muscle, MuscleFibres, Scene, ShapeMemory
 from ..schedule import Breathing
 from ..simulation import Simulation
@@ -61,33 +61,41 @@ OUTCOMES = ("stable", "diverged", "refused")
 class Case:
     name: str
     what: str
-    build: Callable[[], object]     # -> Scene or Model; may raise HybridError (refused)
-    duration_s: float = 4.0         # one breath
-    perturb_l0: float = 0.0         # initial random displacement of the free points, in mean edges
-    reasonable: bool = True         # would a user plausibly run it?
+    build: Callable[[], object]  # -> Scene or Model; may raise HybridError (refused)
+    duration_s: float = 4.0  # one breath
+    perturb_l0: float = 0.0  # initial random displacement of the free points, in mean edges
+    reasonable: bool = True  # would a user plausibly run it?
     small_duration_s: float = 0.3
 
 
 def _replace_force(scene: Scene, kind, **changes) -> Scene:
-    return dataclasses.replace(scene, forces=tuple(
-        dataclasses.replace(f, **changes) if isinstance(f, kind) else f for f in scene.forces))
+    return dataclasses.replace(
+        scene, forces=tuple(dataclasses.replace(f, **changes) if isinstance(f, kind) else f for f in scene.forces)
+    )
 
 
 def _scaled(scene: Scene, kind, field: str, factor: float) -> Scene:
-    return dataclasses.replace(scene, forces=tuple(
-        dataclasses.replace(f, **{field: getattr(f, field) * factor}) if isinstance(f, kind) else f
-        for f in scene.forces))
+    return dataclasses.replace(
+        scene,
+        forces=tuple(
+            dataclasses.replace(f, **{field: getattr(f, field) * factor}) if isinstance(f, kind) else f
+            for f in scene.forces
+        ),
+    )
 
 
 def _schedule_x(scene: Scene, kind, field: str, factor: float) -> Scene:
     """The scene with the schedule `field` of its `kind` terms times factor (a
     Breathing waveform's peak, or a number)."""
+
     def scale(f):
         if not isinstance(f, kind):
             return f
         s = getattr(f, field)
-        return dataclasses.replace(f, **{field: dataclasses.replace(s, peak=s.peak * factor)
-                                         if isinstance(s, Breathing) else s * factor})
+        return dataclasses.replace(
+            f, **{field: dataclasses.replace(s, peak=s.peak * factor) if isinstance(s, Breathing) else s * factor}
+        )
+
     return dataclasses.replace(scene, forces=tuple(scale(f) for f in scene.forces))
 
 
@@ -99,8 +107,10 @@ def _flat_demo(thickness_ratio: float) -> Scene:
     m = uv_sphere(r, base.mesh.segments, base.mesh.rings)
     pos = m.vert_pos * np.array([1.0, 1.0, thickness_ratio])
     mesh = Mesh.from_arrays(pos, m.face_vert, name=f"flat_{thickness_ratio:g}")
-    regions = {"diaphragm": HalfSpace((0.0, 0.0, 0.05 * thickness_ratio), (0.0, 0.0, 1.0)),
-               "pelvis": HalfSpace((0.0, 0.0, -0.09 * thickness_ratio), (0.0, 0.0, -1.0))}
+    regions = {
+        "diaphragm": HalfSpace((0.0, 0.0, 0.05 * thickness_ratio), (0.0, 0.0, 1.0)),
+        "pelvis": HalfSpace((0.0, 0.0, -0.09 * thickness_ratio), (0.0, 0.0, -1.0)),
+    }
     sc = dataclasses.replace(base, mesh=mesh, regions=regions)
     return _replace_force(sc, Muscle, toward_m=(0.0, 0.0, r * thickness_ratio))
 
@@ -118,6 +128,7 @@ def _rib_variant(tmp: Path, name: str, edit: Callable[[ET.Element], None]) -> Ca
         path = tmp / f"trunk_{name}.xml"
         tree.write(path)
         return dataclasses.replace(sc, rigid=dataclasses.replace(sc.rigid, mjcf=str(path)))
+
     return build
 
 
@@ -153,29 +164,58 @@ def continuum_demo() -> Scene:
     apex with the scene's force-length relation (width 0.67), a drag of 200 N s/m^3, gravity, the bottom nailed, incompressible, dt 1 ms
     (the rigid model's step)."""
     base = membrane_demo()
-    return Scene(name="continuum_demo", mesh=base.mesh, masses=base.masses, regions=base.regions,
-                 forces=(Gravity(), Membrane(500.0), Damping(drag_n_s_per_m3=200.0),
-                         MuscleFibres("diaphragm", Breathing(period_s=4.0, inspiration_fraction=0.4, peak=20.0),
-                                      toward_m=(0.0, 0.0, base.mesh.radius_m), force_length_width=0.67)),
-                 constraints=base.constraints, dt_s=1e-3, integrator="symplectic_euler")
+    return Scene(
+        name="continuum_demo",
+        mesh=base.mesh,
+        masses=base.masses,
+        regions=base.regions,
+        forces=(
+            Gravity(),
+            Membrane(500.0),
+            Damping(drag_n_s_per_m3=200.0),
+            MuscleFibres(
+                "diaphragm",
+                Breathing(period_s=4.0, inspiration_fraction=0.4, peak=20.0),
+                toward_m=(0.0, 0.0, base.mesh.radius_m),
+                force_length_width=0.67,
+            ),
+        ),
+        constraints=base.constraints,
+        dt_s=1e-3,
+        integrator="symplectic_euler",
+    )
 
 
 def implicit_variant(case: Case) -> Case:
     """The case run with implicit Euler at its own step: `<case>/implicit_euler`. A
     paper-formulation case is refused (implicit Euler needs the continuum one)."""
+
     def build():
         built = case.build()
         if isinstance(built, Model):  # a step set on the compiled model: keep it
             return compile_scene(dataclasses.replace(built.scene, integrator="implicit_euler", dt_s=built.dt_s))
         return dataclasses.replace(built, integrator="implicit_euler")
-    return dataclasses.replace(case, name=f"{case.name}/implicit_euler", build=build,
-                               what=f"{case.what}; implicit Euler at the same step")
+
+    return dataclasses.replace(
+        case, name=f"{case.name}/implicit_euler", build=build, what=f"{case.what}; implicit Euler at the same step"
+    )
 
 
 #: the stiff cases, each also run with implicit Euler at its own step
-STIFF = ("shape_memory_x100", "shape_memory_x1e4", "dt_at_bound", "dt_2x_bound", "tiny_masses", "mesh_40962",
-         "muscle_x100", "continuum_membrane_x100", "continuum_muscle_x100", "continuum_mesh_40962",
-         "continuum_dt_at_bound", "continuum_dt_2x_bound")
+STIFF = (
+    "shape_memory_x100",
+    "shape_memory_x1e4",
+    "dt_at_bound",
+    "dt_2x_bound",
+    "tiny_masses",
+    "mesh_40962",
+    "muscle_x100",
+    "continuum_membrane_x100",
+    "continuum_muscle_x100",
+    "continuum_mesh_40962",
+    "continuum_dt_at_bound",
+    "continuum_dt_2x_bound",
+)
 
 
 def cases(tmp: Path) -> list[Case]:
@@ -188,77 +228,180 @@ def _cases(tmp: Path) -> list[Case]:
     cdemo = continuum_demo
     return [
         Case("continuum_baseline", "continuum_demo as defined (80 points, sheet 500 N/m, dt 1 ms)", cdemo),
-        Case("continuum_membrane_x100", "continuum_demo, Young's modulus 500 -> 5e4 N/m, dt 1 ms",
-             lambda: _scaled(cdemo(), Membrane, "youngs_modulus_n_per_m", 100.0), reasonable=False),
-        Case("continuum_muscle_x100", "continuum_demo, muscle fibres' peak tension 20 -> 2000 N/m, dt 1 ms",
-             lambda: _schedule_x(cdemo(), MuscleFibres, "tension_n_per_m", 100.0), reasonable=False),
-        Case("continuum_mesh_40962", "continuum_demo on an icosphere of 40962 points (same materials, dt 1 ms)",
-             lambda: dataclasses.replace(cdemo(), mesh=MeshSpec(generator="icosphere", subdivisions=6,
-                                                                radius_m=0.12)),
-             duration_s=0.05, small_duration_s=0.005, reasonable=False),
-        Case("continuum_dt_at_bound", "continuum_demo at dt = model.dt_stable_s",
-             lambda: (lambda m: m.with_dt(m.dt_stable_s))(compile_scene(cdemo()))),
-        Case("continuum_dt_2x_bound", "continuum_demo at dt = 2 x model.dt_stable_s",
-             lambda: (lambda m: m.with_dt(2.0 * m.dt_stable_s))(compile_scene(cdemo())), reasonable=False),
-        Case("baseline_membrane", "membrane_demo as shipped (80 points, shape memory 3000 N/m, dt 1 ms)",
-             lambda: demo()),
+        Case(
+            "continuum_membrane_x100",
+            "continuum_demo, Young's modulus 500 -> 5e4 N/m, dt 1 ms",
+            lambda: _scaled(cdemo(), Membrane, "youngs_modulus_n_per_m", 100.0),
+            reasonable=False,
+        ),
+        Case(
+            "continuum_muscle_x100",
+            "continuum_demo, muscle fibres' peak tension 20 -> 2000 N/m, dt 1 ms",
+            lambda: _schedule_x(cdemo(), MuscleFibres, "tension_n_per_m", 100.0),
+            reasonable=False,
+        ),
+        Case(
+            "continuum_mesh_40962",
+            "continuum_demo on an icosphere of 40962 points (same materials, dt 1 ms)",
+            lambda: dataclasses.replace(cdemo(), mesh=MeshSpec(generator="icosphere", subdivisions=6, radius_m=0.12)),
+            duration_s=0.05,
+            small_duration_s=0.005,
+            reasonable=False,
+        ),
+        Case(
+            "continuum_dt_at_bound",
+            "continuum_demo at dt = model.dt_stable_s",
+            lambda: (lambda m: m.with_dt(m.dt_stable_s))(compile_scene(cdemo())),
+        ),
+        Case(
+            "continuum_dt_2x_bound",
+            "continuum_demo at dt = 2 x model.dt_stable_s",
+            lambda: (lambda m: m.with_dt(2.0 * m.dt_stable_s))(compile_scene(cdemo())),
+            reasonable=False,
+        ),
+        Case(
+            "baseline_membrane", "membrane_demo as shipped (80 points, shape memory 3000 N/m, dt 1 ms)", lambda: demo()
+        ),
         Case("baseline_coupled", "the breathing scene as shipped (membrane + MuJoCo ribs)", _breathing),
-        Case("shape_memory_x100", "membrane_demo, shape memory 3000 -> 3e5 N/m, dt 1 ms",
-             lambda: _scaled(demo(), ShapeMemory, "stiffness_n_per_m", 100.0)),
-        Case("shape_memory_x1e4", "membrane_demo, shape memory 3000 -> 3e7 N/m, dt 1 ms",
-             lambda: _scaled(demo(), ShapeMemory, "stiffness_n_per_m", 1e4), reasonable=False),
-        Case("dt_half_bound", "membrane_demo at dt = 0.5 x model.dt_stable_s (what a divergence suggests)",
-             lambda: (lambda m: m.with_dt(0.5 * m.dt_stable_s))(compile_scene(demo()))),
-        Case("dt_at_bound", "membrane_demo at dt = model.dt_stable_s (the per-point linear bound)",
-             lambda: (lambda m: m.with_dt(m.dt_stable_s))(compile_scene(demo()))),
-        Case("dt_2x_bound", "membrane_demo at dt = 2 x model.dt_stable_s",
-             lambda: (lambda m: m.with_dt(2.0 * m.dt_stable_s))(compile_scene(demo())), reasonable=False),
-        Case("tiny_masses", "membrane_demo, total mass 4 kg -> 0.4 g (x 1e-4), dt 1 ms",
-             lambda: dataclasses.replace(demo(), masses=dataclasses.replace(demo().masses, total_kg=4e-4)),
-             reasonable=False),
-        Case("no_damping", "membrane_demo without its damping term (symplectic Euler)",
-             lambda: demo().without("damping")),
-        Case("no_damping_explicit_euler", "membrane_demo without damping, explicit Euler (no stable step)",
-             lambda: dataclasses.replace(demo().without("damping"), integrator="explicit_euler"),
-             reasonable=False),
-        Case("perturbation_0.7_l0", "membrane_demo released from random displacements of 0.7 mean edge",
-             lambda: demo(), perturb_l0=0.7),
-        Case("perturbation_1.5_l0", "membrane_demo released from random displacements of 1.5 mean edge",
-             lambda: demo(), perturb_l0=1.5, reasonable=False),
-        Case("sliver_triangles", "membrane_demo on a UV sphere of 96 segments x 4 rings (aspect ~ 20)",
-             lambda: dataclasses.replace(demo(), mesh=MeshSpec(generator="uv_sphere", radius_m=0.12,
-                                                               segments=96, rings=4))),
-        Case("nearly_flat_body", "membrane_demo squashed to an ellipsoid 1/100 as thick as wide",
-             lambda: _flat_demo(0.01)),
-        Case("flat_body", "membrane_demo squashed flat (zero thickness, zero volume)",
-             lambda: _flat_demo(0.0), reasonable=False),
-        Case("mesh_40962", "membrane_demo on an icosphere of 40962 points (same 4 kg, 3000 N/m, dt 1 ms)",
-             lambda: dataclasses.replace(demo(), mesh=MeshSpec(generator="icosphere", subdivisions=6,
-                                                               radius_m=0.12)),
-             duration_s=0.05, small_duration_s=0.005),
-        Case("muscle_x100", "membrane_demo, muscle peak 60 -> 6000 N/m",
-             lambda: _schedule_x(demo(), Muscle, "stiffness", 100.0), reasonable=False),
-        Case("rib_springs_x1000", "breathing scene, rib hinge stiffness 12 -> 1.2e4 N m/rad, sternum "
-             "1000 -> 1e6 N/m", _rib_variant(tmp, "stiff", _stiff_ribs)),
-        Case("rib_springs_x1e4", "breathing scene, rib hinge stiffness 12 -> 1.2e5 N m/rad, sternum "
-             "1000 -> 1e7 N/m", _rib_variant(tmp, "stiffer", _stiffer_ribs), reasonable=False),
-        Case("ribs_light", "breathing scene, rib masses x 1e-3 (0.2 kg -> 0.2 g per rib); the linked "
-             "points' mass is still added to the ribs (add_link_mass = true)",
-             _rib_variant(tmp, "light", _light_ribs)),
-        Case("ribs_light_no_link_mass", "breathing scene, rib masses x 1e-3 and add_link_mass = false: "
-             "the ribs alone carry the membrane's explicit force",
-             lambda: (lambda sc: dataclasses.replace(sc, rigid=dataclasses.replace(sc.rigid, add_link_mass=False)))(
-                 _rib_variant(tmp, "light2", _light_ribs)())),
-        Case("huge_external_force", "breathing scene, 1e4 N downward on each dome point",
-             lambda: dataclasses.replace(_breathing(), forces=_breathing().forces + (
-                 AppliedForce("dome", (0.0, 0.0, -1e4)),)), reasonable=False),
-        Case("invalid_dt", "membrane_demo with dt_s = -1e-3", lambda: dataclasses.replace(demo(), dt_s=-1e-3),
-             reasonable=False),
-        Case("nan_stiffness", "membrane_demo with shape memory stiffness NaN",
-             lambda: _replace_force(demo(), ShapeMemory, stiffness_n_per_m=float("nan")), reasonable=False),
-        Case("missing_mjcf", "breathing scene pointing at an MJCF file that does not exist",
-             lambda: dataclasses.replace(_breathing(), rigid=dataclasses.replace(
-                 _breathing().rigid, mjcf=str(tmp / "no_such_trunk.xml"))), reasonable=False),
+        Case(
+            "shape_memory_x100",
+            "membrane_demo, shape memory 3000 -> 3e5 N/m, dt 1 ms",
+            lambda: _scaled(demo(), ShapeMemory, "stiffness_n_per_m", 100.0),
+        ),
+        Case(
+            "shape_memory_x1e4",
+            "membrane_demo, shape memory 3000 -> 3e7 N/m, dt 1 ms",
+            lambda: _scaled(demo(), ShapeMemory, "stiffness_n_per_m", 1e4),
+            reasonable=False,
+        ),
+        Case(
+            "dt_half_bound",
+            "membrane_demo at dt = 0.5 x model.dt_stable_s (what a divergence suggests)",
+            lambda: (lambda m: m.with_dt(0.5 * m.dt_stable_s))(compile_scene(demo())),
+        ),
+        Case(
+            "dt_at_bound",
+            "membrane_demo at dt = model.dt_stable_s (the per-point linear bound)",
+            lambda: (lambda m: m.with_dt(m.dt_stable_s))(compile_scene(demo())),
+        ),
+        Case(
+            "dt_2x_bound",
+            "membrane_demo at dt = 2 x model.dt_stable_s",
+            lambda: (lambda m: m.with_dt(2.0 * m.dt_stable_s))(compile_scene(demo())),
+            reasonable=False,
+        ),
+        Case(
+            "tiny_masses",
+            "membrane_demo, total mass 4 kg -> 0.4 g (x 1e-4), dt 1 ms",
+            lambda: dataclasses.replace(demo(), masses=dataclasses.replace(demo().masses, total_kg=4e-4)),
+            reasonable=False,
+        ),
+        Case(
+            "no_damping", "membrane_demo without its damping term (symplectic Euler)", lambda: demo().without("damping")
+        ),
+        Case(
+            "no_damping_explicit_euler",
+            "membrane_demo without damping, explicit Euler (no stable step)",
+            lambda: dataclasses.replace(demo().without("damping"), integrator="explicit_euler"),
+            reasonable=False,
+        ),
+        Case(
+            "perturbation_0.7_l0",
+            "membrane_demo released from random displacements of 0.7 mean edge",
+            lambda: demo(),
+            perturb_l0=0.7,
+        ),
+        Case(
+            "perturbation_1.5_l0",
+            "membrane_demo released from random displacements of 1.5 mean edge",
+            lambda: demo(),
+            perturb_l0=1.5,
+            reasonable=False,
+        ),
+        Case(
+            "sliver_triangles",
+            "membrane_demo on a UV sphere of 96 segments x 4 rings (aspect ~ 20)",
+            lambda: dataclasses.replace(
+                demo(), mesh=MeshSpec(generator="uv_sphere", radius_m=0.12, segments=96, rings=4)
+            ),
+        ),
+        Case(
+            "nearly_flat_body",
+            "membrane_demo squashed to an ellipsoid 1/100 as thick as wide",
+            lambda: _flat_demo(0.01),
+        ),
+        Case(
+            "flat_body",
+            "membrane_demo squashed flat (zero thickness, zero volume)",
+            lambda: _flat_demo(0.0),
+            reasonable=False,
+        ),
+        Case(
+            "mesh_40962",
+            "membrane_demo on an icosphere of 40962 points (same 4 kg, 3000 N/m, dt 1 ms)",
+            lambda: dataclasses.replace(demo(), mesh=MeshSpec(generator="icosphere", subdivisions=6, radius_m=0.12)),
+            duration_s=0.05,
+            small_duration_s=0.005,
+        ),
+        Case(
+            "muscle_x100",
+            "membrane_demo, muscle peak 60 -> 6000 N/m",
+            lambda: _schedule_x(demo(), Muscle, "stiffness", 100.0),
+            reasonable=False,
+        ),
+        Case(
+            "rib_springs_x1000",
+            "breathing scene, rib hinge stiffness 12 -> 1.2e4 N m/rad, sternum 1000 -> 1e6 N/m",
+            _rib_variant(tmp, "stiff", _stiff_ribs),
+        ),
+        Case(
+            "rib_springs_x1e4",
+            "breathing scene, rib hinge stiffness 12 -> 1.2e5 N m/rad, sternum 1000 -> 1e7 N/m",
+            _rib_variant(tmp, "stiffer", _stiffer_ribs),
+            reasonable=False,
+        ),
+        Case(
+            "ribs_light",
+            "breathing scene, rib masses x 1e-3 (0.2 kg -> 0.2 g per rib); the linked "
+            "points' mass is still added to the ribs (add_link_mass = true)",
+            _rib_variant(tmp, "light", _light_ribs),
+        ),
+        Case(
+            "ribs_light_no_link_mass",
+            "breathing scene, rib masses x 1e-3 and add_link_mass = false: "
+            "the ribs alone carry the membrane's explicit force",
+            lambda: (lambda sc: dataclasses.replace(sc, rigid=dataclasses.replace(sc.rigid, add_link_mass=False)))(
+                _rib_variant(tmp, "light2", _light_ribs)()
+            ),
+        ),
+        Case(
+            "huge_external_force",
+            "breathing scene, 1e4 N downward on each dome point",
+            lambda: dataclasses.replace(
+                _breathing(), forces=_breathing().forces + (AppliedForce("dome", (0.0, 0.0, -1e4)),)
+            ),
+            reasonable=False,
+        ),
+        Case(
+            "invalid_dt",
+            "membrane_demo with dt_s = -1e-3",
+            lambda: dataclasses.replace(demo(), dt_s=-1e-3),
+            reasonable=False,
+        ),
+        Case(
+            "nan_stiffness",
+            "membrane_demo with shape memory stiffness NaN",
+            lambda: _replace_force(demo(), ShapeMemory, stiffness_n_per_m=float("nan")),
+            reasonable=False,
+        ),
+        Case(
+            "missing_mjcf",
+            "breathing scene pointing at an MJCF file that does not exist",
+            lambda: dataclasses.replace(
+                _breathing(), rigid=dataclasses.replace(_breathing().rigid, mjcf=str(tmp / "no_such_trunk.xml"))
+            ),
+            reasonable=False,
+        ),
     ]
 
 
@@ -287,9 +430,19 @@ def _retry(model: Model, case: Case, duration: float, dt: float, max_steps: int 
 def run_case(case: Case, *, small: bool = False, bugs: list | None = None) -> dict:
     """One case: never raises, never returns NaN."""
     bugs = [] if bugs is None else bugs
-    out = {"name": case.name, "what": case.what, "reasonable": case.reasonable, "outcome": None,
-           "message": "", "volume_rel_error_max": None, "step": None, "dt_s": None,
-           "dt_suggested_s": None, "steps_run": 0, "wall_s": 0.0}
+    out = {
+        "name": case.name,
+        "what": case.what,
+        "reasonable": case.reasonable,
+        "outcome": None,
+        "message": "",
+        "volume_rel_error_max": None,
+        "step": None,
+        "dt_s": None,
+        "dt_suggested_s": None,
+        "steps_run": 0,
+        "wall_s": 0.0,
+    }
     t0 = time.perf_counter()
     try:
         try:
@@ -315,20 +468,36 @@ def run_case(case: Case, *, small: bool = False, bugs: list | None = None) -> di
                     raise FloatingPointError(f"non-finite state after step {sim.steps_done} not detected")
                 volmax = max(volmax, err)
         except SimulationDiverged as e:
-            out.update(outcome="diverged", message=str(e), step=e.step, dt_suggested_s=e.dt_suggested_s,
-                       steps_run=sim.steps_done, volume_rel_error_max=volmax)
+            out.update(
+                outcome="diverged",
+                message=str(e),
+                step=e.step,
+                dt_suggested_s=e.dt_suggested_s,
+                steps_run=sim.steps_done,
+                volume_rel_error_max=volmax,
+            )
             out["stable_at_suggested_dt"] = _retry(model, case, duration, e.dt_suggested_s)
             return out
         except ConstraintError as e:
-            out.update(outcome="diverged", message=f"ConstraintError: {e}", step=sim.steps_done,
-                       steps_run=sim.steps_done, volume_rel_error_max=volmax)
+            out.update(
+                outcome="diverged",
+                message=f"ConstraintError: {e}",
+                step=sim.steps_done,
+                steps_run=sim.steps_done,
+                volume_rel_error_max=volmax,
+            )
             return out
-        out.update(outcome="stable", message=f"{nstep} steps ({nstep * model.dt_s:.3g} s) without failure",
-                   volume_rel_error_max=volmax, steps_run=nstep)
+        out.update(
+            outcome="stable",
+            message=f"{nstep} steps ({nstep * model.dt_s:.3g} s) without failure",
+            volume_rel_error_max=volmax,
+            steps_run=nstep,
+        )
         return out
     except Exception as e:  # a bug of hybrid: report, never crash the study
-        bugs.append({"case": case.name, "type": type(e).__name__, "message": str(e),
-                     "traceback": traceback.format_exc(limit=6)})
+        bugs.append(
+            {"case": case.name, "type": type(e).__name__, "message": str(e), "traceback": traceback.format_exc(limit=6)}
+        )
         out.update(outcome="diverged", message=f"BUG {type(e).__name__}: {e}")
         return out
     finally:
@@ -336,18 +505,28 @@ def run_case(case: Case, *, small: bool = False, bugs: list | None = None) -> di
 
 
 def _markdown(res: dict) -> str:
-    L = ["# Extreme cases", "", "| case | outcome | max volume error | step | reasonable | stable at suggested dt "
-         "| message |", "|---|---|---|---|---|---|---|"]
+    L = [
+        "# Extreme cases",
+        "",
+        "| case | outcome | max volume error | step | reasonable | stable at suggested dt | message |",
+        "|---|---|---|---|---|---|---|",
+    ]
     for c in res["cases"]:
         v = c["volume_rel_error_max"]
         msg = c["message"].replace("|", "/")
         if len(msg) > 160:
             msg = msg[:157] + "..."
-        L.append(f"| {c['name']} | {c['outcome']} | {'-' if v is None else format(v, '.2e')} | "
-                 f"{'-' if c['step'] is None else c['step']} | {'yes' if c['reasonable'] else 'no'} | "
-                 f"{ {True: 'yes', False: 'no', None: '-'}[c.get('stable_at_suggested_dt')]} | {msg} |")
-    L += ["", f"Reasonable cases that do not end stable: {', '.join(res['reasonable_failures']) or 'none'}",
-          f"Bugs (unexpected exceptions): {len(res['bugs'])}", f"Run time: {res['runtime_s']:.1f} s"]
+        L.append(
+            f"| {c['name']} | {c['outcome']} | {'-' if v is None else format(v, '.2e')} | "
+            f"{'-' if c['step'] is None else c['step']} | {'yes' if c['reasonable'] else 'no'} | "
+            f"{ {True: 'yes', False: 'no', None: '-'}[c.get('stable_at_suggested_dt')] } | {msg} |"
+        )
+    L += [
+        "",
+        f"Reasonable cases that do not end stable: {', '.join(res['reasonable_failures']) or 'none'}",
+        f"Bugs (unexpected exceptions): {len(res['bugs'])}",
+        f"Run time: {res['runtime_s']:.1f} s",
+    ]
     return "\n".join(L) + "\n"
 
 
@@ -373,9 +552,13 @@ def run(out_dir, *, small: bool = False, scheduler: str | None = None, workers: 
         for row, case_bugs in sweep(run_named_case, params, scheduler=scheduler, workers=workers):
             rows.append(row)
             bugs += case_bugs
-    res = {"small": small, "cases": rows,
-           "reasonable_failures": [r["name"] for r in rows if r["reasonable"] and r["outcome"] != "stable"],
-           "bugs": bugs, "runtime_s": time.perf_counter() - t0}
+    res = {
+        "small": small,
+        "cases": rows,
+        "reasonable_failures": [r["name"] for r in rows if r["reasonable"] and r["outcome"] != "stable"],
+        "bugs": bugs,
+        "runtime_s": time.perf_counter() - t0,
+    }
     write_json(out / "extremes.json", res)
     (out / "extremes.md").write_text(_markdown(finite(res)))
     return finite(res)

@@ -50,7 +50,7 @@ def replay_check(scene, nstep: int) -> dict:
     coupling.record_wrenches = True
     site_id, site_body = coupling.system.site_id, coupling.system.site_body
     qvel, ctrl, wrench_err, wrench_max = [], [], 0.0, 0.0
-    for k in range(nstep):
+    for _k in range(nstep):
         site_pos, com = d.site_xpos[site_id].copy(), d.xipos.copy()
         sim.step(1)
         xfrc = coupling.wrench_history()[-1]
@@ -64,13 +64,19 @@ def replay_check(scene, nstep: int) -> dict:
         qvel.append(d.qvel.copy())
         ctrl.append(d.ctrl.copy())
     qpos_run = coupling.qpos_history()
-    qpos_rep, qvel_rep = replay_states(coupling.mj_model, coupling.initial_state, coupling.wrench_history(),
-                                       np.array(ctrl).reshape(nstep, -1))
-    return {"scene": scene.name, "steps": nstep, "dt_s": sim.model.dt_s,
-            "replay_max_abs_qpos": float(np.abs(qpos_rep - qpos_run).max()) if qpos_run.size else 0.0,
-            "replay_max_abs_qvel": float(np.abs(qvel_rep - np.array(qvel)).max()) if qvel_rep.size else 0.0,
-            "wrench_rel_error": wrench_err / wrench_max if wrench_max > 0 else 0.0,
-            "wrench_max_abs": wrench_max, "qpos_moved_max": float(np.abs(qpos_run - qpos_run[:1]).max())}
+    qpos_rep, qvel_rep = replay_states(
+        coupling.mj_model, coupling.initial_state, coupling.wrench_history(), np.array(ctrl).reshape(nstep, -1)
+    )
+    return {
+        "scene": scene.name,
+        "steps": nstep,
+        "dt_s": sim.model.dt_s,
+        "replay_max_abs_qpos": float(np.abs(qpos_rep - qpos_run).max()) if qpos_run.size else 0.0,
+        "replay_max_abs_qvel": float(np.abs(qvel_rep - np.array(qvel)).max()) if qvel_rep.size else 0.0,
+        "wrench_rel_error": wrench_err / wrench_max if wrench_max > 0 else 0.0,
+        "wrench_max_abs": wrench_max,
+        "qpos_moved_max": float(np.abs(qpos_run - qpos_run[:1]).max()),
+    }
 
 
 def paper_order(duration_s: float = 1.0) -> dict:
@@ -81,13 +87,18 @@ def paper_order(duration_s: float = 1.0) -> dict:
     point, force = np.array([0.1, 0.05, 0.0]), np.array([0.0, 2.0, 1.0])
     exact = ref.run_mujoco(body, state0, point, force, REFERENCE_STEP_S, duration_s, integrator="RK4")
     check = ref.run_mujoco(body, state0, point, force, 2 * REFERENCE_STEP_S, duration_s, integrator="RK4")
-    errors = [ref.state_error(ref.run_paper(body, state0, point, force, h, duration_s), exact)
-              for h in PAPER_STEPS_S]
-    orders = {key: np.log2([e[key] / f[key] for e, f in zip(errors, errors[1:])]).tolist()
-              for key in ("pos", "angle", "vel", "omega")}
-    return {"steps_s": list(PAPER_STEPS_S), "errors": errors, "orders": orders,
-            "reference_error": max(ref.state_error(exact, check).values()),
-            "paper_algorithm_order": float(np.median(np.concatenate(list(orders.values()))))}
+    errors = [ref.state_error(ref.run_paper(body, state0, point, force, h, duration_s), exact) for h in PAPER_STEPS_S]
+    orders = {
+        key: np.log2([e[key] / f[key] for e, f in zip(errors, errors[1:])]).tolist()
+        for key in ("pos", "angle", "vel", "omega")
+    }
+    return {
+        "steps_s": list(PAPER_STEPS_S),
+        "errors": errors,
+        "orders": orders,
+        "reference_error": max(ref.state_error(exact, check).values()),
+        "paper_algorithm_order": float(np.median(np.concatenate(list(orders.values())))),
+    }
 
 
 def run(out_dir, source=None, *, small: bool = False) -> dict:
@@ -99,8 +110,7 @@ def run(out_dir, source=None, *, small: bool = False) -> dict:
     scene = resolve_scene(source)
     res = replay_check(scene, 200 if small else 2000)
     paper = paper_order()
-    res.update(paper_algorithm_order=paper["paper_algorithm_order"], paper=paper,
-               runtime_s=time.perf_counter() - t0)
+    res.update(paper_algorithm_order=paper["paper_algorithm_order"], paper=paper, runtime_s=time.perf_counter() - t0)
     write_json(out / "rigid.json", res)
     (out / "rigid.md").write_text(markdown(res))
     return res
@@ -108,21 +118,23 @@ def run(out_dir, source=None, *, small: bool = False) -> dict:
 
 def markdown(res: dict) -> str:
     p = res["paper"]
-    rows = "\n".join(f"| {h:g} | " + " | ".join(f"{e[k]:.3e}" for k in ("pos", "angle", "vel", "omega")) + " |"
-                     for h, e in zip(p["steps_s"], p["errors"]))
-    return f"""# The rigid part checked: scene {res['scene']}
+    rows = "\n".join(
+        f"| {h:g} | " + " | ".join(f"{e[k]:.3e}" for k in ("pos", "angle", "vel", "omega")) + " |"
+        for h, e in zip(p["steps_s"], p["errors"])
+    )
+    return f"""# The rigid part checked: scene {res["scene"]}
 
-{res['steps']} coupled steps of {res['dt_s']:g} s (qpos moved by up to {res['qpos_moved_max']:.3g}).
+{res["steps"]} coupled steps of {res["dt_s"]:g} s (qpos moved by up to {res["qpos_moved_max"]:.3g}).
 
 | check | value |
 | --- | --- |
-| replay through MuJoCo alone: max abs qpos difference | {res['replay_max_abs_qpos']:.3e} |
-| replay: max abs qvel difference | {res['replay_max_abs_qvel']:.3e} |
-| point forces against the applied wrench: max relative difference | {res['wrench_rel_error']:.3e} |
-| the paper's rigid algorithm against MuJoCo RK4: observed order (median) | {res['paper_algorithm_order']:.3f} |
+| replay through MuJoCo alone: max abs qpos difference | {res["replay_max_abs_qpos"]:.3e} |
+| replay: max abs qvel difference | {res["replay_max_abs_qvel"]:.3e} |
+| point forces against the applied wrench: max relative difference | {res["wrench_rel_error"]:.3e} |
+| the paper's rigid algorithm against MuJoCo RK4: observed order (median) | {res["paper_algorithm_order"]:.3f} |
 
 The paper's algorithm (section 3.5, explicit Euler) on a free body under a body-fixed
-force, 1 s, against MuJoCo's RK4 at {REFERENCE_STEP_S:g} s (converged to {p['reference_error']:.1e}):
+force, 1 s, against MuJoCo's RK4 at {REFERENCE_STEP_S:g} s (converged to {p["reference_error"]:.1e}):
 
 | h (s) | position (m) | angle (rad) | velocity (m/s) | angular velocity (rad/s) |
 | --- | --- | --- | --- | --- |

@@ -85,15 +85,16 @@ def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 def quat_to_mat(q: np.ndarray) -> np.ndarray:
     """(3, 3) rotation matrix (body -> world) of a unit quaternion (w, x, y, z)."""
     w, x, y, z = q
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
-def point_wrench(center: np.ndarray, points: np.ndarray, forces: np.ndarray
-                 ) -> tuple[np.ndarray, np.ndarray]:
+def point_wrench(center: np.ndarray, points: np.ndarray, forces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Steps 4-5: total force (3,) N and torque (3,) N m about `center` (3,) m.
 
     points : (n, 3) m, world positions of the points;  forces : (n, 3) N on them.
@@ -103,8 +104,7 @@ def point_wrench(center: np.ndarray, points: np.ndarray, forces: np.ndarray
     return forces.sum(axis=0), np.cross(points - center, forces).sum(axis=0)
 
 
-def paper_step(body: RigidBody, state: RigidState, force: np.ndarray, torque: np.ndarray,
-               h: float) -> RigidState:
+def paper_step(body: RigidBody, state: RigidState, force: np.ndarray, torque: np.ndarray, h: float) -> RigidState:
     """Step 6: one explicit Euler step of length h (s) under force (N) and torque (N m)."""
     rot = quat_to_mat(state.quat)
     inertia_w = rot @ np.diag(body.inertia) @ rot.T
@@ -131,13 +131,13 @@ def paper_points(state: RigidState, points_body: np.ndarray) -> tuple[np.ndarray
 def _nsteps(h: float, duration: float) -> int:
     n = int(round(duration / h))
     if n < 1 or abs(n * h - duration) > 1e-9 * duration:
-        raise ValueError(f"duration: expected a whole number of steps of h = {h} s, "
-                         f"got {duration} s")
+        raise ValueError(f"duration: expected a whole number of steps of h = {h} s, got {duration} s")
     return n
 
 
-def run_paper(body: RigidBody, state0: RigidState, point_body: np.ndarray,
-              force_body: np.ndarray, h: float, duration: float) -> RigidState:
+def run_paper(
+    body: RigidBody, state0: RigidState, point_body: np.ndarray, force_body: np.ndarray, h: float, duration: float
+) -> RigidState:
     """Move a free body with the paper's algorithm under a body-fixed point force.
 
     point_body : (3,) m and force_body : (3,) N, both fixed in the body frame.
@@ -148,15 +148,21 @@ def run_paper(body: RigidBody, state0: RigidState, point_body: np.ndarray,
     state = state0.copy()
     for _ in range(_nsteps(h, duration)):
         rot = quat_to_mat(state.quat)
-        points, _ = paper_points(state, point_body)           # step 7 of the last step
+        points, _ = paper_points(state, point_body)  # step 7 of the last step
         force, torque = point_wrench(state.pos, points, rot @ force_body)  # steps 4-5
-        state = paper_step(body, state, force, torque, h)     # step 6
+        state = paper_step(body, state, force, torque, h)  # step 6
     return state
 
 
-def run_mujoco(body: RigidBody, state0: RigidState, point_body: np.ndarray,
-               force_body: np.ndarray, h: float, duration: float,
-               integrator: str = "RK4") -> RigidState:
+def run_mujoco(
+    body: RigidBody,
+    state0: RigidState,
+    point_body: np.ndarray,
+    force_body: np.ndarray,
+    h: float,
+    duration: float,
+    integrator: str = "RK4",
+) -> RigidState:
     """The same free body moved by MuJoCo (through `hybrid.rigid`).
 
     The body-fixed force is a site actuator (`hybrid.rigid.free_body_spec`), which
@@ -165,8 +171,7 @@ def run_mujoco(body: RigidBody, state0: RigidState, point_body: np.ndarray,
     from hybrid import rigid  # MuJoCo only when asked for
 
     force_body = np.asarray(force_body, dtype=float)
-    spec = rigid.free_body_spec(body.mass, body.inertia, point_body, force_body,
-                                integrator=integrator, timestep=h)
+    spec = rigid.free_body_spec(body.mass, body.inertia, point_body, force_body, integrator=integrator, timestep=h)
     system = rigid.RigidSystem(spec)
     d = system.data
     d.qpos[0:3] = state0.pos
@@ -178,8 +183,7 @@ def run_mujoco(body: RigidBody, state0: RigidState, point_body: np.ndarray,
     for _ in range(_nsteps(h, duration)):
         system.step()
     quat = d.qpos[3:7].copy()
-    return RigidState(pos=d.qpos[0:3].copy(), vel=d.qvel[0:3].copy(), quat=quat,
-                      omega=quat_to_mat(quat) @ d.qvel[3:6])
+    return RigidState(pos=d.qpos[0:3].copy(), vel=d.qvel[0:3].copy(), quat=quat, omega=quat_to_mat(quat) @ d.qvel[3:6])
 
 
 def state_error(a: RigidState, b: RigidState) -> dict[str, float]:

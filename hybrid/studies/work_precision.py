@@ -54,13 +54,12 @@ __all__ = ["run", "simulate", "observed_order", "SCENES", "INTEGRATORS"]
 SCENES = ("breathing", "membrane")
 INTEGRATORS = ("explicit_euler", "symplectic_euler")
 IMPLICIT = "implicit_euler"  # run on scenes of the continuum formulation
-H0 = 1e-3          # the coarsest step (s); the levels are H0 / 2^k
+H0 = 1e-3  # the coarsest step (s); the levels are H0 / 2^k
 H0_IMPLICIT = 1e-2  # implicit Euler's coarsest step (s): one frame
-FRAME_S = 0.01     # recorded frames every 10 ms of simulated time
+FRAME_S = 0.01  # recorded frames every 10 ms of simulated time
 # (levels, reference level REF_K, window s) by size
-SIZES = {False: dict(levels=5, ref_k=9, window_s=4.0),
-         True: dict(levels=4, ref_k=8, window_s=0.25)}
-ORDER_LEVELS = 3   # the observed order from the finest levels
+SIZES = {False: dict(levels=5, ref_k=9, window_s=4.0), True: dict(levels=4, ref_k=8, window_s=0.25)}
+ORDER_LEVELS = 3  # the observed order from the finest levels
 
 
 #: the coupled scene the study runs by default (`--scene`): the paper's, at its 1 ms step
@@ -69,13 +68,15 @@ DEFAULT_SCENE = "breathing_paper"
 
 def _scene(name: str, coupled: str = DEFAULT_SCENE):
     from ..resolve import resolve_scene
+
     if name not in SCENES:
         raise ValueError(f"scene: expected one of {list(SCENES)}, received {name!r}")
     return resolve_scene({"breathing": coupled, "membrane": "membrane_demo"}[name])
 
 
-def simulate(scene: str, integrator: str, k: int, window_s: float, repeats: int = 1,
-             coupled: str = DEFAULT_SCENE, h0: float = H0) -> dict:
+def simulate(
+    scene: str, integrator: str, k: int, window_s: float, repeats: int = 1, coupled: str = DEFAULT_SCENE, h0: float = H0
+) -> dict:
     """One run at h = h0 / 2^k over `window_s`: the frames every 10 ms
     (vertex positions, rib hinge angles, rib lift, apex descent, pressure) and the wall time.
     The wall time is the least of `repeats` runs (the machine is shared: the
@@ -84,7 +85,7 @@ def simulate(scene: str, integrator: str, k: int, window_s: float, repeats: int 
     from ..run import _apex_vertex
     from ..simulation import Simulation
 
-    dt = h0 / 2 ** k
+    dt = h0 / 2**k
     model = compile_scene(_scene(scene, coupled)).with_dt(dt, integrator)
     Simulation(model).step(1)  # warm-up: compiles (or loads numba's cache) outside the timing
     sim = Simulation(model)
@@ -120,17 +121,31 @@ def simulate(scene: str, integrator: str, k: int, window_s: float, repeats: int 
                     ang[f] = sim.mj_data.qpos
         walls.append(wall)
     wall = min(walls)
-    return {"scene": scene, "integrator": integrator, "k": k, "dt": dt, "pos": pos, "angle": ang, "lift": lift,
-            "apex": apex_mm, "pressure": prs, "wall_s": wall, "sim_s": nframe * FRAME_S}
+    return {
+        "scene": scene,
+        "integrator": integrator,
+        "k": k,
+        "dt": dt,
+        "pos": pos,
+        "angle": ang,
+        "lift": lift,
+        "apex": apex_mm,
+        "pressure": prs,
+        "wall_s": wall,
+        "sim_s": nframe * FRAME_S,
+    }
 
 
 def _errors(r: dict, ref: dict) -> dict:
-    e = {"error": float(np.max(np.linalg.norm(r["pos"] - ref["pos"], axis=2))),
-         "pressure_error": float(np.max(np.abs(r["pressure"] - ref["pressure"])))}
+    e = {
+        "error": float(np.max(np.linalg.norm(r["pos"] - ref["pos"], axis=2))),
+        "pressure_error": float(np.max(np.abs(r["pressure"] - ref["pressure"]))),
+    }
     e["angle_error"] = float(np.max(np.abs(r["angle"] - ref["angle"]))) if r["angle"].size else None
     e["rib_lift_error_mm"] = float(np.max(np.abs(r["lift"] - ref["lift"]))) if np.isfinite(r["lift"]).all() else None
-    e["apex_descent_error_mm"] = (float(np.max(np.abs(r["apex"] - ref["apex"]))) if np.isfinite(r["apex"]).all()
-                                  else None)
+    e["apex_descent_error_mm"] = (
+        float(np.max(np.abs(r["apex"] - ref["apex"]))) if np.isfinite(r["apex"]).all() else None
+    )
     return e
 
 
@@ -143,8 +158,14 @@ def observed_order(dts, errors, n: int = ORDER_LEVELS) -> float:
     return float(np.polyfit(x, y, 1)[0])
 
 
-def run(out_dir, *, small: bool = False, scheduler: str | None = None, workers: int | None = None,
-        scene: str = DEFAULT_SCENE) -> dict:
+def run(
+    out_dir,
+    *,
+    small: bool = False,
+    scheduler: str | None = None,
+    workers: int | None = None,
+    scene: str = DEFAULT_SCENE,
+) -> dict:
     """The study, its coupled runs on `scene` (a scene name or file); writes
     DIR/work_precision.json, .md and .png; returns the JSON's dict. The time step
     only: `hybrid.studies.convergence` has the mesh's half."""
@@ -155,6 +176,7 @@ def run(out_dir, *, small: bool = False, scheduler: str | None = None, workers: 
     window = size["window_s"]
     ref_k = size["ref_k"]
     from ..model import compile_scene
+
     bounds, integrators = {}, {}
     for s in SCENES:
         model = compile_scene(_scene(s, scene))
@@ -164,11 +186,25 @@ def run(out_dir, *, small: bool = False, scheduler: str | None = None, workers: 
             integrators[s] = INTEGRATORS + (IMPLICIT,)
             bounds[s][IMPLICIT] = bounds[s]["symplectic_euler"]
     # the references first: the longest tasks start first
-    tasks = [dict(scene=s, integrator="symplectic_euler", k=k, window_s=window, coupled=scene)
-             for s in SCENES for k in (ref_k + 1, ref_k)]
-    tasks += [dict(scene=s, integrator=i, k=k, window_s=window, repeats=3, coupled=scene,
-                   h0=H0_IMPLICIT if i == IMPLICIT else H0)
-              for s in SCENES for i in integrators[s] for k in range(size["levels"])]
+    tasks = [
+        dict(scene=s, integrator="symplectic_euler", k=k, window_s=window, coupled=scene)
+        for s in SCENES
+        for k in (ref_k + 1, ref_k)
+    ]
+    tasks += [
+        dict(
+            scene=s,
+            integrator=i,
+            k=k,
+            window_s=window,
+            repeats=3,
+            coupled=scene,
+            h0=H0_IMPLICIT if i == IMPLICIT else H0,
+        )
+        for s in SCENES
+        for i in integrators[s]
+        for k in range(size["levels"])
+    ]
     results = sweep(simulate, tasks, scheduler=scheduler, workers=workers, on_error="return")
 
     nref = 2 * len(SCENES)
@@ -183,19 +219,34 @@ def run(out_dir, *, small: bool = False, scheduler: str | None = None, workers: 
     for s in SCENES:
         fine, coarse = refs.get((s, ref_k + 1)), refs.get((s, ref_k))
         if fine is None or coarse is None:
-            raise HybridError(f"work-precision: the reference runs of {s!r} failed: "
-                              + "; ".join(f["message"] for f in failures if f["scene"] == s))
+            raise HybridError(
+                f"work-precision: the reference runs of {s!r} failed: "
+                + "; ".join(f["message"] for f in failures if f["scene"] == s)
+            )
         est = _errors(coarse, fine)  # p = 1: the finer reference's error ~ |x(h) - x(h/2)|
-        reference[s] = {"dt": fine["dt"], "dt_check": coarse["dt"], "wall_s": fine["wall_s"],
-                        "error_estimate": est["error"], "angle_error_estimate": est["angle_error"],
-                        "pressure_error_estimate": est["pressure_error"]}
+        reference[s] = {
+            "dt": fine["dt"],
+            "dt_check": coarse["dt"],
+            "wall_s": fine["wall_s"],
+            "error_estimate": est["error"],
+            "angle_error_estimate": est["angle_error"],
+            "pressure_error_estimate": est["pressure_error"],
+        }
 
     rows = []
     for r in runs:
         ref = refs[(r["scene"], ref_k + 1)]
-        rows.append({"scene": r["scene"], "integrator": r["integrator"], "dt": r["dt"], **_errors(r, ref),
-                     "wall_s": r["wall_s"], "wall_per_sim_s": r["wall_s"] / r["sim_s"],
-                     "dt_over_bound": r["dt"] / bounds[r["scene"]][r["integrator"]]})
+        rows.append(
+            {
+                "scene": r["scene"],
+                "integrator": r["integrator"],
+                "dt": r["dt"],
+                **_errors(r, ref),
+                "wall_s": r["wall_s"],
+                "wall_per_sim_s": r["wall_s"] / r["sim_s"],
+                "dt_over_bound": r["dt"] / bounds[r["scene"]][r["integrator"]],
+            }
+        )
     order, order_angle, order_pressure, order_lift, order_apex = {}, {}, {}, {}, {}
     for s in SCENES:
         for i in integrators[s]:
@@ -214,11 +265,23 @@ def run(out_dir, *, small: bool = False, scheduler: str | None = None, workers: 
         # converged: the reference's own error is at most a tenth of the smallest run error
         reference[s]["converged"] = bool(reference[s]["error_estimate"] <= 0.1 * smallest)
 
-    data = {"coupled_scene": scene, "runs": rows, "order": order, "order_angle": order_angle, "order_pressure": order_pressure,
-            "order_rib_lift": order_lift, "order_apex_descent": order_apex,
-            "reference": reference, "failures": failures, "stability_bound_s": bounds,
-            "window_s": window, "frame_s": FRAME_S, "small": bool(small),
-            "scheduler": scheduler, "runtime_s": time.perf_counter() - t_start}
+    data = {
+        "coupled_scene": scene,
+        "runs": rows,
+        "order": order,
+        "order_angle": order_angle,
+        "order_pressure": order_pressure,
+        "order_rib_lift": order_lift,
+        "order_apex_descent": order_apex,
+        "reference": reference,
+        "failures": failures,
+        "stability_bound_s": bounds,
+        "window_s": window,
+        "frame_s": FRAME_S,
+        "small": bool(small),
+        "scheduler": scheduler,
+        "runtime_s": time.perf_counter() - t_start,
+    }
     write_json(out / "work_precision.json", data)
     _plot(out / "work_precision.png", rows)
     (out / "work_precision.md").write_text(_markdown(data))
@@ -228,38 +291,57 @@ def run(out_dir, *, small: bool = False, scheduler: str | None = None, workers: 
 
 
 def _markdown(d: dict) -> str:
-    lines = [f"Work-precision over {d['window_s']:g} s (frames every {1e3 * d['frame_s']:g} ms): the error of "
-             f"the time step on one mesh; \"breathing\" is the scene `{d['coupled_scene']}`. The mesh's share of "
-             "the error, and both together, are `hybrid study convergence`'s.", "",
-             "| scene | integrator | h (s) | h / bound | vertex error (m) | rib lift error (mm) "
-             "| apex descent error (mm) | rib angle error (rad) | pressure error (Pa) | wall (s) | wall per simulated s |",
-             "|---|---|---|---|---|---|---|---|---|---|---|"]
+    lines = [
+        f"Work-precision over {d['window_s']:g} s (frames every {1e3 * d['frame_s']:g} ms): the error of "
+        f'the time step on one mesh; "breathing" is the scene `{d["coupled_scene"]}`. The mesh\'s share of '
+        "the error, and both together, are `hybrid study convergence`'s.",
+        "",
+        "| scene | integrator | h (s) | h / bound | vertex error (m) | rib lift error (mm) "
+        "| apex descent error (mm) | rib angle error (rad) | pressure error (Pa) | wall (s) | wall per simulated s |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
 
     def opt(v, fmt=".2e"):
         return "-" if v is None else format(v, fmt)
+
     for r in d["runs"]:
-        lines.append(f"| {r['scene']} | {r['integrator']} | {r['dt']:.3g} | {r['dt_over_bound']:.2f} "
-                     f"| {r['error']:.2e} | {opt(r['rib_lift_error_mm'])} | {opt(r['apex_descent_error_mm'])} "
-                     f"| {opt(r['angle_error'])} | {r['pressure_error']:.2e} | {r['wall_s']:.3f} "
-                     f"| {r['wall_per_sim_s']:.3f} |")
-    lines += ["", "Observed orders (the errors of the time series, over the three finest steps):", "",
-              "| scene/integrator | vertex | rib angle | rib lift | apex descent | pressure |", "|---|---|---|---|---|---|"]
+        lines.append(
+            f"| {r['scene']} | {r['integrator']} | {r['dt']:.3g} | {r['dt_over_bound']:.2f} "
+            f"| {r['error']:.2e} | {opt(r['rib_lift_error_mm'])} | {opt(r['apex_descent_error_mm'])} "
+            f"| {opt(r['angle_error'])} | {r['pressure_error']:.2e} | {r['wall_s']:.3f} "
+            f"| {r['wall_per_sim_s']:.3f} |"
+        )
+    lines += [
+        "",
+        "Observed orders (the errors of the time series, over the three finest steps):",
+        "",
+        "| scene/integrator | vertex | rib angle | rib lift | apex descent | pressure |",
+        "|---|---|---|---|---|---|",
+    ]
     for k, p in d["order"].items():
-        lines.append(f"| {k} | {p:.2f} | {opt(d['order_angle'].get(k), '.2f')} | {opt(d['order_rib_lift'].get(k), '.2f')} "
-                     f"| {opt(d['order_apex_descent'].get(k), '.2f')} | {d['order_pressure'][k]:.2f} |")
-    lines += ["", "| scene | reference h (s) | its estimated vertex error (m) | smallest run error (m) | converged |",
-              "|---|---|---|---|---|"]
+        lines.append(
+            f"| {k} | {p:.2f} | {opt(d['order_angle'].get(k), '.2f')} | {opt(d['order_rib_lift'].get(k), '.2f')} "
+            f"| {opt(d['order_apex_descent'].get(k), '.2f')} | {d['order_pressure'][k]:.2f} |"
+        )
+    lines += [
+        "",
+        "| scene | reference h (s) | its estimated vertex error (m) | smallest run error (m) | converged |",
+        "|---|---|---|---|---|",
+    ]
     for s, r in d["reference"].items():
-        lines.append(f"| {s} | {r['dt']:.3g} | {r['error_estimate']:.2e} | {r['smallest_run_error']:.2e} "
-                     f"| {r['converged']} |")
+        lines.append(
+            f"| {s} | {r['dt']:.3g} | {r['error_estimate']:.2e} | {r['smallest_run_error']:.2e} | {r['converged']} |"
+        )
     if d["failures"]:
-        lines += ["", "Failed runs:"] + [f"- {f['scene']} {f['integrator']} h={f['dt']:.3g}: {f['message']}"
-                                          for f in d["failures"]]
+        lines += ["", "Failed runs:"] + [
+            f"- {f['scene']} {f['integrator']} h={f['dt']:.3g}: {f['message']}" for f in d["failures"]
+        ]
     return "\n".join(lines) + "\n"
 
 
 def _plot(path: Path, rows: list) -> None:
     import matplotlib
+
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
@@ -272,8 +354,9 @@ def _plot(path: Path, rows: list) -> None:
             if not sel:
                 continue
             lab = f"{s} / {i.replace('_', ' ')}"
-            axes[0].loglog([x["wall_per_sim_s"] for x in sel], [x["error"] for x in sel],
-                           styles[s], marker=marks[i], label=lab)
+            axes[0].loglog(
+                [x["wall_per_sim_s"] for x in sel], [x["error"] for x in sel], styles[s], marker=marks[i], label=lab
+            )
             axes[1].loglog([x["dt"] for x in sel], [x["error"] for x in sel], styles[s], marker=marks[i], label=lab)
     dts = sorted({x["dt"] for x in rows})
     if dts:

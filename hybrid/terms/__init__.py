@@ -12,23 +12,62 @@ one entry there.
 """
 
 from .base import CONSTRAINT_TYPES, FLAGGED, FORCE_TYPES, TERM_CLASSES, Build, Term, order_terms
+from .fibres import MuscleFibres
+from .local import KeepIn, Nailed, Prescribed
+from .membrane import Membrane
+from .muscle import Muscle
+from .passive_fibres import PassiveFibres
 from .pointwise import Damping, Gravity
 from .shape_memory import ShapeMemory
-from .membrane import Membrane
 from .springs import AppliedForce, Attraction, MassSpring
-from .muscle import Muscle
 from .volume import Pressure, SoftVolume, Volume
-from .fibres import MuscleFibres
-from .passive_fibres import PassiveFibres
-from .local import KeepIn, Nailed, Prescribed
 
-__all__ = ["Term", "Build", "FORCE_TYPES", "CONSTRAINT_TYPES", "TERM_CLASSES", "FLAGGED", "TERMS",
-           "Gravity", "Damping", "ShapeMemory", "Membrane", "MassSpring", "AppliedForce", "Attraction", "Muscle",
-           "SoftVolume", "Volume", "Nailed", "KeepIn", "Prescribed", "Pressure", "MuscleFibres", "PassiveFibres"]
+__all__ = [
+    "Term",
+    "Build",
+    "FORCE_TYPES",
+    "CONSTRAINT_TYPES",
+    "TERM_CLASSES",
+    "FLAGGED",
+    "TERMS",
+    "Gravity",
+    "Damping",
+    "ShapeMemory",
+    "Membrane",
+    "MassSpring",
+    "AppliedForce",
+    "Attraction",
+    "Muscle",
+    "SoftVolume",
+    "Volume",
+    "Nailed",
+    "KeepIn",
+    "Prescribed",
+    "Pressure",
+    "MuscleFibres",
+    "PassiveFibres",
+]
 
-order_terms((Gravity, AppliedForce, Attraction, Damping, ShapeMemory, MassSpring, Muscle, SoftVolume, Membrane,
-             Pressure, MuscleFibres, PassiveFibres,
-             Nailed, Prescribed, KeepIn, Volume))
+order_terms(
+    (
+        Gravity,
+        AppliedForce,
+        Attraction,
+        Damping,
+        ShapeMemory,
+        MassSpring,
+        Muscle,
+        SoftVolume,
+        Membrane,
+        Pressure,
+        MuscleFibres,
+        PassiveFibres,
+        Nailed,
+        Prescribed,
+        KeepIn,
+        Volume,
+    )
+)
 
 #: names of the terms with a flag and a kernel, in id order (MembraneArrays.term_on)
 TERMS = tuple(cls.toml_type for cls in FLAGGED)

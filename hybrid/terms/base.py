@@ -35,8 +35,24 @@ from .. import schedule as _sched
 from ..errors import SceneError
 from ..mesh.validate import few
 
-__all__ = ["param", "Rows", "force", "constraint", "order_terms", "Term", "Build", "FORCE_TYPES", "CONSTRAINT_TYPES",
-           "TERM_CLASSES", "FLAGGED", "check_value", "VALUE_KINDS", "claim_points", "POINT_CLAIMS", "FORMULATIONS"]
+__all__ = [
+    "param",
+    "Rows",
+    "force",
+    "constraint",
+    "order_terms",
+    "Term",
+    "Build",
+    "FORCE_TYPES",
+    "CONSTRAINT_TYPES",
+    "TERM_CLASSES",
+    "FLAGGED",
+    "check_value",
+    "VALUE_KINDS",
+    "claim_points",
+    "POINT_CLAIMS",
+    "FORMULATIONS",
+]
 
 #: how a scene's membrane parameters are meant (`Scene.formulation`): "continuum", material
 #: parameters (moduli in N/m, tensions in N/m, drag per area) that mean the same on every
@@ -53,7 +69,19 @@ FLAGGED: list = []
 
 #: kinds checked by `check_value`; "selector" and "schedule" are checked where
 #: they are evaluated (hybrid.regions.select, hybrid.schedule.as_schedule)
-VALUE_KINDS = ("positive", "step", "floats", "nonneg", "angle_deg", "vec3", "target", "choice", "text", "name", "integer")
+VALUE_KINDS = (
+    "positive",
+    "step",
+    "floats",
+    "nonneg",
+    "angle_deg",
+    "vec3",
+    "target",
+    "choice",
+    "text",
+    "name",
+    "integer",
+)
 
 
 def param(kind: str, default=dataclasses.MISSING, **meta):
@@ -80,7 +108,9 @@ def check_value(where: str, kind: str, value, meta: dict | None = None):
     """`value` checked as a field of `kind`; returns it normalised (floats, tuples)."""
     meta = meta or {}
     if kind == "positive":
-        return checks.number(where, value, lo=0) if meta.get("hi") is None else checks.positive(where, value, meta["hi"])
+        return (
+            checks.number(where, value, lo=0) if meta.get("hi") is None else checks.positive(where, value, meta["hi"])
+        )
     if kind == "step":  # a time step, or "auto": the model's stable-step estimate, halved and rounded down
         if value == "auto":
             return value
@@ -117,6 +147,7 @@ def _term(section: str, toml_type: str, flag: bool):
         cls.__annotations__["name"] = "str"
         cls.name = param("text", toml_type)
         return dataclasses.dataclass(frozen=True)(cls)
+
     return wrap
 
 
@@ -148,6 +179,7 @@ def order_terms(classes) -> None:
 
 class Term:
     """Mixin of the term dataclasses (see the module docstring)."""
+
     toml_type: ClassVar[str]
     section: ClassVar[str]  # "forces" or "constraints"
     id: ClassVar[int] = -1
@@ -163,17 +195,23 @@ class Term:
         """Refuse, in one SceneError line, a term or a field of a formulation other
         than the scene's (a per-point parameter in a continuum scene, say)."""
         if formulation not in self.formulations:
-            ok = sorted(c.toml_type for c in TERM_CLASSES if c.section == self.section and formulation in c.formulations)
-            raise SceneError(f"{what}: type {self.toml_type!r} belongs to formulation {self.formulations[0]!r}, "
-                             f"the scene's formulation is {formulation!r}; expected one of {ok}, or "
-                             f"formulation = {self.formulations[0]!r}")
+            ok = sorted(
+                c.toml_type for c in TERM_CLASSES if c.section == self.section and formulation in c.formulations
+            )
+            raise SceneError(
+                f"{what}: type {self.toml_type!r} belongs to formulation {self.formulations[0]!r}, "
+                f"the scene's formulation is {formulation!r}; expected one of {ok}, or "
+                f"formulation = {self.formulations[0]!r}"
+            )
         for name, f in self.fields().items():
             only = f.metadata.get("formulation")
             if only is not None and only != formulation and getattr(self, name) is not None:
                 ok = [n for n, g in self.fields().items() if g.metadata.get("formulation") == formulation]
-                raise SceneError(f"{what}.{name}: a parameter of formulation {only!r}, the scene's formulation "
-                                 f"is {formulation!r}; expected {' or '.join(ok) or 'no such key'}, or "
-                                 f"formulation = {only!r}")
+                raise SceneError(
+                    f"{what}.{name}: a parameter of formulation {only!r}, the scene's formulation "
+                    f"is {formulation!r}; expected {' or '.join(ok) or 'no such key'}, or "
+                    f"formulation = {only!r}"
+                )
 
     @classmethod
     def fields(cls) -> dict:
@@ -182,8 +220,11 @@ class Term:
 
     @classmethod
     def required(cls) -> tuple:
-        return tuple(f.name for f in dataclasses.fields(cls)
-                     if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING)
+        return tuple(
+            f.name
+            for f in dataclasses.fields(cls)
+            if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING
+        )
 
     def value(self, field: str, what: str):
         """Field `field` checked by its kind (None stays None when it is the default)."""
@@ -193,7 +234,7 @@ class Term:
             return None
         return check_value(f"{what}.{field}", f.metadata["kind"], v, f.metadata)
 
-    def compile(self, b: "Build", what: str):
+    def compile(self, b: Build, what: str):
         """Mark the term present; returns the vertices of its `region` (None without one)."""
         if self.id >= 0:
             b.term_on[self.id] = 1
@@ -202,7 +243,7 @@ class Term:
         return None
 
     @classmethod
-    def finish(cls, b: "Build") -> None:
+    def finish(cls, b: Build) -> None:
         """Turn the rows of every term of this class into its `Rows` arrays; a
         force's rows on points that do not move are left out."""
         names = [n for n, spec in cls.arrays.items() if isinstance(spec, Rows)]
@@ -218,13 +259,26 @@ class Term:
 
 
 #: what a constraint does to its points, as an error message says it
-POINT_CLAIMS = {"nailed": "nailed", "prescribed": "prescribed", "keep_in": "kept in a region",
-                "linked": "linked to a rigid body"}
+POINT_CLAIMS = {
+    "nailed": "nailed",
+    "prescribed": "prescribed",
+    "keep_in": "kept in a region",
+    "linked": "linked to a rigid body",
+}
 # pairs of point constraints that cannot both hold on one point: each sets the
 # position its own way (two nails agree; two keep-in regions may overlap)
-_CONFLICTS = {frozenset(p) for p in (("nailed", "prescribed"), ("nailed", "keep_in"), ("prescribed", "keep_in"),
-                                     ("prescribed",), ("linked", "nailed"), ("linked", "prescribed"),
-                                     ("linked", "keep_in"))}
+_CONFLICTS = {
+    frozenset(p)
+    for p in (
+        ("nailed", "prescribed"),
+        ("nailed", "keep_in"),
+        ("prescribed", "keep_in"),
+        ("prescribed",),
+        ("linked", "nailed"),
+        ("linked", "prescribed"),
+        ("linked", "keep_in"),
+    )
+}
 
 
 def claim_points(claims: list, idx, kind: str, what: str) -> None:
@@ -238,9 +292,11 @@ def claim_points(claims: list, idx, kind: str, what: str) -> None:
             continue
         both = np.intersect1d(idx, idx0)
         if both.size:
-            raise SceneError(f"{what}: {both.size} points are also {POINT_CLAIMS[kind0]} by {what0}: vertices "
-                             f"{few(both.tolist())}; expected a point {POINT_CLAIMS[kind]} or "
-                             f"{POINT_CLAIMS[kind0]}, not both")
+            raise SceneError(
+                f"{what}: {both.size} points are also {POINT_CLAIMS[kind0]} by {what0}: vertices "
+                f"{few(both.tolist())}; expected a point {POINT_CLAIMS[kind]} or "
+                f"{POINT_CLAIMS[kind0]}, not both"
+            )
     claims.append((kind, what, idx))
 
 
@@ -281,8 +337,14 @@ class Build:
 
     def region(self, sel, what: str) -> np.ndarray:
         """The sorted vertex indices a selector picks (SceneError naming `what` if none)."""
-        return _regions.select(sel, self.mesh.vert_pos, name=what, regions=self.regions,
-                               border_vert=self.mesh.border_vert, face_vert=self.mesh.face_vert)
+        return _regions.select(
+            sel,
+            self.mesh.vert_pos,
+            name=what,
+            regions=self.regions,
+            border_vert=self.mesh.border_vert,
+            face_vert=self.mesh.face_vert,
+        )
 
     def schedule(self, value, what: str, ncomp: int) -> int:
         """Row of the validated schedule `value` in the model's schedule table."""

@@ -40,8 +40,15 @@ from ..kernel import kernel
 from .base import Rows, Term, force, param
 from .muscle import fibre_direction, schedule_peak
 
-__all__ = ["MuscleFibres", "fibre_shares", "fibre_coefficients", "add_muscle_fibres", "fibre_rows", "force_length",
-           "NPAR"]
+__all__ = [
+    "MuscleFibres",
+    "fibre_shares",
+    "fibre_coefficients",
+    "add_muscle_fibres",
+    "fibre_rows",
+    "force_length",
+    "NPAR",
+]
 
 # fib_par columns: g_k = c_k / L_k^2 (1/m^2) for the edges k = 0, 1, 2 (corner k to
 # k + 1), the rest area A (m^2) and the force-length width w (0: none)
@@ -62,6 +69,7 @@ class MuscleFibres(Term):
     the rest length, dimensionless): the width w of the force-length relation
     exp(-((stretch - 1) / w)^2), the tension falling as the fibres shorten (0:
     the same tension at every length)."""
+
     formulations = ("continuum",)
     # fib_vert (n, 3) int32: each muscle triangle; fib_par (n, NPAR): its g_k, area, width;
     # fib_sched (n,) int64: the tension's schedule row
@@ -79,14 +87,18 @@ class MuscleFibres(Term):
         s = b.schedule(self.tension_n_per_m, f"{what}.tension_n_per_m", 1)
         width = self.value("force_length_width", what)
         if 0.0 < width < 0.01:
-            raise SceneError(f"{what}.force_length_width: expected 0 (no force-length relation) or a width of at "
-                             f"least 0.01 of the rest length, received {width!r}")
+            raise SceneError(
+                f"{what}.force_length_width: expected 0 (no force-length relation) or a width of at "
+                f"least 0.01 of the rest length, received {width!r}"
+            )
         mesh = b.mesh
         faces = mesh.face_vert[b.face_region(self.region, what, idx)]
         tri, par = fibre_rows(mesh.vert_pos, faces, width, toward=toward, axis=axis)
         if tri.shape[0] == 0:
-            raise SceneError(f"{what}.region: expected triangles in the region "
-                             f"and fibres not normal to them, found none among the region's {idx.size} points")
+            raise SceneError(
+                f"{what}.region: expected triangles in the region "
+                f"and fibres not normal to them, found none among the region's {idx.size} points"
+            )
         # stable-step estimate at each corner: the tension's geometric stiffness A T sum_k |g_k|,
         # and the force-length slope's A T g'max (sum_k |g_k| L_k)^2
         peak = schedule_peak(b.schedules[s])
@@ -99,7 +111,6 @@ class MuscleFibres(Term):
         for corner in range(3):
             np.add.at(b.vert_stiffness, tri[:, corner], k)
         b.add_rows(fib_vert=tri, fib_par=par, fib_sched=np.full(len(tri), s))
-
 
 
 def fibre_coefficients(vert_pos, face_vert, direction):
@@ -160,8 +171,11 @@ def fibre_rows(vert_pos, face_vert, width, *, toward=None, axis=None):
     pos = np.asarray(vert_pos, float)
     face = np.asarray(face_vert, np.int64).reshape(-1, 3)
     p = pos[face]
-    d = (np.asarray(toward, float) - p.mean(axis=1)) if toward is not None else np.tile(np.asarray(axis, float),
-                                                                                      (len(face), 1))
+    d = (
+        (np.asarray(toward, float) - p.mean(axis=1))
+        if toward is not None
+        else np.tile(np.asarray(axis, float), (len(face), 1))
+    )
     ok, c = fibre_coefficients(pos, face, d)
     face, p = face[ok], p[ok]
     e = np.stack([p[:, 1] - p[:, 0], p[:, 2] - p[:, 1], p[:, 0] - p[:, 2]], axis=1)

@@ -20,6 +20,7 @@ __all__ = ["Nailed", "Prescribed", "KeepIn", "KeepInShape", "apply_prescribed", 
 
 class KeepInShape(IntEnum):
     """The shapes of a keep-in region (`MembraneArrays.shape_kind`)."""
+
     HALF_SPACE = 0
     BALL = 1
     BOX = 2
@@ -28,6 +29,7 @@ class KeepInShape(IntEnum):
 @constraint("nailed", flag=False)
 class Nailed(Term):
     """Points fixed at their rest positions (spine, pelvis...)."""
+
     region: object = param("selector")
 
     def compile(self, b, what):
@@ -39,6 +41,7 @@ class Nailed(Term):
 @constraint("prescribed")
 class Prescribed(Term):
     """Points that follow rest position + `displacement_m`(t) (m)."""
+
     # pre_vert (n,) int32; pre_rest (n, 3) m; pre_sched (n,) int64
     arrays = {"pre_vert": Rows(np.int32), "pre_rest": Rows(float, 3), "pre_sched": Rows(np.int64)}
     region: object = param("selector")
@@ -56,10 +59,15 @@ class Prescribed(Term):
 class KeepIn(Term):
     """Points kept inside a half-space (`point_m`, `normal` pointing inside),
     a ball (`center_m`, `radius_m`) or a box (`lo_m`, `hi_m`)."""
+
     # kin_vert (n,) int32; kin_shape (n,) int64: row of shape_kind / shape_par;
     # shape_kind (ns,) int64 KeepInShape; shape_par (ns, 6) m (see apply_keep_in)
-    arrays = {"kin_vert": Rows(np.int32), "kin_shape": Rows(np.int64), "shape_kind": Rows(np.int64),
-              "shape_par": Rows(float, 6)}
+    arrays = {
+        "kin_vert": Rows(np.int32),
+        "kin_shape": Rows(np.int64),
+        "shape_kind": Rows(np.int64),
+        "shape_par": Rows(float, 6),
+    }
     region: object = param("selector")
     shape: str = param("choice", choices=("half_space", "ball", "box"))
     point_m: tuple = param("vec3", None)
@@ -91,13 +99,15 @@ class KeepIn(Term):
         if self.shape == "box":
             lo, hi = checks.vec3(f"{what}.lo_m", self.lo_m), checks.vec3(f"{what}.hi_m", self.hi_m)
             if np.any(np.asarray(hi) <= np.asarray(lo)):
-                raise SceneError(f"{what}: expected lo_m < hi_m componentwise, received lo_m={self.lo_m!r} "
-                                 f"hi_m={self.hi_m!r}")
+                raise SceneError(
+                    f"{what}: expected lo_m < hi_m componentwise, received lo_m={self.lo_m!r} hi_m={self.hi_m!r}"
+                )
             return KeepInShape.BOX, np.concatenate([lo, hi])
         raise SceneError(f"{what}.shape: expected 'half_space', 'ball' or 'box', received {self.shape!r}")
 
 
 # ---------------------------------------------------------------- kernels
+
 
 @kernel
 def apply_prescribed(pre_vert, pre_rest, pre_sched, sched_next, h, vert_pos, vert_vel):
@@ -130,8 +140,11 @@ def apply_keep_in(kin_vert, kin_shape, shape_kind, shape_par, vert_pos, vert_vel
         par = shape_par[s]
         kind = shape_kind[s]
         if kind == KeepInShape.HALF_SPACE:
-            d = ((vert_pos[i, 0] - par[0]) * par[3] + (vert_pos[i, 1] - par[1]) * par[4]
-                 + (vert_pos[i, 2] - par[2]) * par[5])
+            d = (
+                (vert_pos[i, 0] - par[0]) * par[3]
+                + (vert_pos[i, 1] - par[1]) * par[4]
+                + (vert_pos[i, 2] - par[2]) * par[5]
+            )
             if d < 0.0:
                 vn = vert_vel[i, 0] * par[3] + vert_vel[i, 1] * par[4] + vert_vel[i, 2] * par[5]
                 for a in range(3):

@@ -32,8 +32,16 @@ from ..errors import SceneError
 from ..kernel import kernel
 from .base import Rows, Term, force, param
 
-__all__ = ["Membrane", "membrane_rest", "membrane_face_force", "add_membrane_serial", "membrane_faces_parallel",
-           "membrane_gather_parallel", "membrane_energy", "lame_moduli"]
+__all__ = [
+    "Membrane",
+    "membrane_rest",
+    "membrane_face_force",
+    "add_membrane_serial",
+    "membrane_faces_parallel",
+    "membrane_gather_parallel",
+    "membrane_energy",
+    "lame_moduli",
+]
 
 # mem_par columns: rest inverse edge matrix (upper triangular: d00, d01, d11), rest Gram
 # matrix of the edges (g11, g12, g22, m^2), rest area A0 (m^2), lambda, mu (N/m), tau (s)
@@ -43,7 +51,7 @@ NPAR = 10
 
 def lame_moduli(youngs_n_per_m: float, poisson: float) -> tuple[float, float]:
     """Plane-stress Lame moduli (lambda, mu) in N/m of a sheet of 2D Young's modulus Y, Poisson ratio nu."""
-    return youngs_n_per_m * poisson / (1.0 - poisson ** 2), youngs_n_per_m / (2.0 * (1.0 + poisson))
+    return youngs_n_per_m * poisson / (1.0 - poisson**2), youngs_n_per_m / (2.0 * (1.0 + poisson))
 
 
 @force("membrane")
@@ -56,12 +64,18 @@ class Membrane(Term):
     Poisson's ratio `poisson_ratio`, and its rate of strain with the
     Kelvin-Voigt time `damping_time_s` (s). A later term wins where regions
     overlap. Resolution independent; the force is minus an energy's gradient."""
+
     formulations = ("continuum",)
     # mem_vert (nface_m, 3) int32; mem_par (nface_m, NPAR) (the P_* columns);
     # mvf_ptr (nvert+1,) int32, mvf_slot (3 nface_m,) int32: each point's (face, corner)
     # slots 3 k + c in face order (the parallel build's gather); kv_on: any tau > 0
-    arrays = {"mem_vert": Rows(np.int32, 3), "mem_par": Rows(float, NPAR),
-              "mvf_ptr": lambda n: np.zeros(n + 1, np.int32), "mvf_slot": Rows(np.int32), "kv_on": lambda n: False}
+    arrays = {
+        "mem_vert": Rows(np.int32, 3),
+        "mem_par": Rows(float, NPAR),
+        "mvf_ptr": lambda n: np.zeros(n + 1, np.int32),
+        "mvf_slot": Rows(np.int32),
+        "kv_on": lambda n: False,
+    }
     youngs_modulus_n_per_m: float = param("positive", hi=checks.MAX_STIFFNESS_N_PER_M)
     poisson_ratio: float = param("nonneg", 0.3, hi=0.5)
     damping_time_s: float = param("nonneg", 0.0)
@@ -74,8 +88,10 @@ class Membrane(Term):
         tau = self.value("damping_time_s", what)
         faces = b.face_region(self.region, what, idx)
         if faces.size == 0:
-            raise SceneError(f"{what}.region: expected a region holding whole triangles, received "
-                             f"{idx.size} points of which no triangle has two")
+            raise SceneError(
+                f"{what}.region: expected a region holding whole triangles, received "
+                f"{idx.size} points of which no triangle has two"
+            )
         b.rows["membrane"].append((faces, lam, mu, tau))
 
     @classmethod
@@ -91,9 +107,13 @@ class Membrane(Term):
         mem_par = np.concatenate([rest, par[faces]], axis=1)
         order = np.argsort(mem_vert.reshape(-1), kind="stable")  # by point, each point's faces in order
         counts = np.bincount(mem_vert.reshape(-1), minlength=mesh.nvert)
-        b.out.update(mem_vert=mem_vert, mem_par=np.ascontiguousarray(mem_par),
-                     mvf_ptr=np.concatenate([[0], np.cumsum(counts)]).astype(np.int32),
-                     mvf_slot=order.astype(np.int32), kv_on=bool(np.any(mem_par[:, P_TAU] > 0)))
+        b.out.update(
+            mem_vert=mem_vert,
+            mem_par=np.ascontiguousarray(mem_par),
+            mvf_ptr=np.concatenate([[0], np.cumsum(counts)]).astype(np.int32),
+            mvf_slot=order.astype(np.int32),
+            kv_on=bool(np.any(mem_par[:, P_TAU] > 0)),
+        )
         b.vert_stiffness += _vert_stiffness(mesh.nvert, mem_vert, mem_par)
         # Kelvin-Voigt: each triangle's viscosity is its stiffness times its damping time
         b.vert_viscosity += _vert_stiffness(mesh.nvert, mem_vert, mem_par, weight=mem_par[:, P_TAU])
@@ -109,8 +129,10 @@ def membrane_rest(vert_pos, mem_vert, what="membrane") -> np.ndarray:
     area2 = np.linalg.norm(np.cross(e1, e2), axis=1)
     bad = np.nonzero(~(area2 > 1e-14 * np.maximum(l1, 1e-300) ** 2))[0]
     if bad.size:
-        raise SceneError(f"{what}: triangles {bad[:8].tolist()} ({bad.size} in all) have no area at rest; "
-                         f"expected triangles with three distinct corners")
+        raise SceneError(
+            f"{what}: triangles {bad[:8].tolist()} ({bad.size} in all) have no area at rest; "
+            f"expected triangles with three distinct corners"
+        )
     g12 = np.einsum("ij,ij->i", e1, e2)
     out = np.zeros((len(mem_vert), 7))
     out[:, P_D00] = 1.0 / l1
@@ -144,6 +166,7 @@ def _vert_stiffness(nvert, mem_vert, mem_par, weight=None) -> np.ndarray:
 
 # ---------------------------------------------------------------- kernels
 
+
 @kernel(inline="always")
 def _edges_and_strain(mem_vert, mem_par, k, vert_pos):
     """Triangle k's current edges e1 = b - a, e2 = c - a (m) and its Green strain
@@ -158,8 +181,17 @@ def _edges_and_strain(mem_vert, mem_par, k, vert_pos):
     g12 = e1x * e2x + e1y * e2y + e1z * e2z - p[P_G12]
     g22 = e2x * e2x + e2y * e2y + e2z * e2z - p[P_G22]
     t = g11 * d01 + g12 * d11
-    return (e1x, e1y, e1z, e2x, e2y, e2z, 0.5 * d00 * d00 * g11, 0.5 * d00 * t,
-            0.5 * (d01 * t + d11 * (g12 * d01 + g22 * d11)))
+    return (
+        e1x,
+        e1y,
+        e1z,
+        e2x,
+        e2y,
+        e2z,
+        0.5 * d00 * d00 * g11,
+        0.5 * d00 * t,
+        0.5 * (d01 * t + d11 * (g12 * d01 + g22 * d11)),
+    )
 
 
 @kernel(inline="always")
@@ -171,8 +203,16 @@ def membrane_face_force(mem_vert, mem_par, k, vert_pos, vert_vel, kv_on):
     d00, d01, d11 = p[P_D00], p[P_D01], p[P_D11]
     e1x, e1y, e1z, e2x, e2y, e2z, s00, s01, s11 = _edges_and_strain(mem_vert, mem_par, k, vert_pos)
     if kv_on and p[P_TAU] > 0.0:  # add tau dE/dt: the same map applied to dG/dt
-        v1x, v1y, v1z = vert_vel[b, 0] - vert_vel[a, 0], vert_vel[b, 1] - vert_vel[a, 1], vert_vel[b, 2] - vert_vel[a, 2]
-        v2x, v2y, v2z = vert_vel[c, 0] - vert_vel[a, 0], vert_vel[c, 1] - vert_vel[a, 1], vert_vel[c, 2] - vert_vel[a, 2]
+        v1x, v1y, v1z = (
+            vert_vel[b, 0] - vert_vel[a, 0],
+            vert_vel[b, 1] - vert_vel[a, 1],
+            vert_vel[b, 2] - vert_vel[a, 2],
+        )
+        v2x, v2y, v2z = (
+            vert_vel[c, 0] - vert_vel[a, 0],
+            vert_vel[c, 1] - vert_vel[a, 1],
+            vert_vel[c, 2] - vert_vel[a, 2],
+        )
         tau = p[P_TAU]
         h11 = 2.0 * tau * (e1x * v1x + e1y * v1y + e1z * v1z)
         h12 = tau * (e1x * v2x + e1y * v2y + e1z * v2z + e2x * v1x + e2y * v1y + e2z * v1z)
@@ -193,8 +233,14 @@ def membrane_face_force(mem_vert, mem_par, k, vert_pos, vert_vel, kv_on):
     c00 = A * ((d00 * S00 + d01 * S01) * d00 + q * d01)
     c01 = A * q * d11
     c11 = A * d11 * d11 * S11
-    return (-(c00 * e1x + c01 * e2x), -(c00 * e1y + c01 * e2y), -(c00 * e1z + c01 * e2z),
-            -(c01 * e1x + c11 * e2x), -(c01 * e1y + c11 * e2y), -(c01 * e1z + c11 * e2z))
+    return (
+        -(c00 * e1x + c01 * e2x),
+        -(c00 * e1y + c01 * e2y),
+        -(c00 * e1z + c01 * e2z),
+        -(c01 * e1x + c11 * e2x),
+        -(c01 * e1y + c11 * e2y),
+        -(c01 * e1z + c11 * e2z),
+    )
 
 
 @kernel

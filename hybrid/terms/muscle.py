@@ -22,6 +22,7 @@ class Muscle(Term):
     with stiffness k_muscle(t) (N/m) from `stiffness` (a number, a
     `Breathing` waveform, a `Table` or a function of time). Fibres run
     toward the point `toward_m`, or along `axis`."""
+
     formulations = ("paper",)  # a per-point parameter: its meaning changes with the mesh
     # mus_vert, mus_nbr (npair,) int32: each contraction pair; mus_sched (npair,) int64
     arrays = {"mus_vert": Rows(np.int32), "mus_nbr": Rows(np.int32), "mus_sched": Rows(np.int64)}
@@ -37,11 +38,14 @@ class Muscle(Term):
         angle = self.value("max_angle_deg", what)
         s = b.schedule(self.stiffness, f"{what}.stiffness", 1)
         mesh = b.mesh
-        pv, pn = muscle_pairs(mesh.vert_pos, mesh.ring_ptr, mesh.ring_vert, idx, toward=toward, axis=axis,
-                              max_angle_deg=angle)
+        pv, pn = muscle_pairs(
+            mesh.vert_pos, mesh.ring_ptr, mesh.ring_vert, idx, toward=toward, axis=axis, max_angle_deg=angle
+        )
         if pv.size == 0:
-            raise SceneError(f"{what}: no neighbour lies within {angle} deg of the fibre "
-                             f"direction; widen max_angle_deg or check toward_m/axis")
+            raise SceneError(
+                f"{what}: no neighbour lies within {angle} deg of the fibre "
+                f"direction; widen max_angle_deg or check toward_m/axis"
+            )
         np.add.at(b.vert_stiffness, pv, schedule_peak(b.schedules[s]))
         b.add_rows(mus_vert=pv, mus_nbr=pn, mus_sched=np.full(pv.size, s))
 
@@ -49,8 +53,10 @@ class Muscle(Term):
 def fibre_direction(term, what: str) -> tuple:
     """(toward_m, axis) of a muscle term, exactly one given, checked (the other None)."""
     if (term.toward_m is None) == (term.axis is None):
-        raise SceneError(f"{what}: expected exactly one fibre direction, toward_m or axis, received "
-                         f"toward_m={term.toward_m!r} axis={term.axis!r}")
+        raise SceneError(
+            f"{what}: expected exactly one fibre direction, toward_m or axis, received "
+            f"toward_m={term.toward_m!r} axis={term.axis!r}"
+        )
     toward = term.value("toward_m", what)
     axis = term.value("axis", what)
     if axis is not None and not np.linalg.norm(axis) > 0:
@@ -69,8 +75,7 @@ def schedule_peak(s) -> float:
     return 0.0  # a Python function: unknown ahead of time
 
 
-def muscle_pairs(vert_pos, ring_ptr, ring_vert, verts, *, toward=None, axis=None,
-                 max_angle_deg: float = 30.0):
+def muscle_pairs(vert_pos, ring_ptr, ring_vert, verts, *, toward=None, axis=None, max_angle_deg: float = 30.0):
     """Neighbours each muscular point contracts toward (paper 3.4).
 
     A neighbour N of point P is a contraction target when the chord P->N lies
@@ -91,7 +96,7 @@ def muscle_pairs(vert_pos, ring_ptr, ring_vert, verts, *, toward=None, axis=None
                 u = u / nu
         else:
             u = np.asarray(axis, float) / np.linalg.norm(axis)
-        for j in ring_vert[ring_ptr[i]:ring_ptr[i + 1]]:
+        for j in ring_vert[ring_ptr[i] : ring_ptr[i + 1]]:
             c = vert_pos[j] - p
             cos = 1.0 if u is None else abs(c @ u) / np.linalg.norm(c)
             if cos >= cos_min:

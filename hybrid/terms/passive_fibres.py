@@ -40,6 +40,7 @@ class PassiveFibres(Term):
     elasticity (`membrane`). The fibres run around `around_axis` (circles about
     the line through `axis_point_m` (m) along it: hoops), toward the point
     `toward_m` (m), or along `axis`, projected on the surface."""
+
     formulations = ("continuum",)
     arrays = {"pf_vert": Rows(np.int32, 3), "pf_par": Rows(float, NPAR)}
     triangle_rows = "pf_vert"
@@ -54,16 +55,20 @@ class PassiveFibres(Term):
         idx = super().compile(b, what)
         given = [k for k in ("around_axis", "toward_m", "axis") if getattr(self, k) is not None]
         if len(given) != 1:
-            raise SceneError(f"{what}: expected exactly one fibre direction, around_axis, toward_m or axis, "
-                             f"received {given or 'none'}")
+            raise SceneError(
+                f"{what}: expected exactly one fibre direction, around_axis, toward_m or axis, "
+                f"received {given or 'none'}"
+            )
         mesh = b.mesh
         faces = b.face_region(self.region, what, idx)
         tri = mesh.face_vert[faces]
         direction = self._directions(mesh.vert_pos[tri].mean(axis=1), what)
         ok, c = fibre_coefficients(mesh.vert_pos, tri, direction)
         if not ok.any():
-            raise SceneError(f"{what}.region: expected triangles in the region with fibres not normal to them, "
-                             f"found none among its {faces.size} triangles")
+            raise SceneError(
+                f"{what}.region: expected triangles in the region with fibres not normal to them, "
+                f"found none among its {faces.size} triangles"
+            )
         tri = tri[ok]
         p = mesh.vert_pos[tri]
         e = np.stack([p[:, 1] - p[:, 0], p[:, 2] - p[:, 1], p[:, 0] - p[:, 2]], axis=1)
@@ -89,7 +94,6 @@ class PassiveFibres(Term):
         if not np.linalg.norm(a) > 0:
             raise SceneError(f"{what}.axis: expected a non-zero vector, received {self.axis!r}")
         return np.tile(a, (len(centroid), 1))
-
 
 
 @kernel

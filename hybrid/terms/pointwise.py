@@ -12,8 +12,8 @@ from numba import prange
 
 from .. import checks
 from ..errors import SceneError
-from ..mesh.geometry import vertex_area
 from ..kernel import CHUNK_VERTS, kernel, kernel_twin
+from ..mesh.geometry import vertex_area
 from .base import Term, force, param
 from .shape_memory import shape_memory_force
 
@@ -23,6 +23,7 @@ __all__ = ["Gravity", "Damping", "point_forces_serial", "point_forces_parallel"]
 @force("gravity")
 class Gravity(Term):
     """Uniform gravity on the integrated points, F = m g."""
+
     arrays = {"accel": lambda n: np.zeros(3)}  # (3,) m/s^2
     accel_m_s2: tuple = param("vec3", (0.0, 0.0, -9.81))
 
@@ -44,6 +45,7 @@ class Damping(Term):
     breathing membrane the non-conservative shape-memory force excites itself
     below 0.15, as `hybrid study stability` measures).
     """
+
     arrays = {"damp_coef": lambda n: np.zeros(n)}  # (nvert,) N s/m
     finish_last = True
     coef_n_s_per_m: float = param("nonneg", None, formulation="paper")
@@ -61,11 +63,19 @@ class Damping(Term):
         for term, idx, what in b.rows["damping"]:
             given = {k: getattr(term, k) for k in ("drag_n_s_per_m3", "coef_n_s_per_m", "critical_fraction")}
             if sum(v is not None for v in given.values()) != 1:
-                raise SceneError(f"{what}: expected exactly one of drag_n_s_per_m3, coef_n_s_per_m or "
-                                 f"critical_fraction, received " + " ".join(f"{k}={v!r}" for k, v in given.items()))
+                raise SceneError(
+                    f"{what}: expected exactly one of drag_n_s_per_m3, coef_n_s_per_m or "
+                    f"critical_fraction, received " + " ".join(f"{k}={v!r}" for k, v in given.items())
+                )
             if term.drag_n_s_per_m3 is not None:
-                drag = checks.number(f"{what}.drag_n_s_per_m3", term.drag_n_s_per_m3, lo=0, lo_open=False,
-                                     hi=checks.MAX_DRAG_N_S_PER_M3, hi_open=False)
+                drag = checks.number(
+                    f"{what}.drag_n_s_per_m3",
+                    term.drag_n_s_per_m3,
+                    lo=0,
+                    lo_open=False,
+                    hi=checks.MAX_DRAG_N_S_PER_M3,
+                    hi_open=False,
+                )
                 damp_coef[idx] = drag * vertex_area(b.mesh.vert_pos, b.mesh.face_vert)[idx]
             elif term.coef_n_s_per_m is not None:
                 damp_coef[idx] = term.value("coef_n_s_per_m", what)
@@ -73,13 +83,16 @@ class Damping(Term):
                 frac = term.value("critical_fraction", what)
                 soft = idx[b.vert_stiffness[idx] <= 0]
                 if soft.size:
-                    raise SceneError(f"{what}.critical_fraction: vertices {soft[:8].tolist()} have no elastic "
-                                     f"stiffness to define critical damping; give coef_n_s_per_m instead")
+                    raise SceneError(
+                        f"{what}.critical_fraction: vertices {soft[:8].tolist()} have no elastic "
+                        f"stiffness to define critical damping; give coef_n_s_per_m instead"
+                    )
                 damp_coef[idx] = frac * 2.0 * np.sqrt(b.vert_stiffness[idx] * b.vert_mass[idx])
         b.out["damp_coef"] = damp_coef
 
 
 # ---------------------------------------------------------------- the fused pass
+
 
 @kernel(inline="always")
 def _first_at_least(idx, lo):
@@ -94,8 +107,22 @@ def _first_at_least(idx, lo):
     return a
 
 
-def _point_forces(vert_free, vert_mass, accel, gravity_on, damp_coef, damping_on, sm_vert, sm_stiff, sm_coef,
-                  sm_sums, add_sm, vert_pos, vert_vel, vert_force):
+def _point_forces(
+    vert_free,
+    vert_mass,
+    accel,
+    gravity_on,
+    damp_coef,
+    damping_on,
+    sm_vert,
+    sm_stiff,
+    sm_coef,
+    sm_sums,
+    add_sm,
+    vert_pos,
+    vert_vel,
+    vert_force,
+):
     """Start the force sum with the terms that need only the point itself, in
     one pass that sets vert_force (no separate clearing): gravity F = m g
     (integrated points), viscous damping F = -c v (paper eq. 4) and, when
@@ -127,8 +154,9 @@ def _point_forces(vert_free, vert_mass, accel, gravity_on, damp_coef, damping_on
                 fy -= cd * vert_vel[i, 1]
                 fz -= cd * vert_vel[i, 2]
             if k < nsm and np.uint64(sm_vert[k]) == i:
-                gx, gy, gz = shape_memory_force(sm_stiff, sm_coef, sm_sums, k, vert_pos[i, 0], vert_pos[i, 1],
-                                                vert_pos[i, 2])
+                gx, gy, gz = shape_memory_force(
+                    sm_stiff, sm_coef, sm_sums, k, vert_pos[i, 0], vert_pos[i, 1], vert_pos[i, 2]
+                )
                 fx += gx
                 fy += gy
                 fz += gz

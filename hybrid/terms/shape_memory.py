@@ -16,19 +16,28 @@ import math
 import numpy as np
 from numba import prange
 
-from ..errors import MeshError
 from .. import checks
+from ..errors import MeshError
 from ..kernel import kernel, kernel_twin
 from .base import Rows, Term, force, param
 
-__all__ = ["ShapeMemory", "ring_frame", "shape_memory_frame_coef", "shape_memory_frames",
-           "shape_memory_frames_parallel", "shape_memory_force", "add_shape_memory", "add_shape_memory_parallel"]
+__all__ = [
+    "ShapeMemory",
+    "ring_frame",
+    "shape_memory_frame_coef",
+    "shape_memory_frames",
+    "shape_memory_frames_parallel",
+    "shape_memory_force",
+    "add_shape_memory",
+    "add_shape_memory_parallel",
+]
 
 
 @force("shape_memory")
 class ShapeMemory(Term):
     """Local shape memory (paper 3.4): each point attracted to its ideal place
     in the frame of its neighbours, stiffness in N/m."""
+
     formulations = ("paper",)  # a per-point parameter: its meaning changes with the mesh
     # sm_vert (nsm,) int32 sorted; sm_stiff (nsm,) N/m; sm_coef (nsm, 3) m
     arrays = {"sm_vert": Rows(np.int32), "sm_stiff": Rows(float), "sm_coef": Rows(float, 3)}
@@ -48,13 +57,18 @@ class ShapeMemory(Term):
         mesh = b.mesh
         b.out["sm_vert"] = sm_vert
         b.out["sm_stiff"] = stiff[sm_vert].copy()
-        b.out["sm_coef"] = np.ascontiguousarray(shape_memory_frame_coef(
-            mesh.vert_pos, mesh.ring_ptr, mesh.ring_vert, mesh.ring_closed, sm_vert)) if sm_vert.size \
+        b.out["sm_coef"] = (
+            np.ascontiguousarray(
+                shape_memory_frame_coef(mesh.vert_pos, mesh.ring_ptr, mesh.ring_vert, mesh.ring_closed, sm_vert)
+            )
+            if sm_vert.size
             else np.zeros((0, 3))
+        )
         b.vert_stiffness += stiff
 
 
 # ---------------------------------------------------------------- the local frame
+
 
 @kernel(inline="always")
 def ring_sums(vert_pos, ring_ptr, ring_vert, ring_closed, i):
@@ -136,21 +150,23 @@ def shape_memory_frame_coef(vert_pos, ring_ptr, ring_vert, ring_closed, verts) -
             bad.append(int(i))
             continue
         f = ring_frame(vert_pos, ring_ptr, ring_vert, ring_closed, i)
-        scale = float(np.ptp(vert_pos[ring_vert[ring_ptr[i]:ring_ptr[i + 1]]], axis=0).max())
+        scale = float(np.ptp(vert_pos[ring_vert[ring_ptr[i] : ring_ptr[i + 1]]], axis=0).max())
         if not (f[12] > 1e-10 * scale * scale) or not np.all(np.isfinite(f[:12])):
             bad.append(int(i))
             continue
         d = vert_pos[i] - np.array(f[0:3])
         coef[k] = (np.dot(f[3:6], d), np.dot(f[6:9], d), np.dot(f[9:12], d))
     if bad:
-        raise MeshError(f"shape memory: vertices {bad[:8]} ({len(bad)} in all) have a degenerate neighbour "
-                        f"ring (expected at least 3 neighbours not all on one line); leave them out of the "
-                        f"shape-memory region or nail them")
+        raise MeshError(
+            f"shape memory: vertices {bad[:8]} ({len(bad)} in all) have a degenerate neighbour "
+            f"ring (expected at least 3 neighbours not all on one line); leave them out of the "
+            f"shape-memory region or nail them"
+        )
     return coef
 
 
-
 # ---------------------------------------------------------------- kernels
+
 
 @kernel(inline="always")
 def _store_ring_sums(sm_vert, ring_ptr, ring_vert, ring_closed, vert_pos, sm_sums, k):
@@ -187,16 +203,19 @@ def shape_memory_force(sm_stiff, sm_coef, sm_sums, k, px, py, pz):
     """Second pass, one point: k (P_ideal - P) (N) for shape-memory point k at P (m),
     P_ideal = G + alpha t1 + beta t2 + gamma n from its `shape_memory_frames` row."""
     gx, gy, gz = sm_sums[k, 0], sm_sums[k, 1], sm_sums[k, 2]
-    tx, ty, tz, ux, uy, uz, nx, ny, nz = frame_axes(sm_sums[k, 6], sm_sums[k, 7], sm_sums[k, 8],
-                                                    sm_sums[k, 3], sm_sums[k, 4], sm_sums[k, 5])
+    tx, ty, tz, ux, uy, uz, nx, ny, nz = frame_axes(
+        sm_sums[k, 6], sm_sums[k, 7], sm_sums[k, 8], sm_sums[k, 3], sm_sums[k, 4], sm_sums[k, 5]
+    )
     al, be, ga = sm_coef[k, 0], sm_coef[k, 1], sm_coef[k, 2]
     c = sm_stiff[k]
-    return (c * (gx + al * tx + be * ux + ga * nx - px), c * (gy + al * ty + be * uy + ga * ny - py),
-            c * (gz + al * tz + be * uz + ga * nz - pz))
+    return (
+        c * (gx + al * tx + be * ux + ga * nx - px),
+        c * (gy + al * ty + be * uy + ga * ny - py),
+        c * (gz + al * tz + be * uz + ga * nz - pz),
+    )
 
 
-def _add_shape_memory(sm_vert, sm_stiff, sm_coef, ring_ptr, ring_vert, ring_closed, vert_pos, sm_sums,
-                      vert_force):
+def _add_shape_memory(sm_vert, sm_stiff, sm_coef, ring_ptr, ring_vert, ring_closed, vert_pos, sm_sums, vert_force):
     """Local shape memory (paper 3.4): F_i += k_i (P_ideal - P_i).
 
     P_ideal = G + alpha t1 + beta t2 + gamma n in the frame of the current
@@ -215,8 +234,7 @@ def _add_shape_memory(sm_vert, sm_stiff, sm_coef, ring_ptr, ring_vert, ring_clos
         _store_ring_sums(sm_vert, ring_ptr, ring_vert, ring_closed, vert_pos, sm_sums, k)
     for k in prange(sm_vert.shape[0]):
         i = np.uint64(sm_vert[k])
-        fx, fy, fz = shape_memory_force(sm_stiff, sm_coef, sm_sums, k, vert_pos[i, 0], vert_pos[i, 1],
-                                        vert_pos[i, 2])
+        fx, fy, fz = shape_memory_force(sm_stiff, sm_coef, sm_sums, k, vert_pos[i, 0], vert_pos[i, 1], vert_pos[i, 2])
         vert_force[i, 0] += fx
         vert_force[i, 1] += fy
         vert_force[i, 2] += fz

@@ -7,8 +7,8 @@ import math
 
 import numpy as np
 
-from ..errors import SceneError
 from .. import checks
+from ..errors import SceneError
 from ..kernel import kernel
 from .base import Rows, Term, force, param
 
@@ -18,6 +18,7 @@ __all__ = ["MassSpring", "AppliedForce", "Attraction", "add_mass_spring", "add_a
 @force("mass_spring")
 class MassSpring(Term):
     """Springs along the mesh edges within `region` (the paper's comparison model)."""
+
     formulations = ("paper",)  # a per-point parameter: its meaning changes with the mesh
     # spring_vert (ns, 2) int32; spring_stiff (ns,) N/m; spring_rest (ns,) m
     arrays = {"spring_vert": Rows(np.int32, 2), "spring_stiff": Rows(float), "spring_rest": Rows(float)}
@@ -44,13 +45,15 @@ class MassSpring(Term):
         spring_vert = mesh.edge_vert[eidx[used]].astype(np.int32)
         b.out["spring_vert"] = spring_vert
         b.out["spring_stiff"] = stiff[used]
-        b.out["spring_rest"] = np.linalg.norm(mesh.vert_pos[spring_vert[:, 1]] - mesh.vert_pos[spring_vert[:, 0]],
-                                              axis=1)
+        b.out["spring_rest"] = np.linalg.norm(
+            mesh.vert_pos[spring_vert[:, 1]] - mesh.vert_pos[spring_vert[:, 0]], axis=1
+        )
 
 
 @force("applied_force")
 class AppliedForce(Term):
     """A force (N) on each point of `region`: a 3-vector, a `Table` or a function of time."""
+
     formulations = ("paper",)  # a per-point parameter: its meaning changes with the mesh
     # app_vert (n,) int32; app_sched (n,) int64: each point's schedule row
     arrays = {"app_vert": Rows(np.int32), "app_sched": Rows(np.int64)}
@@ -68,10 +71,15 @@ class Attraction(Term):
     """Attractive points (paper 3.3): a spring (N/m) from each point of
     `region` to its ideal position = rest position (or `target_m`) plus
     `offset_m` (a 3-vector, `Table` or function of time, for moving targets)."""
+
     formulations = ("paper",)  # a per-point parameter: its meaning changes with the mesh
     # att_vert (n,) int32; att_stiff (n,) N/m; att_target (n, 3) m; att_sched (n,) int64 (offsets)
-    arrays = {"att_vert": Rows(np.int32), "att_stiff": Rows(float), "att_target": Rows(float, 3),
-              "att_sched": Rows(np.int64)}
+    arrays = {
+        "att_vert": Rows(np.int32),
+        "att_stiff": Rows(float),
+        "att_target": Rows(float, 3),
+        "att_sched": Rows(np.int64),
+    }
     region: object = param("selector")
     stiffness_n_per_m: float = param("positive", hi=checks.MAX_STIFFNESS_N_PER_M)
     offset_m: object = param("schedule", (0.0, 0.0, 0.0), ncomp=3)
@@ -87,14 +95,17 @@ class Attraction(Term):
             if target.shape == (3,):
                 target = np.tile(target, (idx.size, 1))
             if target.shape != (idx.size, 3) or not np.all(np.isfinite(target)):
-                raise SceneError(f"{what}.target_m: expected a 3-vector or {idx.size} 3-vectors, "
-                                 f"received shape {np.shape(self.target_m)}")
+                raise SceneError(
+                    f"{what}.target_m: expected a 3-vector or {idx.size} 3-vectors, "
+                    f"received shape {np.shape(self.target_m)}"
+                )
         s = b.schedule(self.offset_m, f"{what}.offset_m", 3)
         b.add_rows(att_vert=idx, att_stiff=np.full(idx.size, k), att_target=target, att_sched=np.full(idx.size, s))
         b.vert_stiffness[idx] += k
 
 
 # ---------------------------------------------------------------- kernels
+
 
 @kernel
 def add_applied(app_vert, app_sched, sched_val, vert_force):

@@ -125,12 +125,38 @@ def _edge_blocks(tri, c, slot, scale, rank_e, rank_p, e_col, p_col, amat, pdiag)
             g0, g1, g2 = gmx * gnx, gmx * gny, gmx * gnz
             g3, g4, g5 = gmy * gnx, gmy * gny, gmy * gnz
             g6, g7, g8 = gmz * gnx, gmz * gny, gmz * gnz
-            _add_block(amat, s, tri[m] > tri[n], re * g0, re * g1, re * g2, re * g3, re * g4, re * g5, re * g6,
-                       re * g7, re * g8, lap_e)
+            _add_block(
+                amat,
+                s,
+                tri[m] > tri[n],
+                re * g0,
+                re * g1,
+                re * g2,
+                re * g3,
+                re * g4,
+                re * g5,
+                re * g6,
+                re * g7,
+                re * g8,
+                lap_e,
+            )
             if m == n:
                 lap_p = scale * (c[p_col + m] + c[p_col + mp])
-                _add_block(pdiag, tri[m], False, rp * g0, rp * g1, rp * g2, rp * g3, rp * g4, rp * g5, rp * g6, rp * g7,
-                           rp * g8, lap_p)
+                _add_block(
+                    pdiag,
+                    tri[m],
+                    False,
+                    rp * g0,
+                    rp * g1,
+                    rp * g2,
+                    rp * g3,
+                    rp * g4,
+                    rp * g5,
+                    rp * g6,
+                    rp * g7,
+                    rp * g8,
+                    lap_p,
+                )
 
 
 @kernel(fastmath=FAST_NO_FMA)

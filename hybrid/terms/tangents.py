@@ -63,10 +63,23 @@ from ..kernel import kernel
 from .fibres import MIN_STRETCH, force_length
 from .membrane import P_AREA, P_D00, P_D01, P_D11, P_LAM, P_MU, P_TAU, _edges_and_strain
 
-__all__ = ["NCACHE", "NFIB_CACHE", "NPF_CACHE", "fibre_tangent_cache", "fibre_cached_product",
-           "passive_fibres_tangent_cache", "passive_fibres_cached_product", "membrane_tangent_cache",
-           "membrane_tangent_product", "fibre_tangent_product", "clamp_stress", "kelvin_voigt_dissipation",
-           "fibre_energy", "passive_fibres_tangent_product", "passive_fibres_energy_kernel"]
+__all__ = [
+    "NCACHE",
+    "NFIB_CACHE",
+    "NPF_CACHE",
+    "fibre_tangent_cache",
+    "fibre_cached_product",
+    "passive_fibres_tangent_cache",
+    "passive_fibres_cached_product",
+    "membrane_tangent_cache",
+    "membrane_tangent_product",
+    "fibre_tangent_product",
+    "clamp_stress",
+    "kelvin_voigt_dissipation",
+    "fibre_energy",
+    "passive_fibres_tangent_product",
+    "passive_fibres_energy_kernel",
+]
 
 # membrane_tangent_cache columns: F's columns f0, f1 (3 each), the stress S00, S01, S11 (N/m), the
 # projected stress (the same three, its negative eigenvalues clamped)
@@ -237,8 +250,17 @@ def _edge_product(c, e0, s_scale, g_scale, i0, i1, i2, u, y):
     d0x, d0y, d0z = u[i1, 0] - u[i0, 0], u[i1, 1] - u[i0, 1], u[i1, 2] - u[i0, 2]
     d1x, d1y, d1z = u[i2, 0] - u[i1, 0], u[i2, 1] - u[i1, 1], u[i2, 2] - u[i1, 2]
     d2x, d2y, d2z = u[i0, 0] - u[i2, 0], u[i0, 1] - u[i2, 1], u[i0, 2] - u[i2, 2]
-    s = s_scale * (c[0] * d0x + c[1] * d0y + c[2] * d0z + c[3] * d1x + c[4] * d1y + c[5] * d1z
-                   + c[6] * d2x + c[7] * d2y + c[8] * d2z)
+    s = s_scale * (
+        c[0] * d0x
+        + c[1] * d0y
+        + c[2] * d0z
+        + c[3] * d1x
+        + c[4] * d1y
+        + c[5] * d1z
+        + c[6] * d2x
+        + c[7] * d2y
+        + c[8] * d2z
+    )
     g0, g1, g2 = g_scale * c[e0], g_scale * c[e0 + 1], g_scale * c[e0 + 2]
     t0x, t0y, t0z = s * c[0] + g0 * d0x, s * c[1] + g0 * d0y, s * c[2] + g0 * d0z
     t1x, t1y, t1z = s * c[3] + g1 * d1x, s * c[4] + g1 * d1y, s * c[5] + g1 * d1z
@@ -281,10 +303,26 @@ def kelvin_voigt_dissipation(mem_vert, mem_par, vert_pos, vert_vel):
             continue
         a, b, c = mem_vert[k, 0], mem_vert[k, 1], mem_vert[k, 2]
         d00, d01, d11 = p[P_D00], p[P_D01], p[P_D11]
-        e1x, e1y, e1z = vert_pos[b, 0] - vert_pos[a, 0], vert_pos[b, 1] - vert_pos[a, 1], vert_pos[b, 2] - vert_pos[a, 2]
-        e2x, e2y, e2z = vert_pos[c, 0] - vert_pos[a, 0], vert_pos[c, 1] - vert_pos[a, 1], vert_pos[c, 2] - vert_pos[a, 2]
-        v1x, v1y, v1z = vert_vel[b, 0] - vert_vel[a, 0], vert_vel[b, 1] - vert_vel[a, 1], vert_vel[b, 2] - vert_vel[a, 2]
-        v2x, v2y, v2z = vert_vel[c, 0] - vert_vel[a, 0], vert_vel[c, 1] - vert_vel[a, 1], vert_vel[c, 2] - vert_vel[a, 2]
+        e1x, e1y, e1z = (
+            vert_pos[b, 0] - vert_pos[a, 0],
+            vert_pos[b, 1] - vert_pos[a, 1],
+            vert_pos[b, 2] - vert_pos[a, 2],
+        )
+        e2x, e2y, e2z = (
+            vert_pos[c, 0] - vert_pos[a, 0],
+            vert_pos[c, 1] - vert_pos[a, 1],
+            vert_pos[c, 2] - vert_pos[a, 2],
+        )
+        v1x, v1y, v1z = (
+            vert_vel[b, 0] - vert_vel[a, 0],
+            vert_vel[b, 1] - vert_vel[a, 1],
+            vert_vel[b, 2] - vert_vel[a, 2],
+        )
+        v2x, v2y, v2z = (
+            vert_vel[c, 0] - vert_vel[a, 0],
+            vert_vel[c, 1] - vert_vel[a, 1],
+            vert_vel[c, 2] - vert_vel[a, 2],
+        )
         g11 = 2.0 * (e1x * v1x + e1y * v1y + e1z * v1z)  # dG/dt
         g12 = e1x * v2x + e1y * v2y + e1z * v2z + e2x * v1x + e2y * v1y + e2z * v1z
         g22 = 2.0 * (e2x * v2x + e2y * v2y + e2z * v2z)

@@ -21,18 +21,33 @@ from enum import IntEnum
 import numpy as np
 from numba import prange
 
-from ..errors import SceneError
 from .. import checks
+from ..errors import SceneError
 from ..kernel import CHUNK_VERTS, kernel, kernel_twin
 from .base import Rows, Term, constraint, force, param
 
-__all__ = ["Volume", "SoftVolume", "Pressure", "add_pressure", "Projection", "centroid", "face_volume",
-           "ring_cross_sum", "volume_cubic", "solve_cubic_near_zero", "project_volume", "soft_volume_force",
-           "PROJ_OK", "PROJ_NO_GRADIENT", "PROJ_NO_ROOT"]
+__all__ = [
+    "Volume",
+    "SoftVolume",
+    "Pressure",
+    "add_pressure",
+    "Projection",
+    "centroid",
+    "face_volume",
+    "ring_cross_sum",
+    "volume_cubic",
+    "solve_cubic_near_zero",
+    "project_volume",
+    "soft_volume_force",
+    "PROJ_OK",
+    "PROJ_NO_GRADIENT",
+    "PROJ_NO_ROOT",
+]
 
 
 class Projection(IntEnum):
     """Status of the volume projection, read by the simulation."""
+
     OK = 0
     NO_GRADIENT = 1  # the volume gradient vanished on the free points
     NO_ROOT = 2  # the cubic has no real root
@@ -49,6 +64,7 @@ class SoftVolume(Term):
     (formulation "paper", paper 6.2): each point pulled with that stiffness
     toward the position the exact volume projection would give it, whose bulk
     modulus grows with the number of points."""
+
     # soft_stiff N/m (paper), soft_bulk Pa (continuum): the one given, the other 0
     arrays = {"soft_stiff": lambda n: 0.0, "soft_bulk": lambda n: 0.0}
     stiffness_n_per_m: float = param("positive", None, hi=checks.MAX_STIFFNESS_N_PER_M, formulation="paper")
@@ -57,8 +73,10 @@ class SoftVolume(Term):
     def compile(self, b, what):
         super().compile(b, what)
         if (self.stiffness_n_per_m is None) == (self.bulk_modulus_pa is None):
-            raise SceneError(f"{what}: expected exactly one of bulk_modulus_pa or stiffness_n_per_m, received "
-                             f"bulk_modulus_pa={self.bulk_modulus_pa!r} stiffness_n_per_m={self.stiffness_n_per_m!r}")
+            raise SceneError(
+                f"{what}: expected exactly one of bulk_modulus_pa or stiffness_n_per_m, received "
+                f"bulk_modulus_pa={self.bulk_modulus_pa!r} stiffness_n_per_m={self.stiffness_n_per_m!r}"
+            )
         if self.stiffness_n_per_m is not None:
             b.out["soft_stiff"] = self.value("stiffness_n_per_m", what)
         else:
@@ -78,6 +96,7 @@ class Pressure(Term):
     """A uniform pressure load on a closed surface, `pressure_pa` (Pa, positive
     pushing outward; a number, a `Breathing` waveform, a `Table` or a function
     of time): F_i = p(t) grad_i V, the work of p on the enclosed volume."""
+
     # pres_sched (nterm,) int64: the schedule row of each pressure term (their sum acts)
     arrays = {"pres_sched": Rows(np.int64)}
     pressure_pa: object = param("schedule", ncomp=1)
@@ -106,11 +125,14 @@ class Volume(Term):
     @classmethod
     def finish(cls, b):
         if not np.any(b.out["vert_weight"] > 0):
-            raise SceneError(f"{b.rows['volume'][0]}: every point is nailed, prescribed or linked; "
-                             "expected at least one free point to carry the volume correction")
+            raise SceneError(
+                f"{b.rows['volume'][0]}: every point is nailed, prescribed or linked; "
+                "expected at least one free point to carry the volume correction"
+            )
 
 
 # ---------------------------------------------------------------- kernels
+
 
 @kernel(inline="always")
 def ring_cross_sum(ring_ptr, ring_vert, vec, i):
@@ -205,8 +227,7 @@ def _cubic_terms(ring_ptr, ring_vert, ref, vert_pos, dirn, chunk_acc):
         # unsigned indices: numba then skips its negative-index wraparound
         for i in range(np.uint64(c * CHUNK_VERTS), np.uint64(min((c + 1) * CHUNK_VERTS, n))):
             gx, gy, gz = ring_cross_sum(ring_ptr, ring_vert, dirn, i)
-            s2 += ((vert_pos[i, 0] - ref[0]) * gx + (vert_pos[i, 1] - ref[1]) * gy
-                   + (vert_pos[i, 2] - ref[2]) * gz)
+            s2 += (vert_pos[i, 0] - ref[0]) * gx + (vert_pos[i, 1] - ref[1]) * gy + (vert_pos[i, 2] - ref[2]) * gz
             s3 += dirn[i, 0] * gx + dirn[i, 1] * gy + dirn[i, 2] * gz
         chunk_acc[c, 0] = s2
         chunk_acc[c, 1] = s3
@@ -334,8 +355,12 @@ def solve_cubic_near_zero(c0, c1, c2, c3):
             b = min(b, k)
     # a true root (residual at the roundoff of its terms), in the piece around 0, nearest
     scale = abs(c0) + abs(c1 * x) + abs(c2 * x * x) + abs(c3 * x * x * x)
-    if (converged and abs(_cubic_at(c0, c1, c2, c3, x)) <= 1e-12 * scale
-            and a <= x <= b and abs(x) <= min(abs(a), abs(b))):
+    if (
+        converged
+        and abs(_cubic_at(c0, c1, c2, c3, x)) <= 1e-12 * scale
+        and a <= x <= b
+        and abs(x) <= min(abs(a), abs(b))
+    ):
         return x, PROJ_OK
     best = np.inf
     bounds = (lo, k1, k2, hi)
@@ -420,8 +445,9 @@ volume_direction_serial, volume_direction_parallel = kernel_twin(_volume_directi
 
 
 @kernel
-def project_volume(ring_ptr, ring_vert, vol0, vert_weight, h, vert_pos, vert_vel, grad, dirn, cubic,
-                   chunk_acc, parallel, shake=False):
+def project_volume(
+    ring_ptr, ring_vert, vol0, vert_weight, h, vert_pos, vert_vel, grad, dirn, cubic, chunk_acc, parallel, shake=False
+):
     """Exact constant-volume projection (paper 4.2-4.3).
 
     X = X* + phi D, D_i = w_i grad_i V(X*) (with `shake`, D as given: the gradient

@@ -55,7 +55,9 @@ def test_a_uv_sphere_has_meridians_at_the_azimuths_and_keeps_its_counts():
     assert mesh.nvert == plain.nvert and mesh.face_vert.shape == plain.face_vert.shape
     for on, cross in _border_columns(mesh, AZIMUTHS_DEG):
         assert on.sum() == 24 and cross.sum() == 0  # every circle, every face on one side
-    np.testing.assert_array_equal(uv_sphere(0.12, 13, 7, conform_azimuth_deg=()).vert_pos, uv_sphere(0.12, 13, 7).vert_pos)
+    np.testing.assert_array_equal(
+        uv_sphere(0.12, 13, 7, conform_azimuth_deg=()).vert_pos, uv_sphere(0.12, 13, 7).vert_pos
+    )
 
 
 def test_conforming_azimuths_that_cannot_be_met_are_refused():
@@ -79,7 +81,8 @@ def test_a_wedge_selects_by_azimuth_with_its_borders_and_across_180_degrees():
     # about the axis through x = 0.05 m: the points behind it (|azimuth| > 60 degrees about the
     # origin), and now the point above the origin, which is off that axis
     about = select(Wedge(90.0, 270.0, center=(0.05, 0.0, 0.0)), pts, name="w")
-    assert about[-1] == len(az) and np.rad2deg(az[about[:-1]]).round(6).tolist() == \
-        [a for a in range(-175, 180, 10) if abs(a) > 60]
+    assert about[-1] == len(az) and np.rad2deg(az[about[:-1]]).round(6).tolist() == [
+        a for a in range(-175, 180, 10) if abs(a) > 60
+    ]
     with pytest.raises(SceneError, match="region 'w': expected from_deg and to_deg in \\[-360, 360\\]"):
         select(Wedge(0.0, 720.0), pts, name="w")

@@ -5,11 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from hybrid.mesh import Mesh, icosphere, uv_sphere, volume, volume_gradient
-
 from helpers import CLOSED, hemisphere
 
+from hybrid.mesh import Mesh, icosphere, uv_sphere, volume, volume_gradient
 
 OFFSET = np.array([100.0, -100.0, 100.0])  # far from the origin, in m
 

@@ -35,10 +35,16 @@ def test_uv_sphere_counts(segments, rings):
     assert m.closed and m.volume() > 0
 
 
-@pytest.mark.parametrize("kwargs, match", [
-    (dict(segments=2), "segments"), (dict(rings=1), "rings"), (dict(radius=-1.0), "radius"),
-    (dict(radius=np.nan), "radius"), (dict(center=(0, 0)), "center"),
-])
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        (dict(segments=2), "segments"),
+        (dict(rings=1), "rings"),
+        (dict(radius=-1.0), "radius"),
+        (dict(radius=np.nan), "radius"),
+        (dict(center=(0, 0)), "center"),
+    ],
+)
 def test_uv_sphere_rejects_bad_arguments(kwargs, match):
     with pytest.raises(MeshError, match=match):
         uv_sphere(**kwargs)
@@ -50,8 +56,7 @@ def test_icosphere_vertex_counts(subdivisions, nvert):
     assert m.nvert == nvert
     assert m.nface == 2 * nvert - 4
     assert m.closed
-    np.testing.assert_allclose(np.linalg.norm(m.vert_pos - [1.0, 0.0, 0.0], axis=1), 2.0,
-                               rtol=1e-14)
+    np.testing.assert_allclose(np.linalg.norm(m.vert_pos - [1.0, 0.0, 0.0], axis=1), 2.0, rtol=1e-14)
 
 
 def test_icosphere_rejects_bad_level():

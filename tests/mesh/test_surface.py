@@ -7,11 +7,10 @@ import pickle
 
 import numpy as np
 import pytest
+from helpers import dented_sphere, hemisphere, sphere_arrays
 
 from hybrid.errors import MeshError
 from hybrid.mesh import Mesh, uv_sphere
-
-from helpers import dented_sphere, hemisphere, sphere_arrays
 
 
 def test_geometry_methods_check_the_shape():
@@ -23,8 +22,11 @@ def test_geometry_methods_check_the_shape():
 def test_require_closed():
     uv_sphere().require_closed("a volume constraint needs a closed surface")
     m = hemisphere()
-    with pytest.raises(MeshError, match=r"a volume constraint needs a closed surface.*"
-                                        r"open: 13 border edges.*\(\d+, \d+\)"):
+    with pytest.raises(
+        MeshError,
+        match=r"a volume constraint needs a closed surface.*"
+        r"open: 13 border edges.*\(\d+, \d+\)",
+    ):
         m.require_closed("a volume constraint needs a closed surface")
 
 
@@ -33,8 +35,7 @@ def test_mesh_is_frozen_and_owns_its_arrays():
     m = Mesh.from_arrays(pos, face, name="s")
     pos[0] = 99.0  # the caller's arrays stay theirs
     assert m.vert_pos[0, 2] == 1.0 and pos.flags.writeable
-    for arr in (m.vert_pos, m.face_vert, m.ring_ptr, m.ring_vert, m.ring_closed,
-                m.edge_vert, m.border_vert):
+    for arr in (m.vert_pos, m.face_vert, m.ring_ptr, m.ring_vert, m.ring_closed, m.edge_vert, m.border_vert):
         assert not arr.flags.writeable
         with pytest.raises(ValueError):
             arr[0] = 0

@@ -5,11 +5,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import hemisphere, sphere_arrays, torus
 
 from hybrid.errors import MeshError
 from hybrid.mesh import Mesh, uv_sphere
-
-from helpers import hemisphere, sphere_arrays, torus
 
 
 def check_rings(m: Mesh):
@@ -26,7 +25,7 @@ def check_rings(m: Mesh):
             e = tuple(sorted((f[k], f[(k + 1) % 3])))
             undirected_count[e] = undirected_count.get(e, 0) + 1
     for v in range(m.nvert):
-        ring = m.ring_vert[m.ring_ptr[v]:m.ring_ptr[v + 1]].tolist()
+        ring = m.ring_vert[m.ring_ptr[v] : m.ring_ptr[v + 1]].tolist()
         assert set(ring) == neighbours[v] and len(ring) == len(neighbours[v])
         pairs = list(zip(ring[:-1], ring[1:]))
         if m.ring_closed[v]:
@@ -51,9 +50,9 @@ def test_rings_of_closed_meshes(closed_mesh):
 
 def test_uv_sphere_ring_turns_counter_clockwise_seen_from_outside():
     m = uv_sphere()
-    assert m.ring_vert[m.ring_ptr[0]:m.ring_ptr[1]].tolist() == list(range(1, 14))
+    assert m.ring_vert[m.ring_ptr[0] : m.ring_ptr[1]].tolist() == list(range(1, 14))
     # vertex 1 (on +x): north pole, west (13), two below (14, 15), east (2)
-    assert m.ring_vert[m.ring_ptr[1]:m.ring_ptr[2]].tolist() == [0, 13, 14, 15, 2]
+    assert m.ring_vert[m.ring_ptr[1] : m.ring_ptr[2]].tolist() == [0, 13, 14, 15, 2]
 
 
 def test_rings_of_an_open_mesh():

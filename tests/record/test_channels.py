@@ -4,13 +4,12 @@ frame and its triangles less often."""
 from __future__ import annotations
 
 import numpy as np
+from helpers import FrameCopies, decoded_messages
 
 import hybrid
 from hybrid.demo import membrane_demo
 from hybrid.record import Recorder, read
 from hybrid.run import run
-
-from helpers import FrameCopies, decoded_messages
 
 
 def test_a_large_mesh_records_a_point_cloud_every_frame_and_the_triangles_less_often(tmp_path):

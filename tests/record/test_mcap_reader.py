@@ -17,9 +17,17 @@ from hybrid.run import run
 
 # a chunk record: opcode 1, length 8, message start and end times 8 + 8,
 # uncompressed size 8, uncompressed CRC 4, compression (length 4, "zstd"), data length 8
-CHUNK_FIELDS = {"opcode": (0, 1), "record length": (1, 8), "message start time": (9, 8),
-                "message end time": (17, 8), "uncompressed size": (25, 8), "uncompressed crc": (33, 4),
-                "compression length": (37, 4), "compression": (41, 4), "data length": (45, 8)}
+CHUNK_FIELDS = {
+    "opcode": (0, 1),
+    "record length": (1, 8),
+    "message start time": (9, 8),
+    "message end time": (17, 8),
+    "uncompressed size": (25, 8),
+    "uncompressed crc": (33, 4),
+    "compression length": (37, 4),
+    "compression": (41, 4),
+    "data length": (45, 8),
+}
 DATA_AT = 53
 
 
@@ -78,8 +86,10 @@ def test_a_bit_flipped_in_any_chunk_of_a_finished_file_raises_naming_the_chunk(s
                 read(bad)
             msg = str(exc.value)
             assert "\n" not in msg
-            assert f"chunk {i + 1} of {len(chunks)} (t {c.message_start_time * 1e-9:.6g} to " \
-                   f"{c.message_end_time * 1e-9:.6g} s, byte offset {c.chunk_start_offset})" in msg, (what, msg)
+            assert (
+                f"chunk {i + 1} of {len(chunks)} (t {c.message_start_time * 1e-9:.6g} to "
+                f"{c.message_end_time * 1e-9:.6g} s, byte offset {c.chunk_start_offset})" in msg
+            ), (what, msg)
 
 
 def test_a_bit_flipped_in_any_chunk_of_an_unfinished_file_raises(short, tmp_path):
@@ -120,7 +130,7 @@ def test_a_file_cut_anywhere_in_its_last_chunk_reads_up_to_the_chunk_before_with
         np.testing.assert_array_equal(got["t"], full["t"][:before])
         np.testing.assert_array_equal(got["pos"], full["pos"][:before])
     # cut inside its message indexes: the chunk itself is whole, and read
-    cut.write_bytes(whole[:end + 5])
+    cut.write_bytes(whole[: end + 5])
     with pytest.warns(RecordingWarning, match="ends at byte"):
         got = read(cut)["membrane"]
     np.testing.assert_array_equal(got["pos"], full["pos"])
@@ -132,7 +142,9 @@ def test_salvage_skips_the_corrupt_chunk_and_says_which(short, tmp_path):
     c = chunks[2]
     bad = tmp_path / "bad.mcap"
     bad.write_bytes(_flipped(short.read_bytes(), c.chunk_start_offset + DATA_AT + c.compressed_size // 2, 5))
-    with pytest.warns(RecordingWarning, match=rf"chunk 3 of {len(chunks)} .*byte offset {c.chunk_start_offset}\).*skipped"):
+    with pytest.warns(
+        RecordingWarning, match=rf"chunk 3 of {len(chunks)} .*byte offset {c.chunk_start_offset}\).*skipped"
+    ):
         got = read(bad, strict=False)["membrane"]
     full = read(short)["membrane"]
     keep = (full["t"] * 1e9 < c.message_start_time - 1) | (full["t"] * 1e9 > c.message_end_time + 1)
@@ -211,7 +223,7 @@ def test_render_of_a_truncated_recording_draws_it_and_says_so_in_one_line(short,
     warning is one line."""
     chunks, _ = _chunk_indexes(short)
     cut = tmp_path / "cut.mcap"
-    cut.write_bytes(short.read_bytes()[:chunks[-1].chunk_start_offset + 100])
+    cut.write_bytes(short.read_bytes()[: chunks[-1].chunk_start_offset + 100])
     capsys.readouterr()
     assert main(["render", str(cut), "--out", str(tmp_path / "figs")]) == 0
     err = capsys.readouterr().err

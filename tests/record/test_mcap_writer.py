@@ -4,12 +4,11 @@ in Foxglove's well-known schemas, read by mcap's own reader with its CRCs checke
 from __future__ import annotations
 
 import numpy as np
+from helpers import decoded_messages
 
 import hybrid
 from hybrid.record import Recorder
 from hybrid.run import run
-
-from helpers import decoded_messages
 
 
 def test_the_file_is_a_valid_indexed_mcap_in_foxglove_schemas(tmp_path):
@@ -44,4 +43,6 @@ def test_the_file_is_a_valid_indexed_mcap_in_foxglove_schemas(tmp_path):
     assert {e.frame_id for e in geoms.entities} == {"spine", "rib_left", "rib_right"}
     assert sum(len(e.cylinders) + len(e.spheres) + len(e.cubes) for e in geoms.entities) > 0
     with open(tmp_path / "run.mcap", "rb") as f:  # the CRCs hold
-        assert sum(1 for _ in NonSeekingReader(f, validate_crcs=True).iter_messages()) == summary.statistics.message_count
+        assert (
+            sum(1 for _ in NonSeekingReader(f, validate_crcs=True).iter_messages()) == summary.statistics.message_count
+        )

@@ -8,13 +8,12 @@ import dataclasses
 
 import numpy as np
 import pytest
+from helpers import FrameCopies
 
 import hybrid
 from hybrid.demo import membrane_demo
 from hybrid.record import SCALAR_CHANNELS, Recorder, read
 from hybrid.run import RunFailed, run
-
-from helpers import FrameCopies
 
 
 def test_read_back_equals_the_simulation_at_the_recorded_times(tmp_path):
@@ -125,13 +124,15 @@ def test_a_killed_run_leaves_a_readable_file_with_its_frames(tmp_path):
     with Recorder(tmp_path / "warm.mcap", warm) as rec:
         run(warm, 0.05, observers=[rec])
     path = tmp_path / "run.mcap"
-    script = ("import hybrid\n"
-              "from hybrid.demo import membrane_demo\n"
-              "from hybrid.record import Recorder\n"
-              "from hybrid.run import run\n"
-              "sim = hybrid.load(membrane_demo(duration_s=1000.0))\n"
-              f"rec = Recorder({str(path)!r}, sim, flush_s=0.05)\n"
-              "run(sim, 1000.0, observers=[rec])\n")
+    script = (
+        "import hybrid\n"
+        "from hybrid.demo import membrane_demo\n"
+        "from hybrid.record import Recorder\n"
+        "from hybrid.run import run\n"
+        "sim = hybrid.load(membrane_demo(duration_s=1000.0))\n"
+        f"rec = Recorder({str(path)!r}, sim, flush_s=0.05)\n"
+        "run(sim, 1000.0, observers=[rec])\n"
+    )
     proc = subprocess.Popen([sys.executable, "-c", script])
     try:
         deadline = time.monotonic() + 120

@@ -16,22 +16,31 @@ from hybrid.record import Recorder, read
 
 # small meshes (a triangle list every frame) and one above the point-cloud
 # threshold (float32 cloud every frame, the exact triangle list every 10th)
-MESHES = {"icosahedron": hybrid.MeshSpec("icosahedron"), "uv_sphere": hybrid.MeshSpec("uv_sphere"),
-          "icosphere_4": hybrid.MeshSpec("icosphere", subdivisions=4)}
+MESHES = {
+    "icosahedron": hybrid.MeshSpec("icosahedron"),
+    "uv_sphere": hybrid.MeshSpec("uv_sphere"),
+    "icosphere_4": hybrid.MeshSpec("icosphere", subdivisions=4),
+}
 _SIMS: dict = {}
 
 
 def _sim(mesh: str):
     if mesh not in _SIMS:  # one compiled model per mesh for every example
-        scene = hybrid.Scene(mesh=MESHES[mesh], masses=hybrid.Masses(total_kg=1.0), forces=(),
-                             constraints=(hybrid.Volume(),), dt_s=1e-3)
+        scene = hybrid.Scene(
+            mesh=MESHES[mesh], masses=hybrid.Masses(total_kg=1.0), forces=(), constraints=(hybrid.Volume(),), dt_s=1e-3
+        )
         _SIMS[mesh] = hybrid.load(scene)
     return _SIMS[mesh]
 
 
 @settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(mesh=st.sampled_from(sorted(MESHES)), nframe=st.integers(1, 25), seed=st.integers(0, 2 ** 32 - 1),
-       scale=st.floats(1e-3, 1e2), background=st.booleans())
+@given(
+    mesh=st.sampled_from(sorted(MESHES)),
+    nframe=st.integers(1, 25),
+    seed=st.integers(0, 2**32 - 1),
+    scale=st.floats(1e-3, 1e2),
+    background=st.booleans(),
+)
 def test_what_is_recorded_reads_back_exactly(mesh, nframe, seed, scale, background):
     sim = _sim(mesh)
     rng = np.random.default_rng(seed)
@@ -39,8 +48,7 @@ def test_what_is_recorded_reads_back_exactly(mesh, nframe, seed, scale, backgrou
     # frames at whole numbers of recording intervals (10 steps of 1 ms), a random gap apart
     steps = 10 * np.cumsum(rng.integers(1, 50, nframe))
     times = steps * sim.model.dt_s
-    poses = [rest * (1 + 0.1 * rng.standard_normal()) + scale * rng.standard_normal(rest.shape)
-             for _ in range(nframe)]
+    poses = [rest * (1 + 0.1 * rng.standard_normal()) + scale * rng.standard_normal(rest.shape) for _ in range(nframe)]
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "run.mcap"
         rec = Recorder(path, sim, every_s=0.01, background=background)

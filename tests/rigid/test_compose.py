@@ -8,11 +8,11 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import importlib.util
+from pathlib import Path
 
 import mujoco
 import numpy as np
 import pytest
-from pathlib import Path
 
 from hybrid import rigid
 from hybrid.errors import RigidError, SceneError
@@ -25,15 +25,13 @@ from hybrid.simulation import Simulation
 
 def test_attach_points_puts_sites_at_the_rest_positions():
     spec = rigid.load_spec(rigid.TRUNK_XML)
-    points = np.array([[0.0, 0.104, 0.06], [0.09, 0.052, 0.06], [0.0, -0.104, 0.06],
-                       [-0.13, 0.0, -0.1]])
+    points = np.array([[0.0, 0.104, 0.06], [0.09, 0.052, 0.06], [0.0, -0.104, 0.06], [-0.13, 0.0, -0.1]])
     names = rigid.attach_points(spec, ["rib_left", "rib_left", "rib_right", "world"], points)
     assert names == [f"hybrid_link_{i}" for i in range(4)]
     system = rigid.RigidSystem(spec, names)
     np.testing.assert_allclose(system.site_pos(), points, atol=1e-12)
     assert system.site_names() == names
-    assert list(system.site_body) == [system.model.body(b).id
-                                      for b in ("rib_left", "rib_left", "rib_right", "world")]
+    assert list(system.site_body) == [system.model.body(b).id for b in ("rib_left", "rib_left", "rib_right", "world")]
 
 
 def test_attach_points_unknown_body_lists_the_available_names():
@@ -61,7 +59,8 @@ def test_attach_to_a_user_model_through_a_frame_with_a_prefix():
     user = mujoco.MjSpec.from_string(
         '<mujoco><option timestep="0.001"/><worldbody><body name="torso" pos="0 0 1">'
         '<geom size="0.1"/>'
-        '</body></worldbody></mujoco>')
+        "</body></worldbody></mujoco>"
+    )
     trunk = rigid.load_spec(rigid.TRUNK_XML)
     frame = user.body("torso").add_frame(pos=[0.0, 0.0, 0.2])
     frame.attach_body(trunk.body("spine"), "trunk/", "")
@@ -80,9 +79,11 @@ def test_link_masses_are_added_with_the_parallel_axis_theorem(breathing):
         b = mjm.body(name).id
         mine = model.link_vert[np.array(model.rigid.link_body) == name]
         assert mjm.body_mass[b] == pytest.approx(bare.body_mass[b] + vm[mine].sum(), rel=1e-12)
+
         # world inertia about the world origin: the bare rib's plus the point masses'
         def about_origin(mass, com, rot, principal):
             return rot @ np.diag(principal) @ rot.T + mass * (com @ com * np.eye(3) - np.outer(com, com))
+
         d0 = mujoco.MjData(bare)
         mujoco.mj_kinematics(bare, d0)
         expect = about_origin(bare.body_mass[b], d0.xipos[b], d0.ximat[b].reshape(3, 3), bare.body_inertia[b])
@@ -95,13 +96,19 @@ def test_link_masses_are_added_with_the_parallel_axis_theorem(breathing):
 
 def small_rib_scene(**rigid_kw) -> Scene:
     ring = Box((-1, -1, 0.07), (1, 1, 0.08))
-    links = rigid_kw.pop("links", (RigidLink(Intersection((ring, HalfSpace((0, 0.001, 0), (0, 1, 0)))),
-                                             "rib_left", name="left"),))
-    return Scene(formulation="paper", mesh=MeshSpec("uv_sphere", radius_m=0.12), masses=Masses(total_kg=4.0),
-                 regions={"top": HalfSpace((0, 0, 0.07), (0, 0, 1))},
-                 forces=(ShapeMemory(500.0), Damping(critical_fraction=0.3)),
-                 constraints=(Nailed(HalfSpace((0, 0, -0.1), (0, 0, -1)), name="base"), Volume()),
-                 rigid=Rigid(rigid_kw.pop("mjcf", "trunk"), links=links, **rigid_kw), name="small")
+    links = rigid_kw.pop(
+        "links", (RigidLink(Intersection((ring, HalfSpace((0, 0.001, 0), (0, 1, 0)))), "rib_left", name="left"),)
+    )
+    return Scene(
+        formulation="paper",
+        mesh=MeshSpec("uv_sphere", radius_m=0.12),
+        masses=Masses(total_kg=4.0),
+        regions={"top": HalfSpace((0, 0, 0.07), (0, 0, 1))},
+        forces=(ShapeMemory(500.0), Damping(critical_fraction=0.3)),
+        constraints=(Nailed(HalfSpace((0, 0, -0.1), (0, 0, -1)), name="base"), Volume()),
+        rigid=Rigid(rigid_kw.pop("mjcf", "trunk"), links=links, **rigid_kw),
+        name="small",
+    )
 
 
 def test_unknown_body_names_the_link_and_lists_bodies_and_sites():
@@ -132,7 +139,8 @@ def test_mjcf_errors_and_conflicting_links():
 def test_site_names_that_clash_ask_for_another_prefix(tmp_path):
     xml = rigid.TRUNK_XML.read_text().replace(
         '<site name="spine_base" pos="0 0 -0.15"/>',
-        '<site name="spine_base" pos="0 0 -0.15"/><site name="hybrid_link_15"/>')
+        '<site name="spine_base" pos="0 0 -0.15"/><site name="hybrid_link_15"/>',
+    )
     (tmp_path / "mine.xml").write_text(xml)
     scene = dataclasses.replace(small_rib_scene(mjcf="mine.xml"), base_dir=str(tmp_path))
     with pytest.raises(RigidError, match="rigid.prefix.*hybrid_link_15"):
@@ -161,21 +169,30 @@ def _humanoid_xml() -> Path | None:
 HUMANOID = _humanoid_xml()
 
 
-@pytest.mark.skipif(HUMANOID is None, reason="gymnasium (which ships MuJoCo's humanoid.xml) is not installed; "
-                                             "pip install gymnasium, or hybrid[test]")
+@pytest.mark.skipif(
+    HUMANOID is None,
+    reason="gymnasium (which ships MuJoCo's humanoid.xml) is not installed; pip install gymnasium, or hybrid[test]",
+)
 def test_membrane_linked_to_a_third_party_humanoid_torso(tmp_path):
     before = hashlib.sha256(HUMANOID.read_bytes()).hexdigest()
     # the abdomen under the humanoid's torso: its top ring rides on the torso
     centre = (0.0, 0.0, 1.12)
     ring = Box((-1, -1, centre[2] + 0.07), (1, 1, centre[2] + 0.08))
-    scene = Scene(formulation="paper",
-        mesh=MeshSpec("uv_sphere", radius_m=0.12, center_m=centre), masses=Masses(total_kg=4.0),
+    scene = Scene(
+        formulation="paper",
+        mesh=MeshSpec("uv_sphere", radius_m=0.12, center_m=centre),
+        masses=Masses(total_kg=4.0),
         regions={"top": HalfSpace((0, 0, centre[2] + 0.07), (0, 0, 1))},
-        forces=(ShapeMemory(3000.0), Damping(critical_fraction=0.3),
-                Muscle("top", Breathing(4.0, 0.4, 60.0), toward_m=(0, 0, centre[2] + 0.12))),
+        forces=(
+            ShapeMemory(3000.0),
+            Damping(critical_fraction=0.3),
+            Muscle("top", Breathing(4.0, 0.4, 60.0), toward_m=(0, 0, centre[2] + 0.12)),
+        ),
         constraints=(Volume(),),
         rigid=Rigid(str(HUMANOID), links=(RigidLink(ring, "torso", name="ribs"),), prefix="membrane_"),
-        dt_s=1e-3, name="humanoid_abdomen")
+        dt_s=1e-3,
+        name="humanoid_abdomen",
+    )
     model = compile_scene(scene)
     mjm = model.rigid.model
     assert mjm.opt.integrator == mujoco.mjtIntegrator.mjINT_RK4 and mjm.opt.timestep == 1e-3

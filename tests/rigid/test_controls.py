@@ -18,8 +18,8 @@ from hybrid.errors import RigidError, SceneError
 from hybrid.model import compile_scene
 from hybrid.regions import HalfSpace
 from hybrid.scene import Damping, Masses, MeshSpec, Rigid, RigidLink, Scene, ShapeMemory
-from hybrid.schedule import Breathing, Table, evaluate
 from hybrid.scenefile import apply_overrides, scene_from_dict
+from hybrid.schedule import Breathing, Table, evaluate
 from hybrid.simulation import Simulation
 
 # a free-floating torso with a hinged arm and a ball-jointed head, a motor on the
@@ -42,10 +42,16 @@ def mjcf(tmp_path_factory):
 
 
 def scene(mjcf, dt_s=None, **rigid):
-    return Scene(formulation="paper", mesh=MeshSpec(generator="icosahedron", radius_m=0.05, center_m=(0, 0, 1.0)),
-                 masses=Masses(total_kg=0.1), regions={"top": HalfSpace((0, 0, 1.02), (0, 0, 1))},
-                 forces=(ShapeMemory(100.0), Damping(critical_fraction=0.3)),
-                 rigid=Rigid(mjcf, links=(RigidLink("top", "torso"),), **rigid), dt_s=dt_s, duration_s=0.2)
+    return Scene(
+        formulation="paper",
+        mesh=MeshSpec(generator="icosahedron", radius_m=0.05, center_m=(0, 0, 1.0)),
+        masses=Masses(total_kg=0.1),
+        regions={"top": HalfSpace((0, 0, 1.02), (0, 0, 1))},
+        forces=(ShapeMemory(100.0), Damping(critical_fraction=0.3)),
+        rigid=Rigid(mjcf, links=(RigidLink("top", "torso"),), **rigid),
+        dt_s=dt_s,
+        duration_s=0.2,
+    )
 
 
 def run(mjcf, nstep=100, **rigid) -> Simulation:
@@ -91,8 +97,7 @@ def test_a_keyframe_start_has_the_keyframes_qpos_and_the_membrane_rides_on_it(mj
     key = sim.mj_model.key("bent")
     np.testing.assert_array_equal(sim.mj_data.qpos, key.qpos)
     # the linked points start on their sites where the bodies start: at their rest positions
-    np.testing.assert_allclose(sim.state.vert_pos[model.link_vert], model.mesh.vert_pos[model.link_vert],
-                               atol=1e-12)
+    np.testing.assert_allclose(sim.state.vert_pos[model.link_vert], model.mesh.vert_pos[model.link_vert], atol=1e-12)
     # fixed at the keyframe's pose: the root stays at (0.1, 0, 1.2)
     fixed = run(mjcf, keyframe="bent", fix_root=True)
     np.testing.assert_allclose(body_pos(fixed, "torso"), [0.1, 0, 1.2], atol=1e-12)
@@ -119,29 +124,32 @@ def test_the_mjcfs_own_timestep_and_integrator_are_kept_unless_the_scene_sets_th
     assert summary["integrator_from"] == "scene" and summary["mjcf_timestep_s"] == 0.002
 
 
-@pytest.mark.parametrize("rigid, error, words", [
-    ({"fix": ("torsoo",)}, RigidError, ["rigid.fix[0]", "'torsoo'", "close body names: torso"]),
-    ({"fix": ("arm", "hed")}, RigidError, ["rigid.fix[1]", "'hed'", "head"]),
-    ({"fix": ("world",)}, RigidError, ["rigid.fix: body 'world' has no joint"]),
-    ({"fix": ("arm",)}, RigidError, ["rigid.fix: body 'arm'", "driven by actuator 'm_shoulder'"]),
-    ({"weld": ("armm",)}, RigidError, ["rigid.weld[0]", "'armm'", "close body names: arm"]),
-    ({"hold": ("shoulderr",)}, RigidError, ["rigid.hold[0]", "no joint named 'shoulderr'", "shoulder"]),
-    ({"hold": ("root",)}, RigidError, ["rigid.hold[0]", "free joint", "fix_root"]),
-    ({"hold": ("x*",)}, RigidError, ["rigid.hold[0]", "no joint named 'x*'"]),
-    ({"lock": ("neck",)}, RigidError, ["rigid.lock[0]", "ball joint", "hold it"]),
-    ({"lock": ("shoulder",), "hold": ("shoulder",)}, SceneError, ["in both"]),
-    ({"keyframe": "bnet"}, RigidError, ["rigid.keyframe", "'bnet'", "close keyframe names: bent"]),
-    ({"ctrl": {"m_shouldr": 1.0}}, RigidError, ["rigid.ctrl[0]", "'m_shouldr'", "m_shoulder"]),
-    ({"ctrl": {"m_*": 1.0, "m_shoulder": 2.0}}, SceneError, ["rigid.ctrl.m_shoulder", "driven by rigid.ctrl.m_*"]),
-    ({"ctrl": {"m_shoulder": lambda t: t}}, SceneError, ["rigid.ctrl.m_shoulder", "Python function"]),
-    ({"integrator": "Verlet"}, SceneError, ["rigid.integrator", "'Verlet'", "RK4"]),
-    ({"hold_stiffness_nm_per_rad": -1.0}, SceneError, ["rigid.hold_stiffness_nm_per_rad", "-1.0"]),
-    ({"hold_damping_nms_per_rad": -2.0}, SceneError, ["rigid.hold_damping_nms_per_rad", "-2.0"]),
-    ({"weld": ("world",)}, RigidError, ["rigid.weld", "'world' cannot be welded"]),
-    ({"lock": ("root",)}, RigidError, ["rigid.lock[0]", "free joint"]),
-    ({"fix_root": "yes"}, SceneError, ["rigid.fix_root", "true or false"]),
-    ({"fix": "torso"}, SceneError, ["rigid.fix", "expected a list of names"]),
-])
+@pytest.mark.parametrize(
+    "rigid, error, words",
+    [
+        ({"fix": ("torsoo",)}, RigidError, ["rigid.fix[0]", "'torsoo'", "close body names: torso"]),
+        ({"fix": ("arm", "hed")}, RigidError, ["rigid.fix[1]", "'hed'", "head"]),
+        ({"fix": ("world",)}, RigidError, ["rigid.fix: body 'world' has no joint"]),
+        ({"fix": ("arm",)}, RigidError, ["rigid.fix: body 'arm'", "driven by actuator 'm_shoulder'"]),
+        ({"weld": ("armm",)}, RigidError, ["rigid.weld[0]", "'armm'", "close body names: arm"]),
+        ({"hold": ("shoulderr",)}, RigidError, ["rigid.hold[0]", "no joint named 'shoulderr'", "shoulder"]),
+        ({"hold": ("root",)}, RigidError, ["rigid.hold[0]", "free joint", "fix_root"]),
+        ({"hold": ("x*",)}, RigidError, ["rigid.hold[0]", "no joint named 'x*'"]),
+        ({"lock": ("neck",)}, RigidError, ["rigid.lock[0]", "ball joint", "hold it"]),
+        ({"lock": ("shoulder",), "hold": ("shoulder",)}, SceneError, ["in both"]),
+        ({"keyframe": "bnet"}, RigidError, ["rigid.keyframe", "'bnet'", "close keyframe names: bent"]),
+        ({"ctrl": {"m_shouldr": 1.0}}, RigidError, ["rigid.ctrl[0]", "'m_shouldr'", "m_shoulder"]),
+        ({"ctrl": {"m_*": 1.0, "m_shoulder": 2.0}}, SceneError, ["rigid.ctrl.m_shoulder", "driven by rigid.ctrl.m_*"]),
+        ({"ctrl": {"m_shoulder": lambda t: t}}, SceneError, ["rigid.ctrl.m_shoulder", "Python function"]),
+        ({"integrator": "Verlet"}, SceneError, ["rigid.integrator", "'Verlet'", "RK4"]),
+        ({"hold_stiffness_nm_per_rad": -1.0}, SceneError, ["rigid.hold_stiffness_nm_per_rad", "-1.0"]),
+        ({"hold_damping_nms_per_rad": -2.0}, SceneError, ["rigid.hold_damping_nms_per_rad", "-2.0"]),
+        ({"weld": ("world",)}, RigidError, ["rigid.weld", "'world' cannot be welded"]),
+        ({"lock": ("root",)}, RigidError, ["rigid.lock[0]", "free joint"]),
+        ({"fix_root": "yes"}, SceneError, ["rigid.fix_root", "true or false"]),
+        ({"fix": "torso"}, SceneError, ["rigid.fix", "expected a list of names"]),
+    ],
+)
 def test_each_key_refuses_a_wrong_name_or_value_in_one_line(mjcf, rigid, error, words):
     with pytest.raises(error) as info:
         compile_scene(scene(mjcf, **rigid))
@@ -153,6 +161,7 @@ def test_each_key_refuses_a_wrong_name_or_value_in_one_line(mjcf, rigid, error, 
 
 def test_fix_root_refused_without_a_free_root():
     from hybrid.rigid import TRUNK_XML
+
     with pytest.raises(RigidError, match=r"rigid.fix_root: .* has no free-floating root body"):
         compile_scene(scene(str(TRUNK_XML), fix_root=True))
 
@@ -183,12 +192,14 @@ def test_the_scene_file_reads_writes_and_overrides_every_control_key(mjcf):
         body = "torso"
         """)
     import tomllib
+
     s = scene_from_dict(tomllib.loads(text), source="c.toml")
     r = s.rigid
     assert (r.keyframe, r.fix_root, r.weld, r.hold, r.integrator) == ("bent", True, ("arm",), ("ne*",), "RK4")
     assert r.ctrl == {"m_shoulder": Breathing(peak=0.5)} and r.hold_stiffness_nm_per_rad == 500.0
-    s2 = apply_overrides(s, ["rigid.ctrl.m_shoulder=0.25", "rigid.lock=[\"shoulder\"]", "rigid.fix_root=false",
-                             "rigid.keyframe=bent"])
+    s2 = apply_overrides(
+        s, ["rigid.ctrl.m_shoulder=0.25", 'rigid.lock=["shoulder"]', "rigid.fix_root=false", "rigid.keyframe=bent"]
+    )
     assert s2.rigid.lock == ("shoulder",) and not s2.rigid.fix_root
     assert dataclasses.replace(s2.rigid, lock=(), fix_root=True, ctrl=r.ctrl) == r
     with pytest.raises(SceneError, match=r"c.toml: rigid.hold: expected a list of names"):
@@ -206,8 +217,11 @@ def test_a_fixed_child_keeps_the_keyframes_angle_to_its_parent(mjcf):
     np.testing.assert_array_equal(fixed.mj_model.key("bent").qpos, [0.1, 0, 1.2, 1, 0, 0, 0, 0.4])
     for name in ("arm", "head", "torso"):
         np.testing.assert_allclose(body_pos(fixed, name), body_pos(bent, name), atol=1e-12)
-        np.testing.assert_allclose(fixed.mj_data.xquat[fixed.mj_model.body(name).id],
-                                   bent.mj_data.xquat[bent.mj_model.body(name).id], atol=1e-12)
+        np.testing.assert_allclose(
+            fixed.mj_data.xquat[fixed.mj_model.body(name).id],
+            bent.mj_data.xquat[bent.mj_model.body(name).id],
+            atol=1e-12,
+        )
 
 
 @pytest.mark.skipif(importlib.util.find_spec("myo_sim") is None, reason="myo_sim (pip install -e '.[myo]') absent")
@@ -224,8 +238,11 @@ def test_myotorso_locked_stands():
 
 def _humanoid():
     spec = importlib.util.find_spec("gymnasium")
-    path = None if spec is None or spec.origin is None else \
-        Path(spec.origin).parent / "envs" / "mujoco" / "assets" / "humanoid.xml"
+    path = (
+        None
+        if spec is None or spec.origin is None
+        else Path(spec.origin).parent / "envs" / "mujoco" / "assets" / "humanoid.xml"
+    )
     return path if path is not None and path.is_file() else None
 
 
@@ -233,18 +250,24 @@ def _humanoid():
 def test_gymnasiums_humanoid_fixed_held_and_driven():
     path = str(_humanoid())
     centre = (0.0, 0.0, 1.12)
-    sc = Scene(formulation="paper", mesh=MeshSpec(generator="icosahedron", radius_m=0.1, center_m=centre),
-               masses=Masses(total_kg=1.0), regions={"top": HalfSpace((0, 0, 1.17), (0, 0, 1))},
-               forces=(ShapeMemory(300.0), Damping(critical_fraction=0.3)),
-               rigid=Rigid(path, links=(RigidLink("top", "torso"),), fix_root=True, hold=("*",),
-                           ctrl={"abdomen_*": 0.3}))
+    sc = Scene(
+        formulation="paper",
+        mesh=MeshSpec(generator="icosahedron", radius_m=0.1, center_m=centre),
+        masses=Masses(total_kg=1.0),
+        regions={"top": HalfSpace((0, 0, 1.17), (0, 0, 1))},
+        forces=(ShapeMemory(300.0), Damping(critical_fraction=0.3)),
+        rigid=Rigid(path, links=(RigidLink("top", "torso"),), fix_root=True, hold=("*",), ctrl={"abdomen_*": 0.3}),
+    )
     model = compile_scene(sc)
     assert model.dt_s == 0.003  # humanoid.xml's own timestep (RK4, its own integrator)
     sim = Simulation(model)
     sim.step(300)
     np.testing.assert_allclose(body_pos(sim, "torso"), [0, 0, 1.4], atol=1e-12)
-    abdomen = [sim.mj_model.actuator(a).name for a in range(sim.mj_model.nu)
-               if sim.mj_model.actuator(a).name.startswith("abdomen_")]
+    abdomen = [
+        sim.mj_model.actuator(a).name
+        for a in range(sim.mj_model.nu)
+        if sim.mj_model.actuator(a).name.startswith("abdomen_")
+    ]
     assert model.rigid.settings()["driven"] == abdomen and len(abdomen) == 3
     for a in abdomen:
         assert sim.mj_data.ctrl[sim.mj_model.actuator(a).id] == 0.3

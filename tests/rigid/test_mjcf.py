@@ -6,11 +6,10 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 import pytest
+from helpers import RIBS
 
 from hybrid import rigid
 from hybrid.errors import RigidError
-
-from helpers import RIBS
 
 
 def test_trunk_model_compiles_with_named_parts():

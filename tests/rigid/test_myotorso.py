@@ -9,23 +9,25 @@ builds the MjSpec; its files are only read). Needs `pip install -e .[myo]`
 
 import hashlib
 import importlib.util
+from pathlib import Path
 
 import numpy as np
 import pytest
-from pathlib import Path
 
 from hybrid.errors import RigidError
-
 
 SCENE = Path(__file__).resolve().parents[2] / "models" / "scenes" / "myotorso_breathing.toml"
 
 
-pytestmark = pytest.mark.skipif(importlib.util.find_spec("myo_sim") is None,
-                                reason="myo_sim (PyPI myo-sim) is not installed: pip install -e '.[myo]'")
+pytestmark = pytest.mark.skipif(
+    importlib.util.find_spec("myo_sim") is None,
+    reason="myo_sim (PyPI myo-sim) is not installed: pip install -e '.[myo]'",
+)
 
 
 def _package_hash() -> str:
     import myo_sim
+
     root = Path(myo_sim.__file__).resolve().parent
     h = hashlib.sha256()
     for p in sorted(root.rglob("*")):
@@ -37,6 +39,7 @@ def _package_hash() -> str:
 
 def test_packaged_scene_is_the_models_scene():
     from hybrid.scenefile import builtin_scene
+
     assert builtin_scene("myotorso_breathing").read_text() == SCENE.read_text()
 
 
@@ -48,6 +51,7 @@ def test_myotorso_breathing_stands_and_breathes_on_its_added_ribs_through_its_fi
     points stay on their sites, the volume is exact, and myo-sim's files are unchanged.
     (The full 12 s run's figures are in the README: the same peaks each breath.)"""
     import hybrid
+
     before = _package_hash()
     sim = hybrid.load(str(SCENE))
     rig = sim.model.rigid
@@ -68,7 +72,9 @@ def test_myotorso_breathing_stands_and_breathes_on_its_added_ribs_through_its_fi
     assert 10.0 <= s["apex_descent_mm"] <= 25.0  # 19.6 mm measured
     assert s["metrics"]["rib_lift_mm"]["t_max_s"] == pytest.approx(1.6, abs=0.1)
     lift_mm = (np.array([d.site(f).xpos for f in rig.ribs.fronts]) - fronts0)[:, 2] * 1e3
-    assert np.all((2.0 <= lift_mm) & (lift_mm <= 8.0)), lift_mm  # 3.25, 3.27 (rib 9) and 5.47, 5.45 mm (rib 10) at 1.7 s
+    assert np.all((2.0 <= lift_mm) & (lift_mm <= 8.0)), (
+        lift_mm
+    )  # 3.25, 3.27 (rib 9) and 5.47, 5.45 mm (rib 10) at 1.7 s
     assert s["rigid"]["ribs"]["rib_bodies"] == ["rib9_left", "rib9_right", "rib10_left", "rib10_right"]
     angles = [float(d.joint(j).qpos[0]) for j in hinges]
     assert min(angles) > 1e-3, angles  # each rib turned up by milliradians
@@ -76,15 +82,18 @@ def test_myotorso_breathing_stands_and_breathes_on_its_added_ribs_through_its_fi
     np.testing.assert_array_equal(pos[rig.link_vert], d.site_xpos[rig.site_id])
     for j, site in enumerate(rig.site_id):
         b = mjm.site_bodyid[site]
-        np.testing.assert_allclose(d.xpos[b] + d.xmat[b].reshape(3, 3) @ mjm.site_pos[site], pos[rig.link_vert[j]],
-                                   atol=1e-12)
+        np.testing.assert_allclose(
+            d.xpos[b] + d.xmat[b].reshape(3, 3) @ mjm.site_pos[site], pos[rig.link_vert[j]], atol=1e-12
+        )
     assert _package_hash() == before
 
 
 def test_missing_package_is_named_with_the_extra(monkeypatch):
     import sys
-    from hybrid.scenefile import load_scene
+
     from hybrid.model import compile_scene
+    from hybrid.scenefile import load_scene
+
     monkeypatch.setitem(sys.modules, "myo_sim", None)  # import myo_sim raises ImportError
     with pytest.raises(RigidError, match=r"myo_sim.*not installed.*hybrid\[myo\]"):
         compile_scene(load_scene(SCENE))

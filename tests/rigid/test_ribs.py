@@ -19,14 +19,32 @@ from hybrid.model import compile_scene
 from hybrid.regions import Box, Difference, HalfSpace, Intersection
 from hybrid.rigid import TRUNK_XML, load_spec
 from hybrid.rigid.ribs import add_ribs
-from hybrid.scene import (Damping, Masses, MeshSpec, Muscle, Nailed, RibPair, Ribs, Rigid, RigidLink, Scene,
-                          ShapeMemory, Volume)
+from hybrid.scene import (
+    Damping,
+    Masses,
+    MeshSpec,
+    Muscle,
+    Nailed,
+    RibPair,
+    Ribs,
+    Rigid,
+    RigidLink,
+    Scene,
+    ShapeMemory,
+    Volume,
+)
 from hybrid.scenefile import apply_overrides, scene_from_dict, scene_to_toml
 from hybrid.simulation import Simulation
 
 # trunk.xml's left rib, rebuilt on its spine: the head, the anterior end, the arc's width
-PAIR = RibPair(name="r", head_m=(-0.13, 0.025, 0.06), front_m=(0.108, 0.029, 0.06), half_width_m=0.11,
-               axis_angle_deg=35.0, stiffness_n_m_per_rad=12.0)
+PAIR = RibPair(
+    name="r",
+    head_m=(-0.13, 0.025, 0.06),
+    front_m=(0.108, 0.029, 0.06),
+    half_width_m=0.11,
+    axis_angle_deg=35.0,
+    stiffness_n_m_per_rad=12.0,
+)
 RIBS = Ribs(body="spine", pairs=(PAIR,))
 
 
@@ -47,8 +65,9 @@ def test_ribs_are_hinged_mirror_images_whose_positive_angle_lifts_them():
     # the axis at 35 degrees to the mid-sagittal plane, in the transverse plane
     for side, sign in (("left", 1), ("right", -1)):
         j = m.joint(f"r_{side}_hinge").id
-        np.testing.assert_allclose(m.jnt_axis[j], [sign * np.cos(np.radians(35)), -np.sin(np.radians(35)), 0],
-                                   atol=1e-12)
+        np.testing.assert_allclose(
+            m.jnt_axis[j], [sign * np.cos(np.radians(35)), -np.sin(np.radians(35)), 0], atol=1e-12
+        )
         d.qpos[m.jnt_qposadr[j]] = 0.01
     mujoco.mj_kinematics(m, d)
     for side in ("left", "right"):
@@ -110,8 +129,9 @@ half_width_m = 0.11
 reference_angle_deg = -3.0
 """
     scene = scene_from_dict(tomllib.loads(text), source="s.toml")
-    assert scene.rigid.ribs == Ribs(body="spine", pairs=(dataclasses.replace(
-        PAIR, axis_angle_deg=35.0, reference_angle_deg=-3.0),))
+    assert scene.rigid.ribs == Ribs(
+        body="spine", pairs=(dataclasses.replace(PAIR, axis_angle_deg=35.0, reference_angle_deg=-3.0),)
+    )
     back = scene_from_dict(tomllib.loads(scene_to_toml(scene)), source="back")
     assert back.rigid.ribs == scene.rigid.ribs
     changed = apply_overrides(scene, ["rigid.ribs.pairs.r.stiffness_n_m_per_rad=5", "rigid.ribs.radius_m=0.004"])
@@ -122,32 +142,41 @@ def _pair(**kw):
     return Ribs(body="spine", pairs=(dataclasses.replace(PAIR, **kw),))
 
 
-@pytest.mark.parametrize("ribs, error, words", [
-    (Ribs(body="spien", pairs=(PAIR,)), RigidError, ["rigid.ribs.body", "'spien'", "close body names: spine"]),
-    (Ribs(body="world", pairs=(PAIR,)), RigidError, ["rigid.ribs.body", "'world'"]),
-    (Ribs(body="spine", pairs=()), SceneError, ["rigid.ribs.pairs", "at least one rib pair"]),
-    (Ribs(body="spine", pairs=(PAIR, PAIR)), SceneError, ["rigid.ribs.pairs[1].name", "'r' names two"]),
-    (Ribs(body="spine", pairs=(PAIR,), anterior=(0, 0, 0)), SceneError, ["rigid.ribs.anterior", "non-zero"]),
-    (Ribs(body="spine", pairs=(PAIR,), cranial=(1, 0, 1)), SceneError, ["rigid.ribs.cranial", "perpendicular"]),
-    (Ribs(body="spine", pairs=(PAIR,), radius_m=-0.01), SceneError, ["rigid.ribs.radius_m", "-0.01"]),
-    (Ribs(body="spine", pairs=(PAIR,), sternum_stiffness_n_per_m=0.0), SceneError,
-     ["rigid.ribs.sternum_stiffness_n_per_m", "> 0"]),
-    (Ribs(body="spine", pairs=(PAIR,), sternum_damping_n_s_per_m=-1.0), SceneError,
-     ["rigid.ribs.sternum_damping_n_s_per_m", "[0, "]),
-    (Ribs(body="spine", pairs=("r",)), SceneError, ["rigid.ribs.pairs[0]", "RibPair"]),
-    (_pair(name="rib"), RigidError, ["rigid.ribs.pairs[0].name", "body 'rib_left'"]),
-    (_pair(name="a/b"), SceneError, ["rigid.ribs.pairs[0].name"]),
-    (_pair(head_m=(-0.13, -0.025, 0.06)), SceneError, ["rigid.ribs.pairs[0].head_m", "left rib"]),
-    (_pair(head_m=(0.0, 0.1)), SceneError, ["rigid.ribs.pairs[0].head_m", "3-vector"]),
-    (_pair(front_m=(-0.12, 0.03, 0.06)), SceneError, ["rigid.ribs.pairs[0].front_m", "4 radius_m"]),
-    (_pair(half_width_m=0.02), SceneError, ["rigid.ribs.pairs[0].half_width_m", "more than"]),
-    (_pair(axis_angle_deg=120.0), SceneError, ["rigid.ribs.pairs[0].axis_angle_deg", "120"]),
-    (_pair(stiffness_n_m_per_rad=0.0), SceneError, ["rigid.ribs.pairs[0].stiffness_n_m_per_rad", "> 0"]),
-    (_pair(damping_n_m_s_per_rad=-0.1), SceneError, ["rigid.ribs.pairs[0].damping_n_m_s_per_rad", "[0, "]),
-    (_pair(reference_angle_deg=100.0), SceneError, ["rigid.ribs.pairs[0].reference_angle_deg", "100"]),
-    (_pair(mass_kg=0.0), SceneError, ["rigid.ribs.pairs[0].mass_kg", "> 0"]),
-    ("spine", SceneError, ["rigid.ribs", "hybrid.scene.Ribs"]),
-])
+@pytest.mark.parametrize(
+    "ribs, error, words",
+    [
+        (Ribs(body="spien", pairs=(PAIR,)), RigidError, ["rigid.ribs.body", "'spien'", "close body names: spine"]),
+        (Ribs(body="world", pairs=(PAIR,)), RigidError, ["rigid.ribs.body", "'world'"]),
+        (Ribs(body="spine", pairs=()), SceneError, ["rigid.ribs.pairs", "at least one rib pair"]),
+        (Ribs(body="spine", pairs=(PAIR, PAIR)), SceneError, ["rigid.ribs.pairs[1].name", "'r' names two"]),
+        (Ribs(body="spine", pairs=(PAIR,), anterior=(0, 0, 0)), SceneError, ["rigid.ribs.anterior", "non-zero"]),
+        (Ribs(body="spine", pairs=(PAIR,), cranial=(1, 0, 1)), SceneError, ["rigid.ribs.cranial", "perpendicular"]),
+        (Ribs(body="spine", pairs=(PAIR,), radius_m=-0.01), SceneError, ["rigid.ribs.radius_m", "-0.01"]),
+        (
+            Ribs(body="spine", pairs=(PAIR,), sternum_stiffness_n_per_m=0.0),
+            SceneError,
+            ["rigid.ribs.sternum_stiffness_n_per_m", "> 0"],
+        ),
+        (
+            Ribs(body="spine", pairs=(PAIR,), sternum_damping_n_s_per_m=-1.0),
+            SceneError,
+            ["rigid.ribs.sternum_damping_n_s_per_m", "[0, "],
+        ),
+        (Ribs(body="spine", pairs=("r",)), SceneError, ["rigid.ribs.pairs[0]", "RibPair"]),
+        (_pair(name="rib"), RigidError, ["rigid.ribs.pairs[0].name", "body 'rib_left'"]),
+        (_pair(name="a/b"), SceneError, ["rigid.ribs.pairs[0].name"]),
+        (_pair(head_m=(-0.13, -0.025, 0.06)), SceneError, ["rigid.ribs.pairs[0].head_m", "left rib"]),
+        (_pair(head_m=(0.0, 0.1)), SceneError, ["rigid.ribs.pairs[0].head_m", "3-vector"]),
+        (_pair(front_m=(-0.12, 0.03, 0.06)), SceneError, ["rigid.ribs.pairs[0].front_m", "4 radius_m"]),
+        (_pair(half_width_m=0.02), SceneError, ["rigid.ribs.pairs[0].half_width_m", "more than"]),
+        (_pair(axis_angle_deg=120.0), SceneError, ["rigid.ribs.pairs[0].axis_angle_deg", "120"]),
+        (_pair(stiffness_n_m_per_rad=0.0), SceneError, ["rigid.ribs.pairs[0].stiffness_n_m_per_rad", "> 0"]),
+        (_pair(damping_n_m_s_per_rad=-0.1), SceneError, ["rigid.ribs.pairs[0].damping_n_m_s_per_rad", "[0, "]),
+        (_pair(reference_angle_deg=100.0), SceneError, ["rigid.ribs.pairs[0].reference_angle_deg", "100"]),
+        (_pair(mass_kg=0.0), SceneError, ["rigid.ribs.pairs[0].mass_kg", "> 0"]),
+        ("spine", SceneError, ["rigid.ribs", "hybrid.scene.Ribs"]),
+    ],
+)
 def test_each_ribs_key_refuses_a_wrong_name_or_value_in_one_line(ribs, error, words):
     with pytest.raises(error) as info:
         add_ribs(load_spec(TRUNK_XML), ribs, "trunk")
@@ -157,21 +186,46 @@ def test_each_ribs_key_refuses_a_wrong_name_or_value_in_one_line(ribs, error, wo
         assert w in message, message
 
 
-@pytest.mark.parametrize("table, words", [
-    ({"body": "spine", "pairs": [{}], "colour": 1}, ["rigid.ribs.colour", "unknown key"]),
-    ({"pairs": [{}]}, ["rigid.ribs", "missing required key 'body'"]),
-    ({"body": "spine", "pairs": {}}, ["rigid.ribs.pairs", "array of tables"]),
-    ({"body": "spine", "pairs": [{"name": "r"}]}, ["rigid.ribs.pairs[0]", "missing required key 'head_m'"]),
-    ({"body": "spine", "pairs": [{"name": "r", "head_m": [0, 0, 0], "front_m": [0, 0, 0], "half_width_m": 0.1,
-                                  "pitch": 1}]}, ["rigid.ribs.pairs[0].pitch", "unknown key"]),
-    ({"body": 3, "pairs": [{}]}, ["rigid.ribs.body", "a string"]),
-    ({"body": "spine", "anterior": [1, 0], "pairs": [{}]}, ["rigid.ribs.anterior", "3-vector"]),
-    ({"body": "spine", "pairs": [{"name": "r", "head_m": [0, 0, 0], "front_m": [0, 0, 0], "half_width_m": 0.1,
-                                  "reference_angle_deg": "up"}]}, ["rigid.ribs.pairs[0].reference_angle_deg"]),
-])
+@pytest.mark.parametrize(
+    "table, words",
+    [
+        ({"body": "spine", "pairs": [{}], "colour": 1}, ["rigid.ribs.colour", "unknown key"]),
+        ({"pairs": [{}]}, ["rigid.ribs", "missing required key 'body'"]),
+        ({"body": "spine", "pairs": {}}, ["rigid.ribs.pairs", "array of tables"]),
+        ({"body": "spine", "pairs": [{"name": "r"}]}, ["rigid.ribs.pairs[0]", "missing required key 'head_m'"]),
+        (
+            {
+                "body": "spine",
+                "pairs": [{"name": "r", "head_m": [0, 0, 0], "front_m": [0, 0, 0], "half_width_m": 0.1, "pitch": 1}],
+            },
+            ["rigid.ribs.pairs[0].pitch", "unknown key"],
+        ),
+        ({"body": 3, "pairs": [{}]}, ["rigid.ribs.body", "a string"]),
+        ({"body": "spine", "anterior": [1, 0], "pairs": [{}]}, ["rigid.ribs.anterior", "3-vector"]),
+        (
+            {
+                "body": "spine",
+                "pairs": [
+                    {
+                        "name": "r",
+                        "head_m": [0, 0, 0],
+                        "front_m": [0, 0, 0],
+                        "half_width_m": 0.1,
+                        "reference_angle_deg": "up",
+                    }
+                ],
+            },
+            ["rigid.ribs.pairs[0].reference_angle_deg"],
+        ),
+    ],
+)
 def test_the_ribs_table_refuses_a_malformed_key_in_one_line(table, words):
-    data = {"name": "s", "mesh": {"generator": "icosahedron"}, "masses": {"total_kg": 1.0},
-            "rigid": {"mjcf": "trunk", "ribs": table}}
+    data = {
+        "name": "s",
+        "mesh": {"generator": "icosahedron"},
+        "masses": {"total_kg": 1.0},
+        "rigid": {"mjcf": "trunk", "ribs": table},
+    }
     with pytest.raises(SceneError) as info:
         scene_from_dict(data, source="s.toml")
     message = str(info.value)
@@ -182,8 +236,11 @@ def test_the_ribs_table_refuses_a_malformed_key_in_one_line(table, words):
 
 def _humanoid():
     spec = importlib.util.find_spec("gymnasium")
-    path = None if spec is None or spec.origin is None else \
-        Path(spec.origin).parent / "envs" / "mujoco" / "assets" / "humanoid.xml"
+    path = (
+        None
+        if spec is None or spec.origin is None
+        else Path(spec.origin).parent / "envs" / "mujoco" / "assets" / "humanoid.xml"
+    )
     return path if path is not None and path.is_file() else None
 
 
@@ -196,21 +253,46 @@ def test_gymnasiums_humanoid_breathes_on_ribs_added_to_its_torso():
     path = _humanoid()
     before = path.read_bytes()
     c = np.array([0.0, 0.0, 1.2])
-    ribs = Ribs(body="torso", pairs=(RibPair(name="rib", head_m=tuple(c + [-0.09, 0.02, 0.03]),
-                                             front_m=tuple(c + [0.08, 0.025, 0.03]), half_width_m=0.09,
-                                             axis_angle_deg=60.0, stiffness_n_m_per_rad=2.0),))
+    ribs = Ribs(
+        body="torso",
+        pairs=(
+            RibPair(
+                name="rib",
+                head_m=tuple(c + [-0.09, 0.02, 0.03]),
+                front_m=tuple(c + [0.08, 0.025, 0.03]),
+                half_width_m=0.09,
+                axis_angle_deg=60.0,
+                stiffness_n_m_per_rad=2.0,
+            ),
+        ),
+    )
     band = Box((-1, -1, c[2] + 0.015), (1, 1, c[2] + 0.045))
-    sc = Scene(formulation="paper", mesh=MeshSpec(generator="uv_sphere", radius_m=0.08, center_m=tuple(c)),
-               masses=Masses(total_kg=1.0),
-               regions={"band": band, "left": Intersection(("band", HalfSpace((0, 0, 0), (0, 1, 0)))),
-                        "right": Difference("band", "left"),
-                        "dome": HalfSpace((0, 0, c[2] + 0.046), (0, 0, 1)),
-                        "floor": HalfSpace((0, 0, c[2] - 0.04), (0, 0, -1))},
-               forces=(ShapeMemory(300.0), Damping(critical_fraction=0.3),
-                       Muscle(stiffness=60.0, region="dome", toward_m=tuple(c + [0, 0, 0.12]))),
-               constraints=(Nailed("floor"), Volume()), dt_s=1e-3,
-               rigid=Rigid(str(path), fix_root=True, hold=("*",), ribs=ribs,
-                           links=(RigidLink("left", "rib_left", "left"), RigidLink("right", "rib_right", "right"))))
+    sc = Scene(
+        formulation="paper",
+        mesh=MeshSpec(generator="uv_sphere", radius_m=0.08, center_m=tuple(c)),
+        masses=Masses(total_kg=1.0),
+        regions={
+            "band": band,
+            "left": Intersection(("band", HalfSpace((0, 0, 0), (0, 1, 0)))),
+            "right": Difference("band", "left"),
+            "dome": HalfSpace((0, 0, c[2] + 0.046), (0, 0, 1)),
+            "floor": HalfSpace((0, 0, c[2] - 0.04), (0, 0, -1)),
+        },
+        forces=(
+            ShapeMemory(300.0),
+            Damping(critical_fraction=0.3),
+            Muscle(stiffness=60.0, region="dome", toward_m=tuple(c + [0, 0, 0.12])),
+        ),
+        constraints=(Nailed("floor"), Volume()),
+        dt_s=1e-3,
+        rigid=Rigid(
+            str(path),
+            fix_root=True,
+            hold=("*",),
+            ribs=ribs,
+            links=(RigidLink("left", "rib_left", "left"), RigidLink("right", "rib_right", "right")),
+        ),
+    )
     model = compile_scene(sc)
     assert model.rigid.settings()["ribs"]["rib_joints"] == ["rib_left_hinge", "rib_right_hinge"]
     sim = Simulation(model)
@@ -231,11 +313,18 @@ def test_ribs_rebuilt_on_the_trunks_spine_breathe_as_its_own():
     to the rebuilt pair instead: the same rib lift and apex descent within 0.5% over the
     first 0.8 s of inspiration (the arcs' shapes and inertias differ a little)."""
     import hybrid
+
     scene = hybrid.load_scene("breathing")
     pair = dataclasses.replace(PAIR, axis_angle_deg=70.7)
-    rebuilt = dataclasses.replace(scene, rigid=dataclasses.replace(
-        scene.rigid, ribs=Ribs(body="spine", pairs=(pair,)), load_joints=(),
-        links=(RigidLink("rib_left_points", "r_left", "a"), RigidLink("rib_right_points", "r_right", "b"))))
+    rebuilt = dataclasses.replace(
+        scene,
+        rigid=dataclasses.replace(
+            scene.rigid,
+            ribs=Ribs(body="spine", pairs=(pair,)),
+            load_joints=(),
+            links=(RigidLink("rib_left_points", "r_left", "a"), RigidLink("rib_right_points", "r_right", "b")),
+        ),
+    )
     own, new = (hybrid.run(Simulation(compile_scene(s)), 0.8)["summary"] for s in (scene, rebuilt))
     assert own["rib_lift_mm"] > 1.0
     assert new["rib_lift_mm"] == pytest.approx(own["rib_lift_mm"], rel=5e-3)
@@ -244,6 +333,7 @@ def test_ribs_rebuilt_on_the_trunks_spine_breathe_as_its_own():
 
 def test_the_thorax_pitch_is_the_turn_of_its_anterior_axis_toward_cranial():
     from hybrid.readouts import pitch_deg
+
     anterior, cranial = np.array([0.0, -1.0, 0.0]), np.array([0.0, 0.0, 1.0])  # myotorso's frame
     left = np.cross(cranial, anterior)
     start = np.array([0.5, 0.5, -0.5, -0.5])  # a body frame turned against the world (myotorso's torso)
@@ -261,14 +351,30 @@ def test_the_thorax_pitch_is_the_turn_of_its_anterior_axis_toward_cranial():
 def test_the_command_line_refuses_a_wrong_ribs_key_in_one_line_with_status_2(tmp_path, capsys):
     import hybrid
     from hybrid.cli import main
+
     scene = hybrid.load_scene("breathing")
     path = tmp_path / "ribbed.toml"
     path.write_text(scene_to_toml(dataclasses.replace(scene, rigid=dataclasses.replace(scene.rigid, ribs=RIBS))))
-    assert main(["run", str(path), "--duration", "0.01", "--out", str(tmp_path / "o"), "--set",
-                 "rigid.ribs.body=spnie"]) == 2
+    assert (
+        main(["run", str(path), "--duration", "0.01", "--out", str(tmp_path / "o"), "--set", "rigid.ribs.body=spnie"])
+        == 2
+    )
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "rigid.ribs.body: no body named 'spnie'" in err[0] and "spine" in err[0]
-    assert main(["run", str(path), "--duration", "0.01", "--out", str(tmp_path / "o2"), "--set",
-                 "rigid.ribs.pairs.r.axis_angle_deg=95"]) == 2
+    assert (
+        main(
+            [
+                "run",
+                str(path),
+                "--duration",
+                "0.01",
+                "--out",
+                str(tmp_path / "o2"),
+                "--set",
+                "rigid.ribs.pairs.r.axis_angle_deg=95",
+            ]
+        )
+        == 2
+    )
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "rigid.ribs.pairs[0].axis_angle_deg" in err[0]

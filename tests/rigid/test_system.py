@@ -9,15 +9,15 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 import pytest
+from helpers import RIBS
 
 from hybrid import rigid
 from hybrid.errors import RigidError
 
-from helpers import RIBS
 
-
-def trunk_system(*, sternum: bool = True, gravity: bool = True, damping: bool = True,
-                 spec: mujoco.MjSpec | None = None, sites=()) -> rigid.RigidSystem:
+def trunk_system(
+    *, sternum: bool = True, gravity: bool = True, damping: bool = True, spec: mujoco.MjSpec | None = None, sites=()
+) -> rigid.RigidSystem:
     """The trunk model, optionally without the sternum spring, gravity or hinge damping."""
     system = rigid.RigidSystem(spec or rigid.load_spec(rigid.TRUNK_XML), sites)
     m = system.model
@@ -148,8 +148,7 @@ def test_apply_point_forces_sums_the_wrenches_about_the_centre_of_mass():
 
 def test_site_pos_and_vel_belong_to_the_state_after_the_step():
     spec = rigid.load_spec(rigid.TRUNK_XML)
-    names = rigid.attach_points(spec, ["rib_left", "rib_right"],
-                                np.array([[0.05, 0.09, 0.06], [0.05, -0.09, 0.06]]))
+    names = rigid.attach_points(spec, ["rib_left", "rib_right"], np.array([[0.05, 0.09, 0.06], [0.05, -0.09, 0.06]]))
     system = rigid.RigidSystem(spec, names)
     system.apply_point_forces(np.array([[0.0, 0.0, 3.0], [0.0, 1.0, -2.0]]))
     for _ in range(50):
@@ -181,8 +180,7 @@ def test_numba_loop_calls_mujoco_bit_for_bit():
             out[k] = site_xpos[site_id[0], 2]
 
     spec = rigid.load_spec(rigid.TRUNK_XML)
-    names = rigid.attach_points(spec, ["rib_left", "rib_right"],
-                                np.array([[0.05, 0.09, 0.06], [0.05, -0.09, 0.06]]))
+    names = rigid.attach_points(spec, ["rib_left", "rib_right"], np.array([[0.05, 0.09, 0.06], [0.05, -0.09, 0.06]]))
     forces = np.random.default_rng(5).normal(size=(300, 2, 3))
     a, b = rigid.RigidSystem(spec, names), rigid.RigidSystem(spec, names)
     z = np.empty(300)
@@ -192,7 +190,6 @@ def test_numba_loop_calls_mujoco_bit_for_bit():
         z[k] = a.site_pos()[0, 2]
     d = b.data
     out = np.empty(300)
-    run(*b.pointers(), 300, forces, d.site_xpos, d.xipos, b.site_id,
-        b.site_body, d.xfrc_applied, out)
+    run(*b.pointers(), 300, forces, d.site_xpos, d.xipos, b.site_id, b.site_body, d.xfrc_applied, out)
     np.testing.assert_array_equal(out, z)
     np.testing.assert_array_equal(d.qpos, a.data.qpos)

@@ -16,8 +16,9 @@ def test_paper_rigid_algorithm_converges_at_first_order_to_mujoco():
     exact = ref.run_mujoco(body, state0, point, force, 1e-4, duration, integrator="RK4")
     check = ref.run_mujoco(body, state0, point, force, 2e-4, duration, integrator="RK4")
     assert max(ref.state_error(exact, check).values()) < 1e-10  # RK4 reference converged
-    errors = [ref.state_error(ref.run_paper(body, state0, point, force, h, duration), exact)
-              for h in (4e-3, 2e-3, 1e-3, 5e-4)]
+    errors = [
+        ref.state_error(ref.run_paper(body, state0, point, force, h, duration), exact) for h in (4e-3, 2e-3, 1e-3, 5e-4)
+    ]
     for key in ("pos", "angle", "vel", "omega"):
         e = np.array([err[key] for err in errors])
         order = np.log2(e[:-1] / e[1:])

@@ -6,17 +6,16 @@ from __future__ import annotations
 import math
 
 import pytest
+from helpers import strict_load
 
 from hybrid.studies.cli import main_study
 from hybrid.studies.convergence import DEFAULT_METRICS, TARGETS, estimate, recommend, richardson
-
-from helpers import strict_load
 
 
 def test_richardson_recovers_the_limit_and_order_of_a_power_law():
     r = math.sqrt(2.0)
     for p in (1.0, 2.0):
-        xs = [3.0 + 0.7 * (0.1 / r ** k) ** p for k in range(4)]
+        xs = [3.0 + 0.7 * (0.1 / r**k) ** p for k in range(4)]
         limit, observed, used = richardson(xs, r)
         assert observed == pytest.approx(p, rel=1e-9) and used == observed
         assert limit == pytest.approx(3.0, rel=1e-12)
@@ -32,10 +31,17 @@ def _grid(limit=10.0, cs=0.8, ct=0.05, levels=(0, 1, 2, 3)):
     for k in levels:
         h = 2 ** (-k / 2)
         for j in range(3):
-            dt = 1e-3 * h / 2 ** j
-            runs.append({"level": k, "nvert": 80 * 2 ** k, "dt": dt, "status": "ok",
-                         "values": {"m": limit + cs * h + ct * dt / 1e-3},
-                         "wall_s_per_sim_s": 80 * 2 ** k / dt * 1e-6})
+            dt = 1e-3 * h / 2**j
+            runs.append(
+                {
+                    "level": k,
+                    "nvert": 80 * 2**k,
+                    "dt": dt,
+                    "status": "ok",
+                    "values": {"m": limit + cs * h + ct * dt / 1e-3},
+                    "wall_s_per_sim_s": 80 * 2**k / dt * 1e-6,
+                }
+            )
     return runs
 
 
@@ -81,8 +87,22 @@ def test_small_convergence_study_of_the_breathing_scene(tmp_path, capsys):
 
 
 def test_convergence_refuses_an_unknown_metric_in_one_line(tmp_path, capsys):
-    code = main_study(["convergence", "--out", str(tmp_path), "--small", "--metric", "snore_mm",
-                       "--levels", "0-1", "--steps", "1", "--duration", "0.01"])
+    code = main_study(
+        [
+            "convergence",
+            "--out",
+            str(tmp_path),
+            "--small",
+            "--metric",
+            "snore_mm",
+            "--levels",
+            "0-1",
+            "--steps",
+            "1",
+            "--duration",
+            "0.01",
+        ]
+    )
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1 and "snore_mm" in err and "apex_descent_mm" in err
 
@@ -91,11 +111,27 @@ def test_a_mesh_read_from_a_file_refines_by_splitting_its_faces(tmp_path, capsys
     """The study's levels on a file mesh: faces split into four a level, the spacing halved."""
     from hybrid.model import compile_scene
     from hybrid.resolve import resolve_scene
+
     path = tmp_path / "level0.obj"
     compile_scene(resolve_scene("breathing", overrides=["mesh.level=0"])).mesh.save(path)
     out = tmp_path / "cv"
-    assert main_study(["convergence", "--out", str(out), "--small", "--steps", "1", "--duration", "0.1",
-                       "--set", f"mesh.path={path}"]) == 0
+    assert (
+        main_study(
+            [
+                "convergence",
+                "--out",
+                str(out),
+                "--small",
+                "--steps",
+                "1",
+                "--duration",
+                "0.1",
+                "--set",
+                f"mesh.path={path}",
+            ]
+        )
+        == 0
+    )
     data = strict_load(out / "convergence.json")
     assert data["spacing_ratio"] == 2.0 and data["levels"] == [0, 1] and not data["failures"]
     nv = [r["nvert"] for r in data["runs"]]
@@ -107,8 +143,25 @@ def test_convergence_with_implicit_euler_steps_from_its_own_step(tmp_path):
     """`--integrator implicit_euler`: each level's steps halve from implicit Euler's own
     "auto" step (4x symplectic Euler's), not from the explicit bound."""
     from hybrid.studies.convergence import base_step
-    assert main_study(["convergence", "--out", str(tmp_path), "--integrator", "implicit_euler",
-                       "--levels", "0-1", "--steps", "2", "--duration", "0.2"]) == 0
+
+    assert (
+        main_study(
+            [
+                "convergence",
+                "--out",
+                str(tmp_path),
+                "--integrator",
+                "implicit_euler",
+                "--levels",
+                "0-1",
+                "--steps",
+                "2",
+                "--duration",
+                "0.2",
+            ]
+        )
+        == 0
+    )
     data = strict_load(tmp_path / "convergence.json")
     assert data["overrides"] == ["integrator=implicit_euler"] and not data["failures"]
     for level in (0, 1):

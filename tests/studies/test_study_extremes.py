@@ -3,9 +3,9 @@ refused, with a message; no NaN in the JSON; nothing unexpected raised."""
 
 from __future__ import annotations
 
-from hybrid.studies.cli import main_study
-
 from helpers import strict_load
+
+from hybrid.studies.cli import main_study
 
 
 def test_small_extremes_catalogue(tmp_path, capsys, monkeypatch):

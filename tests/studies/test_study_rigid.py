@@ -32,11 +32,20 @@ def test_breathing_replays_exactly_and_the_paper_algorithm_is_first_order(tmp_pa
 def test_a_driven_held_model_replays_exactly_with_its_controls(tmp_path):
     path = tmp_path / "arm.xml"
     path.write_text(XML)
-    scene = Scene(formulation="paper", mesh=MeshSpec(generator="icosahedron", radius_m=0.05, center_m=(0, 0, 1.0)),
-                  masses=Masses(total_kg=0.1), regions={"top": HalfSpace((0, 0, 1.02), (0, 0, 1))},
-                  forces=(ShapeMemory(100.0), Damping(critical_fraction=0.3)),
-                  rigid=Rigid(str(path), links=(RigidLink("top", "torso"),), weld=("torso",),
-                              hold=("shoulder",), ctrl={"m_shoulder": Breathing(period_s=0.2, peak=3.0)}))
+    scene = Scene(
+        formulation="paper",
+        mesh=MeshSpec(generator="icosahedron", radius_m=0.05, center_m=(0, 0, 1.0)),
+        masses=Masses(total_kg=0.1),
+        regions={"top": HalfSpace((0, 0, 1.02), (0, 0, 1))},
+        forces=(ShapeMemory(100.0), Damping(critical_fraction=0.3)),
+        rigid=Rigid(
+            str(path),
+            links=(RigidLink("top", "torso"),),
+            weld=("torso",),
+            hold=("shoulder",),
+            ctrl={"m_shoulder": Breathing(period_s=0.2, peak=3.0)},
+        ),
+    )
     r = replay_check(scene, 100)
     assert r["qpos_moved_max"] > 1e-3
     assert r["replay_max_abs_qpos"] <= 1e-12 and r["replay_max_abs_qvel"] <= 1e-12

@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-from hybrid.studies.cli import main_study
-
 from helpers import strict_load
+
+from hybrid.studies.cli import main_study
 
 
 def test_small_stability_study_writes_the_json(tmp_path):
@@ -13,7 +13,8 @@ def test_small_stability_study_writes_the_json(tmp_path):
     assert data["table1_max_abs_error"] <= 1e-12
     rows = data["table3"]
     assert {(r["model"], r["perturbation"]) for r in rows} == {
-        (m, p) for m in ("mass_spring", "shape_memory") for p in (0.3, 0.7)}
+        (m, p) for m in ("mass_spring", "shape_memory") for p in (0.3, 0.7)
+    }
     for r in rows:
         assert set(r) >= {"model", "perturbation", "h_max", "iterations"}
         assert isinstance(r["h_max"], (int, float)) and r["h_max"] >= 0

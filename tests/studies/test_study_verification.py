@@ -3,9 +3,9 @@ small study's resolutions (the full study, with finer meshes, is the command's).
 
 from __future__ import annotations
 
-from hybrid.studies.cli import main_study
-
 from helpers import strict_load
+
+from hybrid.studies.cli import main_study
 
 
 def test_small_verification_study(tmp_path, capsys):

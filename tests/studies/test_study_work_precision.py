@@ -26,10 +26,12 @@ def test_small_work_precision(tmp_path, capsys):
     # the references are converged: Richardson's estimate of their error is far below every run's
     for s, ref in d["reference"].items():
         assert ref["converged"] and ref["error_estimate"] < 0.1 * ref["smallest_run_error"], s
-    sym = sorted((r for r in d["runs"] if r["scene"] == "membrane" and r["integrator"] == "symplectic_euler"),
-                 key=lambda r: -r["dt"])
+    sym = sorted(
+        (r for r in d["runs"] if r["scene"] == "membrane" and r["integrator"] == "symplectic_euler"),
+        key=lambda r: -r["dt"],
+    )
     assert len(sym) >= 4
-    assert all(a["error"] > b["error"] for a, b in zip(sym, sym[1:]))   # errors decrease with h
+    assert all(a["error"] > b["error"] for a, b in zip(sym, sym[1:]))  # errors decrease with h
     # First order for both Euler variants: explicit and symplectic Euler are each
     # first-order one-step methods (local error O(h^2), global O(h)), and the volume
     # projection after the step does not raise that: it is a first-order
@@ -40,16 +42,20 @@ def test_small_work_precision(tmp_path, capsys):
         assert 0.7 < p < 1.5, (key, p)
     assert abs(observed_order([1.0, 0.5, 0.25], [4.0, 2.0, 1.0]) - 1.0) < 1e-12
     # the rib lift's error falls with the step too (first order: halving h about halves it)
-    lift = sorted((r for r in d["runs"] if r["scene"] == "breathing" and r["integrator"] == "symplectic_euler"),
-                  key=lambda r: -r["dt"])
+    lift = sorted(
+        (r for r in d["runs"] if r["scene"] == "breathing" and r["integrator"] == "symplectic_euler"),
+        key=lambda r: -r["dt"],
+    )
     assert all(a["rib_lift_error_mm"] > b["rib_lift_error_mm"] for a, b in zip(lift, lift[1:]))
     assert "hybrid study convergence" in (tmp_path / "work_precision.md").read_text()
 
 
 def test_small_work_precision_on_dask_cluster(tmp_path, dask_cluster):
     """`--scheduler ADDRESS` sends the runs to an existing Dask cluster."""
-    assert main_study(["work-precision", "--out", str(tmp_path), "--small",
-                       "--scheduler", dask_cluster.scheduler_address]) == 0
+    assert (
+        main_study(["work-precision", "--out", str(tmp_path), "--small", "--scheduler", dask_cluster.scheduler_address])
+        == 0
+    )
     d = json.loads((tmp_path / "work_precision.json").read_text())
     assert d["scheduler"] == dask_cluster.scheduler_address and d["failures"] == []
     assert len(d["runs"]) == 16 and all(0.7 < p < 1.5 for p in d["order"].values())

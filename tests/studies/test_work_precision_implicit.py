@@ -13,10 +13,9 @@ def test_implicit_euler_first_order_on_breathing_series():
     ref = simulate("breathing", "symplectic_euler", 6, window, coupled=scene)  # 15.6 us
     check = simulate("breathing", "symplectic_euler", 5, window, coupled=scene)
     ks = (1, 2, 3)  # 5, 2.5, 1.25 ms
-    errs = [_errors(simulate("breathing", "implicit_euler", k, window, coupled=scene, h0=H0_IMPLICIT), ref)
-            for k in ks]
+    errs = [_errors(simulate("breathing", "implicit_euler", k, window, coupled=scene, h0=H0_IMPLICIT), ref) for k in ks]
     est = _errors(check, ref)  # the reference's own error, by Richardson (first order)
-    dts = [H0_IMPLICIT / 2 ** k for k in ks]
+    dts = [H0_IMPLICIT / 2**k for k in ks]
     for key in KEYS:
         e = [r[key] for r in errs]
         assert est[key] < 0.05 * e[-1], (key, est[key], e)

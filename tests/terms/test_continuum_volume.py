@@ -49,8 +49,9 @@ def test_the_fill_and_the_load_are_minus_the_gradient_of_their_energies(family):
     the readout is the fill's pressure -K (V - V0) / V0; net force zero."""
     mesh = MESHES[family]()
     K, p = 2e4, 300.0
-    model = compile_scene(Scene(mesh=mesh, masses=Masses(total_kg=1.0),
-                                forces=(SoftVolume(bulk_modulus_pa=K), Pressure(p))))
+    model = compile_scene(
+        Scene(mesh=mesh, masses=Masses(total_kg=1.0), forces=(SoftVolume(bulk_modulus_pa=K), Pressure(p)))
+    )
     v0 = mesh.volume()
     rng = np.random.default_rng(3)
     pos = mesh.vert_pos * 1.02 + rng.normal(scale=1e-3, size=mesh.vert_pos.shape)
@@ -75,8 +76,12 @@ def test_a_pressure_load_compresses_the_fill_by_dp_over_k(family):
     mesh = MESHES[family]()
     K, dp = 1e5, 2000.0
     # radial mode: w^2 = 12 pi K R / M ~ 3.8e5 /s^2; drag b A ~ 2 w M damps it near critically
-    scene = Scene(mesh=mesh, masses=Masses(total_kg=1.0), dt_s=1e-4,
-                  forces=(SoftVolume(bulk_modulus_pa=K), Pressure(-dp), Damping(drag_n_s_per_m3=1e4)))
+    scene = Scene(
+        mesh=mesh,
+        masses=Masses(total_kg=1.0),
+        dt_s=1e-4,
+        forces=(SoftVolume(bulk_modulus_pa=K), Pressure(-dp), Damping(drag_n_s_per_m3=1e4)),
+    )
     sim = Simulation(compile_scene(scene))
     sim.step(1000)  # 0.1 s: the radial mode has decayed by e^-60
     v0 = mesh.volume()
@@ -98,8 +103,17 @@ def test_the_same_drag_damps_a_translation_at_the_same_rate_on_every_mesh():
         mesh = make()
         for drag in ("continuum", "paper"):
             damping = Damping(drag_n_s_per_m3=b) if drag == "continuum" else Damping(coef_n_s_per_m=0.01)
-            sim = Simulation(compile_scene(Scene(formulation=drag, mesh=mesh, dt_s=h, forces=(damping,),
-                                                 masses=Masses(density_kg_per_m2={"all": rho}))))
+            sim = Simulation(
+                compile_scene(
+                    Scene(
+                        formulation=drag,
+                        mesh=mesh,
+                        dt_s=h,
+                        forces=(damping,),
+                        masses=Masses(density_kg_per_m2={"all": rho}),
+                    )
+                )
+            )
             sim.set_state(vert_vel=np.tile(v0, (mesh.nvert, 1)))
             sim.step(1)
             if drag == "continuum":

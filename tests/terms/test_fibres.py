@@ -8,25 +8,27 @@ import numpy as np
 import pytest
 
 from hybrid.errors import SceneError
-from hybrid.mesh import icosphere, uv_sphere
+from hybrid.mesh import Mesh, icosphere, uv_sphere
 from hybrid.model import compile_scene
 from hybrid.regions import Ball, HalfSpace
 from hybrid.scene import Masses, MuscleFibres, Scene
 from hybrid.schedule import Breathing, evaluate
 from hybrid.step import membrane_forces, new_state
-from hybrid.mesh import Mesh
 from hybrid.terms.fibres import add_muscle_fibres, fibre_shares
 from hybrid.terms.tangents import fibre_energy
 
 R = 0.1
-LEVELS = {"icosphere": [icosphere(k, R) for k in (1, 2, 3)],
-          "uv_sphere": [uv_sphere(R, s, s // 2) for s in (13, 26, 52)]}
+LEVELS = {
+    "icosphere": [icosphere(k, R) for k in (1, 2, 3)],
+    "uv_sphere": [uv_sphere(R, s, s // 2) for s in (13, 26, 52)],
+}
 DOME = HalfSpace((0.0, 0.0, 0.0), (0.0, 0.0, 1.0))  # the upper half, fibres along its meridians
 
 
 def _model(mesh, tension=40.0):
-    return compile_scene(Scene(mesh=mesh, masses=Masses(total_kg=1.0),
-                               forces=(MuscleFibres(DOME, tension, toward_m=(0.0, 0.0, R)),)))
+    return compile_scene(
+        Scene(mesh=mesh, masses=Masses(total_kg=1.0), forces=(MuscleFibres(DOME, tension, toward_m=(0.0, 0.0, R)),))
+    )
 
 
 def _forces(model, pos, t=0.0):
@@ -56,8 +58,13 @@ def test_the_force_is_minus_the_gradient_of_the_fibres_work_function(width):
     differences at strains of about 10%, at a time a breathing schedule gives T(t) = 30 N/m
     x its waveform."""
     mesh = LEVELS["uv_sphere"][1]
-    model = compile_scene(Scene(mesh=mesh, masses=Masses(total_kg=1.0), forces=(
-        MuscleFibres(DOME, Breathing(4.0, 0.4, 30.0), toward_m=(0.0, 0.0, R), force_length_width=width),)))
+    model = compile_scene(
+        Scene(
+            mesh=mesh,
+            masses=Masses(total_kg=1.0),
+            forces=(MuscleFibres(DOME, Breathing(4.0, 0.4, 30.0), toward_m=(0.0, 0.0, R), force_length_width=width),),
+        )
+    )
     a = model.arrays
     rng = np.random.default_rng(5)
     pos = mesh.vert_pos + rng.normal(scale=1e-2 * R, size=mesh.vert_pos.shape)
@@ -88,8 +95,13 @@ def test_a_shortened_fibre_pulls_by_the_force_length_relation():
     w, stretch = 0.5, 0.8
     for jitter in (0.0, 0.3):
         pos, face = _sheet(8, jitter, rng)
-        model = compile_scene(Scene(mesh=Mesh.from_arrays(pos, face), masses=Masses(total_kg=1.0),
-                                    forces=(MuscleFibres("all", 1.0, axis=(1.0, 0.0, 0.0), force_length_width=w),)))
+        model = compile_scene(
+            Scene(
+                mesh=Mesh.from_arrays(pos, face),
+                masses=Masses(total_kg=1.0),
+                forces=(MuscleFibres("all", 1.0, axis=(1.0, 0.0, 0.0), force_length_width=w),),
+            )
+        )
         squeezed = pos * [stretch, 1.0, 1.0]
         force = _forces(model, squeezed)
         left = pos[:, 0] < 0.37
@@ -99,7 +111,7 @@ def test_a_shortened_fibre_pulls_by_the_force_length_relation():
         keep = left[a.fib_vert].all(axis=1)
         add_muscle_fibres(a.fib_vert[keep], a.fib_par[keep], a.fib_sched[keep], np.ones((1, 3)), squeezed, inside)
         across = (force - inside)[left].sum(axis=0)
-        np.testing.assert_allclose(across, [np.exp(-((stretch - 1) / w) ** 2), 0.0, 0.0], rtol=0, atol=1e-12)
+        np.testing.assert_allclose(across, [np.exp(-(((stretch - 1) / w) ** 2)), 0.0, 0.0], rtol=0, atol=1e-12)
 
 
 def _cut_force(pos, edge, share, left):
@@ -133,8 +145,9 @@ def test_a_flat_sheet_carries_the_tension_times_the_width_across_any_cut(jitter)
         pos, face = _sheet(n, jitter, rng)
         edge, share = fibre_shares(pos, face, axis=(1.0, 0.0, 0.0))
         for x_cut in (0.37, 0.61):
-            np.testing.assert_allclose(_cut_force(pos, edge, share, pos[:, 0] < x_cut), [1.0, 0.0, 0.0],
-                                       rtol=0, atol=1e-12)
+            np.testing.assert_allclose(
+                _cut_force(pos, edge, share, pos[:, 0] < x_cut), [1.0, 0.0, 0.0], rtol=0, atol=1e-12
+            )
 
 
 def test_meridian_fibres_carry_t_times_the_equator_across_it_on_both_families():
@@ -143,8 +156,10 @@ def test_meridian_fibres_carry_t_times_the_equator_across_it_on_both_families():
     errors 2.4 / 0.60 / 0.15 % (icospheres 162 / 642 / 2562 points) and 6.6 / 1.7 /
     0.43 % (UV spheres 114 / 482 / 1986): second order toward the same value."""
     errs = {}
-    for family, meshes in (("icosphere", [icosphere(k, R) for k in (2, 3, 4)]),
-                           ("uv_sphere", [uv_sphere(R, s, s // 2) for s in (16, 32, 64)])):
+    for family, meshes in (
+        ("icosphere", [icosphere(k, R) for k in (2, 3, 4)]),
+        ("uv_sphere", [uv_sphere(R, s, s // 2) for s in (16, 32, 64)]),
+    ):
         for mesh in meshes:
             edge, share = fibre_shares(mesh.vert_pos, mesh.face_vert, toward=(0.0, 0.0, R))
             f = _cut_force(mesh.vert_pos, edge, share, mesh.vert_pos[:, 2] > 1e-9 * R)
@@ -159,13 +174,22 @@ def test_a_region_without_triangles_and_a_missing_direction_are_refused():
     mesh = LEVELS["icosphere"][0]
     far = Ball((0.0, 0.0, 0.0), 0.5 * R)  # inside the sphere, no point: refused by the region itself
     near_one = Ball(tuple(mesh.vert_pos[0]), 1e-3 * R)  # one point: no triangle
-    for sel, pattern in ((near_one, r"forces\['muscle_fibres'\]\.region: expected triangles in the region"),
-                         (far, r"selects none")):
+    for sel, pattern in (
+        (near_one, r"forces\['muscle_fibres'\]\.region: expected triangles in the region"),
+        (far, r"selects none"),
+    ):
         with pytest.raises(SceneError, match=pattern):
-            compile_scene(Scene(mesh=mesh, masses=Masses(total_kg=1.0),
-                                forces=(MuscleFibres(sel, 10.0, axis=(0.0, 0.0, 1.0)),)))
+            compile_scene(
+                Scene(mesh=mesh, masses=Masses(total_kg=1.0), forces=(MuscleFibres(sel, 10.0, axis=(0.0, 0.0, 1.0)),))
+            )
     with pytest.raises(SceneError, match=r"expected exactly one fibre direction, toward_m or axis"):
         compile_scene(Scene(mesh=mesh, masses=Masses(total_kg=1.0), forces=(MuscleFibres("all", 10.0),)))
     with pytest.raises(SceneError, match=r"type 'muscle_fibres' belongs to formulation 'continuum'"):
-        compile_scene(Scene(formulation="paper", mesh=mesh, masses=Masses(total_kg=1.0),
-                            forces=(MuscleFibres("all", 10.0, axis=(0.0, 0.0, 1.0)),)))
+        compile_scene(
+            Scene(
+                formulation="paper",
+                mesh=mesh,
+                masses=Masses(total_kg=1.0),
+                forces=(MuscleFibres("all", 10.0, axis=(0.0, 0.0, 1.0)),),
+            )
+        )

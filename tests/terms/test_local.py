@@ -8,14 +8,13 @@ import math
 
 import numpy as np
 import pytest
+from helpers import EPS
 
 from hybrid.model import compile_scene
 from hybrid.regions import HalfSpace, Indices
 from hybrid.scene import Damping, Gravity, KeepIn, Masses, MeshSpec, Nailed, Prescribed, Scene, ShapeMemory, Volume
 from hybrid.schedule import Function, Table, evaluate
 from hybrid.simulation import Simulation
-
-from helpers import EPS
 
 
 @pytest.mark.parametrize("kind", ["table", "function"])
@@ -25,10 +24,15 @@ def test_prescribed_point_follows_its_schedule_exactly(kind):
     else:
         sched = Function(lambda t: (0.01 * math.sin(2 * math.pi * 5 * t), 0.0, 0.002 * t))
     vert = 7
-    scene = Scene(formulation="paper", mesh=MeshSpec(), masses=Masses(total_kg=4.0),
-                  regions={"bottom": HalfSpace((0.0, 0.0, -0.1), (0.0, 0.0, -1.0))},
-                  forces=(Gravity(), ShapeMemory(3000.0), Damping(critical_fraction=0.3)),
-                  constraints=(Nailed("bottom"), Prescribed(Indices((vert,)), sched), Volume()), dt_s=1e-3)
+    scene = Scene(
+        formulation="paper",
+        mesh=MeshSpec(),
+        masses=Masses(total_kg=4.0),
+        regions={"bottom": HalfSpace((0.0, 0.0, -0.1), (0.0, 0.0, -1.0))},
+        forces=(Gravity(), ShapeMemory(3000.0), Damping(critical_fraction=0.3)),
+        constraints=(Nailed("bottom"), Prescribed(Indices((vert,)), sched), Volume()),
+        dt_s=1e-3,
+    )
     model = compile_scene(scene)
     assert model.arrays.vert_weight[vert] == 0.0  # the volume projection leaves it alone
     sim = Simulation(model)
@@ -49,14 +53,20 @@ def test_prescribed_point_follows_its_schedule_exactly(kind):
 
 KEEP_IN = {
     # a floor 1 cm below the sphere: it falls on it
-    "half_space": (KeepIn("all", "half_space", point_m=(0.0, 0.0, -0.13), normal=(0.0, 0.0, 1.0)),
-                   lambda x: x[:, 2] - (-0.13)),
+    "half_space": (
+        KeepIn("all", "half_space", point_m=(0.0, 0.0, -0.13), normal=(0.0, 0.0, 1.0)),
+        lambda x: x[:, 2] - (-0.13),
+    ),
     # a ball smaller than the sphere: every point starts outside
-    "ball": (KeepIn("all", "ball", center_m=(0.0, 0.0, 0.0), radius_m=0.115),
-             lambda x: 0.115 - np.linalg.norm(x, axis=1)),
+    "ball": (
+        KeepIn("all", "ball", center_m=(0.0, 0.0, 0.0), radius_m=0.115),
+        lambda x: 0.115 - np.linalg.norm(x, axis=1),
+    ),
     # a box squeezing x, with its floor 1 cm down
-    "box": (KeepIn("all", "box", lo_m=(-0.11, -1.0, -0.13), hi_m=(0.11, 1.0, 1.0)),
-            lambda x: np.minimum.reduce([x[:, 0] + 0.11, 0.11 - x[:, 0], x[:, 2] + 0.13])),
+    "box": (
+        KeepIn("all", "box", lo_m=(-0.11, -1.0, -0.13), hi_m=(0.11, 1.0, 1.0)),
+        lambda x: np.minimum.reduce([x[:, 0] + 0.11, 0.11 - x[:, 0], x[:, 2] + 0.13]),
+    ),
 }
 
 
@@ -65,9 +75,14 @@ def test_keep_in_region_keeps_points_inside(shape):
     """No volume constraint here: it projects after keep-in and may nudge a point
     out by its (small) correction; this tests the keep-in projection itself."""
     con, inside = KEEP_IN[shape]
-    scene = Scene(formulation="paper", mesh=MeshSpec(), masses=Masses(total_kg=4.0),
-                  forces=(Gravity(), ShapeMemory(3000.0), Damping(critical_fraction=0.5)),
-                  constraints=(con,), dt_s=1e-3)
+    scene = Scene(
+        formulation="paper",
+        mesh=MeshSpec(),
+        masses=Masses(total_kg=4.0),
+        forces=(Gravity(), ShapeMemory(3000.0), Damping(critical_fraction=0.5)),
+        constraints=(con,),
+        dt_s=1e-3,
+    )
     sim = Simulation(compile_scene(scene))
     worst = np.inf
     for _ in range(400):
@@ -92,9 +107,14 @@ def test_keep_in_with_the_volume_constraint_keeps_the_volume_exact_and_the_overs
     con = KeepIn("all", "half_space", point_m=(0.0, 0.0, -0.13), normal=(0.0, 0.0, 1.0))
     worst = {}
     for h in (1e-3, 5e-4):
-        scene = Scene(formulation="paper", mesh=MeshSpec(), masses=Masses(total_kg=4.0),
-                      forces=(Gravity(), ShapeMemory(3000.0), Damping(critical_fraction=0.5)),
-                      constraints=(con, Volume()), dt_s=h)
+        scene = Scene(
+            formulation="paper",
+            mesh=MeshSpec(),
+            masses=Masses(total_kg=4.0),
+            forces=(Gravity(), ShapeMemory(3000.0), Damping(critical_fraction=0.5)),
+            constraints=(con, Volume()),
+            dt_s=h,
+        )
         sim = Simulation(compile_scene(scene))
         v0 = sim.model.arrays.vol0
         worst[h] = 0.0

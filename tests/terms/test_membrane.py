@@ -11,16 +11,25 @@ from hybrid import Masses, Membrane, MeshSpec, Scene, Volume
 from hybrid.errors import SceneError
 from hybrid.mesh import Mesh, icosphere, irregular_sphere, uv_sphere
 from hybrid.readouts import net_internal, swept_volume
-from hybrid.terms.membrane import (add_membrane_serial, lame_moduli, membrane_energy, membrane_faces_parallel,
-                                   membrane_gather_parallel)
+from hybrid.terms.membrane import (
+    add_membrane_serial,
+    lame_moduli,
+    membrane_energy,
+    membrane_faces_parallel,
+    membrane_gather_parallel,
+)
 
-FAMILIES = {"uv": lambda: uv_sphere(0.12, 16, 9), "ico": lambda: icosphere(2, 0.12),
-            "irregular": lambda: irregular_sphere(300, 0.12, seed=3)}
+FAMILIES = {
+    "uv": lambda: uv_sphere(0.12, 16, 9),
+    "ico": lambda: icosphere(2, 0.12),
+    "irregular": lambda: irregular_sphere(300, 0.12, seed=3),
+}
 
 
 def model_of(mesh, **kw):
-    return hybrid.compile_scene(Scene(mesh=mesh, masses=Masses(total_kg=1.0),
-                                      forces=(Membrane(kw.pop("youngs", 800.0), **kw),)))
+    return hybrid.compile_scene(
+        Scene(mesh=mesh, masses=Masses(total_kg=1.0), forces=(Membrane(kw.pop("youngs", 800.0), **kw),))
+    )
 
 
 def forces(a, x, v=None):
@@ -133,8 +142,10 @@ def test_swept_volumes_of_a_partition_add_up_to_the_volume_change():
     top = np.nonzero(mesh.vert_pos[:, 2] > 0.03)[0]
     rest = np.setdiff1d(np.arange(mesh.nvert), top)
     from hybrid.readouts import region_faces
-    parts = [swept_volume(mesh.face_vert[region_faces(mesh.face_vert, r, mesh.nvert)], mesh.vert_pos, x)
-             for r in (top, rest)]
+
+    parts = [
+        swept_volume(mesh.face_vert[region_faces(mesh.face_vert, r, mesh.nvert)], mesh.vert_pos, x) for r in (top, rest)
+    ]
     dv = Mesh.from_arrays(x, mesh.face_vert).volume() - mesh.volume()
     assert abs(sum(parts) - dv) <= 1e-14 * mesh.volume() * 10
     assert parts[0] > 0 and parts[1] > 0
@@ -152,6 +163,7 @@ def _swept_reference(face_vert, rest, pos):
 
 def test_compiled_swept_volumes_of_frames_match_the_formula_and_a_prism():
     from hybrid.readouts import swept_volumes
+
     mesh = FAMILIES["irregular"]()
     rng = np.random.default_rng(8)
     frames = mesh.vert_pos + 0.05 * rng.standard_normal((4, mesh.nvert, 3))
@@ -167,15 +179,22 @@ def test_compiled_swept_volumes_of_frames_match_the_formula_and_a_prism():
     assert swept_volumes(tri, rest, moved[None])[0] == pytest.approx(0.5 * 0.3 * 0.2 * 0.05, rel=1e-14)
 
 
-@pytest.mark.parametrize("field, value, message", [
-    ("youngs_modulus_n_per_m", -1.0, r"youngs_modulus_n_per_m: expected a number > 0"),
-    ("poisson_ratio", 0.6, r"poisson_ratio: expected a number in \[0, 0.5\], received 0.6"),
-    ("damping_time_s", -0.1, r"damping_time_s: expected a number >= 0"),
-])
+@pytest.mark.parametrize(
+    "field, value, message",
+    [
+        ("youngs_modulus_n_per_m", -1.0, r"youngs_modulus_n_per_m: expected a number > 0"),
+        ("poisson_ratio", 0.6, r"poisson_ratio: expected a number in \[0, 0.5\], received 0.6"),
+        ("damping_time_s", -0.1, r"damping_time_s: expected a number >= 0"),
+    ],
+)
 def test_bad_membrane_values_are_one_line(field, value, message):
     kw = {"youngs_modulus_n_per_m": 100.0, field: value}
-    scene = Scene(mesh=MeshSpec(generator="icosphere", subdivisions=1), masses=Masses(total_kg=1.0),
-                  forces=(Membrane(**kw),), constraints=(Volume(),))
+    scene = Scene(
+        mesh=MeshSpec(generator="icosphere", subdivisions=1),
+        masses=Masses(total_kg=1.0),
+        forces=(Membrane(**kw),),
+        constraints=(Volume(),),
+    )
     with pytest.raises(SceneError, match=message) as e:
         hybrid.compile_scene(scene)
     assert "\n" not in str(e.value)

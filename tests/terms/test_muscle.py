@@ -16,13 +16,22 @@ def _muscle_scene(stiffness):
     # damping given as a coefficient (0.3 of critical for k = 3000 N/m, m = 0.05 kg):
     # a critical fraction would count the muscle's peak stiffness, which is
     # known for a table but not for a Python function
-    return Scene(formulation="paper",
-        mesh=MeshSpec(), masses=Masses(total_kg=4.0),
-        regions={"bottom": HalfSpace((0.0, 0.0, -0.1), (0.0, 0.0, -1.0)),
-                 "top": HalfSpace((0.0, 0.0, 0.05), (0.0, 0.0, 1.0))},
-        forces=(ShapeMemory(3000.0), Damping(coef_n_s_per_m=7.3),
-                Muscle("top", stiffness, toward_m=(0.0, 0.0, 0.12))),  # meridian fibres, toward the apex
-        constraints=(Nailed("bottom"), Volume()), dt_s=1e-3)
+    return Scene(
+        formulation="paper",
+        mesh=MeshSpec(),
+        masses=Masses(total_kg=4.0),
+        regions={
+            "bottom": HalfSpace((0.0, 0.0, -0.1), (0.0, 0.0, -1.0)),
+            "top": HalfSpace((0.0, 0.0, 0.05), (0.0, 0.0, 1.0)),
+        },
+        forces=(
+            ShapeMemory(3000.0),
+            Damping(coef_n_s_per_m=7.3),
+            Muscle("top", stiffness, toward_m=(0.0, 0.0, 0.12)),
+        ),  # meridian fibres, toward the apex
+        constraints=(Nailed("bottom"), Volume()),
+        dt_s=1e-3,
+    )
 
 
 def test_muscle_contracts_its_region():

@@ -20,9 +20,13 @@ E_F = 500.0  # N/m
 
 
 def _model(mesh, **direction):
-    return compile_scene(Scene(mesh=mesh, masses=Masses(total_kg=1.0),
-                               forces=(PassiveFibres(modulus_n_per_m=E_F, **(direction or
-                                                                            {"around_axis": (0.0, 0.0, 1.0)})),)))
+    return compile_scene(
+        Scene(
+            mesh=mesh,
+            masses=Masses(total_kg=1.0),
+            forces=(PassiveFibres(modulus_n_per_m=E_F, **(direction or {"around_axis": (0.0, 0.0, 1.0)})),),
+        )
+    )
 
 
 def _forces(model, pos):
@@ -42,7 +46,7 @@ def test_a_dilation_stores_the_same_energy_per_area_on_every_mesh(family):
     mesh = MESHES[family]
     a = _model(mesh).arrays
     stretch = 1.03
-    e = (stretch ** 2 - 1) / 2  # the Green strain of a uniform dilation, along any direction
+    e = (stretch**2 - 1) / 2  # the Green strain of a uniform dilation, along any direction
     # exact on any triangulation: the fibre strain of a linear triangle is f . E f exactly
     energy = passive_fibres_energy(a.pf_vert, a.pf_par, mesh.vert_pos * stretch)
     assert energy == pytest.approx(0.5 * E_F * e * e * _area(mesh), rel=1e-12)
@@ -61,7 +65,9 @@ def test_the_force_is_minus_the_energy_gradient_without_net_force_or_moment(fami
     force = _forces(model, pos)
     arm = pos - pos.mean(axis=0)
     assert np.linalg.norm(force.sum(axis=0)) <= 1e-12 * np.linalg.norm(force, axis=1).sum()
-    assert np.linalg.norm(np.cross(arm, force).sum(axis=0)) <= 1e-12 * np.linalg.norm(np.cross(arm, force), axis=1).sum()
+    assert (
+        np.linalg.norm(np.cross(arm, force).sum(axis=0)) <= 1e-12 * np.linalg.norm(np.cross(arm, force), axis=1).sum()
+    )
     # central differences: error O(h^2) of the energy's third derivative, h = 1e-7 m
     h = 1e-7
     for i in rng.choice(mesh.nvert, 5, replace=False):
@@ -69,7 +75,9 @@ def test_the_force_is_minus_the_energy_gradient_without_net_force_or_moment(fami
             up, dn = pos.copy(), pos.copy()
             up[i, x] += h
             dn[i, x] -= h
-            grad = (passive_fibres_energy(a.pf_vert, a.pf_par, up) - passive_fibres_energy(a.pf_vert, a.pf_par, dn)) / (2 * h)
+            grad = (passive_fibres_energy(a.pf_vert, a.pf_par, up) - passive_fibres_energy(a.pf_vert, a.pf_par, dn)) / (
+                2 * h
+            )
             assert -grad == pytest.approx(force[i, x], rel=1e-5, abs=1e-9 * np.abs(force).max())
 
 
@@ -77,7 +85,7 @@ def test_hoops_resist_a_bulge_and_not_a_stretch_along_the_axis():
     mesh = MESHES["ring_sphere"]
     a = _model(mesh).arrays
     bulge = mesh.vert_pos * np.array([1.02, 1.02, 1.0])  # radial: stretches the hoops
-    along = mesh.vert_pos * np.array([1.0, 1.0, 1.02])   # axial: the hoops keep their length
+    along = mesh.vert_pos * np.array([1.0, 1.0, 1.02])  # axial: the hoops keep their length
     e_bulge = passive_fibres_energy(a.pf_vert, a.pf_par, bulge)
     assert e_bulge > 0
     assert passive_fibres_energy(a.pf_vert, a.pf_par, along) < 1e-6 * e_bulge
@@ -90,5 +98,6 @@ def test_one_direction_is_required():
     with pytest.raises(SceneError, match="around_axis: expected a non-zero vector"):
         _model(mesh, around_axis=(0.0, 0.0, 0.0))
     with pytest.raises(SceneError, match="passive_fibres.*formulation"):
-        compile_scene(Scene(mesh=mesh, formulation="paper", forces=(PassiveFibres(modulus_n_per_m=E_F,
-                                                                                    around_axis=(0, 0, 1)),)))
+        compile_scene(
+            Scene(mesh=mesh, formulation="paper", forces=(PassiveFibres(modulus_n_per_m=E_F, around_axis=(0, 0, 1)),))
+        )

@@ -32,6 +32,15 @@ def test_step_forces_are_the_terms_added_point_by_point(subdivisions, parallel):
     membrane_forces(a, state, 0.0)
     want = np.where(a.vert_free[:, None] > 0, a.vert_mass[:, None] * a.accel[None, :], 0.0)
     want -= a.damp_coef[:, None] * state.vert_vel
-    add_shape_memory(a.sm_vert, a.sm_stiff, a.sm_coef, a.ring_ptr, a.ring_vert, a.ring_closed, state.vert_pos,
-                     np.zeros((a.sm_vert.size, 9)), want)
+    add_shape_memory(
+        a.sm_vert,
+        a.sm_stiff,
+        a.sm_coef,
+        a.ring_ptr,
+        a.ring_vert,
+        a.ring_closed,
+        state.vert_pos,
+        np.zeros((a.sm_vert.size, 9)),
+        want,
+    )
     np.testing.assert_allclose(state.vert_force, want, rtol=0, atol=1e-13 * np.abs(want).max())

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import open_hemisphere
 
 from hybrid.mesh import Mesh, icosphere, uv_sphere
 from hybrid.model import compile_scene
@@ -23,9 +24,6 @@ from hybrid.regions import Indices
 from hybrid.scene import Damping, Masses, MeshSpec, Nailed, Scene, ShapeMemory, Volume
 from hybrid.simulation import Simulation
 from hybrid.terms.shape_memory import add_shape_memory, shape_memory_frame_coef
-
-from helpers import open_hemisphere
-
 
 K = 3000.0  # N/m
 
@@ -52,15 +50,23 @@ class ShapeMemoryForce:
     def __init__(self, mesh: Mesh):
         self.mesh = mesh
         self.verts = np.arange(mesh.nvert, dtype=np.int32)
-        self.coef = shape_memory_frame_coef(mesh.vert_pos, mesh.ring_ptr, mesh.ring_vert, mesh.ring_closed,
-                                            self.verts)
+        self.coef = shape_memory_frame_coef(mesh.vert_pos, mesh.ring_ptr, mesh.ring_vert, mesh.ring_closed, self.verts)
         self.stiff = np.full(mesh.nvert, K)
 
     def __call__(self, pos) -> np.ndarray:
         f = np.zeros((self.mesh.nvert, 3))
         m = self.mesh
-        add_shape_memory(self.verts, self.stiff, self.coef, m.ring_ptr, m.ring_vert, m.ring_closed,
-                         np.ascontiguousarray(pos, dtype=np.float64), np.zeros((m.nvert, 9)), f)
+        add_shape_memory(
+            self.verts,
+            self.stiff,
+            self.coef,
+            m.ring_ptr,
+            m.ring_vert,
+            m.ring_closed,
+            np.ascontiguousarray(pos, dtype=np.float64),
+            np.zeros((m.nvert, 9)),
+            f,
+        )
         return f
 
 
@@ -128,9 +134,15 @@ def test_perturbed_sphere_returns_to_its_rest_shape(with_volume):
     about the nail; the rotation itself is checked to be small.
     """
     nail = 79
-    scene = Scene(formulation="paper", mesh=MeshSpec(), masses=Masses(total_kg=4.0), regions={"nail": Indices((nail,))},
-                  forces=(ShapeMemory(K), Damping(critical_fraction=0.3)),
-                  constraints=(Nailed("nail"),) + ((Volume(),) if with_volume else ()), dt_s=1e-3)
+    scene = Scene(
+        formulation="paper",
+        mesh=MeshSpec(),
+        masses=Masses(total_kg=4.0),
+        regions={"nail": Indices((nail,))},
+        forces=(ShapeMemory(K), Damping(critical_fraction=0.3)),
+        constraints=(Nailed("nail"),) + ((Volume(),) if with_volume else ()),
+        dt_s=1e-3,
+    )
     model = compile_scene(scene)
     sim = Simulation(model)
     rest = model.mesh.vert_pos

@@ -27,8 +27,13 @@ def test_attraction_follows_a_moving_target_with_the_closed_form_lag(kind):
         offset = Table((0.0, 10.0), ((0.0, 0.0, 0.0), tuple(10.0 * u)))
     else:
         offset = Function(lambda t: tuple(u * t))
-    scene = Scene(formulation="paper", mesh=MeshSpec(), masses=Masses(per_vertex_kg=(m,) * 80),
-                  forces=(Attraction("all", k, offset_m=offset), Damping(coef_n_s_per_m=c)), dt_s=1e-3)
+    scene = Scene(
+        formulation="paper",
+        mesh=MeshSpec(),
+        masses=Masses(per_vertex_kg=(m,) * 80),
+        forces=(Attraction("all", k, offset_m=offset), Damping(coef_n_s_per_m=c)),
+        dt_s=1e-3,
+    )
     sim = Simulation(compile_scene(scene))
     sim.step(1500)
     lag = sim.model.mesh.vert_pos + u * sim.time - sim.vert_pos

@@ -11,9 +11,17 @@ from hybrid.mesh import irregular_sphere
 from hybrid.model import compile_scene
 from hybrid.terms.fibres import MIN_STRETCH, add_muscle_fibres
 from hybrid.terms.membrane import add_membrane_serial
-from hybrid.terms.tangents import (NCACHE, NFIB_CACHE, NPF_CACHE, fibre_cached_product, fibre_energy,
-                                   fibre_tangent_cache, fibre_tangent_product, membrane_tangent_cache,
-                                   membrane_tangent_product)
+from hybrid.terms.tangents import (
+    NCACHE,
+    NFIB_CACHE,
+    NPF_CACHE,
+    fibre_cached_product,
+    fibre_energy,
+    fibre_tangent_cache,
+    fibre_tangent_product,
+    membrane_tangent_cache,
+    membrane_tangent_product,
+)
 
 R = 0.12
 TENSION = 40.0  # N/m
@@ -22,10 +30,18 @@ TENSION = 40.0  # N/m
 @pytest.fixture(scope="module")
 def model():
     mesh = irregular_sphere(40, R, seed=2)
-    return compile_scene(Scene(mesh=mesh, masses=Masses(total_kg=1.0), integrator="implicit_euler", forces=(
-        Membrane(800.0, poisson_ratio=0.3, damping_time_s=0.02),
-        MuscleFibres(HalfSpace((0.0, 0.0, 0.0), (0.0, 0.0, 1.0)), TENSION, toward_m=(0.0, 0.0, R)),
-        Damping(drag_n_s_per_m3=30.0))))
+    return compile_scene(
+        Scene(
+            mesh=mesh,
+            masses=Masses(total_kg=1.0),
+            integrator="implicit_euler",
+            forces=(
+                Membrane(800.0, poisson_ratio=0.3, damping_time_s=0.02),
+                MuscleFibres(HalfSpace((0.0, 0.0, 0.0), (0.0, 0.0, 1.0)), TENSION, toward_m=(0.0, 0.0, R)),
+                Damping(drag_n_s_per_m3=30.0),
+            ),
+        )
+    )
 
 
 def deformed(model, seed, scale=0.01):
@@ -78,6 +94,7 @@ def membrane_matrix(a, x, kx, kv, project):
         y = np.zeros_like(u)
         membrane_tangent_product(a.mem_vert, a.mem_par, cache, project, kx, kv, u, y)
         return y
+
     return columns(x.shape[0], product), cache
 
 
@@ -119,6 +136,7 @@ def test_the_fibre_hessian_is_minus_the_force_jacobian(model, width):
         y = np.zeros_like(u)
         fibre_tangent_product(a.fib_vert, par, a.fib_sched, sv, x, False, 1.0, u, y)
         return y
+
     hess = columns(x.shape[0], product)
     assert rel_error(-hess, finite_difference(force, x, 1e-7)) <= 1e-6
 
@@ -157,6 +175,7 @@ def test_triangles_collapsed_along_their_fibres_pull_in_proportion(model, width)
         y = np.zeros_like(u)
         fibre_tangent_product(a.fib_vert, par, a.fib_sched, sv, x, False, 1.0, u, y)
         return y
+
     assert rel_error(-columns(x.shape[0], product), finite_difference(force, x, 1e-8)) <= 1e-6
     grad = np.zeros(x.size)
     for j in range(x.size):
@@ -205,6 +224,7 @@ def test_the_newton_matrix_against_finite_differences_of_the_implicit_forces(mod
         f = np.zeros_like(y)
         implicit_forces(a, a, sv, y, w, f)
         return f
+
     newton = columns(x.shape[0], product)
     dfdx = finite_difference(lambda y: forces(y, zero), x, 1e-7)
     dfdv = finite_difference(lambda w: forces(x, w), v, 1e-4)
@@ -222,7 +242,7 @@ def test_the_projected_element_hessian_is_psd_and_exact_where_the_exact_one_is(m
     convex = indefinite = 0
     for k in range(a.mem_vert.shape[0]):
         corners = a.mem_vert[k]
-        one = a._replace(mem_vert=a.mem_vert[k:k + 1], mem_par=a.mem_par[k:k + 1])
+        one = a._replace(mem_vert=a.mem_vert[k : k + 1], mem_par=a.mem_par[k : k + 1])
         dofs = (3 * corners[:, None] + np.arange(3)).ravel()
         exact = membrane_matrix(one, x, 1.0, 0.0, False)[0][np.ix_(dofs, dofs)]
         proj = membrane_matrix(one, x, 1.0, 0.0, True)[0][np.ix_(dofs, dofs)]
@@ -246,9 +266,16 @@ def test_the_passive_fibre_hessian_is_minus_the_force_jacobian_and_its_energy():
     from hybrid import PassiveFibres
     from hybrid.terms.passive_fibres import add_passive_fibres, passive_fibres_energy
     from hybrid.terms.tangents import passive_fibres_energy_kernel, passive_fibres_tangent_product
+
     mesh = irregular_sphere(40, R, seed=2)
-    a = compile_scene(Scene(mesh=mesh, masses=Masses(total_kg=1.0), integrator="implicit_euler", forces=(
-        Membrane(800.0), PassiveFibres(modulus_n_per_m=600.0, around_axis=(0.0, 0.0, 1.0))))).arrays
+    a = compile_scene(
+        Scene(
+            mesh=mesh,
+            masses=Masses(total_kg=1.0),
+            integrator="implicit_euler",
+            forces=(Membrane(800.0), PassiveFibres(modulus_n_per_m=600.0, around_axis=(0.0, 0.0, 1.0))),
+        )
+    ).arrays
     x = deformed(compile_scene(Scene(mesh=mesh, masses=Masses(total_kg=1.0))), 11)
     n = x.shape[0]
 
@@ -262,7 +289,9 @@ def test_the_passive_fibre_hessian_is_minus_the_force_jacobian_and_its_energy():
             y = np.zeros_like(u)
             passive_fibres_tangent_product(a.pf_vert, a.pf_par, x, project, 1.0, u, y)
             return y
+
         return columns(n, product)
+
     exact, proj = matrix(False), matrix(True)
     assert np.abs(exact).max() > 0
     assert rel_error(-exact, finite_difference(force, x, 1e-7)) <= 1e-6
@@ -278,8 +307,12 @@ def test_the_cached_fibre_products_are_the_direct_ones(model, project):
     relation (some triangles below MIN_STRETCH, a schedule row at zero tension), passive
     fibres stretched and slack; to 1e-12 of the largest entry."""
     from hybrid import PassiveFibres
-    from hybrid.terms.tangents import (passive_fibres_cached_product, passive_fibres_tangent_cache,
-                                       passive_fibres_tangent_product)
+    from hybrid.terms.tangents import (
+        passive_fibres_cached_product,
+        passive_fibres_tangent_cache,
+        passive_fibres_tangent_product,
+    )
+
     a = model.arrays
     x = deformed(model, 12)
     for f in range(0, a.fib_vert.shape[0], 7):  # a few triangles shrunk below MIN_STRETCH
@@ -304,8 +337,14 @@ def test_the_cached_fibre_products_are_the_direct_ones(model, project):
             assert np.abs(want).max() > 0.0
             assert np.abs(got - want).max() <= 1e-12 * np.abs(want).max()
     mesh = irregular_sphere(40, R, seed=2)
-    p = compile_scene(Scene(mesh=mesh, masses=Masses(total_kg=1.0), integrator="implicit_euler", forces=(
-        Membrane(800.0), PassiveFibres(modulus_n_per_m=600.0, around_axis=(0.0, 0.0, 1.0))))).arrays
+    p = compile_scene(
+        Scene(
+            mesh=mesh,
+            masses=Masses(total_kg=1.0),
+            integrator="implicit_euler",
+            forces=(Membrane(800.0), PassiveFibres(modulus_n_per_m=600.0, around_axis=(0.0, 0.0, 1.0))),
+        )
+    ).arrays
     x = deformed(model, 14)
     cache = np.zeros((p.pf_vert.shape[0], NPF_CACHE))
     passive_fibres_tangent_cache(p.pf_vert, p.pf_par, x, cache)
@@ -323,11 +362,21 @@ def test_the_newton_rows_skip_only_triangles_of_fixed_points():
     triangles kept), the Newton matrix's product from `newton_rows` (the triangles with a free
     corner) is the product from every triangle on the free points."""
     from hybrid import PassiveFibres
+
     mesh = irregular_sphere(40, R, seed=2)
-    a = compile_scene(Scene(mesh=mesh, masses=Masses(total_kg=1.0), integrator="implicit_euler", forces=(
-        Membrane(800.0, damping_time_s=0.02), PassiveFibres(modulus_n_per_m=600.0, around_axis=(0.0, 0.0, 1.0)),
-        MuscleFibres(HalfSpace((0.0, 0.0, -0.03), (0.0, 0.0, 1.0)), TENSION, toward_m=(0.0, 0.0, R)),
-        Damping(drag_n_s_per_m3=30.0)))).arrays
+    a = compile_scene(
+        Scene(
+            mesh=mesh,
+            masses=Masses(total_kg=1.0),
+            integrator="implicit_euler",
+            forces=(
+                Membrane(800.0, damping_time_s=0.02),
+                PassiveFibres(modulus_n_per_m=600.0, around_axis=(0.0, 0.0, 1.0)),
+                MuscleFibres(HalfSpace((0.0, 0.0, -0.03), (0.0, 0.0, 1.0)), TENSION, toward_m=(0.0, 0.0, R)),
+                Damping(drag_n_s_per_m3=30.0),
+            ),
+        )
+    ).arrays
     a = a._replace(vert_free=(a.vert_rest[:, 2] >= 0.04).astype(np.uint8))
     rows = newton_rows(a)
     free = a.vert_free != 0

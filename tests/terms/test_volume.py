@@ -20,27 +20,45 @@ import numpy as np
 import pytest
 from numba import njit
 
-from hybrid.mesh import uv_sphere, volume as face_volume, volume_gradient as face_volume_gradient
+from hybrid.mesh import uv_sphere
+from hybrid.mesh import volume as face_volume
+from hybrid.mesh import volume_gradient as face_volume_gradient
 from hybrid.model import compile_scene
 from hybrid.regions import HalfSpace, Indices
-from hybrid.scene import (AppliedForce, Damping, Gravity, Masses, MassSpring, MeshSpec, Nailed, Scene, ShapeMemory,
-                          SoftVolume, Volume)
+from hybrid.scene import (
+    AppliedForce,
+    Damping,
+    Gravity,
+    Masses,
+    MassSpring,
+    MeshSpec,
+    Nailed,
+    Scene,
+    ShapeMemory,
+    SoftVolume,
+    Volume,
+)
 from hybrid.simulation import Simulation
 from hybrid.step import S_PRESSURE, membrane_forces, new_state, run_membrane
-
 
 VOLUME_RTOL = 1e-12  # the issue's bound; see the module docstring for why it is reachable
 
 
-def nailed_sphere_scene(mesh: MeshSpec, *, stiffness=3000.0, dt=1e-3, integrator="symplectic_euler",
-                        elastic=None) -> Scene:
+def nailed_sphere_scene(
+    mesh: MeshSpec, *, stiffness=3000.0, dt=1e-3, integrator="symplectic_euler", elastic=None
+) -> Scene:
     """A 4 kg sphere (R = 0.12 m) hanging under gravity from its nailed bottom cap,
     incompressible: the test body of the paper, the trunk's abdomen."""
-    return Scene(formulation="paper",
-        mesh=mesh, masses=Masses(total_kg=4.0),
+    return Scene(
+        formulation="paper",
+        mesh=mesh,
+        masses=Masses(total_kg=4.0),
         regions={"bottom": HalfSpace((0.0, 0.0, -0.1), (0.0, 0.0, -1.0))},
         forces=(Gravity(), elastic or ShapeMemory(stiffness), Damping(critical_fraction=0.3)),
-        constraints=(Nailed("bottom"), Volume()), dt_s=dt, integrator=integrator)
+        constraints=(Nailed("bottom"), Volume()),
+        dt_s=dt,
+        integrator=integrator,
+    )
 
 
 @pytest.mark.parametrize("integrator", ["symplectic_euler", "explicit_euler"])
@@ -190,12 +208,17 @@ def test_pressure_readout_matches_a_uniform_normal_load():
     mesh = uv_sphere(0.12)
     area = mesh.vert_area_vector()
     np.testing.assert_allclose(area, mesh.volume_gradient(), atol=1e-15)
-    loads = tuple(AppliedForce(Indices((i,)), tuple(-p_ext * area[i]), name=f"load{i}")
-                  for i in range(mesh.nvert))
+    loads = tuple(AppliedForce(Indices((i,)), tuple(-p_ext * area[i]), name=f"load{i}") for i in range(mesh.nvert))
     nails = (0, 79, 40)  # north pole, south pole, a point of the equator
-    scene = Scene(formulation="paper", mesh=mesh, masses=Masses(total_kg=4.0), regions={"nails": Indices(nails)},
-                  forces=(ShapeMemory(3000.0), Damping(critical_fraction=1.0)) + loads,
-                  constraints=(Nailed("nails"), Volume()), dt_s=1e-3)
+    scene = Scene(
+        formulation="paper",
+        mesh=mesh,
+        masses=Masses(total_kg=4.0),
+        regions={"nails": Indices(nails)},
+        forces=(ShapeMemory(3000.0), Damping(critical_fraction=1.0)) + loads,
+        constraints=(Nailed("nails"), Volume()),
+        dt_s=1e-3,
+    )
     sim = Simulation(compile_scene(scene))
     edge = mesh.edge_length_mean()
     rng = np.random.default_rng(2)
@@ -232,7 +255,9 @@ def test_soft_volume_force_is_the_attraction_to_the_volume_satisfying_points():
     """F_i = k (X_i^target - X_i) = k phi grad_i V, readout p = k phi (Pa), and
     p > 0 (pushing outward) for a compressed body, p < 0 for a dilated one."""
     k = 2e4
-    model = compile_scene(Scene(formulation="paper", mesh=MeshSpec(), masses=Masses(total_kg=4.0), forces=(SoftVolume(k),)))
+    model = compile_scene(
+        Scene(formulation="paper", mesh=MeshSpec(), masses=Masses(total_kg=4.0), forces=(SoftVolume(k),))
+    )
     mesh = model.mesh
     rng = np.random.default_rng(7)
     for scale, sign in ((0.99, +1), (1.01, -1)):
@@ -264,16 +289,20 @@ def test_soft_volume_keeps_the_error_bounded_and_reads_the_pressure(p_ext):
     a little below p_ext, and the error a little below the static bound.
     """
     from hybrid.mesh import uv_sphere
+
     mesh = uv_sphere(0.12)
     area = mesh.vert_area_vector()
     v0 = mesh.volume()
     grad2 = float(np.sum(mesh.volume_gradient() ** 2))
     errs = {}
     for k in (2e4, 8e4):
-        loads = tuple(AppliedForce(Indices((i,)), tuple(-p_ext * area[i]), name=f"load{i}")
-                      for i in range(mesh.nvert))
-        scene = Scene(formulation="paper", mesh=mesh, masses=Masses(total_kg=4.0),
-                      forces=(ShapeMemory(3000.0), Damping(critical_fraction=0.5), SoftVolume(k)) + loads)
+        loads = tuple(AppliedForce(Indices((i,)), tuple(-p_ext * area[i]), name=f"load{i}") for i in range(mesh.nvert))
+        scene = Scene(
+            formulation="paper",
+            mesh=mesh,
+            masses=Masses(total_kg=4.0),
+            forces=(ShapeMemory(3000.0), Damping(critical_fraction=0.5), SoftVolume(k)) + loads,
+        )
         sim = Simulation(compile_scene(scene))
         static = abs(p_ext) * grad2 / (k * v0)
         err = []

@@ -43,8 +43,17 @@ from .relaxation import stability_map, table3
 from .report import finite, markdown, plots, write_json
 from .tables import TABLE1_CASES, TABLE2_NOTES, table1, table2
 
-__all__ = ["run", "table1", "table2", "table3", "stability_map", "membrane_spectrum",
-           "self_excitation", "step_jacobian", "TABLE2_NOTES"]
+__all__ = [
+    "run",
+    "table1",
+    "table2",
+    "table3",
+    "stability_map",
+    "membrane_spectrum",
+    "self_excitation",
+    "step_jacobian",
+    "TABLE2_NOTES",
+]
 
 
 def run_section(name: str, small: bool) -> tuple[object, float]:
@@ -78,13 +87,18 @@ def run(out_dir, *, small: bool = False, scheduler: str | None = None, workers: 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    done = sweep(run_section, [dict(name=n, small=small) for n in SECTIONS], scheduler=scheduler,
-                 workers=workers)
+    done = sweep(run_section, [dict(name=n, small=small) for n in SECTIONS], scheduler=scheduler, workers=workers)
     parts = {n: r for n, (r, _) in zip(SECTIONS, done)}
     timings = {n: w for n, (_, w) in zip(SECTIONS, done)}
     t1, t3 = parts["table1"], parts["table3"]
-    res = {"small": small, "table1_max_abs_error": t1["max_abs_error"], "table1": t1, "table2": parts["table2"],
-           "table3": [{k: v for k, v in r.items()} for r in t3["rows"]], "table3_setup": t3["setup"]}
+    res = {
+        "small": small,
+        "table1_max_abs_error": t1["max_abs_error"],
+        "table1": t1,
+        "table2": parts["table2"],
+        "table3": [{k: v for k, v in r.items()} for r in t3["rows"]],
+        "table3_setup": t3["setup"],
+    }
     for n in ("stability_map", "membrane_spectrum", "self_excitation"):
         res[n] = parts[n]
     res["plots"] = plots(out, res)

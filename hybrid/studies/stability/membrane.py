@@ -29,9 +29,13 @@ def breathing_membrane_scene(critical_fraction: float | None = None):
     sc = resolve_scene("breathing_paper")
     sc = dataclasses.replace(sc, rigid=None).without("muscle", "muscle_insertion")
     if critical_fraction is not None:
-        sc = dataclasses.replace(sc, forces=tuple(
-            dataclasses.replace(f, critical_fraction=critical_fraction) if isinstance(f, Damping) else f
-            for f in sc.forces))
+        sc = dataclasses.replace(
+            sc,
+            forces=tuple(
+                dataclasses.replace(f, critical_fraction=critical_fraction) if isinstance(f, Damping) else f
+                for f in sc.forces
+            ),
+        )
     return sc
 
 
@@ -79,8 +83,9 @@ def membrane_spectrum(*, small=False) -> dict:
     rho0, jac = membrane_rho(model, h0, free)
     eig = np.linalg.eigvals(jac)
     n_b = 6 if small else 14
-    h_pred, _ = largest_true(lambda h: membrane_rho(model, h, free)[0] <= 1.0 + 1e-6,
-                              [h0 * f for f in (1, 2, 3, 4, 5, 6, 8)], n_b)
+    h_pred, _ = largest_true(
+        lambda h: membrane_rho(model, h, free)[0] <= 1.0 + 1e-6, [h0 * f for f in (1, 2, 3, 4, 5, 6, 8)], n_b
+    )
     grid = [h0 * f for f in (1, 2, 3, 4, 5, 6, 8, 10)]
     h_obs, _ = largest_true(lambda h: observed_stable(model, h, seconds=0.3 if small else 1.0), grid, n_b)
     full = dataclasses.replace(resolve_scene("breathing_paper"), rigid=None)
@@ -89,16 +94,21 @@ def membrane_spectrum(*, small=False) -> dict:
     h_coupled = None
     if not small:
         h_coupled, _ = largest_true(lambda h: breath_stable(coupled, h), grid, 6)
-    return {"scene": "breathing without rigid part and muscles (linearized about rest)",
-            "nfree": int(free.size), "dt_s": h0, "spectral_radius_at_dt": rho0,
-            "eigenvalues_re": eig.real.tolist(), "eigenvalues_im": eig.imag.tolist(),
-            "h_max_per_point_estimate": model.dt_stable_s,
-            "h_max_linearized": h_pred,
-            "h_max_observed": h_obs,
-            "h_max_observed_breath_membrane_only": h_breath,
-            "h_max_observed_breath_coupled": h_coupled,
-            "observed_criterion": "1 s from 1 mm random displacements: finite and ends closer to rest; "
-                                  "breath: 4 s with muscles, no SimulationDiverged/ConstraintError"}
+    return {
+        "scene": "breathing without rigid part and muscles (linearized about rest)",
+        "nfree": int(free.size),
+        "dt_s": h0,
+        "spectral_radius_at_dt": rho0,
+        "eigenvalues_re": eig.real.tolist(),
+        "eigenvalues_im": eig.imag.tolist(),
+        "h_max_per_point_estimate": model.dt_stable_s,
+        "h_max_linearized": h_pred,
+        "h_max_observed": h_obs,
+        "h_max_observed_breath_membrane_only": h_breath,
+        "h_max_observed_breath_coupled": h_coupled,
+        "observed_criterion": "1 s from 1 mm random displacements: finite and ends closer to rest; "
+        "breath: 4 s with muscles, no SimulationDiverged/ConstraintError",
+    }
 
 
 def self_excitation(*, small=False) -> dict:
@@ -140,9 +150,11 @@ def self_excitation(*, small=False) -> dict:
         return bisect(lambda frac: not pred(frac), 0.0, 0.3, n_b)[1]
 
     fr = [0.0, 0.1, 0.3] if small else [0.0, 0.02, 0.05, 0.1, 0.15, 0.2, 0.3]
-    return {"critical_fraction_min_linearized": lowest_stable(lin_stable),
-            "critical_fraction_min_observed": lowest_stable(run_stable),
-            "spectral_radius_by_fraction": [{"critical_fraction": f, "spectral_radius": rho(f)} for f in fr],
-            "setup": "breathing membrane without rigid part and muscles, symplectic Euler dt 1e-3 s; "
-                     "runs from 0.1 mm random displacements, excited if ln KE grows between "
-                     "the second and the last quarter"}
+    return {
+        "critical_fraction_min_linearized": lowest_stable(lin_stable),
+        "critical_fraction_min_observed": lowest_stable(run_stable),
+        "spectral_radius_by_fraction": [{"critical_fraction": f, "spectral_radius": rho(f)} for f in fr],
+        "setup": "breathing membrane without rigid part and muscles, symplectic Euler dt 1e-3 s; "
+        "runs from 0.1 mm random displacements, excited if ln KE grows between "
+        "the second and the last quarter",
+    }

@@ -5,13 +5,11 @@ the runs' settings (no runaway heuristics, numpy's BLAS on one thread).
 
 from __future__ import annotations
 
-
 import numpy as np
 
 from hybrid.simulation import Simulation
 
-__all__ = ["no_runaway_check", "single_thread_blas", "multiset_error", "step_jacobian", "bisect",
-           "largest_true"]
+__all__ = ["no_runaway_check", "single_thread_blas", "multiset_error", "step_jacobian", "bisect", "largest_true"]
 
 
 def no_runaway_check(model):
@@ -32,6 +30,7 @@ class single_thread_blas:
             import ctypes
             import glob
             import os
+
             libs = glob.glob(os.path.join(os.path.dirname(np.__file__), os.pardir, "numpy.libs", "*openblas*"))
             lib = ctypes.CDLL(libs[0])
             self._n = int(lib.scipy_openblas_get_num_threads64_())
@@ -49,6 +48,7 @@ class single_thread_blas:
 
 def multiset_error(got, want) -> float:
     from scipy.optimize import linear_sum_assignment
+
     got, want = np.asarray(got, complex), np.asarray(want, complex)
     cost = np.abs(got[:, None] - want[None, :])
     rows, cols = linear_sum_assignment(cost)

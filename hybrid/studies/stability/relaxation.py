@@ -15,7 +15,7 @@ import numpy as np
 from hybrid.errors import SimulationDiverged
 from hybrid.mesh import Mesh, icosahedron
 from hybrid.model import compile_scene
-from hybrid.scene import Damping, MassSpring, Masses, Scene, ShapeMemory
+from hybrid.scene import Damping, Masses, MassSpring, Scene, ShapeMemory
 from hybrid.simulation import Simulation
 
 from .numerics import largest_true, no_runaway_check
@@ -23,7 +23,7 @@ from .tables import K_UNIT, KV_UNIT, M_UNIT, MODELS, rho_table1
 
 __all__ = ["EQ_TOL", "icosahedron_scene", "perturbation", "relax", "table3", "stability_map"]
 
-EQ_TOL = 1e-6   # equilibrium: max |v| <= tol l0 sqrt(k/m) and max |F| <= tol k l0
+EQ_TOL = 1e-6  # equilibrium: max |v| <= tol l0 sqrt(k/m) and max |F| <= tol k l0
 
 
 def icosahedron_scene(model: str, k=K_UNIT, kv=KV_UNIT, m=M_UNIT, h=1.0) -> Scene:
@@ -31,9 +31,15 @@ def icosahedron_scene(model: str, k=K_UNIT, kv=KV_UNIT, m=M_UNIT, h=1.0) -> Scen
     elastic force of the unified weight k (k_sm = k, k_ms = 2k/3) and viscosity kv;
     explicit Euler (eq. 4); nothing nailed, no volume, no gravity."""
     force = ShapeMemory(k) if model == "shape_memory" else MassSpring(2.0 * k / 3.0)
-    return Scene(formulation="paper", mesh=icosahedron(1.0), masses=Masses(per_vertex_kg=(m,) * 12),
-                 forces=(force, Damping(coef_n_s_per_m=kv)), dt_s=h, integrator="explicit_euler",
-                 name=f"icosahedron_{model}")
+    return Scene(
+        formulation="paper",
+        mesh=icosahedron(1.0),
+        masses=Masses(per_vertex_kg=(m,) * 12),
+        forces=(force, Damping(coef_n_s_per_m=kv)),
+        dt_s=h,
+        integrator="explicit_euler",
+        name=f"icosahedron_{model}",
+    )
 
 
 def perturbation(mesh: Mesh, amplitude: float, seed: int = 0) -> np.ndarray:
@@ -87,8 +93,11 @@ def relax(model, x0, *, k=K_UNIT, m=M_UNIT, tol=EQ_TOL, max_time=3000.0, chunk=1
                     sim.step(1)
                     if done():
                         break
-                return {"outcome": "equilibrium", "iterations": sim.steps_done,
-                        "shape_error_l0": shape_error(sim.vert_pos, model.arrays.vert_rest) / l0}
+                return {
+                    "outcome": "equilibrium",
+                    "iterations": sim.steps_done,
+                    "shape_error_l0": shape_error(sim.vert_pos, model.arrays.vert_rest) / l0,
+                }
     except SimulationDiverged:
         return {"outcome": "diverged", "iterations": sim.steps_done, "shape_error_l0": None}
     return {"outcome": "no_steady_state", "iterations": sim.steps_done, "shape_error_l0": None}
@@ -112,39 +121,64 @@ def table3(*, small=False, seeds=tuple(range(10))) -> dict:
 
                 h_max, h_fail = largest_true(ok, grid, n_bisect, from_top=True)
                 at1 = relax(base.with_dt(1.0), x0, max_time=max_time)
-                per_seed.append({"seed": seed, "h_max": h_max, "first_failure_h": h_fail,
-                                 "iterations_at_h1": at1["iterations"] if at1["outcome"] == "equilibrium" else None,
-                                 "shape_error_l0_at_h1": at1["shape_error_l0"]})
+                per_seed.append(
+                    {
+                        "seed": seed,
+                        "h_max": h_max,
+                        "first_failure_h": h_fail,
+                        "iterations_at_h1": at1["iterations"] if at1["outcome"] == "equilibrium" else None,
+                        "shape_error_l0_at_h1": at1["shape_error_l0"],
+                    }
+                )
             hm = min(p["h_max"] for p in per_seed)
             its = [p["iterations_at_h1"] for p in per_seed if p["iterations_at_h1"] is not None]
             errs = [p["shape_error_l0_at_h1"] for p in per_seed if p["shape_error_l0_at_h1"] is not None]
-            rows.append({"model": model_name, "perturbation": amp, "h_max": hm,
-                         "iterations": int(np.median(its)) if its else None,
-                         "h_max_median_over_seeds": float(np.median([p["h_max"] for p in per_seed])),
-                         "shape_error_l0_at_h1_max": max(errs) if errs else None,
-                         "paper_h_max": {("mass_spring", 0.3): 3.8, ("mass_spring", 0.7): 1.7,
-                                         ("shape_memory", 0.3): 4.0, ("shape_memory", 0.7): 2.6}[(model_name, amp)],
-                         "seeds": per_seed})
-    return {"rows": rows,
-            "setup": {"mesh": "icosahedron, circumradius 1, l0 = mean edge = 1.0515",
-                      "m": M_UNIT, "kv": KV_UNIT, "k_unified": K_UNIT, "k_ms": 2 * K_UNIT / 3, "k_sm": K_UNIT,
-                      "integrator": "explicit_euler", "forces": "elastic + viscosity only",
-                      "perturbation": "x_i += a l0 u_i, u_i uniform random unit vectors, seeds " + str(list(seeds)),
-                      "equilibrium": f"max|v| <= {EQ_TOL} l0 sqrt(k/m) and max|F| <= {EQ_TOL} k l0",
-                      "iterations": "median over seeds at h = 1, steps to equilibrium",
-                      "h_max": f"largest h on the grid {grid[0]:.1f}:{grid[1]-grid[0]:.1f}:{grid[-1]:.1f} reaching "
-                               f"equilibrium within t = {max_time:g} (scanning down from the top), refined by "
-                               f"{n_bisect} bisections; the minimum over seeds"}}
+            rows.append(
+                {
+                    "model": model_name,
+                    "perturbation": amp,
+                    "h_max": hm,
+                    "iterations": int(np.median(its)) if its else None,
+                    "h_max_median_over_seeds": float(np.median([p["h_max"] for p in per_seed])),
+                    "shape_error_l0_at_h1_max": max(errs) if errs else None,
+                    "paper_h_max": {
+                        ("mass_spring", 0.3): 3.8,
+                        ("mass_spring", 0.7): 1.7,
+                        ("shape_memory", 0.3): 4.0,
+                        ("shape_memory", 0.7): 2.6,
+                    }[(model_name, amp)],
+                    "seeds": per_seed,
+                }
+            )
+    return {
+        "rows": rows,
+        "setup": {
+            "mesh": "icosahedron, circumradius 1, l0 = mean edge = 1.0515",
+            "m": M_UNIT,
+            "kv": KV_UNIT,
+            "k_unified": K_UNIT,
+            "k_ms": 2 * K_UNIT / 3,
+            "k_sm": K_UNIT,
+            "integrator": "explicit_euler",
+            "forces": "elastic + viscosity only",
+            "perturbation": "x_i += a l0 u_i, u_i uniform random unit vectors, seeds " + str(list(seeds)),
+            "equilibrium": f"max|v| <= {EQ_TOL} l0 sqrt(k/m) and max|F| <= {EQ_TOL} k l0",
+            "iterations": "median over seeds at h = 1, steps to equilibrium",
+            "h_max": f"largest h on the grid {grid[0]:.1f}:{grid[1] - grid[0]:.1f}:{grid[-1]:.1f} reaching "
+            f"equilibrium within t = {max_time:g} (scanning down from the top), refined by "
+            f"{n_bisect} bisections; the minimum over seeds",
+        },
+    }
 
 
 # ---------------------------------------------------------------- beyond: map
+
 
 def stability_map(*, small=False) -> dict:
     hs = np.linspace(0.25, 6.0, 6 if small else 24)
     ks = np.geomspace(0.005, 0.5, 5 if small else 24)
     max_time = 500.0 if small else 2000.0
-    out = {"h": hs.tolist(), "k": ks.tolist(), "perturbation": 0.3, "max_time": max_time,
-           "m": M_UNIT, "kv": KV_UNIT}
+    out = {"h": hs.tolist(), "k": ks.tolist(), "perturbation": 0.3, "max_time": max_time, "m": M_UNIT, "kv": KV_UNIT}
     for model_name in MODELS:
         grid = np.zeros((ks.size, hs.size), int)  # 1 equilibrium, 0 no steady state, -1 diverged
         theory = np.zeros((ks.size, hs.size), bool)
@@ -155,6 +189,9 @@ def stability_map(*, small=False) -> dict:
                 r = relax(base.with_dt(h), x0, k=k, max_time=max_time)
                 grid[i, j] = {"equilibrium": 1, "no_steady_state": 0, "diverged": -1}[r["outcome"]]
                 theory[i, j] = rho_table1(model_name, h, k, KV_UNIT, M_UNIT) < 1.0
-        out[model_name] = {"outcome": grid.tolist(), "three_point_stable": theory.tolist(),
-                           "agreement": float(np.mean((grid == 1) == theory))}
+        out[model_name] = {
+            "outcome": grid.tolist(),
+            "three_point_stable": theory.tolist(),
+            "agreement": float(np.mean((grid == 1) == theory)),
+        }
     return out

@@ -39,10 +39,15 @@ def write_json(path: Path, data) -> None:
 def plots(out: Path, res: dict) -> list[str]:
     """DIR/<section>.png for each plotted section present in `res`; the files written."""
     import matplotlib
+
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    drawers = {"stability_map": _draw_map, "membrane_spectrum": _draw_spectrum,
-               "self_excitation": _draw_self_excitation}
+
+    drawers = {
+        "stability_map": _draw_map,
+        "membrane_spectrum": _draw_spectrum,
+        "self_excitation": _draw_self_excitation,
+    }
     files = []
     for section, draw in drawers.items():
         if res.get(section):
@@ -80,8 +85,7 @@ def _draw_spectrum(plt, ms: dict):
     ax.plot(np.cos(t), np.sin(t), "k-", lw=0.8)
     ax.plot(ms["eigenvalues_re"], ms["eigenvalues_im"], ".", ms=4)
     ax.set_aspect("equal")
-    ax.set_title(f"breathing membrane, one step at h = {ms['dt_s']:g} s\n"
-                 f"rho = {ms['spectral_radius_at_dt']:.6f}")
+    ax.set_title(f"breathing membrane, one step at h = {ms['dt_s']:g} s\nrho = {ms['spectral_radius_at_dt']:.6f}")
     return fig
 
 
@@ -104,42 +108,65 @@ def _fmt(x, spec=".3g"):
 
 def markdown(res: dict) -> str:
     L = ["# Stability study (paper 6.1)", ""]
-    L += [f"Table 1: max |eigenvalue(Jacobian of our step) - closed form| = {res['table1_max_abs_error']:.2e} "
-          f"over {len(res['table1']['rows'])} (model, h, k, kv, m) cases.", ""]
+    L += [
+        f"Table 1: max |eigenvalue(Jacobian of our step) - closed form| = {res['table1_max_abs_error']:.2e} "
+        f"over {len(res['table1']['rows'])} (model, h, k, kv, m) cases.",
+        "",
+    ]
     t2 = res["table2"]
-    L += [f"Table 2 (three-point system, m = {t2['m']:g}, kv = {t2['kv']:g}): largest stable h by k", "",
-          "| k | mass-spring h_max | shape memory h_max |", "|---|---|---|"]
+    L += [
+        f"Table 2 (three-point system, m = {t2['m']:g}, kv = {t2['kv']:g}): largest stable h by k",
+        "",
+        "| k | mass-spring h_max | shape memory h_max |",
+        "|---|---|---|",
+    ]
     for r in t2["h_max_by_k"]:
-        L.append(f"| {r['k']:g} | {r['mass_spring']['h_max_eigenvalues']:.4f} | "
-                 f"{r['shape_memory']['h_max_eigenvalues']:.4f} |")
+        L.append(
+            f"| {r['k']:g} | {r['mass_spring']['h_max_eigenvalues']:.4f} | "
+            f"{r['shape_memory']['h_max_eigenvalues']:.4f} |"
+        )
     L += ["", "largest stable k by h", "", "| h | mass-spring k_max | shape memory k_max |", "|---|---|---|"]
     for r in t2["k_max_by_h"]:
-        L.append(f"| {r['h']:g} | {r['mass_spring']['k_max_eigenvalues']:.4f} | "
-                 f"{r['shape_memory']['k_max_eigenvalues']:.4f} |")
+        L.append(
+            f"| {r['h']:g} | {r['mass_spring']['k_max_eigenvalues']:.4f} | "
+            f"{r['shape_memory']['k_max_eigenvalues']:.4f} |"
+        )
     L += ["", "```", t2["notes"], "```", ""]
-    L += ["Table 3: icosahedron, largest h reaching equilibrium (ours / paper) and iterations at h = 1", "",
-          "| model | perturbation | h_max (min over seeds) | median | paper | iterations (h = 1) | "
-          "shape error at equilibrium (l0) |", "|---|---|---|---|---|---|---|"]
+    L += [
+        "Table 3: icosahedron, largest h reaching equilibrium (ours / paper) and iterations at h = 1",
+        "",
+        "| model | perturbation | h_max (min over seeds) | median | paper | iterations (h = 1) | "
+        "shape error at equilibrium (l0) |",
+        "|---|---|---|---|---|---|---|",
+    ]
     for r in res["table3"]:
-        L.append(f"| {r['model']} | {r['perturbation']} l0 | {_fmt(r['h_max'])} | "
-                 f"{_fmt(r['h_max_median_over_seeds'])} | {r['paper_h_max']} | "
-                 f"{_fmt(r['iterations'], 'd') if r['iterations'] is not None else '-'} | "
-                 f"{_fmt(r['shape_error_l0_at_h1_max'], '.2g')} |")
+        L.append(
+            f"| {r['model']} | {r['perturbation']} l0 | {_fmt(r['h_max'])} | "
+            f"{_fmt(r['h_max_median_over_seeds'])} | {r['paper_h_max']} | "
+            f"{_fmt(r['iterations'], 'd') if r['iterations'] is not None else '-'} | "
+            f"{_fmt(r['shape_error_l0_at_h1_max'], '.2g')} |"
+        )
     L += ["", "Setup: " + json.dumps(res["table3_setup"]), ""]
     ms = res.get("membrane_spectrum")
     if ms:
-        L += ["Breathing membrane (80 points, symplectic Euler):", "",
-              f"- per-point estimate (model.dt_stable_s): {ms['h_max_per_point_estimate']:.4g} s",
-              f"- linearized step (spectral radius <= 1): {_fmt(ms['h_max_linearized'], '.4g')} s",
-              f"- observed (small perturbation, 1 s): {_fmt(ms['h_max_observed'], '.4g')} s",
-              f"- observed (one breath with muscles, membrane only): "
-              f"{_fmt(ms['h_max_observed_breath_membrane_only'], '.4g')} s",
-              f"- observed (one breath, coupled to the ribs): {_fmt(ms['h_max_observed_breath_coupled'], '.4g')} s",
-              ""]
+        L += [
+            "Breathing membrane (80 points, symplectic Euler):",
+            "",
+            f"- per-point estimate (model.dt_stable_s): {ms['h_max_per_point_estimate']:.4g} s",
+            f"- linearized step (spectral radius <= 1): {_fmt(ms['h_max_linearized'], '.4g')} s",
+            f"- observed (small perturbation, 1 s): {_fmt(ms['h_max_observed'], '.4g')} s",
+            f"- observed (one breath with muscles, membrane only): "
+            f"{_fmt(ms['h_max_observed_breath_membrane_only'], '.4g')} s",
+            f"- observed (one breath, coupled to the ribs): {_fmt(ms['h_max_observed_breath_coupled'], '.4g')} s",
+            "",
+        ]
     se = res.get("self_excitation")
     if se:
-        L += [f"Self-excitation: the undriven membrane is stable for critical_fraction >= "
-              f"{se['critical_fraction_min_linearized']:.4g} (linearized) / "
-              f"{se['critical_fraction_min_observed']:.4g} (runs).", ""]
+        L += [
+            f"Self-excitation: the undriven membrane is stable for critical_fraction >= "
+            f"{se['critical_fraction_min_linearized']:.4g} (linearized) / "
+            f"{se['critical_fraction_min_observed']:.4g} (runs).",
+            "",
+        ]
     L += [f"Run time: {res['runtime_s']:.1f} s; plots: {', '.join(res['plots'])}"]
     return "\n".join(L) + "\n"

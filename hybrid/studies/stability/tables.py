@@ -15,14 +15,24 @@ import numpy as np
 from hybrid.mesh import Mesh, icosahedron
 from hybrid.model import compile_scene
 from hybrid.regions import All, Difference, Indices
-from hybrid.scene import Damping, MassSpring, Masses, Nailed, Scene, ShapeMemory
+from hybrid.scene import Damping, Masses, MassSpring, Nailed, Scene, ShapeMemory
 from hybrid.simulation import Simulation
 from hybrid.stability import max_stable_dt, table1_eigenvalues
 
 from .numerics import bisect, multiset_error, no_runaway_check, step_jacobian
 
-__all__ = ["MODELS", "TABLE1_CASES", "M_UNIT", "KV_UNIT", "K_UNIT", "TABLE2_NOTES", "three_point", "table1",
-           "rho_table1", "table2"]
+__all__ = [
+    "MODELS",
+    "TABLE1_CASES",
+    "M_UNIT",
+    "KV_UNIT",
+    "K_UNIT",
+    "TABLE2_NOTES",
+    "three_point",
+    "table1",
+    "rho_table1",
+    "table2",
+]
 
 MODELS = ("mass_spring", "shape_memory")
 # (h, k, kv, m): SI-sized cases (the trunk's) and dimensionless ones (Table 3's)
@@ -30,10 +40,10 @@ TABLE1_CASES = [
     (1e-3, 3000.0, 2.0, 0.05),
     (4e-3, 100.0, 20.0, 0.05),
     (2e-2, 50.0, 1.0, 0.2),
-    (1e-3, 1e4, 0.5, 0.01),     # an unstable step
-    (1.0, 0.25, 1.0, 1.0),      # Table 3's units, critical for shape memory
-    (3.0, 0.1, 1.0, 1.0),       # overdamped, large step
-    (2.5, 1.0, 1.0, 1.0),       # underdamped, unstable
+    (1e-3, 1e4, 0.5, 0.01),  # an unstable step
+    (1.0, 0.25, 1.0, 1.0),  # Table 3's units, critical for shape memory
+    (3.0, 0.1, 1.0, 1.0),  # overdamped, large step
+    (2.5, 1.0, 1.0, 1.0),  # underdamped, unstable
 ]
 # dimensionless parameters of Table 3 and the map
 M_UNIT, KV_UNIT, K_UNIT = 1.0, 0.5, 0.06
@@ -42,27 +52,41 @@ M_UNIT, KV_UNIT, K_UNIT = 1.0, 0.5, 0.06
 def three_point(model: str, h, k, kv, m) -> tuple[Simulation, float, float]:
     """The tiny scenes of tests/test_stability.py: (sim, dx, dv) for vertex 0."""
     if model == "mass_spring":
-        L = 2.0 ** -4
+        L = 2.0**-4
         pos = np.array([[0, 0, 0], [-L, 0, 0], [L, 0, 0], [0, L, 0], [0, -L, 0]], float)
         face = np.array([[0, 2, 3], [0, 3, 1], [0, 1, 4], [0, 4, 2]])
         mesh = Mesh.from_arrays(pos, face, name="three_points")
-        scene = Scene(formulation="paper", mesh=mesh, masses=Masses(per_vertex_kg=(m,) * 5),
-                      regions={"springs": Indices((0, 1, 2)), "fixed": Indices((1, 2, 3, 4))},
-                      forces=(MassSpring(2.0 * k / 3.0, region="springs"), Damping(coef_n_s_per_m=kv)),
-                      constraints=(Nailed("fixed"),), dt_s=h, integrator="explicit_euler", duration_s=max(1.0, h))
-        return Simulation(no_runaway_check(compile_scene(scene))), L * 2.0 ** -26, 2.0 ** -10
+        scene = Scene(
+            formulation="paper",
+            mesh=mesh,
+            masses=Masses(per_vertex_kg=(m,) * 5),
+            regions={"springs": Indices((0, 1, 2)), "fixed": Indices((1, 2, 3, 4))},
+            forces=(MassSpring(2.0 * k / 3.0, region="springs"), Damping(coef_n_s_per_m=kv)),
+            constraints=(Nailed("fixed"),),
+            dt_s=h,
+            integrator="explicit_euler",
+            duration_s=max(1.0, h),
+        )
+        return Simulation(no_runaway_check(compile_scene(scene))), L * 2.0**-26, 2.0**-10
     base = icosahedron(0.1)
     mesh = icosahedron(0.1, center=tuple(-base.vert_pos[0]))
-    scene = Scene(formulation="paper", mesh=mesh, masses=Masses(per_vertex_kg=(m,) * 12),
-                  regions={"P": Indices((0,)), "others": Difference(All(), Indices((0,)))},
-                  forces=(ShapeMemory(k, region="P"), Damping(coef_n_s_per_m=kv)),
-                  constraints=(Nailed("others"),), dt_s=h, integrator="explicit_euler", duration_s=max(1.0, h))
+    scene = Scene(
+        formulation="paper",
+        mesh=mesh,
+        masses=Masses(per_vertex_kg=(m,) * 12),
+        regions={"P": Indices((0,)), "others": Difference(All(), Indices((0,)))},
+        forces=(ShapeMemory(k, region="P"), Damping(coef_n_s_per_m=kv)),
+        constraints=(Nailed("others"),),
+        dt_s=h,
+        integrator="explicit_euler",
+        duration_s=max(1.0, h),
+    )
     return Simulation(no_runaway_check(compile_scene(scene))), 1e-4, 1e-3
 
 
 def table1(cases=TABLE1_CASES) -> dict:
     rows = []
-    for (h, k, kv, m) in cases:
+    for h, k, kv, m in cases:
         for model in MODELS:
             sim, dx, dv = three_point(model, h, k, kv, m)
             got = np.linalg.eigvals(step_jacobian(sim, [0], dx, dv))
@@ -72,10 +96,19 @@ def table1(cases=TABLE1_CASES) -> dict:
             else:  # the pair once more for the third direction
                 want = np.concatenate([table, table[:2]])
             err = multiset_error(got, want)
-            rows.append({"model": model, "h": h, "k": k, "kv": kv, "m": m, "abs_error": err,
-                         "spectral_radius": float(np.abs(want).max()),
-                         "eigenvalues_re": np.sort_complex(table).real.tolist(),
-                         "eigenvalues_im": np.sort_complex(table).imag.tolist()})
+            rows.append(
+                {
+                    "model": model,
+                    "h": h,
+                    "k": k,
+                    "kv": kv,
+                    "m": m,
+                    "abs_error": err,
+                    "spectral_radius": float(np.abs(want).max()),
+                    "eigenvalues_re": np.sort_complex(table).real.tolist(),
+                    "eigenvalues_im": np.sort_complex(table).imag.tolist(),
+                }
+            )
     return {"rows": rows, "max_abs_error": max(r["abs_error"] for r in rows)}
 
 
@@ -123,8 +156,9 @@ def rho_table1(model, h, k, kv, m):
     return float(np.abs(lam).max())
 
 
-def table2(m=M_UNIT, kv=KV_UNIT, ks=(0.001, 0.01, 0.046875, 0.0625, 0.06, 0.1, 0.25, 1.0),
-           hs=(0.5, 1.0, 2.0, 3.0)) -> dict:
+def table2(
+    m=M_UNIT, kv=KV_UNIT, ks=(0.001, 0.01, 0.046875, 0.0625, 0.06, 0.1, 0.25, 1.0), hs=(0.5, 1.0, 2.0, 3.0)
+) -> dict:
     rows_h = []
     for k in ks:
         row = {"k": k}
@@ -136,8 +170,7 @@ def table2(m=M_UNIT, kv=KV_UNIT, ks=(0.001, 0.01, 0.046875, 0.0625, 0.06, 0.1, 0
             if model == "mass_spring":
                 via_lib = min(via_lib, float(max_stable_dt(m, 0.0, kv, "explicit_euler", h_hi=100.0)))
                 closed = min(closed, 2 * m / kv)
-            row[model] = {"h_max_eigenvalues": via_eig, "h_max_hybrid_stability": via_lib,
-                          "h_max_closed_form": closed}
+            row[model] = {"h_max_eigenvalues": via_eig, "h_max_hybrid_stability": via_lib, "h_max_closed_form": closed}
         rows_h.append(row)
     rows_k = []
     for h in hs:
@@ -148,14 +181,28 @@ def table2(m=M_UNIT, kv=KV_UNIT, ks=(0.001, 0.01, 0.046875, 0.0625, 0.06, 0.1, 0
             row[model] = {"k_max_eigenvalues": k_max, "k_max_closed_form": closed}
         rows_k.append(row)
     return {
-        "m": m, "kv": kv,
-        "h_max_by_k": rows_h, "k_max_by_h": rows_k,
-        "paper": {"mass_spring": {"h_max": "m/kv", "k_max": "3/16 m"},
-                  "shape_memory": {"h_max": "2m/kv", "k_max": "1/4 m"}},
-        "ours": {"mass_spring": {"h_max_k_to_0": 2 * m / kv, "h_max_general": "min(2m/kv, h(4k/3))",
-                                 "k_max": "3 kv/(4 h)", "real_complex_transition_k": 3 * kv * kv / (16 * m)},
-                 "shape_memory": {"h_max_k_to_0": 2 * m / kv, "h_max_general": "h(k)",
-                                  "k_max": "kv/h", "real_complex_transition_k": kv * kv / (4 * m)}},
+        "m": m,
+        "kv": kv,
+        "h_max_by_k": rows_h,
+        "k_max_by_h": rows_k,
+        "paper": {
+            "mass_spring": {"h_max": "m/kv", "k_max": "3/16 m"},
+            "shape_memory": {"h_max": "2m/kv", "k_max": "1/4 m"},
+        },
+        "ours": {
+            "mass_spring": {
+                "h_max_k_to_0": 2 * m / kv,
+                "h_max_general": "min(2m/kv, h(4k/3))",
+                "k_max": "3 kv/(4 h)",
+                "real_complex_transition_k": 3 * kv * kv / (16 * m),
+            },
+            "shape_memory": {
+                "h_max_k_to_0": 2 * m / kv,
+                "h_max_general": "h(k)",
+                "k_max": "kv/h",
+                "real_complex_transition_k": kv * kv / (4 * m),
+            },
+        },
         "h_of_k": "h(k_e) = 4m/(kv + sqrt(kv^2 - 4 m k_e)) if k_e <= kv^2/(4m) else kv/k_e",
         "notes": TABLE2_NOTES,
     }
