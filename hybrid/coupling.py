@@ -3,22 +3,11 @@
 The rigid part is built at model time (`hybrid.rigid.build_rigid`, called by
 `compile_scene`: the scene's MJCF with one attachment site per linked point and the
 points' masses on their bodies). `Coupling` (made by `Simulation` for such scenes)
-runs the coupled step, in this order:
-
-1. the membrane forces at t (only the terms the scene has);
-2. every linked point's membrane force, plus the pressure force of the last volume
-   projection p grad_i V (how the incompressible abdomen pushes on the ribs), plus
-   its weight, goes to its body as a wrench applied at its site (`xfrc_applied`);
-3. the actuators the scene drives (`rigid.ctrl`) take their schedules' values at t
-   (`mjData.ctrl`); MuJoCo steps (`mj_step2` then `mj_step1`, or `mj_step` + `mj_step1` for RK4, so
-   that the site kinematics belong to the new state; bit for bit `mj_step`);
-4. the linked points take their sites' positions and velocities;
-5. the free points integrate, the local constraints and the exact volume projection
-   apply (`membrane_advance`).
-
-The whole loop, n steps at a time, is one numba function that calls MuJoCo's C
-`mj_step1`/`mj_step2` directly (their addresses are registered with LLVM as
-external symbols, so the function is cached on disk like the other kernels).
+owns this run's MuJoCo model and data and hands them to the one compiled step loop
+(`hybrid.loop.run_steps`, whose docstring gives the coupled step's order) as its
+`RigidPack`. The loop calls MuJoCo's C `mj_step1`/`mj_step2` directly: their
+addresses are registered with LLVM as external symbols when this module is imported,
+so the loop is cached on disk like the other kernels.
 
 Weight of the linked points: with `Rigid.add_link_mass` (the default) each linked
 point's mass m_i is on its body (`hybrid.rigid.compose`), and MuJoCo applies its
@@ -35,33 +24,21 @@ run's parameters leaves the `Model` and other runs alone.
 from __future__ import annotations
 
 import ctypes
-from typing import NamedTuple
 
 import llvmlite.binding as _llvm
 import mujoco
 import numpy as np
-from numba import types
 
 from .errors import RigidError, SimulationDiverged
-from .kernel import kernel
-from .rigid import CoupledRigid, mj_step_ctypes, point_wrench_kernel, site_vel_kernel
-from .schedule import schedule_eval
-from .step import (
-    OK,
-    S_PRESSURE,
-    S_TIME,
-    T_GRAVITY,
-    Frames,
-    MembraneState,
-    capture_frame,
-    membrane_advance,
-    membrane_forces,
-    step_switches,
-)
+from .loop import CtrlArrays, LinkArrays, MjViews, RigidPack, WrenchHistory
+from .rigid import CoupledRigid, mj_step_ctypes
+from .step import S_TIME, T_GRAVITY, MembraneState
 
-__all__ = ["LinkArrays", "CtrlArrays", "MjViews", "WrenchHistory", "Coupling", "run_coupled"]
+__all__ = ["Coupling"]
 
 _RK4 = int(mujoco.mjtIntegrator.mjINT_RK4)
+# what a checkpoint keeps of MuJoCo: every quantity its step reads (`hybrid.State`)
+_INTEGRATION = int(mujoco.mjtState.mjSTATE_INTEGRATION)
 _DSBL_GRAVITY = int(mujoco.mjtDisableBit.mjDSBL_GRAVITY)
 
 
@@ -81,199 +58,6 @@ def _register_mujoco_symbols() -> None:
 
 
 _register_mujoco_symbols()
-_SIG = types.void(types.intp, types.intp)
-_mj_step = types.ExternalFunction("hybrid_mj_step", _SIG)
-_mj_step1 = types.ExternalFunction("hybrid_mj_step1", _SIG)
-_mj_step2 = types.ExternalFunction("hybrid_mj_step2", _SIG)
-
-
-# ----------------------------------------------------------------- the compiled loop's packs
-
-
-class LinkArrays(NamedTuple):
-    """The n linked points and their attachment sites, in site order.
-
-    Read: vert (n,) int32, the linked membrane vertices; site_id (n,) int64, their
-    MuJoCo sites; site_body (n,) int64, each site's body; site_root (n,) int64, the
-    root body of its kinematic tree (for `cvel`); extra_force (n, 3) N, added to each
-    point's force (the weight correction, module docstring).
-    Scratch: force (n, 3) N, the forces sent to the sites; vel (n, 3) m/s, the
-    sites' velocities.
-    """
-
-    vert: np.ndarray
-    site_id: np.ndarray
-    site_body: np.ndarray
-    site_root: np.ndarray
-    extra_force: np.ndarray
-    force: np.ndarray
-    vel: np.ndarray
-
-
-class CtrlArrays(NamedTuple):
-    """The actuators a scene drives (`rigid.ctrl`): act (nc,) int64, their ids;
-    sched, their schedules (`hybrid.schedule.ScheduleTable`, row j for act[j]);
-    scratch: val (3,), a schedule's value."""
-
-    act: np.ndarray
-    sched: object
-    val: np.ndarray
-
-
-class MjViews(NamedTuple):
-    """MuJoCo's model and data as the compiled loop sees them: model_ptr, data_ptr
-    (int), the `mjModel*` and `mjData*` for the C step functions, and views of the
-    `MjData`'s own arrays (valid as long as it lives), written by MuJoCo's step:
-    site_xpos (nsite, 3) m; xipos (nbody, 3) m, the bodies' centres of mass;
-    xfrc_applied (nbody, 6) [N, N m]; cvel (nbody, 6) [rad/s, m/s]; subtree_com
-    (nbody, 3) m; qpos (nq,); xpos (nbody, 3) m and xquat (nbody, 4) (w, x, y, z),
-    the bodies' poses; ctrl (nu,), the actuators' controls."""
-
-    model_ptr: int
-    data_ptr: int
-    site_xpos: np.ndarray
-    xipos: np.ndarray
-    xfrc_applied: np.ndarray
-    cvel: np.ndarray
-    subtree_com: np.ndarray
-    qpos: np.ndarray
-    xpos: np.ndarray
-    xquat: np.ndarray
-    ctrl: np.ndarray
-
-
-class WrenchHistory(NamedTuple):
-    """Per step k of a recorded run: xfrc (nstep, nbody, 6) [N, N m], the
-    `xfrc_applied` used; qpos (nstep, nq), MuJoCo's qpos after the step. Empty
-    (nstep = 0) when not recording."""
-
-    xfrc: np.ndarray
-    qpos: np.ndarray
-
-
-# ----------------------------------------------------------------- the coupled step
-
-
-@kernel
-def run_coupled(
-    m,
-    s,
-    links,
-    ctrls,
-    mj,
-    rk4,
-    stops,
-    step0,
-    record,
-    hist,
-    frame_pos,
-    frame_scal,
-    frame_body_pos,
-    frame_body_quat,
-    par=True,
-    shape_memory=True,
-    membrane=True,
-    applied=True,
-    attraction=True,
-    mass_spring=True,
-    muscle=True,
-    soft_volume=True,
-    pressure=True,
-    fibres=True,
-    passive=True,
-    prescribed=True,
-    keep_in=True,
-    volume=True,
-    shake=True,
-):
-    """Coupled steps (module docstring, steps 1-5) to each step index of stops,
-    capturing a frame at each (a stop at the current step captures it without
-    stepping). Returns the frames captured: fewer than stops when the membrane
-    fails, its status then in s.status (s.status[1]: the failing step's index).
-    The one compiled loop of the coupled step, for runs by frames and by steps
-    alike (`Coupling.run`: one stop), so that a first run compiles it once.
-
-    # Model:    m (MembraneArrays); links.vert, .site_id, .site_body, .site_root,
-    #           .extra_force (LinkArrays); rk4: bool, step MuJoCo with mj_step (RK4);
-    #           ctrls.act, .sched (CtrlArrays): the driven actuators
-    # Data in:  s (MembraneState) at step step0; mj (MjViews): MuJoCo's state;
-    #           stops (nframe,) int64 increasing step indices from step0
-    # Data out: s and MuJoCo's state (through mj.data_ptr) after the steps done;
-    #           mj.xfrc_applied; mj.ctrl[ctrls.act] at each step's start time;
-    #           hist.xfrc[j], hist.qpos[j] of step step0 + j when
-    #           record; per frame i: frame_pos[i] (nvert, 3) m, frame_scal[i]
-    #           (`capture_frame`), frame_body_pos[i] (nbody - 1, 3) m and
-    #           frame_body_quat[i] (nbody - 1, 4) from mj.xpos, mj.xquat (world excluded)
-    # Scratch:  links.force, links.vel, ctrls.val
-    # par:      None: the membrane's serial passes only (`hybrid.step.step_par`)
-    # switches: None for a term the model lacks, not compiled (`hybrid.step.step_switches`)
-    """
-    h = m.dt
-    pos, vel, frc, grad = s.vert_pos, s.vert_vel, s.vert_force, s.grad
-    link_vert, site_id, link_force, link_vel = links.vert, links.site_id, links.force, links.vel
-    xfrc, qpos = mj.xfrc_applied, mj.qpos
-    n = link_vert.shape[0]
-    done = step0
-    for f in range(stops.shape[0]):
-        t0 = s.scal[S_TIME]
-        for k in range(stops[f] - done):
-            t = t0 + k * h
-            row = done - step0 + k
-            membrane_forces(
-                m,
-                s,
-                t,
-                par,
-                shape_memory,
-                membrane,
-                applied,
-                attraction,
-                mass_spring,
-                muscle,
-                soft_volume,
-                pressure,
-                fibres,
-                passive,
-            )
-            p = s.scal[S_PRESSURE]
-            for j in range(n):
-                i = link_vert[j]
-                for a in range(3):
-                    link_force[j, a] = frc[i, a] + p * grad[i, a] + links.extra_force[j, a]
-            point_wrench_kernel(mj.site_xpos, mj.xipos, site_id, links.site_body, link_force, xfrc)
-            for j in range(ctrls.act.shape[0]):
-                schedule_eval(ctrls.sched, j, t, ctrls.val)
-                mj.ctrl[ctrls.act[j]] = ctrls.val[0]
-            if record:  # element-wise: a slice copy would allocate
-                for b in range(xfrc.shape[0]):
-                    for a in range(6):
-                        hist.xfrc[row, b, a] = xfrc[b, a]
-            if rk4:
-                _mj_step(mj.model_ptr, mj.data_ptr)
-            else:
-                _mj_step2(mj.model_ptr, mj.data_ptr)
-            _mj_step1(mj.model_ptr, mj.data_ptr)
-            if record:
-                for a in range(qpos.shape[0]):
-                    hist.qpos[row, a] = qpos[a]
-            site_vel_kernel(mj.site_xpos, mj.cvel, mj.subtree_com, site_id, links.site_body, links.site_root, link_vel)
-            for j in range(n):
-                i = link_vert[j]
-                sid = site_id[j]
-                for a in range(3):
-                    pos[i, a] = mj.site_xpos[sid, a]
-                    vel[i, a] = link_vel[j, a]
-            if membrane_advance(m, s, t, done + k, par, prescribed, keep_in, volume, shake) != OK:
-                return f
-            s.scal[S_TIME] = t0 + (k + 1) * h
-        done = stops[f]
-        capture_frame(m, s, frame_pos[f], frame_scal[f])
-        for b in range(frame_body_pos.shape[1]):
-            for a in range(3):
-                frame_body_pos[f, b, a] = mj.xpos[b + 1, a]
-            for a in range(4):
-                frame_body_quat[f, b, a] = mj.xquat[b + 1, a]
-    return stops.shape[0]
 
 
 class Coupling:
@@ -303,7 +87,9 @@ class Coupling:
         self.initial_state: np.ndarray | None = None
         mjm = self.system.model
         self._no_hist = WrenchHistory(np.empty((0, mjm.nbody, 6)), np.empty((0, mjm.nq)))
-        self._frame = Frames(1, model.nvert, mjm.nbody - 1)  # `run`'s frame (scratch)
+        # 1 where the user's program sets a driven actuator's ctrl (`hybrid.Control`)
+        self.ctrl_user = np.zeros(self.system.ctrl_act.size, np.uint8)
+        self._mj_time = 0.0  # MuJoCo's time when the loop's last `pack` was made
 
     # -- MuJoCo access
     @property
@@ -337,7 +123,7 @@ class Coupling:
         self._links = LinkArrays(
             self.link_vert, sys.site_id, sys.site_body, sys.site_root, self.link_extra_force(), self._force, self._vel
         )
-        self._ctrls = CtrlArrays(sys.ctrl_act, sys.ctrl_sched, np.zeros(3))
+        self._ctrls = CtrlArrays(sys.ctrl_act, sys.ctrl_sched, self.ctrl_user, np.zeros(3))
         d = sys.data
         self._mj = MjViews(
             *sys.pointers(),
@@ -357,48 +143,26 @@ class Coupling:
         state.vert_pos[self.link_vert] = sys.site_pos()
         state.vert_vel[self.link_vert] = sys.site_vel()
 
-    def step(self, state: MembraneState, t: float, step_index: int, arrays=None) -> int:
-        """One coupled step from time t; returns 0 or the simulation's status code."""
-        done = self.run(state, 1, step_index, arrays)
-        return OK if done == 1 else int(state.status[0])
-
     def _rk4(self) -> bool:
         """Whether MuJoCo integrates with RK4 (read at every call: `mj_model` may change)."""
         return int(self.system.model.opt.integrator) == _RK4
 
-    def run(self, state: MembraneState, nstep: int, step0: int, arrays=None) -> int:
-        """nstep coupled steps in one compiled call; returns the steps done. `arrays`:
-        the model's arrays with the build to run (`Simulation` chooses), by default the model's."""
+    def pack(self, nstep: int) -> RigidPack:
+        """The step loop's rigid half (`hybrid.loop.RigidPack`) for the next nstep steps:
+        with a wrench history of nstep rows when recording. `finish` after the loop."""
         mjm = self.system.model
         record = bool(self.record_wrenches)
         hist = WrenchHistory(np.empty((nstep, mjm.nbody, 6)), np.empty((nstep, mjm.nq))) if record else self._no_hist
-        mj_time = self.system.data.time
-        a = self.model.arrays if arrays is None else arrays
-        f = self._frame
-        stop = np.array([step0 + nstep], np.int64)
-        count = run_coupled(
-            a,
-            state,
-            self._links,
-            self._ctrls,
-            self._mj,
-            self._rk4(),
-            stop,
-            int(step0),
-            record,
-            hist,
-            f.pos,
-            f.scal,
-            f.body_pos,
-            f.body_quat,
-            *step_switches(a),
-        )
-        done = int(nstep) if count else int(state.status[1]) - int(step0)
-        if record:
-            self._xfrc_hist.append(hist.xfrc[:done])
-            self._qpos_hist.append(hist.qpos[:done])
-        self._check_not_reset(state, mj_time, step0, done)
-        return done
+        self._mj_time = self.system.data.time
+        return RigidPack(self._links, self._ctrls, self._mj, self._rk4(), record, hist)
+
+    def finish(self, rig: RigidPack, state: MembraneState, step0: int, done: int) -> None:
+        """After the loop ran `done` steps from step0 with `rig`: keep the recorded wrenches,
+        and raise if MuJoCo reset its state meanwhile (`_check_not_reset`)."""
+        if rig.record:
+            self._xfrc_hist.append(rig.hist.xfrc[:done])
+            self._qpos_hist.append(rig.hist.qpos[:done])
+        self._check_not_reset(state, self._mj_time, step0, done)
 
     def _check_not_reset(self, state: MembraneState, mj_time: float, step0: int, done: int) -> None:
         """Raise if MuJoCo's clock ran fewer than `done` steps since mj_time: MuJoCo found
@@ -416,31 +180,20 @@ class Coupling:
                 dt_suggested_s=0.5 * float(self.model.arrays.dt),
             )
 
-    def run_frames(self, state: MembraneState, stops: np.ndarray, step0: int, frames: Frames, arrays=None) -> int:
-        """`run` to each step index of stops in one compiled call, capturing a frame at
-        each into frames; returns the frames captured. (Without wrench recording.)"""
-        mj_time = self.system.data.time
-        a = self.model.arrays if arrays is None else arrays
-        count = run_coupled(
-            a,
-            state,
-            self._links,
-            self._ctrls,
-            self._mj,
-            self._rk4(),
-            stops,
-            int(step0),
-            False,
-            self._no_hist,
-            frames.pos,
-            frames.scal,
-            frames.body_pos,
-            frames.body_quat,
-            *step_switches(a),
-        )
-        # a reset anywhere in these frames makes none of them trustworthy (frames.count stays 0)
-        self._check_not_reset(state, mj_time, step0, (int(stops[count - 1]) if count else int(step0)) - int(step0))
-        return count
+    # -- checkpoints (`hybrid.State`)
+    def mj_state(self) -> np.ndarray:
+        """MuJoCo's integration state (`mjSTATE_INTEGRATION`), a copy."""
+        m, d = self.system.model, self.system.data
+        out = np.empty(mujoco.mj_stateSize(m, _INTEGRATION))
+        mujoco.mj_getState(m, d, out, _INTEGRATION)
+        return out
+
+    def set_mj_state(self, vec: np.ndarray) -> None:
+        """MuJoCo back to an integration state (`mj_state`), every derived quantity
+        recomputed from it (the step loop reads the sites' kinematics before stepping)."""
+        m, d = self.system.model, self.system.data
+        mujoco.mj_setState(m, d, np.asarray(vec, float), _INTEGRATION)
+        mujoco.mj_forward(m, d)
 
     # -- records
     def link_forces(self) -> np.ndarray:

@@ -474,12 +474,12 @@ def _volume_gradient(face_vert, pos, grad):
 
 
 @kernel
-def implicit_step(m, s, step, imp):
+def implicit_step(m, s, sched_val, step, imp):
     """Step phase 2 for implicit Euler: the free points' new velocities and positions,
     with the divergence check's sums per chunk of points into s.vert_acc (as
     `hybrid.step._integrate`). Returns 0 (done), `IMPLICIT_NOT_CONVERGED` (status
     set, state unchanged) or `EXPLICIT` when imp is None (another integrator).
-    # Model: m   # Data in: imp.f_expl (the explicit forces at the step's start), s.sched_val
+    # Model: m   # Data in: imp.f_expl (the explicit forces at the step's start), sched_val (the inputs at t)
     # Data in/out: s.vert_pos, s.vert_vel, imp   # Data out: s.vert_acc, s.status on failure
     """
     if imp is None:
@@ -506,7 +506,7 @@ def implicit_step(m, s, step, imp):
     tol = m.implicit_tol
     rows_of = w.mat.free  # the free point of each row of the Newton matrix
     cg_max = max(CG_MIN_ITER, 9 * rows_of.shape[0])
-    rn, scale, worst = _residual(m, s.sched_val, pos, vel, h, w)
+    rn, scale, worst = _residual(m, sched_val, pos, vel, h, w)
     # the time-averaged force scale: the run's mean step-start scale, this step's included
     scale_start = scale
     scale_mean = (info[I_FORCE_SUM] + scale) / (info[I_SOLVED] + 1.0)
@@ -522,7 +522,7 @@ def implicit_step(m, s, step, imp):
         for i in range(n):
             for a in range(3):
                 w.x_kv[i, a] = w.x_try[i, a]
-        newton_caches(m, w.rows, s.sched_val, w.x_try, w.face, w.fib, w.pf)
+        newton_caches(m, w.rows, sched_val, w.x_try, w.face, w.fib, w.pf)
         assemble(m, w.rows, w.face, w.fib, w.pf, h, w.mat)
         # the exact Hessian, its negative curvature ending the conjugate gradients early
         # (truncated Newton); when met at once, the Hessian projected per element instead
@@ -557,16 +557,16 @@ def implicit_step(m, s, step, imp):
         frac = 1.0  # of the step now applied
         phi = np.nan  # the potential at the start: taken only when a residual does not halve
         for k in range(HALVINGS + 1):
-            rn_new, scale, worst = _residual(m, s.sched_val, pos, vel, h, w)
+            rn_new, scale, worst = _residual(m, sched_val, pos, vel, h, w)
             # a residual that halved (near the root the potential's change is round-off),
             # else Armijo on the potential
             if rn_new <= 0.5 * rn or k == HALVINGS:
                 break
             if phi != phi:
                 _trial(m, pos, vel, h, dv_start, w)
-                phi = _merit(m, s.sched_val, h, dv_start, w)
+                phi = _merit(m, sched_val, h, dv_start, w)
                 _trial(m, pos, vel, h, w.dv, w)
-            if _merit(m, s.sched_val, h, w.dv, w) <= phi + ARMIJO * frac * slope:
+            if _merit(m, sched_val, h, w.dv, w) <= phi + ARMIJO * frac * slope:
                 break
             frac *= 0.5
             _scatter_add(rows_of, -frac, w.cg_x, w.dv)

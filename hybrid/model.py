@@ -90,6 +90,9 @@ class Model:
     rigid: object = None
     link_vert: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
     vert_viscosity: np.ndarray | None = None  # N s/m: the membrane's Kelvin-Voigt share per point
+    # the inputs a step reads, one per schedule row: (scene key, components), e.g.
+    # ("forces['muscle_fibres'].tension_n_per_m", 1) (`hybrid.Control`)
+    control_keys: tuple = ()
 
     @property
     def nvert(self) -> int:
@@ -118,6 +121,7 @@ class Model:
             self.rigid,
             self.link_vert,
             self.vert_viscosity,
+            self.control_keys,
         )
 
     def region_faces(self, name: str) -> np.ndarray:
@@ -487,6 +491,7 @@ def _compile(scene: Scene) -> Model:
         rigid=rigid,
         link_vert=b.link_vert,
         vert_viscosity=b.vert_viscosity,
+        control_keys=tuple(b.schedule_keys),
     )
 
 

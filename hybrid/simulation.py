@@ -7,7 +7,6 @@ unless the scene has Python schedules (evaluated between steps).
 
 from __future__ import annotations
 
-import copy
 import math
 import time
 
@@ -15,26 +14,24 @@ import numpy as np
 
 from . import readouts
 from .builds import BuildChoice
+from .control import Control
 from .errors import ConstraintError, SceneError, SimulationDiverged
 from .implicit import IMPLICIT_NOT_CONVERGED, Info
+from .loop import run_steps
 from .model import TERMS, Model
+from .state import State
 from .step import (
     DIVERGED_NONFINITE,
-    OK,
     S_MAXDISP,
     S_PHI,
     S_PRESSURE,
+    S_ORIGIN,
     S_TIME,
     VOLUME_FAILED,
     Frames,
-    advance_switches,
-    force_switches,
     kinetic_energy_of,
-    membrane_advance,
-    membrane_forces,
+    new_control,
     new_state,
-    run_membrane,
-    run_membrane_frames,
     step_switches,
 )
 from .terms.volume import PROJ_NO_GRADIENT, face_volume
@@ -74,7 +71,22 @@ class Simulation:
             from .coupling import Coupling  # imports mujoco only for rigid scenes
 
             self.rigid = Coupling(model)
+        self.control = self._new_control()
         self.reset()
+
+    def _new_control(self) -> Control:
+        """The run's inputs (`hybrid.Control`): the schedules' rows, then the driven actuators'."""
+        arrays = new_control(self.model.arrays)
+        if self.rigid is None:
+            return Control(self.model.control_keys, arrays)
+        system = self.rigid.system
+        return Control(
+            self.model.control_keys,
+            arrays,
+            system.controls.ctrl_actuators,
+            self.rigid.ctrl_user,
+            lambda: (self.rigid.mj_data.ctrl, system.ctrl_act),
+        )
 
     # ------------------------------------------------------------ state
     def reset(self) -> None:
@@ -152,7 +164,7 @@ class Simulation:
         and |r x F|: zero to round-off in the continuum formulation, not in the
         paper's. {"net_force_n": (3,), "net_moment_n_m": (3,), "sum_abs_force_n",
         "sum_abs_moment_n_m"}."""
-        f = readouts.internal_forces(self.model.arrays, self.state.vert_pos, self.state.sched_val)
+        f = readouts.internal_forces(self.model.arrays, self.state.vert_pos, self.control.arrays.value)
         return readouts.net_internal(self.state.vert_pos, f)
 
     def swept_volume_m3(self, region: str) -> float:
@@ -181,7 +193,6 @@ class Simulation:
             raise self.failed
         if not (isinstance(n, (int, np.integer)) and n >= 0):
             raise ValueError(f"n: expected an integer >= 0, received {n!r}")
-        s = self.state
         if not self.model.python_schedules:
             left = int(n)
             while True:  # one compiled call, or pieces timed for the choice of build
@@ -196,27 +207,37 @@ class Simulation:
                 if left <= 0:
                     return
         par = self.builds.parallel
-        m = self._arrays[par]
-        for _ in range(int(n)):
-            t = float(s.scal[S_TIME])
-            self._python_schedules(t)
-            if self.rigid is None:
-                membrane_forces(m, s, t, *force_switches(m))
-                code = membrane_advance(m, s, t, self.steps_done, *advance_switches(m))
-            else:
-                code = self.rigid.step(s, t, self.steps_done, m)
-            if code != OK:
+        for _ in range(int(n)):  # Python schedules: evaluated between steps
+            self._python_schedules(float(self.state.scal[S_TIME]))
+            done = self._run(self._arrays[par], 1)
+            self.steps_done += done
+            self.builds.steps[par] += done
+            if done < 1:
                 self._raise()
-            s.scal[S_TIME] = t + m.dt
-            self.steps_done += 1
-            self.builds.steps[par] += 1
 
     def _run(self, arrays, nstep: int) -> int:
         """nstep steps in one compiled call with these arrays (the build their flag
-        says); the steps done."""
-        if self.rigid is None:
-            return run_membrane(arrays, self.state, nstep, self.steps_done, *step_switches(arrays))
-        return self.rigid.run(self.state, nstep, self.steps_done, arrays)  # the whole coupled loop (hybrid.coupling)
+        says), their frame into a scratch buffer; the steps done."""
+        if self._piece_frame is None:
+            self._piece_frame = self.frames_buffer(1)
+        stop = np.array([self.steps_done + nstep], np.int64)
+        if self._loop(arrays, stop, self._piece_frame, 0):
+            return nstep
+        return int(self.state.status[1]) - self.steps_done  # the failing step's index
+
+    def _loop(self, arrays, stops: np.ndarray, frames: Frames, first: int) -> int:
+        """Step to each of stops in one call of the compiled step loop
+        (`hybrid.loop.run_steps`), capturing into frames from index `first` on; the
+        frames captured."""
+        step0 = self.steps_done
+        rig = None if self.rigid is None else self.rigid.pack(int(stops[-1]) - step0)
+        count = run_steps(
+            arrays, self.state, self.control.arrays, stops, step0, frames.arrays(first), rig, *step_switches(arrays)
+        )
+        if rig is not None:
+            done = (int(stops[-1]) if count == len(stops) else int(self.state.status[1])) - step0
+            self.rigid.finish(rig, self.state, step0, done)
+        return count
 
     @property
     def can_step_frames(self) -> bool:
@@ -251,14 +272,14 @@ class Simulation:
             par, k = self.builds.chunk(int(stops[-1]) - self.steps_done)
             t0 = time.perf_counter()
             if k < int(stops[i]) - self.steps_done:  # a piece short of the next frame
-                done = self._run_piece(self._arrays[par], k)
+                done = self._run(self._arrays[par], k)
                 self.builds.record(par, done, time.perf_counter() - t0)
                 self.steps_done += done
                 if done < k:
                     self._raise()
                 continue
             j = max(i + 1, int(np.searchsorted(stops, self.steps_done + k, side="right")))
-            count = self._run_frames(self._arrays[par], stops[i:j], frames, i)
+            count = self._loop(self._arrays[par], stops[i:j], frames, i)
             frames.count = i + count
             if count < j - i:
                 self.steps_done = int(s.status[1])
@@ -267,33 +288,13 @@ class Simulation:
             self.steps_done = int(stops[j - 1])
             i = j
 
-    def _run_piece(self, arrays, nstep: int) -> int:
-        """nstep steps by the frames' compiled call (its frame into a scratch buffer), so
-        that stepping by frames compiles that one loop; the steps done."""
-        if self._piece_frame is None:
-            self._piece_frame = self.frames_buffer(1)
-        stop = np.array([self.steps_done + nstep], np.int64)
-        if self._run_frames(arrays, stop, self._piece_frame, 0):
-            return nstep
-        return int(self.state.status[1]) - self.steps_done  # the failing step's index
-
-    def _run_frames(self, arrays, stops: np.ndarray, frames: Frames, first: int) -> int:
-        """Step to each of stops in one compiled call, capturing into frames from
-        index `first` on; the frames captured."""
-        if first:
-            frames = copy.copy(frames)
-            frames.pos, frames.scal = frames.pos[first:], frames.scal[first:]
-            frames.body_pos, frames.body_quat = frames.body_pos[first:], frames.body_quat[first:]
-        if self.rigid is None:
-            return run_membrane_frames(
-                arrays, self.state, stops, self.steps_done, frames.pos, frames.scal, *step_switches(arrays)
-            )
-        return self.rigid.run_frames(self.state, stops, self.steps_done, frames, arrays)
-
     def _python_schedules(self, t: float) -> None:
         h = self.model.arrays.dt
+        c = self.control.arrays
         for row, fn in self.model.python_schedules:
-            for out, tt in ((self.state.sched_val, t), (self.state.sched_next, t + h)):
+            if c.user[row]:  # the user's program sets this input
+                continue
+            for out, tt in ((c.value, t), (c.value_next, t + h)):
                 val = np.atleast_1d(np.asarray(fn(tt), dtype=float)).reshape(-1)
                 if val.size not in (1, 3) or not np.all(np.isfinite(val)):
                     err = SimulationDiverged(
@@ -431,8 +432,63 @@ class Simulation:
         return f"try dt_s <= {suggest:.3g} s", suggest
 
     # ------------------------------------------------------------ a state set by hand
-    def set_state(self, *, vert_pos=None, vert_vel=None, time_s: float | None = None, qpos=None, qvel=None) -> None:
-        """Start from another state; what is not given stays as it is.
+    def get_state(self) -> State:
+        """A copy of the run's state (`hybrid.State`): `set_state(state)` restarts from it
+        bit for bit, in this `Simulation` or another of the same model."""
+        s = self.state
+        imp = s.implicit
+        return State(
+            steps_done=int(self.steps_done),
+            vert_pos=s.vert_pos.copy(),
+            vert_vel=s.vert_vel.copy(),
+            scal=s.scal.copy(),
+            vert_grad=s.grad.copy(),
+            term_calls=s.term_calls.copy(),
+            implicit_dv=None if imp is None else imp.dv.copy(),
+            implicit_info=None if imp is None else imp.info.copy(),
+            mj_state=None if self.rigid is None else self.rigid.mj_state(),
+        )
+
+    def _restore(self, state: State) -> None:
+        """`set_state(state)`: every part checked against this model before any is set."""
+        s, model = self.state, self.model
+        want = {
+            "vert_pos": s.vert_pos.shape,
+            "implicit_dv": None if s.implicit is None else s.implicit.dv.shape,
+            "mj_state": None if self.rigid is None else self.rigid.mj_state().shape,
+        }
+        for name, shape in want.items():
+            got = getattr(state, name)
+            if (None if got is None else np.shape(got)) != shape:
+                raise ValueError(
+                    f"state.{name}: expected {'None' if shape is None else f'shape {shape}'} (scene "
+                    f"{model.scene.name!r}, integrator {model.scene.integrator}), received {_described(got)}"
+                )
+        s.vert_pos[:] = state.vert_pos
+        s.vert_vel[:] = state.vert_vel
+        s.scal[:] = state.scal
+        s.grad[:] = state.vert_grad
+        s.term_calls[:] = state.term_calls
+        if s.implicit is not None:
+            s.implicit.dv[:] = state.implicit_dv
+            s.implicit.info[:] = state.implicit_info
+        if self.rigid is not None:
+            self.rigid.set_mj_state(state.mj_state)
+        self.steps_done = int(state.steps_done)
+        self.failed = None
+
+    def set_state(
+        self,
+        state: State | None = None,
+        *,
+        vert_pos=None,
+        vert_vel=None,
+        time_s: float | None = None,
+        qpos=None,
+        qvel=None,
+    ) -> None:
+        """Start from another state: a `State` (`get_state`), restored whole, or the parts
+        given by keyword, what is not given staying as it is.
 
         vert_pos (nvert, 3) m, vert_vel (nvert, 3) m/s: every point (the linked
         points then take their sites' positions and velocities, as at reset). New
@@ -447,6 +503,14 @@ class Simulation:
         the argument, what was expected and what was received. A run that failed
         steps again from the new state.
         """
+        if state is not None:
+            if not isinstance(state, State):
+                raise ValueError(
+                    f"state: expected a hybrid.State (Simulation.get_state()), received {_described(state)}"
+                )
+            if any(v is not None for v in (vert_pos, vert_vel, time_s, qpos, qvel)):
+                raise ValueError("set_state: expected a State or keyword parts, received both")
+            return self._restore(state)
         nvert = self.model.nvert
         pos = _checked_array("vert_pos", vert_pos, (nvert, 3), "positions (m)")
         vel = _checked_array("vert_vel", vert_vel, (nvert, 3), "velocities (m/s)")
@@ -477,6 +541,7 @@ class Simulation:
             s.vert_vel[:] = vel
         if time_s is not None:
             s.scal[S_TIME] = float(time_s)
+            s.scal[S_ORIGIN] = float(time_s) - round(float(time_s) / self.model.arrays.dt) * self.model.arrays.dt
             self.steps_done = int(round(float(time_s) / self.model.arrays.dt))
         if self.rigid is not None:
             self.rigid.set_state(s, time_s=None if time_s is None else float(time_s), **rigid)

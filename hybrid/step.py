@@ -9,9 +9,11 @@ One step, membrane only:
 5. the divergence check: non-finite values, or a point that moved farther
    in one step than the body's size.
 
-The whole loop is compiled (`run_membrane`); `hybrid.simulation.Simulation`
-drives it, and `hybrid.coupling` runs it with MuJoCo between the force and
-integration phases.
+Phase 1 is `membrane_forces`, phases 2-5 `membrane_advance`; the one compiled loop
+(`hybrid.loop.run_steps`) calls them, with MuJoCo's step between them for scenes
+with rigid parts. The step reads its inputs (muscle tensions, pressures, applied
+forces, prescribed motions) from `ControlArrays`, filled from the scene's schedules
+or set by the user's program (`hybrid.Control`).
 """
 
 from __future__ import annotations
@@ -67,13 +69,14 @@ __all__ = [
     "FrameColumn",
     "MembraneState",
     "new_state",
+    "ControlArrays",
+    "new_control",
     "membrane_forces",
     "membrane_advance",
-    "run_membrane",
-    "run_membrane_frames",
     "capture_frame",
     "kinetic_energy_of",
     "Frames",
+    "FrameArrays",
     "step_par",
     "FORCE_SWITCHES",
     "ADVANCE_SWITCHES",
@@ -120,6 +123,7 @@ class Scal(IntEnum):
     PHI = 2  # the last projection's multiplier
     KE = 3  # J, of the last step before its constraints
     MAXDISP = 4  # m, the largest displacement of the last step
+    ORIGIN = 5  # s, the time of step index 0: step k runs from ORIGIN + k h, however the run is cut in calls
 
 
 class StepStatus(IntEnum):
@@ -131,7 +135,7 @@ class StepStatus(IntEnum):
     VOLUME_FAILED = 3
 
 
-S_TIME, S_PRESSURE, S_PHI, S_KE, S_MAXDISP = Scal
+S_TIME, S_PRESSURE, S_PHI, S_KE, S_MAXDISP, S_ORIGIN = Scal
 OK, DIVERGED_NONFINITE, DIVERGED_RUNAWAY, VOLUME_FAILED = StepStatus
 
 
@@ -142,7 +146,6 @@ class MembraneState(NamedTuple):
     the membrane triangles' forces (parallel build's scratch); sm_sums (nsm, 9),
     dirn, cubic: scratch; vert_acc (chunk_count(nvert), 4): scratch, the sums
     of the per-point passes over each chunk of points (hybrid.kernel);
-    sched_val / sched_next (nsched, 3): schedules at t and t + h;
     scal: time s, pressure Pa, phi, kinetic energy J, largest step displacement m;
     status: code, failing step, worst vertex, projection status;
     term_calls (nterm,): how many times each term's kernel ran;
@@ -157,8 +160,6 @@ class MembraneState(NamedTuple):
     vert_acc: np.ndarray
     dirn: np.ndarray
     cubic: np.ndarray
-    sched_val: np.ndarray
-    sched_next: np.ndarray
     scal: np.ndarray
     status: np.ndarray
     term_calls: np.ndarray
@@ -167,7 +168,6 @@ class MembraneState(NamedTuple):
 
 def new_state(arrays: MembraneArrays) -> MembraneState:
     n = arrays.vert_rest.shape[0]
-    ns = arrays.sched.kind.shape[0]
     return MembraneState(
         vert_pos=arrays.vert_rest.copy(),
         vert_vel=np.zeros((n, 3)),
@@ -178,13 +178,30 @@ def new_state(arrays: MembraneArrays) -> MembraneState:
         vert_acc=np.zeros((chunk_count(n), 4)),
         dirn=np.zeros((n, 3)),
         cubic=np.zeros(2),
-        sched_val=np.zeros((ns, 3)),
-        sched_next=np.zeros((ns, 3)),
         scal=np.zeros(8),
         status=np.zeros(4, np.int64),
         term_calls=np.zeros(len(TERMS), np.int64),
         implicit=implicit_work(arrays),
     )
+
+
+class ControlArrays(NamedTuple):
+    """The inputs a step reads, one row per schedule of the model (`Model.control_names`):
+    value (nsched, 3), each input at the step's time t (a tension N/m, a pressure Pa, a
+    force N, ...: the unit of its key); value_next (nsched, 3), at t + h (prescribed motions
+    read both ends of the step); user (nsched,) uint8: 1 where the user's program sets
+    the row (`hybrid.Control`), which the step then leaves as it is, 0 where the step
+    evaluates the scene's schedule."""
+
+    value: np.ndarray
+    value_next: np.ndarray
+    user: np.ndarray
+
+
+def new_control(arrays: MembraneArrays) -> ControlArrays:
+    """Every input driven by its schedule, the values zero until the first step."""
+    ns = arrays.sched.kind.shape[0]
+    return ControlArrays(np.zeros((ns, 3)), np.zeros((ns, 3)), np.zeros(ns, np.uint8))
 
 
 def step_par(arrays: MembraneArrays):
@@ -244,10 +261,13 @@ def step_switches(arrays: MembraneArrays) -> tuple:
 
 
 @kernel
-def eval_schedules(sched, t, out):
-    """All compiled schedules at time t into out (nsched, 3); Python ones are set by the caller."""
+def eval_schedules(sched, user, t, out):
+    """The compiled schedules at time t into out (nsched, 3), except the rows the user's
+    program sets (user[row] = 1); Python ones are set by the caller.
+    # Model: sched (ScheduleTable)   # Data in: user (nsched,) uint8   # Data out: out (nsched, 3)
+    """
     for row in range(sched.kind.shape[0]):
-        if sched.kind[row] != KIND_PYTHON:
+        if sched.kind[row] != KIND_PYTHON and not user[row]:
             schedule_eval(sched, row, t, out[row])
 
 
@@ -255,6 +275,7 @@ def eval_schedules(sched, t, out):
 def membrane_forces(
     m,
     s,
+    c,
     t,
     par=True,
     shape_memory=True,
@@ -274,9 +295,9 @@ def membrane_forces(
     (`force_switches`): None for a term the model lacks, whose kernel is then not
     compiled; True: its flag in m.term_on decides.
     # Model: m (MembraneArrays)   # Data in: s.vert_pos, s.vert_vel
-    # Data out: s.vert_force, s.sched_val, s.term_calls (and pressure for soft volume)
+    # Data out: s.vert_force, c.value, s.term_calls (and pressure for soft volume)
     """
-    eval_schedules(m.sched, t, s.sched_val)
+    eval_schedules(m.sched, c.user, t, c.value)
     on = m.term_on
     # implicit Euler: the terms it treats implicitly once, kept for its solve (`implicit_start_forces`)
     implicit = m.integrator == IMPLICIT_ID
@@ -289,16 +310,16 @@ def membrane_forces(
             add_membrane_serial(m.mem_vert, m.mem_par, m.kv_on, s.vert_pos, s.vert_vel, s.vert_force)
         s.term_calls[T_MEMBRANE] += 1
     if applied is not None and on[T_APPLIED]:
-        add_applied(m.app_vert, m.app_sched, s.sched_val, s.vert_force)
+        add_applied(m.app_vert, m.app_sched, c.value, s.vert_force)
         s.term_calls[T_APPLIED] += 1
     if attraction is not None and on[T_ATTRACTION]:
-        add_attraction(m.att_vert, m.att_stiff, m.att_target, m.att_sched, s.sched_val, s.vert_pos, s.vert_force)
+        add_attraction(m.att_vert, m.att_stiff, m.att_target, m.att_sched, c.value, s.vert_pos, s.vert_force)
         s.term_calls[T_ATTRACTION] += 1
     if mass_spring is not None and on[T_MASS_SPRING]:
         add_mass_spring(m.spring_vert, m.spring_stiff, m.spring_rest, s.vert_pos, s.vert_force)
         s.term_calls[T_MASS_SPRING] += 1
     if muscle is not None and on[T_MUSCLE]:
-        add_muscle(m.mus_vert, m.mus_nbr, m.mus_sched, s.sched_val, s.vert_pos, s.vert_force)
+        add_muscle(m.mus_vert, m.mus_nbr, m.mus_sched, c.value, s.vert_pos, s.vert_force)
         s.term_calls[T_MUSCLE] += 1
     if soft_volume is not None and on[T_SOFT_VOLUME]:
         s.scal[S_PRESSURE] = soft_volume_force(
@@ -315,15 +336,15 @@ def membrane_forces(
         )
         s.term_calls[T_SOFT_VOLUME] += 1
     if pressure is not None and on[T_PRESSURE]:
-        add_pressure(m.ring_ptr, m.ring_vert, m.pres_sched, s.sched_val, s.vert_pos, s.vert_force)
+        add_pressure(m.ring_ptr, m.ring_vert, m.pres_sched, c.value, s.vert_pos, s.vert_force)
         s.term_calls[T_PRESSURE] += 1
     if fibres is not None and on[T_MUSCLE_FIBRES] and not implicit:
-        add_muscle_fibres(m.fib_vert, m.fib_par, m.fib_sched, s.sched_val, s.vert_pos, s.vert_force)
+        add_muscle_fibres(m.fib_vert, m.fib_par, m.fib_sched, c.value, s.vert_pos, s.vert_force)
         s.term_calls[T_MUSCLE_FIBRES] += 1
     if passive is not None and on[T_PASSIVE_FIBRES] and not implicit:
         add_passive_fibres(m.pf_vert, m.pf_par, s.vert_pos, s.vert_force)
         s.term_calls[T_PASSIVE_FIBRES] += 1
-    if implicit_start_forces(m, s.sched_val, s.vert_pos, s.vert_vel, s.implicit, s.vert_force):
+    if implicit_start_forces(m, c.value, s.vert_pos, s.vert_vel, s.implicit, s.vert_force):
         for k in (T_MEMBRANE, T_MUSCLE_FIBRES, T_PASSIVE_FIBRES):
             s.term_calls[k] += on[k]
 
@@ -423,7 +444,7 @@ def _pointwise_forces(m, s, par, shape_memory, implicit=False):
 
 
 @kernel(inline="always")
-def membrane_advance(m, s, t, step, par=True, prescribed=True, keep_in=True, volume=True, shake=True):
+def membrane_advance(m, s, c, t, step, par=True, prescribed=True, keep_in=True, volume=True, shake=True):
     """Step phases 2-5: integrate, project, check. Returns a status code. `par` and
     the switches after it (`advance_switches`): as `membrane_forces`.
     # Model: m   # Data in: s.vert_force   # Data out: s.vert_pos, s.vert_vel, s.scal, s.status
@@ -435,7 +456,7 @@ def membrane_advance(m, s, t, step, par=True, prescribed=True, keep_in=True, vol
             volume_direction_parallel(m.ring_ptr, m.ring_vert, m.vert_weight, pos, s.dirn)
         else:
             volume_direction_serial(m.ring_ptr, m.ring_vert, m.vert_weight, pos, s.dirn)
-    code = implicit_step(m, s, step, s.implicit)  # implicit Euler (hybrid.implicit), else EXPLICIT
+    code = implicit_step(m, s, c.value, step, s.implicit)  # implicit Euler (hybrid.implicit), else EXPLICIT
     if code == EXPLICIT:
         if par is not None and m.parallel:
             _integrate_parallel(m.vert_free, m.vert_mass, m.integrator == 0, m.dt, s.vert_force, pos, vel, s.vert_acc)
@@ -443,14 +464,14 @@ def membrane_advance(m, s, t, step, par=True, prescribed=True, keep_in=True, vol
             _integrate_serial(m.vert_free, m.vert_mass, m.integrator == 0, m.dt, s.vert_force, pos, vel, s.vert_acc)
     elif code != OK:
         return code
-    code = _after_integration(m, s, t, step, par, prescribed, keep_in, volume)
+    code = _after_integration(m, s, c, t, step, par, prescribed, keep_in, volume)
     if code == OK and volume is not None and m.term_on[T_VOLUME]:  # implicit Euler's solve carried part of the pressure
         s.scal[S_PRESSURE] = implicit_pressure(s.implicit, s.scal[S_PRESSURE])
     return code
 
 
 @kernel(inline="always")
-def _after_integration(m, s, t, step, par, prescribed, keep_in, volume):
+def _after_integration(m, s, c, t, step, par, prescribed, keep_in, volume):
     """Step phases 3-5 after `_integrate`: check, local constraints, volume."""
     h = m.dt
     pos, vel = s.vert_pos, s.vert_vel
@@ -459,12 +480,12 @@ def _after_integration(m, s, t, step, par, prescribed, keep_in, volume):
     worst = 0
     ke = 0.0
     acc = s.vert_acc
-    for c in range(acc.shape[0]):  # the chunks in order: both builds agree, the first largest step wins
-        dsum += acc[c, 0]
-        ke += acc[c, 1]
-        if acc[c, 2] > dmax:
-            dmax = acc[c, 2]
-            worst = int(acc[c, 3])
+    for ch in range(acc.shape[0]):  # the chunks in order: both builds agree, the first largest step wins
+        dsum += acc[ch, 0]
+        ke += acc[ch, 1]
+        if acc[ch, 2] > dmax:
+            dmax = acc[ch, 2]
+            worst = int(acc[ch, 3])
     s.scal[S_KE] = 0.5 * ke
     s.scal[S_MAXDISP] = math.sqrt(dmax)
     if not (dsum < np.inf and ke < np.inf):
@@ -478,8 +499,8 @@ def _after_integration(m, s, t, step, par, prescribed, keep_in, volume):
         return _fail(s, DIVERGED_RUNAWAY, step, worst)
     on = m.term_on
     if prescribed is not None and on[T_PRESCRIBED]:
-        eval_schedules(m.sched, t + h, s.sched_next)
-        apply_prescribed(m.pre_vert, m.pre_rest, m.pre_sched, s.sched_next, h, pos, vel)
+        eval_schedules(m.sched, c.user, t + h, c.value_next)
+        apply_prescribed(m.pre_vert, m.pre_rest, m.pre_sched, c.value_next, h, pos, vel)
         s.term_calls[T_PRESCRIBED] += 1
     if keep_in is not None and on[T_KEEP_IN]:
         apply_keep_in(m.kin_vert, m.kin_shape, m.shape_kind, m.shape_par, pos, vel)
@@ -547,55 +568,6 @@ def _first_nonfinite(pos, vel, fallback):
     return fallback
 
 
-@kernel
-def run_membrane(
-    m,
-    s,
-    nstep,
-    step0,
-    par=True,
-    shape_memory=True,
-    membrane=True,
-    applied=True,
-    attraction=True,
-    mass_spring=True,
-    muscle=True,
-    soft_volume=True,
-    pressure=True,
-    fibres=True,
-    passive=True,
-    prescribed=True,
-    keep_in=True,
-    volume=True,
-    shake=True,
-):
-    """nstep whole membrane steps; time advances as t0 + k h. Returns steps done.
-    `par` and the switches (`step_switches`): as `membrane_forces`, `membrane_advance`."""
-    t0 = s.scal[S_TIME]
-    for k in range(nstep):
-        t = t0 + k * m.dt
-        membrane_forces(
-            m,
-            s,
-            t,
-            par,
-            shape_memory,
-            membrane,
-            applied,
-            attraction,
-            mass_spring,
-            muscle,
-            soft_volume,
-            pressure,
-            fibres,
-            passive,
-        )
-        if membrane_advance(m, s, t, step0 + k, par, prescribed, keep_in, volume, shake) != OK:
-            return k
-        s.scal[S_TIME] = t0 + (k + 1) * m.dt
-    return nstep
-
-
 class FrameColumn(IntEnum):
     """The numbers captured at each frame by the frame kernels (`Frames.scal` columns)."""
 
@@ -632,63 +604,16 @@ def capture_frame(m, s, pos_out, scal_out):
     scal_out[F_KE] = kinetic_energy_of(m, s)
 
 
-@kernel
-def run_membrane_frames(
-    m,
-    s,
-    stops,
-    step0,
-    frame_pos,
-    frame_scal,
-    par=True,
-    shape_memory=True,
-    membrane=True,
-    applied=True,
-    attraction=True,
-    mass_spring=True,
-    muscle=True,
-    soft_volume=True,
-    pressure=True,
-    fibres=True,
-    passive=True,
-    prescribed=True,
-    keep_in=True,
-    volume=True,
-    shake=True,
-):
-    """Step to each step index of stops, capturing a frame at each; returns the
-    frames captured (fewer than stops when a step fails; its status is in s.status).
-    A stop at the current step captures it without stepping. `par` and the
-    switches: as `run_membrane`, whose loop this repeats rather than calls: a run by
-    frames then compiles one loop (a callee would compile, and be optimised, apart).
-    Time advances as in `run_membrane` called from each stop."""
-    done = step0
-    for i in range(stops.shape[0]):
-        t0 = s.scal[S_TIME]
-        for k in range(stops[i] - done):
-            t = t0 + k * m.dt
-            membrane_forces(
-                m,
-                s,
-                t,
-                par,
-                shape_memory,
-                membrane,
-                applied,
-                attraction,
-                mass_spring,
-                muscle,
-                soft_volume,
-                pressure,
-                fibres,
-                passive,
-            )
-            if membrane_advance(m, s, t, done + k, par, prescribed, keep_in, volume, shake) != OK:
-                return i
-            s.scal[S_TIME] = t0 + (k + 1) * m.dt
-        done = stops[i]
-        capture_frame(m, s, frame_pos[i], frame_scal[i])
-    return stops.shape[0]
+class FrameArrays(NamedTuple):
+    """Where the loop captures its frames, per frame i: pos[i] (nvert, 3) m; scal[i]
+    (`hybrid.step.FrameColumn`); body_pos[i] (nbody - 1, 3) m and body_quat[i]
+    (nbody - 1, 4) (w, x, y, z), the rigid bodies' poses, world excluded (empty
+    without a rigid part)."""
+
+    pos: np.ndarray
+    scal: np.ndarray
+    body_pos: np.ndarray
+    body_quat: np.ndarray
 
 
 class Frames:
@@ -696,6 +621,10 @@ class Frames:
     pos (nvert, 3) m, scal (F_TIME s, F_VOLUME m^3, F_PRESSURE Pa, F_KE J), and the
     rigid bodies' poses body_pos (nbody, 3) m, body_quat (nbody, 4) (w, x, y, z),
     world excluded. `count`: the frames of the last call, also when it raised."""
+
+    def arrays(self, first: int = 0):
+        """The compiled loop's view of frames first, first + 1, ... (`hybrid.loop.FrameArrays`)."""
+        return FrameArrays(self.pos[first:], self.scal[first:], self.body_pos[first:], self.body_quat[first:])
 
     def __init__(self, capacity: int, nvert: int, nbody: int = 0):
         self.pos = np.zeros((capacity, nvert, 3))

@@ -26,7 +26,7 @@ from hybrid.errors import SimulationDiverged
 from hybrid.model import compile_scene
 from hybrid.scene import Gravity, Scene
 from hybrid.simulation import Simulation
-from hybrid.step import OK, S_PRESSURE, S_TIME, membrane_advance, membrane_forces
+from hybrid.step import OK, S_PRESSURE, S_TIME, membrane_advance, membrane_forces, new_control
 
 PERIOD_S = 4.0
 
@@ -117,15 +117,16 @@ def python_coupled_steps(model, nstep):
     coupling = Coupling(model)  # only for the weight correction of the linked points
     extra = coupling.link_extra_force()
     state.vert_pos[link] = system.site_pos()
+    control = new_control(model.arrays)
     for k in range(nstep):
         t = state.scal[S_TIME]
-        membrane_forces(model.arrays, state, t)
+        membrane_forces(model.arrays, state, control, t)
         force = state.vert_force[link] + state.scal[S_PRESSURE] * state.grad[link] + extra
         system.apply_point_forces(force)
         system.step()
         state.vert_pos[link] = system.site_pos()
         state.vert_vel[link] = system.site_vel()
-        assert membrane_advance(model.arrays, state, t, k) == OK
+        assert membrane_advance(model.arrays, state, control, t, k) == OK
         state.scal[S_TIME] = t + model.arrays.dt
     return state, system
 

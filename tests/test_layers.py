@@ -18,13 +18,14 @@ PACKAGE = Path(__file__).resolve().parents[1] / "hybrid"
 # Bottom to top. A module imports only modules of its own layer or below.
 LAYERS = (
     ("errors, kernel", ("errors", "kernel", "checks")),
-    ("geometry, regions, schedules", ("mesh", "mesh.*", "regions", "schedule", "stability")),
+    ("geometry, regions, schedules", ("mesh", "mesh.*", "regions", "schedule", "stability", "sites")),
     ("terms", ("terms", "terms.*")),
     ("scene", ("scene", "scenefile", "rigidfile", "demo", "resolve")),
     ("model, rigid", ("model", "rigid", "rigid.*")),
     ("step", ("step", "readouts", "implicit", "implicit_matrix")),
+    ("step loop", ("loop",)),
     ("coupled step", ("coupling",)),
-    ("simulation", ("simulation", "builds")),
+    ("simulation", ("simulation", "builds", "control")),
     ("observers", ("run", "loads", "record", "record.*", "render", "sweep", "grid", "outputs", "provenance")),
     ("public API", ("",)),  # hybrid/__init__.py
     (

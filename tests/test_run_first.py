@@ -68,7 +68,7 @@ def test_a_sweeps_first_task_ends_before_the_others_start():
 _COMPILED = """
 import json, sys
 import hybrid
-from hybrid import coupling, step
+from hybrid import loop, step
 from hybrid.cli import main
 from hybrid.terms import fibres, local, membrane, muscle, passive_fibres, shape_memory, springs, volume
 code = main(["run", "membrane_demo", "--duration", "0.01", "--no-record", "--out", sys.argv[1]])
@@ -84,7 +84,7 @@ kernels = {  # each switch of the step: the kernels it guards
 names = list(step.FORCE_SWITCHES) + list(step.ADVANCE_SWITCHES)
 switches = step.step_switches(hybrid.load("membrane_demo").model.arrays)[1:]
 print(json.dumps({"code": code, "loops": {k.py_func.__name__: len(k.signatures) for k in
-                  (step.run_membrane, step.run_membrane_frames, coupling.run_coupled)},
+                  (loop.run_steps,)},
                   "kernels": {name: [len(k.signatures) for k in kernels[name]] for name in names},
                   "on": {name: on is not None for name, on in zip(names, switches)}}))
 """
@@ -93,7 +93,7 @@ print(json.dumps({"code": code, "loops": {k.py_func.__name__: len(k.signatures) 
 def test_a_first_run_compiles_only_the_kernels_its_scene_uses(tmp_path):
     """Issue 15: on an empty compile cache, `hybrid run` compiles the kernels of the
     terms its scene has and no other (their branches are pruned when the step
-    compiles: `hybrid.step.step_switches`), and one step loop: the frames' loop."""
+    compiles: `hybrid.step.step_switches`), and the one step loop once."""
     env = dict(os.environ, PYTHONPATH=str(ROOT), NUMBA_CACHE_DIR=str(tmp_path / "cache"))
     proc = subprocess.run(
         [sys.executable, "-c", _COMPILED, str(tmp_path / "out")], capture_output=True, text=True, env=env, timeout=900
@@ -101,7 +101,7 @@ def test_a_first_run_compiles_only_the_kernels_its_scene_uses(tmp_path):
     assert proc.returncode == 0, proc.stderr[-2000:]
     got = json.loads(proc.stdout.splitlines()[-1])
     assert got["code"] == 0
-    assert got["loops"] == {"run_membrane": 0, "run_membrane_frames": 1, "run_coupled": 0}
+    assert got["loops"] == {"run_steps": 1}  # the one step loop, once: a membrane-only scene
     on = got["on"]
     # membrane_demo: shape memory, muscle, nailed points and the volume constraint; no other term
     assert {name for name, used in on.items() if used} == {"shape_memory", "muscle", "volume"}

@@ -325,6 +325,7 @@ class Build:
         self.rows: dict = defaultdict(list)
         self.out: dict = {}
         self.schedules: list = []
+        self.schedule_keys: list = []  # (scene key, components) per schedule row: the model's controls
         self.link_vert = np.zeros(0, np.int32)
         self.moving: np.ndarray | None = None
         self.claims: list = []  # (kind, what, points) of the point constraints (claim_points)
@@ -349,6 +350,7 @@ class Build:
     def schedule(self, value, what: str, ncomp: int) -> int:
         """Row of the validated schedule `value` in the model's schedule table."""
         self.schedules.append(_sched.as_schedule(value, name=what, ncomp=ncomp))
+        self.schedule_keys.append((what, ncomp))
         return len(self.schedules) - 1
 
     def add_rows(self, **columns) -> None:

@@ -15,7 +15,7 @@ from hybrid.mesh import volume as face_volume
 from hybrid.model import compile_scene
 from hybrid.scene import Damping, Masses, Pressure, Scene, SoftVolume
 from hybrid.simulation import Simulation
-from hybrid.step import S_PRESSURE, membrane_forces, new_state
+from hybrid.step import S_PRESSURE, membrane_forces, new_control, new_state
 
 R = 0.1
 MESHES = {"icosphere": lambda: icosphere(2, R), "uv_sphere": lambda: uv_sphere(R, 24, 12)}
@@ -24,7 +24,7 @@ MESHES = {"icosphere": lambda: icosphere(2, R), "uv_sphere": lambda: uv_sphere(R
 def _forces(model, pos):
     state = new_state(model.arrays)
     state.vert_pos[:] = pos
-    membrane_forces(model.arrays, state, 0.0)
+    membrane_forces(model.arrays, state, new_control(model.arrays), 0.0)
     return state.vert_force.copy(), float(state.scal[S_PRESSURE])
 
 

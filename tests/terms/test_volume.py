@@ -20,6 +20,7 @@ import numpy as np
 import pytest
 from numba import njit
 
+from hybrid.loop import run_steps
 from hybrid.mesh import uv_sphere
 from hybrid.mesh import volume as face_volume
 from hybrid.mesh import volume_gradient as face_volume_gradient
@@ -39,7 +40,7 @@ from hybrid.scene import (
     Volume,
 )
 from hybrid.simulation import Simulation
-from hybrid.step import S_PRESSURE, membrane_forces, new_state, run_membrane
+from hybrid.step import S_PRESSURE, membrane_forces, new_control, new_state
 
 VOLUME_RTOL = 1e-12  # the issue's bound; see the module docstring for why it is reachable
 
@@ -113,12 +114,14 @@ def _face_volume(face, pos):
 
 
 @njit(error_model="numpy")
-def _steps_checking_volume(arrays, state, nstep, step0, face, v0, err):
+def _steps_checking_volume(arrays, state, control, frames, nstep, step0, face, v0, err):
     """nstep single compiled steps (the very loop Simulation.step runs, one step
     per call), recording |V - V0| / V0 after each into err[step0 + k].
     Not cached on disk: a cache would not notice changes in the core's kernels."""
+    stop = np.zeros(1, np.int64)
     for k in range(nstep):
-        if run_membrane(arrays, state, 1, step0 + k) != 1:
+        stop[0] = step0 + k + 1
+        if run_steps(arrays, state, control, stop, step0 + k, frames, None) != 1:
             return k
         err[step0 + k] = abs(_face_volume(face, state.vert_pos) - v0) / v0
     return nstep
@@ -144,7 +147,9 @@ def test_volume_exact_every_step_icosphere_10242():
     err_chunk = []
     pressure = []
     for c in range(nstep // chunk):
-        done = _steps_checking_volume(model.arrays, sim.state, chunk, c * chunk, face, v0, err)
+        done = _steps_checking_volume(
+            model.arrays, sim.state, sim.control.arrays, sim.frames_buffer(1).arrays(), chunk, c * chunk, face, v0, err
+        )
         assert done == chunk, f"step failed at {c * chunk + done}: status {sim.state.status}"
         sim.steps_done += done
         err_chunk.append(abs(face_volume(sim.vert_pos, face) - v0) / v0)
@@ -264,7 +269,7 @@ def test_soft_volume_force_is_the_attraction_to_the_volume_satisfying_points():
         state = new_state(model.arrays)
         pos = mesh.vert_pos * scale + rng.normal(scale=1e-3, size=mesh.vert_pos.shape)
         state.vert_pos[:] = pos
-        membrane_forces(model.arrays, state, 0.0)
+        membrane_forces(model.arrays, state, new_control(model.arrays), 0.0)
         phi, g = _soft_phi(pos, mesh.face_vert, mesh.volume())
         p = state.scal[S_PRESSURE]
         assert np.sign(p) == sign

@@ -1,0 +1,242 @@
+"""The one compiled step loop: the membrane alone, or coupled to MuJoCo's rigid bodies
+(paper 3.5). Every run steps through `run_steps`: by steps (one stop) or by frames,
+with or without a rigid part, with the scene's schedules or the user's controls.
+
+One step, from time t:
+1. the membrane's forces at t (`hybrid.step.membrane_forces`: only the terms the model has);
+2. with a rigid part (`rig` not None): every linked point's membrane force, plus the
+   pressure force of the last volume projection p grad_i V (how the incompressible
+   abdomen pushes on the ribs), plus its weight correction, goes to its body as a
+   wrench at its site (`xfrc_applied`); the driven actuators take their controls
+   (`mjData.ctrl`); MuJoCo steps (`mj_step2` then `mj_step1`, or `mj_step` + `mj_step1`
+   for RK4, so that the site kinematics belong to the new state; bit for bit
+   `mj_step`); the linked points take their sites' positions and velocities;
+3. the free points integrate, the local constraints and the exact volume projection
+   apply, the divergence check runs (`hybrid.step.membrane_advance`).
+
+MuJoCo stays behind its door: this module declares MuJoCo's C step functions by the
+names `hybrid.coupling` registers with LLVM when it is imported (it is, by every
+scene with a rigid part, before its first step), and a membrane-only scene passes
+`rig=None`, which prunes the rigid phases when the loop compiles: it never loads MuJoCo.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+from numba import types
+
+from .kernel import kernel
+from .schedule import schedule_eval
+from .sites import point_wrench_kernel, site_vel_kernel
+from .step import OK, S_ORIGIN, S_PRESSURE, S_TIME, capture_frame, membrane_advance, membrane_forces
+
+__all__ = ["LinkArrays", "CtrlArrays", "MjViews", "WrenchHistory", "RigidPack", "run_steps"]
+
+# MuJoCo's C step functions, by the names `hybrid.coupling` registers (module docstring)
+_SIG = types.void(types.intp, types.intp)
+_mj_step = types.ExternalFunction("hybrid_mj_step", _SIG)
+_mj_step1 = types.ExternalFunction("hybrid_mj_step1", _SIG)
+_mj_step2 = types.ExternalFunction("hybrid_mj_step2", _SIG)
+
+
+class LinkArrays(NamedTuple):
+    """The n linked points and their attachment sites, in site order.
+
+    Read: vert (n,) int32, the linked membrane vertices; site_id (n,) int64, their
+    MuJoCo sites; site_body (n,) int64, each site's body; site_root (n,) int64, the
+    root body of its kinematic tree (for `cvel`); extra_force (n, 3) N, added to each
+    point's force (the weight correction, `hybrid.coupling`).
+    Scratch: force (n, 3) N, the forces sent to the sites; vel (n, 3) m/s, the
+    sites' velocities.
+    """
+
+    vert: np.ndarray
+    site_id: np.ndarray
+    site_body: np.ndarray
+    site_root: np.ndarray
+    extra_force: np.ndarray
+    force: np.ndarray
+    vel: np.ndarray
+
+
+class CtrlArrays(NamedTuple):
+    """The actuators a scene drives (`rigid.ctrl`): act (nc,) int64, their ids;
+    sched, their schedules (`hybrid.schedule.ScheduleTable`, row j for act[j]);
+    user (nc,) uint8: 1 where the user's program sets the actuator's `ctrl`
+    (`hybrid.Control`), which the step then leaves as it is; scratch: val (3,)."""
+
+    act: np.ndarray
+    sched: object
+    user: np.ndarray
+    val: np.ndarray
+
+
+class MjViews(NamedTuple):
+    """MuJoCo's model and data as the compiled loop sees them: model_ptr, data_ptr
+    (int), the `mjModel*` and `mjData*` for the C step functions, and views of the
+    `MjData`'s own arrays (valid as long as it lives), written by MuJoCo's step:
+    site_xpos (nsite, 3) m; xipos (nbody, 3) m, the bodies' centres of mass;
+    xfrc_applied (nbody, 6) [N, N m]; cvel (nbody, 6) [rad/s, m/s]; subtree_com
+    (nbody, 3) m; qpos (nq,); xpos (nbody, 3) m and xquat (nbody, 4) (w, x, y, z),
+    the bodies' poses; ctrl (nu,), the actuators' controls."""
+
+    model_ptr: int
+    data_ptr: int
+    site_xpos: np.ndarray
+    xipos: np.ndarray
+    xfrc_applied: np.ndarray
+    cvel: np.ndarray
+    subtree_com: np.ndarray
+    qpos: np.ndarray
+    xpos: np.ndarray
+    xquat: np.ndarray
+    ctrl: np.ndarray
+
+
+class WrenchHistory(NamedTuple):
+    """Per step k of a recorded run: xfrc (nstep, nbody, 6) [N, N m], the
+    `xfrc_applied` used; qpos (nstep, nq), MuJoCo's qpos after the step. Empty
+    (nstep = 0) when not recording."""
+
+    xfrc: np.ndarray
+    qpos: np.ndarray
+
+
+class RigidPack(NamedTuple):
+    """The rigid half of a coupled loop (`hybrid.coupling.Coupling` makes it): links,
+    ctrls, mj (above); rk4: bool, MuJoCo integrates with RK4 (step with `mj_step`);
+    record: bool, keep each step's wrenches and qpos in hist."""
+
+    links: LinkArrays
+    ctrls: CtrlArrays
+    mj: MjViews
+    rk4: bool
+    record: bool
+    hist: WrenchHistory
+
+
+@kernel(inline="always")
+def rigid_phase(m, s, t, row, rig):
+    """Step phase 2 (module docstring): forces to the sites, controls, MuJoCo's step,
+    the linked points onto their sites.
+    # Model:    m (MembraneArrays); rig.links.vert, .site_id, .site_body, .site_root,
+    #           .extra_force; rig.ctrls.act, .sched, .user; rig.rk4
+    # Data in:  s.vert_force, s.grad, s.scal[S_PRESSURE] (the last projection's);
+    #           rig.mj: MuJoCo's state; t (s), the step's time; row: the step's row of rig.hist
+    # Data out: MuJoCo's state (through rig.mj.data_ptr), rig.mj.xfrc_applied,
+    #           rig.mj.ctrl[rig.ctrls.act] (the rows the user does not set); the linked
+    #           points' s.vert_pos, s.vert_vel; rig.hist.xfrc[row], .qpos[row] when rig.record
+    # Scratch:  rig.links.force, .vel, rig.ctrls.val
+    """
+    links, ctrls, mj, hist = rig.links, rig.ctrls, rig.mj, rig.hist
+    pos, vel, frc, grad = s.vert_pos, s.vert_vel, s.vert_force, s.grad
+    link_vert, site_id, link_force, link_vel = links.vert, links.site_id, links.force, links.vel
+    xfrc, qpos = mj.xfrc_applied, mj.qpos
+    p = s.scal[S_PRESSURE]
+    for j in range(link_vert.shape[0]):
+        i = link_vert[j]
+        for a in range(3):
+            link_force[j, a] = frc[i, a] + p * grad[i, a] + links.extra_force[j, a]
+    point_wrench_kernel(mj.site_xpos, mj.xipos, site_id, links.site_body, link_force, xfrc)
+    for j in range(ctrls.act.shape[0]):
+        if not ctrls.user[j]:
+            schedule_eval(ctrls.sched, j, t, ctrls.val)
+            mj.ctrl[ctrls.act[j]] = ctrls.val[0]
+    if rig.record:  # element-wise: a slice copy would allocate
+        for b in range(xfrc.shape[0]):
+            for a in range(6):
+                hist.xfrc[row, b, a] = xfrc[b, a]
+    if rig.rk4:
+        _mj_step(mj.model_ptr, mj.data_ptr)
+    else:
+        _mj_step2(mj.model_ptr, mj.data_ptr)
+    _mj_step1(mj.model_ptr, mj.data_ptr)
+    if rig.record:
+        for a in range(qpos.shape[0]):
+            hist.qpos[row, a] = qpos[a]
+    site_vel_kernel(mj.site_xpos, mj.cvel, mj.subtree_com, site_id, links.site_body, links.site_root, link_vel)
+    for j in range(link_vert.shape[0]):
+        i = link_vert[j]
+        sid = site_id[j]
+        for a in range(3):
+            pos[i, a] = mj.site_xpos[sid, a]
+            vel[i, a] = link_vel[j, a]
+
+
+@kernel
+def run_steps(
+    m,
+    s,
+    c,
+    stops,
+    step0,
+    frames,
+    rig,
+    par=True,
+    shape_memory=True,
+    membrane=True,
+    applied=True,
+    attraction=True,
+    mass_spring=True,
+    muscle=True,
+    soft_volume=True,
+    pressure=True,
+    fibres=True,
+    passive=True,
+    prescribed=True,
+    keep_in=True,
+    volume=True,
+    shake=True,
+):
+    """Steps (module docstring) to each step index of stops, capturing a frame at each
+    (a stop at the current step captures it without stepping). Returns the frames
+    captured: fewer than stops when a step fails, its status then in s.status
+    (s.status[1]: the failing step's index). Step k runs from t = origin + k h: the
+    same times however a run is cut into calls (a checkpoint, frames, timed pieces).
+    # Model:    m (MembraneArrays); rig: None (membrane only: its phases not compiled) or RigidPack
+    # Data in:  s (MembraneState) at step step0; c (ControlArrays): the inputs;
+    #           stops (nframe,) int64 increasing step indices from step0
+    # Data out: s, c.value and c.value_next (the scheduled rows), MuJoCo's state after the steps done;
+    #           frames (FrameArrays): frame i at stops[i]
+    # par:      None: the membrane's serial passes only (`hybrid.step.step_par`)
+    # switches: None for a term the model lacks, not compiled (`hybrid.step.step_switches`)
+    """
+    h = m.dt
+    origin = s.scal[S_ORIGIN]
+    done = step0
+    for f in range(stops.shape[0]):
+        for k in range(stops[f] - done):
+            t = origin + (done + k) * h
+            membrane_forces(
+                m,
+                s,
+                c,
+                t,
+                par,
+                shape_memory,
+                membrane,
+                applied,
+                attraction,
+                mass_spring,
+                muscle,
+                soft_volume,
+                pressure,
+                fibres,
+                passive,
+            )
+            if rig is not None:
+                rigid_phase(m, s, t, done - step0 + k, rig)
+            if membrane_advance(m, s, c, t, done + k, par, prescribed, keep_in, volume, shake) != OK:
+                return f
+            s.scal[S_TIME] = origin + (done + k + 1) * h
+        done = stops[f]
+        capture_frame(m, s, frames.pos[f], frames.scal[f])
+        if rig is not None:
+            for b in range(frames.body_pos.shape[1]):
+                for a in range(3):
+                    frames.body_pos[f, b, a] = rig.mj.xpos[b + 1, a]
+                for a in range(4):
+                    frames.body_quat[f, b, a] = rig.mj.xquat[b + 1, a]
+    return stops.shape[0]
