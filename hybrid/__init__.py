@@ -22,6 +22,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from pathlib import Path
 
+from .control import Control
 from .errors import ConstraintError, HybridError, MeshError, RigidError, SceneError, SimulationDiverged
 from .model import Model, compile_scene
 from .regions import All, Ball, Border, Box, Difference, HalfSpace, Indices, Intersection, Nearest, Patch, Union_, Wedge
@@ -58,6 +59,7 @@ from .scene import (
 )
 from .schedule import Breathing, Constant, Function, Table
 from .simulation import Simulation
+from .state import State
 from .sweep import sweep
 
 __all__ = [
@@ -68,6 +70,8 @@ __all__ = [
     "compile_scene",
     "Model",
     "Simulation",
+    "State",
+    "Control",
     "run",
     "read",
     "sweep",

@@ -23,9 +23,9 @@ from .state import State
 from .step import (
     DIVERGED_NONFINITE,
     S_MAXDISP,
+    S_ORIGIN,
     S_PHI,
     S_PRESSURE,
-    S_ORIGIN,
     S_TIME,
     VOLUME_FAILED,
     Frames,

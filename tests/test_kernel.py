@@ -48,7 +48,15 @@ def test_the_kernel_sources_are_the_compiling_modules_and_what_they_import(tmp_p
 
     package = _package_copy(tmp_path)
     names = {p.relative_to(package).as_posix() for p in k.kernel_sources(package)}
-    assert {"kernel.py", "terms/shape_memory.py", "terms/volume.py", "step.py", "loop.py", "sites.py", "schedule.py"} <= names
+    assert {
+        "kernel.py",
+        "terms/shape_memory.py",
+        "terms/volume.py",
+        "step.py",
+        "loop.py",
+        "sites.py",
+        "schedule.py",
+    } <= names
     assert {"errors.py", "scene.py"} <= names  # imported by kernels: their constants compile in
     assert not names & {"render.py", "cli.py", "run.py", "sweep.py", "__init__.py", "studies/cli.py"}
 
