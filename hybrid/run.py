@@ -22,6 +22,7 @@ import numpy as np
 
 from .errors import HybridError, reduce_exception
 from .loads import Loads, LoadsObserver
+from .loop import capture_frame
 from .model import Model
 from .outputs import (
     FolderLock,
@@ -38,7 +39,7 @@ from .readouts import pitch_deg, quat_rot, swept_volumes
 from .scene import Muscle, MuscleFibres, SoftVolume, Volume
 from .schedule import Breathing, schedule_eval, stack_schedules
 from .simulation import Simulation
-from .step import F_KE, F_PRESSURE, F_TIME, F_VOLUME, capture_frame
+from .step import F_KE, F_PRESSURE, F_TIME, F_VOLUME
 from .terms.volume import face_volume
 
 __all__ = [
@@ -372,7 +373,7 @@ def run(
     `observers`: called at each frame after the trace has its values (e.g.
     `hybrid.record.Recorder`); they must not change the state. An observer with a
     `frames(sim, frames, trace)` method takes the frames a compiled call captured
-    (`hybrid.step.Frames`, `frames.count` of them, the trace's last rows);
+    (`hybrid.loop.Frames`, `frames.count` of them, the trace's last rows);
     otherwise it is called as `obs(sim, trace)` at each frame, the simulation then
     stepped frame by frame. An observer with an `every_steps` attribute gets a
     frame at every multiple of that many steps, besides those `frame_dt_s` apart.

@@ -17,7 +17,7 @@ from .builds import BuildChoice
 from .control import Control
 from .errors import ConstraintError, SceneError, SimulationDiverged
 from .implicit import IMPLICIT_NOT_CONVERGED, Info
-from .loop import run_steps
+from .loop import Frames, kinetic_energy_of, run_steps
 from .model import TERMS, Model
 from .state import State
 from .step import (
@@ -28,8 +28,6 @@ from .step import (
     S_PRESSURE,
     S_TIME,
     VOLUME_FAILED,
-    Frames,
-    kinetic_energy_of,
     new_control,
     new_state,
     step_switches,

@@ -56,7 +56,6 @@ from .terms.volume import (
     PROJ_OK,
     Pressure,
     add_pressure,
-    face_volume,
     project_volume,
     soft_volume_force,
     volume_direction_parallel,
@@ -66,17 +65,13 @@ from .terms.volume import (
 __all__ = [
     "Scal",
     "StepStatus",
-    "FrameColumn",
     "MembraneState",
+    "FrameColumn",
     "new_state",
     "ControlArrays",
     "new_control",
     "membrane_forces",
     "membrane_advance",
-    "capture_frame",
-    "kinetic_energy_of",
-    "Frames",
-    "FrameArrays",
     "step_par",
     "FORCE_SWITCHES",
     "ADVANCE_SWITCHES",
@@ -578,61 +573,3 @@ class FrameColumn(IntEnum):
 
 
 F_TIME, F_VOLUME, F_PRESSURE, F_KE = FrameColumn
-
-
-@kernel(inline="always")
-def kinetic_energy_of(m, s):
-    """0.5 sum m v^2 over the integrated points (J)."""
-    ke = 0.0
-    vel = s.vert_vel
-    for i in range(vel.shape[0]):
-        if m.vert_free[i] > 0:
-            ke += m.vert_mass[i] * (vel[i, 0] * vel[i, 0] + vel[i, 1] * vel[i, 1] + vel[i, 2] * vel[i, 2])
-    return 0.5 * ke
-
-
-@kernel(inline="always")
-def capture_frame(m, s, pos_out, scal_out):
-    """The state's positions and numbers (F_* columns) into one frame's rows."""
-    pos = s.vert_pos
-    for i in range(pos.shape[0]):
-        for a in range(3):
-            pos_out[i, a] = pos[i, a]
-    scal_out[F_TIME] = s.scal[S_TIME]
-    scal_out[F_VOLUME] = face_volume(m.face_vert, pos)
-    scal_out[F_PRESSURE] = s.scal[S_PRESSURE]
-    scal_out[F_KE] = kinetic_energy_of(m, s)
-
-
-class FrameArrays(NamedTuple):
-    """Where the loop captures its frames, per frame i: pos[i] (nvert, 3) m; scal[i]
-    (`hybrid.step.FrameColumn`); body_pos[i] (nbody - 1, 3) m and body_quat[i]
-    (nbody - 1, 4) (w, x, y, z), the rigid bodies' poses, world excluded (empty
-    without a rigid part)."""
-
-    pos: np.ndarray
-    scal: np.ndarray
-    body_pos: np.ndarray
-    body_quat: np.ndarray
-
-
-class Frames:
-    """Frames captured in one compiled call (`Simulation.step_frames`): per frame,
-    pos (nvert, 3) m, scal (F_TIME s, F_VOLUME m^3, F_PRESSURE Pa, F_KE J), and the
-    rigid bodies' poses body_pos (nbody, 3) m, body_quat (nbody, 4) (w, x, y, z),
-    world excluded. `count`: the frames of the last call, also when it raised."""
-
-    def arrays(self, first: int = 0):
-        """The compiled loop's view of frames first, first + 1, ... (`hybrid.loop.FrameArrays`)."""
-        return FrameArrays(self.pos[first:], self.scal[first:], self.body_pos[first:], self.body_quat[first:])
-
-    def __init__(self, capacity: int, nvert: int, nbody: int = 0):
-        self.pos = np.zeros((capacity, nvert, 3))
-        self.scal = np.zeros((capacity, 4))
-        self.body_pos = np.zeros((capacity, nbody, 3))
-        self.body_quat = np.zeros((capacity, nbody, 4))
-        self.count = 0
-
-    @property
-    def capacity(self) -> int:
-        return len(self.pos)

@@ -25,7 +25,7 @@ LAYERS = (
     ("step", ("step", "readouts", "implicit", "implicit_matrix")),
     ("step loop", ("loop",)),
     ("coupled step", ("coupling",)),
-    ("simulation", ("simulation", "builds", "control")),
+    ("simulation", ("simulation", "builds", "control", "state")),
     ("observers", ("run", "loads", "record", "record.*", "render", "sweep", "grid", "outputs", "provenance")),
     ("public API", ("",)),  # hybrid/__init__.py
     (
