@@ -65,13 +65,13 @@ class _Decoder:
     """A chunk's messages decoded into arrays, by topic, and the arrays gathered."""
 
     def __init__(self, f: _File, wanted: set | None):
-        schemas = {name: data for name, _, data in f.schemas.values()}
+        schemas = {s.name: s.data for s in f.schemas.values()}
         try:
             self.classes = _message_classes(schemas)
         except Exception as exc:  # protobuf refuses a schema: name its error
             raise f.error(f"its schemas do not load: {type(exc).__name__}: {exc}") from None
-        self.topic = {cid: topic for cid, (topic, _, _) in f.channels.items()}
-        self.schema = {cid: f.schemas[sid][0] for cid, (_, _, sid) in f.channels.items() if sid in f.schemas}
+        self.topic = {cid: c.topic for cid, c in f.channels.items()}
+        self.schema = {cid: f.schemas[c.schema_id].name for cid, c in f.channels.items() if c.schema_id in f.schemas}
         has_points = "/membrane/points" in self.topic.values()
         if wanted is not None and "membrane" in wanted:
             wanted = wanted | {"/membrane/points" if has_points else "/membrane/mesh"}
@@ -80,13 +80,12 @@ class _Decoder:
         self.rgba: dict[str, np.ndarray] = {}
         self.bodies = None
 
-    def chunk(self, raw: bytes, msgs: list, lo: int, hi: int) -> dict[str, dict]:
-        """The chunk's messages in [lo, hi] of the wanted topics, as arrays by topic."""
-        view = memoryview(raw)
+    def chunk(self, msgs: list, lo: int, hi: int) -> dict[str, dict]:
+        """The chunk's messages (mcap's) in [lo, hi] of the wanted topics, as arrays by topic."""
         picked: dict[int, list] = {}
-        for ch, t, a, b in msgs:
-            if lo <= t <= hi:
-                picked.setdefault(ch, []).append((t, a, b))
+        for m in msgs:
+            if lo <= m.log_time <= hi:
+                picked.setdefault(m.channel_id, []).append(m)
         out = {}
         for ch, rows in picked.items():
             topic = self.topic[ch]
@@ -95,9 +94,9 @@ class _Decoder:
             if ch not in self.schema:
                 raise _Bad(f"channel {ch} ({topic}) has no schema")
             decode = self.classes[self.schema[ch]].FromString
-            t = np.array([r[0] for r in rows], np.int64) * 1e-9
+            t = np.array([m.log_time for m in rows], np.int64) * 1e-9
             try:
-                out[topic] = self._decode(topic, decode, [view[a:b] for _, a, b in rows], t)
+                out[topic] = self._decode(topic, decode, [m.data for m in rows], t)
             except Exception as exc:  # protobuf's DecodeError, or shapes that differ from frame to frame
                 raise _Bad(f"its messages of {topic} do not decode: {type(exc).__name__}: {exc}") from None
         return out
@@ -186,7 +185,7 @@ def read(
         f = _open(fh, path, strict)
         _warn_truncated(f)
         dec = _Decoder(f, wanted)
-        for decoded in _chunks(fh, f, lo, hi, strict, lambda raw, msgs: dec.chunk(raw, msgs, lo, hi)):
+        for decoded in _chunks(fh, f, lo, hi, strict, lambda msgs: dec.chunk(msgs, lo, hi)):
             dec.add(decoded)
     out = dec.result()
     every = out.get("/membrane/points") or out.get("/membrane/mesh")
@@ -215,7 +214,7 @@ def frames(
         dec = _Decoder(f, {"membrane"})
         topic = "/membrane/points" if "/membrane/points" in dec.topic.values() else "/membrane/mesh"
         dec.wanted = {topic}
-        for decoded in _chunks(fh, f, lo, hi, strict, lambda raw, msgs: dec.chunk(raw, msgs, lo, hi)):
+        for decoded in _chunks(fh, f, lo, hi, strict, lambda msgs: dec.chunk(msgs, lo, hi)):
             part = decoded.get(topic)
             if part is not None:
                 yield from zip(part["t"].tolist(), part["pos"])
