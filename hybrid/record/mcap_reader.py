@@ -1,19 +1,15 @@
 """A recording's MCAP records read back and verified, chunk by chunk, on the `mcap` library.
 
-mcap reads the structure and the records: `make_reader` the summary (schemas,
-channels, chunk and metadata indexes) and the header, `Chunk.read` and the other
-record parsers the fields, `breakup_chunk` a chunk's messages with its CRC checked.
-What it does not do is kept here: the summary's CRC (mcap does not check it); each
-chunk's header against the summary's index of it, its start and end times against
-its messages, its uncompressed size and its message indexes (mcap reads the chunk
-at the index's offset without looking at its opcode, length, times or size, and
-never reads message indexes); every field filling its record exactly (mcap's reads
-stop short at the end of the bytes without a word); errors that name the chunk,
-its time range and its byte offset (`RecordingError`, or with `strict=False` the
-chunk skipped and a `RecordingWarning`); a file without a summary (a killed run)
-scanned record by record, read up to its last complete chunk with a warning (mcap
-raises on the torn end without saying where); other writers' files refused.
-`hybrid.record.reader` decodes what these yield.
+mcap reads the summary and the header (`make_reader`), each record's fields (its
+record classes) and a chunk's messages, decompressed and their CRC checked
+(`breakup_chunk`). Kept here is what mcap does not do: the summary's CRC; each chunk
+against the summary's index of it (mcap reads the data at the index's offset without
+looking at its opcode, length, times or size), its times and size against its
+messages, its message indexes (mcap never reads them); fields that fill their record
+exactly; errors that name the chunk, its time range and byte offset (`RecordingError`,
+or with `strict=False` a `RecordingWarning` and the chunk skipped); files without a
+summary (a killed run) scanned up to their last complete chunk, with a warning; other
+writers' files refused. `hybrid.record.reader` decodes what these yield.
 """
 
 from __future__ import annotations
@@ -101,6 +97,15 @@ def _parse(op: int, body: bytes):
     return rec
 
 
+def _read_record(fh, at: int, op: int, length: int):
+    """The record at byte `at` of an index's opcode and length (with the opcode's and its own 9 bytes), by mcap."""
+    fh.seek(at)
+    got, n = struct.unpack("<BQ", fh.read(9).ljust(9, b"\0"))
+    if got != op or n != length - 9:
+        raise _Bad(f"its record has opcode {got:#04x} and length {n}, expected {op:#04x} and {length - 9}")
+    return _parse(op, fh.read(n))
+
+
 @dataclass
 class _File:
     path: Path
@@ -145,7 +150,9 @@ def _open(fh, path: Path, strict: bool) -> _File:
     head = fh.read(8)
     if head != MAGIC:
         if MAGIC.startswith(head):  # empty, or ends inside the magic: nothing recorded yet
-            return _File(path, size, truncated=f"the file ends at byte {size}, before its first record")
+            msg = f"recording {str(path)!r}: the file ends at byte {size}, before its first record"
+            warnings.warn(msg, RecordingWarning, stacklevel=3)
+            return _File(path, size)
         raise _File(path, size).error(f"not an MCAP file: it starts with {head!r}, an MCAP file with {MAGIC!r}")
     fh.seek(max(8, size - 8 - FOOTER_SIZE))
     tail = fh.read()
@@ -166,6 +173,9 @@ def _open(fh, path: Path, strict: bool) -> _File:
     if not f.chunks_indexed:
         _scan(fh, f, strict)
     _check_foreign(f)
+    if f.truncated is not None:
+        msg = f"recording {str(path)!r}: {f.truncated}; read up to its last complete chunk"
+        warnings.warn(msg, RecordingWarning, stacklevel=3)
     return f
 
 
@@ -211,13 +221,9 @@ def _read_summary(fh, f: _File) -> None:
     f.chunks_indexed = True
     for m in summary.metadata_indexes:
         if m.name == "hybrid":
-            fh.seek(m.offset)
             try:
-                op, n = struct.unpack("<BQ", fh.read(9))
-                if op != Opcode.METADATA or n != m.length - 9:
-                    raise _Bad("its opcode or length differs from the summary's index of it")
-                f.meta = _description(_parse(op, fh.read(n)), f, m.offset)
-            except (_Bad, struct.error) as exc:
+                f.meta = _description(_read_record(fh, m.offset, Opcode.METADATA, m.length), f, m.offset)
+            except _Bad as exc:
                 raise f.error(f"the metadata record at byte offset {m.offset} is corrupt: {exc}") from None
             break
 
@@ -312,34 +318,15 @@ def _end(c: ChunkIndex) -> int:
     return c.chunk_start_offset + c.chunk_length + c.message_index_length
 
 
-def _where(f: _File, i: int, c: ChunkIndex) -> str:
-    return (
-        f"chunk {i + 1} of {len(f.chunks)} (t {c.message_start_time * 1e-9:.6g} to "
-        f"{c.message_end_time * 1e-9:.6g} s, byte offset {c.chunk_start_offset})"
-    )
-
-
 def _load(fh, f: _File, c: ChunkIndex) -> list[Message]:
     """A chunk's messages (mcap's records, its CRC checked by mcap), verified against
     the index of it and its message indexes. Raises _Bad on any disagreement."""
-    fh.seek(c.chunk_start_offset)
-    op, n = struct.unpack("<BQ", fh.read(9).ljust(9, b"\0"))
-    if op != Opcode.CHUNK or n != c.chunk_length - 9:
-        raise _Bad(f"its record has opcode {op:#04x} and length {n}, expected 0x06 and {c.chunk_length - 9}")
-    chunk = _parse(op, fh.read(n))
+    chunk = _read_record(fh, c.chunk_start_offset, Opcode.CHUNK, c.chunk_length)
     head = (chunk.message_start_time, chunk.message_end_time, chunk.uncompressed_size, chunk.compression)
-    if head + (len(chunk.data),) != (
-        c.message_start_time,
-        c.message_end_time,
-        c.uncompressed_size,
-        c.compression,
-        c.compressed_size,
-    ):
-        raise _Bad(
-            f"its header (t {head[0]} to {head[1]} ns, {head[2]} bytes, {head[3]!r}, {len(chunk.data)} compressed) "
-            f"differs from the index of it (t {c.message_start_time} to {c.message_end_time} ns, "
-            f"{c.uncompressed_size} bytes, {c.compression!r}, {c.compressed_size} compressed)"
-        )
+    want = (c.message_start_time, c.message_end_time, c.uncompressed_size, c.compression, c.compressed_size)
+    if head + (len(chunk.data),) != want:
+        said = "t {} to {} ns, {} bytes, {!r}, {} compressed".format
+        raise _Bad(f"its header ({said(*head, len(chunk.data))}) differs from the index of it ({said(*want)})")
     if chunk.compression != "zstd":
         raise _Bad(f"its compression is {chunk.compression!r}, expected 'zstd'")
     try:
@@ -349,21 +336,15 @@ def _load(fh, f: _File, c: ChunkIndex) -> list[Message]:
     starts = [0, *accumulate(_MSG_BYTES + len(m.data) for m in msgs)]
     if not all(isinstance(m, Message) for m in msgs) or starts[-1] != chunk.uncompressed_size:
         raise _Bad(f"its records are not {chunk.uncompressed_size} bytes of messages, as its header says")
-    for m in msgs:
-        if m.channel_id not in f.channels:
-            raise _Bad(f"a message is on channel {m.channel_id}, which the file does not declare")
+    if unknown := {m.channel_id for m in msgs} - set(f.channels):
+        raise _Bad(f"messages are on channels {sorted(unknown)}, which the file does not declare")
     times = [m.log_time for m in msgs]
     if msgs and (min(times), max(times)) != head[:2]:
         raise _Bad(f"its messages span t {min(times)} to {max(times)} ns, its header says {head[0]} to {head[1]}")
     by_channel: dict[int, list] = {}
     for m, start in zip(msgs, starts):
         by_channel.setdefault(m.channel_id, []).append((m.log_time, start))
-    _check_message_index(fh, c, by_channel, partial=f.partial == c.chunk_start_offset)
-    return msgs
-
-
-def _check_message_index(fh, c: ChunkIndex, by_channel: dict, partial: bool) -> None:
-    """The chunk's message indexes (mcap's records) list each of its messages: (log time, offset), by channel."""
+    # its message indexes (mcap's records) list each of its messages: (log time, offset), by channel
     at = c.chunk_start_offset + c.chunk_length
     fh.seek(at)
     raw, k, indexed = fh.read(c.message_index_length), 0, {}
@@ -379,11 +360,12 @@ def _check_message_index(fh, c: ChunkIndex, by_channel: dict, partial: bool) -> 
             )
         indexed[idx.channel_id] = sorted(idx.records, key=lambda r: r[1])
         k += 9 + n
-    if not partial and set(indexed) != set(by_channel):
+    if f.partial != c.chunk_start_offset and set(indexed) != set(by_channel):
         raise _Bad(f"its message indexes are of channels {sorted(indexed)}, its messages of {sorted(by_channel)}")
     for ch, records in indexed.items():
         if records != by_channel.get(ch, []):
             raise _Bad(f"its message index of channel {ch} differs from its messages")
+    return msgs
 
 
 def _chunks(fh, f: _File, lo_ns: int, hi_ns: int, strict: bool, decode) -> Iterator:
@@ -395,18 +377,12 @@ def _chunks(fh, f: _File, lo_ns: int, hi_ns: int, strict: bool, decode) -> Itera
         try:
             out = decode(_load(fh, f, c))
         except _Bad as exc:
-            what = f"{_where(f, i, c)} is corrupt: {exc}"
+            t_lo, t_hi, at = c.message_start_time * 1e-9, c.message_end_time * 1e-9, c.chunk_start_offset
+            what = (
+                f"chunk {i + 1} of {len(f.chunks)} (t {t_lo:.6g} to {t_hi:.6g} s, byte offset {at}) is corrupt: {exc}"
+            )
             if strict:
                 raise f.error(what + "; read with strict=False to skip it") from None
             warnings.warn(f"recording {str(f.path)!r}: {what}; skipped", RecordingWarning, stacklevel=3)
             continue
         yield out
-
-
-def _warn_truncated(f: _File) -> None:
-    if f.truncated is not None:
-        warnings.warn(
-            f"recording {str(f.path)!r}: {f.truncated}; read up to its last complete chunk",
-            RecordingWarning,
-            stacklevel=3,
-        )

@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import HybridError
-from .mcap_reader import RecordingError, RecordingWarning, _Bad, _chunks, _File, _open, _warn_truncated
+from .mcap_reader import RecordingError, RecordingWarning, _Bad, _chunks, _File, _open
 from .schemas import SCALAR_CHANNELS, _message_classes
 
 __all__ = ["read", "frames", "RecordingError", "RecordingWarning", "TOPICS"]
@@ -183,7 +183,6 @@ def read(
     wanted = _topics(topics)
     with open(path, "rb") as fh:
         f = _open(fh, path, strict)
-        _warn_truncated(f)
         dec = _Decoder(f, wanted)
         for decoded in _chunks(fh, f, lo, hi, strict, lambda msgs: dec.chunk(msgs, lo, hi)):
             dec.add(decoded)
@@ -210,7 +209,6 @@ def frames(
     lo, hi = _window(t_s)
     with open(path, "rb") as fh:
         f = _open(fh, path, strict)
-        _warn_truncated(f)
         dec = _Decoder(f, {"membrane"})
         topic = "/membrane/points" if "/membrane/points" in dec.topic.values() else "/membrane/mesh"
         dec.wanted = {topic}
