@@ -1,8 +1,8 @@
 """A recording's MCAP records read back and verified, chunk by chunk, on the `mcap` library.
 
 mcap reads the summary and the header (`make_reader`), each record's fields (its
-record classes) and a chunk's messages, decompressed and their CRC checked
-(`breakup_chunk`). Kept here is what mcap does not do: the summary's CRC; each chunk
+record classes) and a chunk's data, decompressed and its CRC checked
+(`get_chunk_data_stream`). Kept here is what mcap does not do: the summary's CRC; each chunk
 against the summary's index of it (mcap reads the data at the index's offset without
 looking at its opcode, length, times or size), its times and size against its
 messages, its message indexes (mcap never reads them); fields that fill their record
@@ -21,7 +21,6 @@ import warnings
 import zlib
 from collections.abc import Iterator
 from dataclasses import dataclass, field
-from itertools import accumulate
 from pathlib import Path
 
 import numpy as np
@@ -30,8 +29,8 @@ from mcap.data_stream import ReadDataStream
 from mcap.exceptions import EndOfFile, McapError
 from mcap.opcode import Opcode
 from mcap.reader import FOOTER_SIZE, make_reader
-from mcap.records import Channel, Chunk, ChunkIndex, DataEnd, Header, Message, MessageIndex, Metadata, Schema
-from mcap.stream_reader import breakup_chunk
+from mcap.records import Channel, Chunk, ChunkIndex, DataEnd, Header, MessageIndex, Metadata, Schema
+from mcap.stream_reader import get_chunk_data_stream
 from mcap.writer import MCAP0_MAGIC as MAGIC
 
 from ..errors import HybridError
@@ -49,7 +48,7 @@ _PARSE = {
     Opcode.DATA_END: DataEnd.read,
 }
 _PREFIX_MAX = 4096  # a chunk's fields before its data fit in this (hybrid's compression name is short)
-_MSG_BYTES = 9 + 22  # a message record's opcode, length, channel, sequence and two times
+_MSG = struct.Struct("<BQHIQQ")  # a message record's opcode, length, channel, sequence, log and publish times
 
 
 class RecordingError(HybridError, ValueError):
@@ -318,9 +317,10 @@ def _end(c: ChunkIndex) -> int:
     return c.chunk_start_offset + c.chunk_length + c.message_index_length
 
 
-def _load(fh, f: _File, c: ChunkIndex) -> list[Message]:
-    """A chunk's messages (mcap's records, its CRC checked by mcap), verified against
-    the index of it and its message indexes. Raises _Bad on any disagreement."""
+def _load(fh, f: _File, c: ChunkIndex) -> tuple[bytes, list]:
+    """A chunk's records (decompressed, their CRC checked, by mcap) and its messages as
+    (channel, log time ns, start, end) in them, verified against the index of it and its
+    message indexes. Raises _Bad on any disagreement."""
     chunk = _read_record(fh, c.chunk_start_offset, Opcode.CHUNK, c.chunk_length)
     head = (chunk.message_start_time, chunk.message_end_time, chunk.uncompressed_size, chunk.compression)
     want = (c.message_start_time, c.message_end_time, c.uncompressed_size, c.compression, c.compressed_size)
@@ -330,52 +330,62 @@ def _load(fh, f: _File, c: ChunkIndex) -> list[Message]:
     if chunk.compression != "zstd":
         raise _Bad(f"its compression is {chunk.compression!r}, expected 'zstd'")
     try:
-        msgs = breakup_chunk(chunk, validate_crc=True)
-    except (McapError, ValueError, struct.error, zstandard.ZstdError, MemoryError, OverflowError) as exc:
-        raise _Bad(f"its records do not read: {type(exc).__name__}: {exc}") from None
-    starts = [0, *accumulate(_MSG_BYTES + len(m.data) for m in msgs)]
-    if not all(isinstance(m, Message) for m in msgs) or starts[-1] != chunk.uncompressed_size:
-        raise _Bad(f"its records are not {chunk.uncompressed_size} bytes of messages, as its header says")
-    if unknown := {m.channel_id for m in msgs} - set(f.channels):
+        stream, size = get_chunk_data_stream(chunk, validate_crc=True)
+    except (McapError, ValueError, zstandard.ZstdError, MemoryError, OverflowError) as exc:
+        raise _Bad(f"its data does not read: {type(exc).__name__}: {exc}") from None
+    raw = stream.read(size)
+    if size != chunk.uncompressed_size:
+        raise _Bad(f"its records are {size} bytes, its header says {chunk.uncompressed_size}")
+    msgs, k = [], 0  # split here, not by mcap's breakup_chunk: a Message object a message reads 1.5 times slower
+    while k < size:
+        op, n, ch, _, t, _ = _MSG.unpack_from(raw.ljust(k + _MSG.size, b"\0"), k)
+        if op != Opcode.MESSAGE or n < 22 or k + 9 + n > size:
+            raise _Bad(f"the record at byte {k} of its records (opcode {op:#04x}, length {n}) is not a message in it")
+        msgs.append((ch, t, k + _MSG.size, k + 9 + n))
+        k += 9 + n
+    if unknown := {m[0] for m in msgs} - set(f.channels):
         raise _Bad(f"messages are on channels {sorted(unknown)}, which the file does not declare")
-    times = [m.log_time for m in msgs]
+    times = [m[1] for m in msgs]
     if msgs and (min(times), max(times)) != head[:2]:
         raise _Bad(f"its messages span t {min(times)} to {max(times)} ns, its header says {head[0]} to {head[1]}")
-    by_channel: dict[int, list] = {}
-    for m, start in zip(msgs, starts):
-        by_channel.setdefault(m.channel_id, []).append((m.log_time, start))
-    # its message indexes (mcap's records) list each of its messages: (log time, offset), by channel
+    # its message indexes list each of its messages: (log time, offset), by channel
     at = c.chunk_start_offset + c.chunk_length
     fh.seek(at)
-    raw, k, indexed = fh.read(c.message_index_length), 0, {}
-    while k < len(raw):
-        op, n = struct.unpack_from("<BQ", raw.ljust(k + 9, b"\0"), k)
+    raw_index, k, indexed = fh.read(c.message_index_length), 0, {}
+    while k < len(raw_index):
+        op, n = struct.unpack_from("<BQ", raw_index.ljust(k + 9, b"\0"), k)
         if op != Opcode.MESSAGE_INDEX:
             raise _Bad(f"its message index at byte offset {at + k} has opcode {op:#04x}")
-        idx = _parse(op, raw[k + 9 : k + 9 + n])
-        if c.message_index_offsets.get(idx.channel_id) != at + k:
+        ch, m = struct.unpack_from("<HI", raw_index.ljust(k + 15, b"\0"), k + 9)  # numpy, not mcap's entry by entry
+        if m != n - 6 or m % 16 or k + 9 + n > len(raw_index):
+            raise _Bad(f"its message index at byte offset {at + k} is malformed")
+        if c.message_index_offsets.get(ch) != at + k:
             raise _Bad(
-                f"its message index of channel {idx.channel_id} is at byte offset {at + k}, the index of the "
-                f"chunk says {c.message_index_offsets.get(idx.channel_id)}"
+                f"its message index of channel {ch} is at byte offset {at + k}, the index of the chunk says "
+                f"{c.message_index_offsets.get(ch)}"
             )
-        indexed[idx.channel_id] = sorted(idx.records, key=lambda r: r[1])
+        indexed[ch] = np.frombuffer(raw_index, "<u8", m // 8, k + 15).reshape(-1, 2)
         k += 9 + n
+    by_channel: dict[int, list] = {}
+    for ch, t, start, _ in msgs:
+        by_channel.setdefault(ch, []).append((t, start - _MSG.size))
     if f.partial != c.chunk_start_offset and set(indexed) != set(by_channel):
         raise _Bad(f"its message indexes are of channels {sorted(indexed)}, its messages of {sorted(by_channel)}")
     for ch, records in indexed.items():
-        if records != by_channel.get(ch, []):
+        have = np.array(by_channel.get(ch, []), np.uint64).reshape(-1, 2)
+        if not np.array_equal(records[np.argsort(records[:, 1], kind="stable")], have):
             raise _Bad(f"its message index of channel {ch} differs from its messages")
-    return msgs
+    return raw, msgs
 
 
 def _chunks(fh, f: _File, lo_ns: int, hi_ns: int, strict: bool, decode) -> Iterator:
-    """decode(messages) of each chunk overlapping [lo_ns, hi_ns], verified, in file
+    """decode(records, messages) of each chunk overlapping [lo_ns, hi_ns], verified, in file
     order; in salvage, the corrupt ones skipped with a warning."""
     for i, c in enumerate(f.chunks):
         if c.message_end_time < lo_ns or c.message_start_time > hi_ns:
             continue
         try:
-            out = decode(_load(fh, f, c))
+            out = decode(*_load(fh, f, c))
         except _Bad as exc:
             t_lo, t_hi, at = c.message_start_time * 1e-9, c.message_end_time * 1e-9, c.chunk_start_offset
             what = (

@@ -80,12 +80,13 @@ class _Decoder:
         self.rgba: dict[str, np.ndarray] = {}
         self.bodies = None
 
-    def chunk(self, msgs: list, lo: int, hi: int) -> dict[str, dict]:
-        """The chunk's messages (mcap's) in [lo, hi] of the wanted topics, as arrays by topic."""
+    def chunk(self, raw: bytes, msgs: list, lo: int, hi: int) -> dict[str, dict]:
+        """The chunk's messages in [lo, hi] of the wanted topics, as arrays by topic."""
+        view = memoryview(raw)
         picked: dict[int, list] = {}
-        for m in msgs:
-            if lo <= m.log_time <= hi:
-                picked.setdefault(m.channel_id, []).append(m)
+        for ch, t, a, b in msgs:
+            if lo <= t <= hi:
+                picked.setdefault(ch, []).append((t, a, b))
         out = {}
         for ch, rows in picked.items():
             topic = self.topic[ch]
@@ -94,9 +95,9 @@ class _Decoder:
             if ch not in self.schema:
                 raise _Bad(f"channel {ch} ({topic}) has no schema")
             decode = self.classes[self.schema[ch]].FromString
-            t = np.array([m.log_time for m in rows], np.int64) * 1e-9
+            t = np.array([r[0] for r in rows], np.int64) * 1e-9
             try:
-                out[topic] = self._decode(topic, decode, [m.data for m in rows], t)
+                out[topic] = self._decode(topic, decode, [view[a:b] for _, a, b in rows], t)
             except Exception as exc:  # protobuf's DecodeError, or shapes that differ from frame to frame
                 raise _Bad(f"its messages of {topic} do not decode: {type(exc).__name__}: {exc}") from None
         return out
@@ -184,7 +185,7 @@ def read(
     with open(path, "rb") as fh:
         f = _open(fh, path, strict)
         dec = _Decoder(f, wanted)
-        for decoded in _chunks(fh, f, lo, hi, strict, lambda msgs: dec.chunk(msgs, lo, hi)):
+        for decoded in _chunks(fh, f, lo, hi, strict, lambda raw, msgs: dec.chunk(raw, msgs, lo, hi)):
             dec.add(decoded)
     out = dec.result()
     every = out.get("/membrane/points") or out.get("/membrane/mesh")
@@ -212,7 +213,7 @@ def frames(
         dec = _Decoder(f, {"membrane"})
         topic = "/membrane/points" if "/membrane/points" in dec.topic.values() else "/membrane/mesh"
         dec.wanted = {topic}
-        for decoded in _chunks(fh, f, lo, hi, strict, lambda msgs: dec.chunk(msgs, lo, hi)):
+        for decoded in _chunks(fh, f, lo, hi, strict, lambda raw, msgs: dec.chunk(raw, msgs, lo, hi)):
             part = decoded.get(topic)
             if part is not None:
                 yield from zip(part["t"].tolist(), part["pos"])
