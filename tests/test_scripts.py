@@ -117,7 +117,6 @@ def test_own_mesh_scene(tmp_path, monkeypatch):
 
 
 def test_third_party_mjcf(tmp_path, monkeypatch):
-    pytest.importorskip("gymnasium", reason="gymnasium ships the humanoid.xml (hybrid[test])")
     assert _run("third_party_mjcf", tmp_path, monkeypatch) == 0
     _figure_drawn(tmp_path / "third_party.png")
     rows = _table(tmp_path / "third_party.csv")
