@@ -157,7 +157,7 @@ def _run_into(args, sim, duration: float, out: Path, provenance: dict) -> int:
     if s["status"] == "interrupted":
         return _interrupted(caught, sim, out)
     print(
-        f"{s['scene']}: {s['steps']} steps of {s['dt']:g} s in {s['wall_s']:.2f} s "
+        f"{s['scene']} ({s['mesh_points']}-point mesh): {s['steps']} steps of {s['dt']:g} s in {s['wall_s']:.2f} s "
         f"({s['us_per_step']:.1f} us/step); {_metrics_line(s)} -> {out}"
     )
     return 0

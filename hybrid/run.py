@@ -537,6 +537,7 @@ def run(
     wall = time.perf_counter() - wall0
     summary = {
         "scene": model.scene.name,
+        "mesh_points": model.nvert,
         "status": "ok" if error is None and interrupted is None else "failed" if error else "interrupted",
         "steps": sim.steps_done,
         "dt": h,

@@ -191,3 +191,20 @@ def test_every_command_taking_a_scene_lists_every_packaged_scene_in_its_help(cap
         text = " ".join(capsys.readouterr().out.split())  # argparse wraps its lines
         missing = [name for name in listed if f" {name}," not in text and f" {name} " not in text]
         assert not missing, (command, missing)
+
+
+def test_the_summary_says_the_meshs_point_count(tmp_path, capsys):
+    """Issue 29, item 6: summary.json and the printed line name the mesh's point count,
+    the recording's own (two meshes, so that the figure is read, not assumed)."""
+    seen = []
+    for level in ("0", "1"):
+        out = tmp_path / level
+        capsys.readouterr()
+        argv = ["run", "membrane_demo", "--duration", "0.02", "--set", f"mesh.level={level}", "--out", str(out)]
+        assert main(argv) == 0
+        printed = capsys.readouterr().out
+        points = read(out / "run.mcap")["membrane"]["pos"].shape[1]
+        assert json.loads((out / "summary.json").read_text())["mesh_points"] == points
+        assert printed.startswith(f"membrane_demo ({points}-point mesh): ")
+        seen.append(points)
+    assert seen[0] < seen[1]
