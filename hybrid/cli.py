@@ -157,7 +157,7 @@ def _run_into(args, sim, duration: float, out: Path, provenance: dict) -> int:
     if s["status"] == "interrupted":
         return _interrupted(caught, sim, out)
     print(
-        f"{s['scene']}: {s['steps']} steps of {s['dt']:g} s in {s['wall_s']:.2f} s "
+        f"{s['scene']} ({s['mesh_points']}-point mesh): {s['steps']} steps of {s['dt']:g} s in {s['wall_s']:.2f} s "
         f"({s['us_per_step']:.1f} us/step); {_metrics_line(s)} -> {out}"
     )
     return 0
@@ -277,10 +277,14 @@ def _cmd_study(args) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from .resolve import DEFAULT_SCENE, scene_names
+
+    # the scenes a name stands for, read off the package (as the unknown-name error lists them)
+    named = f"a scene TOML file, or a built-in name: {', '.join(scene_names())} (default: {DEFAULT_SCENE})"
     p = _Parser(prog="hybrid", description="Breathing trunk: MuJoCo ribs coupled to a volume-preserving membrane.")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
     r = sub.add_parser("run", help="run a scene (default: the built-in breathing trunk)")
-    r.add_argument("scene", nargs="?", help="a scene TOML file, or a built-in name: breathing, membrane_demo")
+    r.add_argument("scene", nargs="?", help=named)
     r.add_argument("--duration", type=float, help="simulated time (s); default: the scene's")
     r.add_argument("--dt", type=float, help="time step (s); default: the scene's")
     r.add_argument("--out", help="output folder (default runs/SCENE, or runs/SCENE-2, -3, ... when it holds a run)")
@@ -299,7 +303,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     r.set_defaults(func=_cmd_run)
     d = sub.add_parser("render", help="draw rest, peak inspiration and end of expiration (figure 4) headless")
-    d.add_argument("source", nargs="?", help="a run.mcap recording, or a scene to run (default: breathing)")
+    d.add_argument("source", nargs="?", help=f"a run.mcap recording, or {named}")
     d.add_argument("--out", required=True, help="output folder: figure4.png (and run.mp4)")
     d.add_argument("--video", action="store_true", help="also an MP4 of the run (needs pip install -e .[video])")
     d.add_argument("--duration", type=_positive_float, help="simulated time when running a scene (s)")
@@ -307,11 +311,11 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a scene value, e.g. dt_s=5e-4")
     d.set_defaults(func=_cmd_render)
     v = sub.add_parser("view", help="run a scene live in MuJoCo's viewer (needs a display)")
-    v.add_argument("scene", nargs="?", help="a scene TOML file, or a built-in name (default: breathing)")
+    v.add_argument("scene", nargs="?", help=named)
     v.add_argument("--duration", type=_positive_float, help="simulated time (s); default: the scene's")
     v.set_defaults(func=_cmd_view)
     w = sub.add_parser("sweep", help="run a scene over a grid of --set values in parallel: a table and a plot")
-    w.add_argument("scene", nargs="?", help="a scene TOML file, or a built-in name (default: breathing)")
+    w.add_argument("scene", nargs="?", help=named)
     w.add_argument("--set", action="append", metavar="KEY=V1,V2,...", help="a swept key and its values")
     w.add_argument("--without", action="append", metavar="NAME", help="drop a force term or constraint by name")
     w.add_argument("--duration", type=_positive_float, help="simulated time of each run (s); default: the scene's")

@@ -538,6 +538,7 @@ def run(
     wall = time.perf_counter() - wall0
     summary = {
         "scene": model.scene.name,
+        "mesh_points": model.nvert,
         "status": "ok" if error is None and interrupted is None else "failed" if error else "interrupted",
         "steps": sim.steps_done,
         "dt": h,
@@ -606,21 +607,44 @@ class RunInterrupted(KeyboardInterrupt):
 
 
 class _Progress:
-    """A one-line progress bar on stderr, only on a terminal."""
+    """The run's progress on stderr: a one-line bar redrawn on a terminal; in a Jupyter
+    kernel (its stderr is no terminal, yet shown under the cell) a display updated in
+    place at most twice a second with IPython, else a plain line each tenth of the run;
+    elsewhere (a pipe, a log file) nothing."""
 
     def __init__(self, total: int):
         self.total = max(total, 1)
+        self.t0 = self.shown_t = time.perf_counter()
         self.tty = sys.stderr.isatty()
-        self.t0 = time.perf_counter()
+        self.notebook = not self.tty and "ipykernel" in sys.modules
+        self.handle = None
+        self.tenths = -1  # the last tenth written as a plain line
+        if self.notebook:
+            try:
+                from IPython.display import Pretty, display
+
+                self.pretty, self.handle = Pretty, display(Pretty(self._text(0)), display_id=True)
+            except ImportError:  # a kernel without IPython's display: plain lines
+                pass
+
+    def _text(self, done: int) -> str:
+        frac = done / self.total
+        n = int(30 * min(frac, 1.0))
+        return f"[{'#' * n}{'.' * (30 - n)}] {100 * frac:5.1f}%  {time.perf_counter() - self.t0:6.1f} s"
 
     def update(self, done: int) -> None:
-        if not self.tty:
-            return
-        frac = done / self.total
-        n = int(30 * frac)
-        el = time.perf_counter() - self.t0
-        sys.stderr.write(f"\r[{'#' * n}{'.' * (30 - n)}] {100 * frac:5.1f}%  {el:6.1f} s")
-        sys.stderr.flush()
+        if self.tty:
+            sys.stderr.write(f"\r{self._text(done)}")
+            sys.stderr.flush()
+        elif self.handle is not None:
+            now = time.perf_counter()
+            if now - self.shown_t >= 0.5 or done >= self.total:  # a modest rate: the kernel sends each update
+                self.handle.update(self.pretty(self._text(done)))
+                self.shown_t = now
+        elif self.notebook and 10 * done // self.total > self.tenths:
+            self.tenths = 10 * done // self.total
+            sys.stderr.write(self._text(done) + "\n")
+            sys.stderr.flush()
 
     def close(self) -> None:
         if self.tty:

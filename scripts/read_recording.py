@@ -21,12 +21,10 @@ from _common import parse, pyplot, write_table
 import hybrid
 
 
-def make_recording(out: Path, scene: str, duration_s: float) -> Path:
-    """A run.mcap from the command line, in out/run."""
-    subprocess.run(
-        [sys.executable, "-m", "hybrid", "run", scene, "--duration", str(duration_s), "--out", str(out / "run")],
-        check=True,
-    )
+def make_recording(out: Path, scene: str, duration_s: float, overwrite: bool = False) -> Path:
+    """A run.mcap from the command line, in out/run (replacing an earlier one there with `overwrite`)."""
+    command = [sys.executable, "-m", "hybrid", "run", scene, "--duration", str(duration_s), "--out", str(out / "run")]
+    subprocess.run(command + ["--overwrite"] * overwrite, check=True)
     return out / "run" / "run.mcap"
 
 
@@ -40,7 +38,7 @@ def main(argv=None) -> int:
             p.add_argument("--scene", default="breathing", help="the scene to record when no --recording is given"),
         ),
     )
-    path = args.recording or make_recording(args.out, args.scene, 0.3 if args.quick else 4.0)
+    path = args.recording or make_recording(args.out, args.scene, 0.3 if args.quick else 4.0, args.overwrite)
     data = hybrid.read(path)
     scalars = sorted(k for k, v in data.items() if k.startswith("/") and isinstance(v, dict) and "value" in v)
     rows = []

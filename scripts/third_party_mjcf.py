@@ -1,6 +1,6 @@
 """The membrane combined with a third-party MJCF model: an abdomen under the torso of
-MuJoCo's humanoid (the humanoid.xml that gymnasium ships), its top ring riding on the
-torso.
+MuJoCo's humanoid (tests/data/humanoid.xml, the copy gymnasium ships, MIT), its top
+ring riding on the torso.
 
     python scripts/third_party_mjcf.py [--mjcf humanoid.xml] [--duration 1] [--out DIR] [--quick]
 
@@ -12,8 +12,6 @@ membrane's centroid height and its volume error at a few times) and third_party.
 
 from __future__ import annotations
 
-import importlib.util
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -24,13 +22,7 @@ import hybrid
 CENTRE_M = (0.0, 0.0, 1.12)  # under the humanoid's torso at its initial pose
 
 
-def humanoid_xml() -> Path | None:
-    """gymnasium's copy of MuJoCo's humanoid.xml, if gymnasium is installed."""
-    spec = importlib.util.find_spec("gymnasium")
-    if spec is None or spec.origin is None:
-        return None
-    path = Path(spec.origin).parent / "envs" / "mujoco" / "assets" / "humanoid.xml"
-    return path if path.is_file() else None
+HUMANOID_XML = Path(__file__).resolve().parents[1] / "tests" / "data" / "humanoid.xml"
 
 
 def scene(mjcf: Path) -> hybrid.Scene:
@@ -59,14 +51,11 @@ def main(argv=None) -> int:
         argv,
         "third_party_mjcf",
         lambda p: (
-            p.add_argument("--mjcf", type=Path, default=None, help="the MJCF file (default: gymnasium's humanoid.xml)"),
+            p.add_argument("--mjcf", type=Path, default=None, help="the MJCF file (default: tests/data/humanoid.xml)"),
             p.add_argument("--duration", type=float, default=1.0, help="simulated time (s)"),
         ),
     )
-    mjcf = args.mjcf or humanoid_xml()
-    if mjcf is None:
-        sys.stderr.write("third_party_mjcf: no humanoid.xml: pip install gymnasium (or hybrid[test]), or give --mjcf\n")
-        return 2
+    mjcf = args.mjcf or HUMANOID_XML
     duration = 0.2 if args.quick else args.duration
     sim = hybrid.load(scene(mjcf))
     torso = sim.mj_model.body("torso").id

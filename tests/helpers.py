@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+from pathlib import Path
 
 import numpy as np
 
@@ -14,6 +15,9 @@ from hybrid.regions import HalfSpace
 from hybrid.scene import Damping, Gravity, Masses, MeshSpec, Nailed, Scene, ShapeMemory, Volume
 
 EPS = np.finfo(float).eps
+
+# MuJoCo's humanoid, an MJCF model written by others (vendored from gymnasium, MIT: humanoid.xml.LICENSE)
+HUMANOID_XML = Path(__file__).parent / "data" / "humanoid.xml"
 
 
 # ----------------------------------------------------------------- scenes

@@ -175,3 +175,36 @@ def test_no_record_and_record_every(tmp_path):
         main(["run", "membrane_demo", "--duration", "0.1", "--out", str(tmp_path / "b"), "--record-every", "0.05"]) == 0
     )
     np.testing.assert_allclose(read(tmp_path / "b" / "run.mcap")["/pressure"]["t"], [0.0, 0.05, 0.1], atol=1e-9)
+
+
+def test_every_command_taking_a_scene_lists_every_packaged_scene_in_its_help(capsys):
+    """Issue 29, item 6: `hybrid run --help` named two scenes where the unknown-name
+    error names every one; the help now lists what the error lists, read off the package."""
+    assert main(["run", "no_such_scene"]) == 2
+    err = capsys.readouterr().err
+    listed = err.rsplit("one of: ", 1)[1].strip().split(", ")
+    assert len(listed) >= 4 and "myotorso_breathing" in listed  # a packaged scene file the help did not name
+    for command in ("run", "view", "sweep", "render"):
+        with pytest.raises(SystemExit) as exc:
+            main([command, "--help"])
+        assert exc.value.code == 0
+        text = " ".join(capsys.readouterr().out.split())  # argparse wraps its lines
+        missing = [name for name in listed if f" {name}," not in text and f" {name} " not in text]
+        assert not missing, (command, missing)
+
+
+def test_the_summary_says_the_meshs_point_count(tmp_path, capsys):
+    """Issue 29, item 6: summary.json and the printed line name the mesh's point count,
+    the recording's own (two meshes, so that the figure is read, not assumed)."""
+    seen = []
+    for level in ("0", "1"):
+        out = tmp_path / level
+        capsys.readouterr()
+        argv = ["run", "membrane_demo", "--duration", "0.02", "--set", f"mesh.level={level}", "--out", str(out)]
+        assert main(argv) == 0
+        printed = capsys.readouterr().out
+        points = read(out / "run.mcap")["membrane"]["pos"].shape[1]
+        assert json.loads((out / "summary.json").read_text())["mesh_points"] == points
+        assert printed.startswith(f"membrane_demo ({points}-point mesh): ")
+        seen.append(points)
+    assert seen[0] < seen[1]

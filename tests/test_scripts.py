@@ -117,7 +117,6 @@ def test_own_mesh_scene(tmp_path, monkeypatch):
 
 
 def test_third_party_mjcf(tmp_path, monkeypatch):
-    pytest.importorskip("gymnasium", reason="gymnasium ships the humanoid.xml (hybrid[test])")
     assert _run("third_party_mjcf", tmp_path, monkeypatch) == 0
     _figure_drawn(tmp_path / "third_party.png")
     rows = _table(tmp_path / "third_party.csv")
@@ -164,3 +163,30 @@ def test_dask_sweep(tmp_path, monkeypatch):
     rows = _table(tmp_path / "dask_sweep.csv")
     assert len(rows) == 2 and not any(r["error"] for r in rows)
     assert all(float(r["apex_descent_mm"]) > 0 for r in rows)
+
+
+def test_a_script_refuses_an_output_folder_that_holds_files_unless_overwrite(tmp_path, monkeypatch, capsys):
+    """Issue 29, item 6: the scripts overwrote runs/scripts/NAME silently; like `hybrid run
+    --out`, a folder that holds files is refused in one line (status 2), untouched,
+    unless --overwrite."""
+    mine = tmp_path / "rigid_vs_mujoco.png"
+    mine.write_bytes(b"an earlier figure")
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as exc:
+        _run("rigid_vs_mujoco", tmp_path, monkeypatch)
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("rigid_vs_mujoco: error: --out: ") and "--overwrite" in err
+    assert list(tmp_path.iterdir()) == [mine] and mine.read_bytes() == b"an earlier figure"
+    assert _run("rigid_vs_mujoco", tmp_path, monkeypatch, "--overwrite") == 0
+    _figure_drawn(mine)  # replaced by the new figure
+    # the default folder too: a second run in the same place is refused
+    monkeypatch.chdir(tmp_path)
+    spec = importlib.util.spec_from_file_location("script_rigid_vs_mujoco_default", SCRIPTS / "rigid_vs_mujoco.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    (tmp_path / "runs" / "scripts" / "rigid_vs_mujoco").mkdir(parents=True)
+    (tmp_path / "runs" / "scripts" / "rigid_vs_mujoco" / "rigid_vs_mujoco.csv").write_text("earlier\n")
+    with pytest.raises(SystemExit) as exc:
+        module.main(["--quick"])
+    assert exc.value.code == 2 and "runs/scripts/rigid_vs_mujoco" in capsys.readouterr().err

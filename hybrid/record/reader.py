@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import HybridError
-from .mcap_reader import RecordingError, RecordingWarning, _Bad, _chunks, _File, _open, _warn_truncated
+from .mcap_reader import RecordingError, RecordingWarning, _Bad, _chunks, _File, _open
 from .schemas import SCALAR_CHANNELS, _message_classes
 
 __all__ = ["read", "frames", "RecordingError", "RecordingWarning", "TOPICS"]
@@ -65,13 +65,13 @@ class _Decoder:
     """A chunk's messages decoded into arrays, by topic, and the arrays gathered."""
 
     def __init__(self, f: _File, wanted: set | None):
-        schemas = {name: data for name, _, data in f.schemas.values()}
+        schemas = {s.name: s.data for s in f.schemas.values()}
         try:
             self.classes = _message_classes(schemas)
         except Exception as exc:  # protobuf refuses a schema: name its error
             raise f.error(f"its schemas do not load: {type(exc).__name__}: {exc}") from None
-        self.topic = {cid: topic for cid, (topic, _, _) in f.channels.items()}
-        self.schema = {cid: f.schemas[sid][0] for cid, (_, _, sid) in f.channels.items() if sid in f.schemas}
+        self.topic = {cid: c.topic for cid, c in f.channels.items()}
+        self.schema = {cid: f.schemas[c.schema_id].name for cid, c in f.channels.items() if c.schema_id in f.schemas}
         has_points = "/membrane/points" in self.topic.values()
         if wanted is not None and "membrane" in wanted:
             wanted = wanted | {"/membrane/points" if has_points else "/membrane/mesh"}
@@ -184,7 +184,6 @@ def read(
     wanted = _topics(topics)
     with open(path, "rb") as fh:
         f = _open(fh, path, strict)
-        _warn_truncated(f)
         dec = _Decoder(f, wanted)
         for decoded in _chunks(fh, f, lo, hi, strict, lambda raw, msgs: dec.chunk(raw, msgs, lo, hi)):
             dec.add(decoded)
@@ -211,7 +210,6 @@ def frames(
     lo, hi = _window(t_s)
     with open(path, "rb") as fh:
         f = _open(fh, path, strict)
-        _warn_truncated(f)
         dec = _Decoder(f, {"membrane"})
         topic = "/membrane/points" if "/membrane/points" in dec.topic.values() else "/membrane/mesh"
         dec.wanted = {topic}

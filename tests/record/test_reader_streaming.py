@@ -44,7 +44,7 @@ def loads(monkeypatch):
     load = reader._load
 
     def counting(fh, f, c):
-        seen.append(c.offset)
+        seen.append(c.chunk_start_offset)
         return load(fh, f, c)
 
     monkeypatch.setattr(reader, "_load", counting)

@@ -1,18 +1,17 @@
 """Spec composition (hybrid.rigid.compose): attachment sites at the linked points' rest
 positions, the points' masses added to their bodies with the parallel-axis theorem,
-errors that name the link, and composition with an MJCF written by others (gymnasium's
-humanoid), read-only."""
+errors that name the link, and composition with an MJCF written by others (MuJoCo's
+humanoid, vendored from gymnasium in tests/data), read-only."""
 
 from __future__ import annotations
 
 import dataclasses
 import hashlib
-import importlib.util
-from pathlib import Path
 
 import mujoco
 import numpy as np
 import pytest
+from helpers import HUMANOID_XML
 
 from hybrid import rigid
 from hybrid.errors import RigidError, SceneError
@@ -158,21 +157,9 @@ def test_without_link_mass_the_bodies_keep_their_mass():
     assert sim.volume_rel_error <= 1e-12
 
 
-def _humanoid_xml() -> Path | None:
-    spec = importlib.util.find_spec("gymnasium")
-    if spec is None or spec.origin is None:
-        return None
-    path = Path(spec.origin).parent / "envs" / "mujoco" / "assets" / "humanoid.xml"
-    return path if path.is_file() else None
+HUMANOID = HUMANOID_XML
 
 
-HUMANOID = _humanoid_xml()
-
-
-@pytest.mark.skipif(
-    HUMANOID is None,
-    reason="gymnasium (which ships MuJoCo's humanoid.xml) is not installed; pip install gymnasium, or hybrid[test]",
-)
 def test_membrane_linked_to_a_third_party_humanoid_torso(tmp_path):
     before = hashlib.sha256(HUMANOID.read_bytes()).hexdigest()
     # the abdomen under the humanoid's torso: its top ring rides on the torso

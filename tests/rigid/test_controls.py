@@ -8,10 +8,10 @@ from __future__ import annotations
 import dataclasses
 import importlib.util
 import textwrap
-from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import HUMANOID_XML
 
 import hybrid
 from hybrid.errors import RigidError, SceneError
@@ -236,19 +236,8 @@ def test_myotorso_locked_stands():
     assert sim.volume_rel_error < 1e-12
 
 
-def _humanoid():
-    spec = importlib.util.find_spec("gymnasium")
-    path = (
-        None
-        if spec is None or spec.origin is None
-        else Path(spec.origin).parent / "envs" / "mujoco" / "assets" / "humanoid.xml"
-    )
-    return path if path is not None and path.is_file() else None
-
-
-@pytest.mark.skipif(_humanoid() is None, reason="gymnasium (which ships MuJoCo's humanoid.xml) is not installed")
 def test_gymnasiums_humanoid_fixed_held_and_driven():
-    path = str(_humanoid())
+    path = str(HUMANOID_XML)
     centre = (0.0, 0.0, 1.12)
     sc = Scene(
         formulation="paper",

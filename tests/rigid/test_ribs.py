@@ -1,18 +1,18 @@
 """Articulated ribs added to a loaded model through MjSpec (`rigid.ribs`,
 hybrid.rigid.ribs): their geometry and hinges, the scene file's [rigid.ribs] table, a
-one-line refusal for every key, and a second existing model (gymnasium's humanoid)
+one-line refusal for every key, and a second existing model (MuJoCo's humanoid, tests/data)
 breathing on ribs added to its torso."""
 
 from __future__ import annotations
 
 import dataclasses
-import importlib.util
 import tomllib
 from pathlib import Path
 
 import mujoco
 import numpy as np
 import pytest
+from helpers import HUMANOID_XML
 
 from hybrid.errors import RigidError, SceneError
 from hybrid.model import compile_scene
@@ -234,23 +234,12 @@ def test_the_ribs_table_refuses_a_malformed_key_in_one_line(table, words):
         assert w in message, message
 
 
-def _humanoid():
-    spec = importlib.util.find_spec("gymnasium")
-    path = (
-        None
-        if spec is None or spec.origin is None
-        else Path(spec.origin).parent / "envs" / "mujoco" / "assets" / "humanoid.xml"
-    )
-    return path if path is not None and path.is_file() else None
-
-
-@pytest.mark.skipif(_humanoid() is None, reason="gymnasium (which ships MuJoCo's humanoid.xml) is not installed")
 def test_gymnasiums_humanoid_breathes_on_ribs_added_to_its_torso():
     """humanoid.xml (x forward, y left, z up; torso at z = 1.4 m on a free root, fixed
     here, its joints held): a rib pair added to `torso`, a small abdomen below it whose
     band is linked to the ribs, its dome contracting: the ribs turn, the volume is exact,
     and the model's file is unchanged."""
-    path = _humanoid()
+    path = HUMANOID_XML
     before = path.read_bytes()
     c = np.array([0.0, 0.0, 1.2])
     ribs = Ribs(
