@@ -72,7 +72,7 @@ FILE_LEVELS = {False: (0, 1, 2), True: (0, 1)}
 #: an observed order outside this range is not trusted for extrapolation: the
 #: methods' formal order (1 in time; 1 in space for the regions' point membership) is used
 ORDER_RANGE = (0.5, 4.0)
-#: a run shorter than this in CPU time is repeated (REPEATS runs, the median kept): a
+#: a run shorter than this in CPU time is repeated (REPEATS runs, the least kept): a
 #: scheduler's tick or a cache miss is a visible share of it
 REPEAT_BELOW_S = 1.0
 REPEATS = 5
@@ -273,7 +273,7 @@ def recommend(runs: list, est: dict, metrics, targets=TARGETS, ratio: float = RA
                 guess = _predict(e, runs, finest, target, ratio)
                 past = guess["level"] - finest["level"]
                 row = {"metric": k, "target_rel_error": target, "predicted": True, "levels_past_finest": past}
-                if past > MAX_EXTRAPOLATED_LEVELS:  # refused: the fitted model says no more than "finer"
+                if past > MAX_EXTRAPOLATED_LEVELS:  # refused: that far out the fitted model is no evidence
                     row.update(basis="beyond", level=None, nvert=None, dt=None, rel_error=None, cpu_s_per_sim_s=None)
                 else:
                     row.update(basis="extrapolated" if past > 0 else "predicted", **guess)
