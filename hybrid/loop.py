@@ -142,7 +142,9 @@ class RigidPack(NamedTuple):
 
 @kernel(inline="always")
 def kinetic_energy_of(m, s):
-    """0.5 sum m v^2 over the integrated points (J)."""
+    """0.5 sum m v^2 over the integrated points (J).
+    # Model: m.vert_free, m.vert_mass   # Data in: s.vert_vel (m/s)   # Data out: returns J
+    """
     ke = 0.0
     vel = s.vert_vel
     for i in range(vel.shape[0]):
@@ -153,7 +155,10 @@ def kinetic_energy_of(m, s):
 
 @kernel(inline="always")
 def capture_frame(m, s, pos_out, scal_out):
-    """The state's positions and numbers (F_* columns) into one frame's rows."""
+    """The state's positions and numbers (F_* columns) into one frame's rows.
+    # Model: m.face_vert, m.vert_free, m.vert_mass   # Data in: s.vert_pos, s.vert_vel, s.scal
+    # Data out: pos_out (nvert, 3) m, scal_out (`FrameColumn`)
+    """
     pos = s.vert_pos
     for i in range(pos.shape[0]):
         for a in range(3):

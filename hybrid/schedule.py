@@ -187,7 +187,9 @@ def stack_schedules(scheds: Sequence[Schedule]) -> tuple[ScheduleTable, list]:
 
 @kernel
 def breathing_value(par, t):
-    """Raised-cosine breathing cycle (see `Breathing`); par = (period, fraction, peak, onset)."""
+    """Raised-cosine breathing cycle (see `Breathing`); par = (period, fraction, peak, onset).
+    # Model: par (period s, fraction, peak, onset s)   # Data in: t s   # Data out: returns the value
+    """
     period, frac, peak, onset = par[0], par[1], par[2], par[3]
     if t < onset:
         return 0.0
@@ -203,6 +205,7 @@ def schedule_eval(sched, row, t, out):
     """Write schedule `row` at time t (s) into out (3,); scalars land in out[0].
 
     # Model: sched
+    # Data in: row, t s
     # Data out: out
     """
     kind = sched.kind[row]

@@ -15,7 +15,9 @@ __all__ = ["point_wrench_kernel", "site_vel_kernel"]
 
 @jit(_nrt=False, inline="always")
 def _site_offset(site_xpos, s, origin, c):  # pragma: no cover
-    """site_xpos[s] - origin[c] as three floats (m): the lever arm of a site about a point."""
+    """site_xpos[s] - origin[c] as three floats (m): the lever arm of a site about a point.
+    # Model: none   # Data in: site_xpos (nsite, 3) m, s, origin (n, 3) m, c   # Data out: returns (x, y, z) m
+    """
     return site_xpos[s, 0] - origin[c, 0], site_xpos[s, 1] - origin[c, 1], site_xpos[s, 2] - origin[c, 2]
 
 

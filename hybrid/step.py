@@ -391,7 +391,10 @@ _integrate_serial, _integrate_parallel = kernel_twin(_integrate)
 def _pointwise_forces(m, s, par, shape_memory, implicit=False):
     """Step phase 1 for gravity, damping and shape memory: the shape memory's
     ring gathers (compiled unless `shape_memory` is None), then the fused pass
-    `hybrid.terms.pointwise.point_forces` (serial or parallel build)."""
+    `hybrid.terms.pointwise.point_forces` (serial or parallel build).
+    # Model: m (term_on, accel, damp_coef, sm_*, ring_*, vert_free, vert_mass)   # Data in: s.vert_pos, s.vert_vel
+    # Data out: s.vert_force (added to), s.term_calls   # Scratch: s.sm_sums
+    """
     on = m.term_on
     sm = on[T_SHAPE_MEMORY] != 0
     grav, damp = on[T_GRAVITY] != 0, on[T_DAMPING] != 0 and not implicit  # implicit Euler's drag: its own
@@ -467,7 +470,11 @@ def membrane_advance(m, s, c, t, step, par=True, prescribed=True, keep_in=True, 
 
 @kernel(inline="always")
 def _after_integration(m, s, c, t, step, par, prescribed, keep_in, volume):
-    """Step phases 3-5 after `_integrate`: check, local constraints, volume."""
+    """Step phases 3-5 after `_integrate`: check, local constraints, volume. Returns a status code.
+    # Model: m   # Data in: s.vert_acc (the integration's sums per chunk), c.user
+    # Data in/out: s.vert_pos, s.vert_vel   # Data out: s.scal, s.status on failure, s.grad, c.value_next
+    # Scratch: s.dirn, s.cubic
+    """
     h = m.dt
     pos, vel = s.vert_pos, s.vert_vel
     dmax = 0.0
@@ -546,6 +553,9 @@ def _after_integration(m, s, c, t, step, par, prescribed, keep_in, volume):
 
 @kernel(inline="always")
 def _fail(s, code, step, vert):
+    """Record a failing step; returns its code.
+    # Model: none   # Data in: code, step, vert   # Data out: s.status[0:3]
+    """
     s.status[0] = code
     s.status[1] = step
     s.status[2] = vert
@@ -555,7 +565,9 @@ def _fail(s, code, step, vert):
 @kernel
 def _first_nonfinite(pos, vel, fallback):
     """The first vertex with a non-finite coordinate, else `fallback` (the point
-    that moved most: finite values whose kinetic energy overflowed)."""
+    that moved most: finite values whose kinetic energy overflowed).
+    # Model: none   # Data in: pos (nvert, 3) m, vel (nvert, 3) m/s   # Data out: returns a vertex
+    """
     for i in range(pos.shape[0]):
         for a in range(3):
             if not (abs(pos[i, a]) < np.inf and abs(vel[i, a]) < np.inf):

@@ -141,9 +141,13 @@ def _convergence(args) -> None:
     )
     order = ", ".join(f"{k} {_num(e['observed_order_space'], '.2f')}" for k, e in r["estimate"].items() if e)
     change = ", ".join(f"{k} {v:.2%}" for k, v in r["finest_change"].items())
+    basis = [row["basis"] for row in r["recommendation"]]
+    rec = ", ".join(f"{basis.count(b)} {b}" for b in ("measured", "predicted", "extrapolated", "beyond") if b in basis)
     print(
         f"convergence: {len(r['runs'])} runs, {len(r['failures'])} failed; order in space: {order}; "
-        f"change between the two finest levels: {change}; {r['runtime_s']:.1f} s -> {args.out}/convergence.json"
+        f"change between the two finest levels: {change}; recommendation: {rec} (beyond: more than "
+        f"{convergence.MAX_EXTRAPOLATED_LEVELS} levels past the finest run, not extrapolated); "
+        f"{r['runtime_s']:.1f} s -> {args.out}/convergence.json"
     )
 
 

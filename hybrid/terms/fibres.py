@@ -186,7 +186,9 @@ def fibre_rows(vert_pos, face_vert, width, *, toward=None, axis=None):
 
 @kernel
 def force_length(stretch, width):
-    """(g, g') of the force-length relation at fibre stretch `stretch` (module docstring)."""
+    """(g, g') of the force-length relation at fibre stretch `stretch` (module docstring).
+    # Model: width (the relation's)   # Data in: stretch   # Data out: returns (g, g')
+    """
     if width <= 0.0:
         return 1.0, 0.0
     x = (stretch - 1.0) / width

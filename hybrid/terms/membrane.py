@@ -171,7 +171,10 @@ def _vert_stiffness(nvert, mem_vert, mem_par, weight=None) -> np.ndarray:
 def _edges_and_strain(mem_vert, mem_par, k, vert_pos):
     """Triangle k's current edges e1 = b - a, e2 = c - a (m) and its Green strain
     E = D^T (G - G0) D / 2 (D its rest inverse edge matrix, upper triangular; G the
-    edges' Gram matrix): (e1x, e1y, e1z, e2x, e2y, e2z, E00, E01, E11)."""
+    edges' Gram matrix): (e1x, e1y, e1z, e2x, e2y, e2z, E00, E01, E11).
+    # Model: mem_vert (nf, 3) int32, mem_par (nf, NPAR)   # Data in: k, vert_pos (nvert, 3) m
+    # Data out: returns the 9-tuple above
+    """
     a, b, c = mem_vert[k, 0], mem_vert[k, 1], mem_vert[k, 2]
     p = mem_par[k]
     e1x, e1y, e1z = vert_pos[b, 0] - vert_pos[a, 0], vert_pos[b, 1] - vert_pos[a, 1], vert_pos[b, 2] - vert_pos[a, 2]
@@ -197,7 +200,10 @@ def _edges_and_strain(mem_vert, mem_par, k, vert_pos):
 @kernel(inline="always")
 def membrane_face_force(mem_vert, mem_par, k, vert_pos, vert_vel, kv_on):
     """Forces (N) on corners b and c of membrane triangle k (corner a takes minus
-    their sum): minus the gradient of A0 W(E) (+ the Kelvin-Voigt stress's)."""
+    their sum): minus the gradient of A0 W(E) (+ the Kelvin-Voigt stress's).
+    # Model: mem_vert, mem_par, kv_on (Kelvin-Voigt on)   # Data in: k, vert_pos m, vert_vel m/s
+    # Data out: returns (fbx, fby, fbz, fcx, fcy, fcz) N
+    """
     a, b, c = mem_vert[k, 0], mem_vert[k, 1], mem_vert[k, 2]
     p = mem_par[k]
     d00, d01, d11 = p[P_D00], p[P_D01], p[P_D11]
@@ -266,7 +272,10 @@ def add_membrane_serial(mem_vert, mem_par, kv_on, vert_pos, vert_vel, vert_force
 
 @kernel(parallel=True)
 def membrane_faces_parallel(mem_vert, mem_par, kv_on, vert_pos, vert_vel, face_force):
-    """First pass of the parallel build: each triangle's forces on b and c into face_force (nf, 6)."""
+    """First pass of the parallel build: each triangle's forces on b and c into face_force (nf, 6).
+    # Model: mem_vert, mem_par, kv_on   # Data in: vert_pos m, vert_vel m/s
+    # Data out: face_force (nf, 6) N
+    """
     for k in prange(mem_vert.shape[0]):
         bx, by, bz, cx, cy, cz = membrane_face_force(mem_vert, mem_par, k, vert_pos, vert_vel, kv_on)
         face_force[k, 0] = bx
@@ -279,7 +288,10 @@ def membrane_faces_parallel(mem_vert, mem_par, kv_on, vert_pos, vert_vel, face_f
 
 @kernel(parallel=True)
 def membrane_gather_parallel(mvf_ptr, mvf_slot, face_force, vert_force):
-    """Second pass: each point adds its triangles' forces in face order (bit for bit the serial sum)."""
+    """Second pass: each point adds its triangles' forces in face order (bit for bit the serial sum).
+    # Model: mvf_ptr (nvert + 1,), mvf_slot (each point's triangle corners)   # Data in: face_force (nf, 6) N
+    # Data out: vert_force (nvert, 3) N, added to
+    """
     n = vert_force.shape[0]
     for i in prange(n):
         fx, fy, fz = vert_force[i, 0], vert_force[i, 1], vert_force[i, 2]
@@ -301,7 +313,9 @@ def membrane_gather_parallel(mvf_ptr, mvf_slot, face_force, vert_force):
 
 @kernel
 def membrane_energy(mem_vert, mem_par, vert_pos):
-    """The membrane's elastic energy sum A0 W(E) (J)."""
+    """The membrane's elastic energy sum A0 W(E) (J).
+    # Model: mem_vert, mem_par   # Data in: vert_pos (nvert, 3) m   # Data out: returns the energy J
+    """
     total = 0.0
     for k in range(mem_vert.shape[0]):
         p = mem_par[k]

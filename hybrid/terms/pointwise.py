@@ -96,7 +96,9 @@ class Damping(Term):
 
 @kernel(inline="always")
 def _first_at_least(idx, lo):
-    """The first k with idx[k] >= lo in the sorted array idx (len(idx) if none), unsigned."""
+    """The first k with idx[k] >= lo in the sorted array idx (len(idx) if none), unsigned.
+    # Model: idx (sorted)   # Data in: lo   # Data out: returns k
+    """
     a, b = np.uint64(0), np.uint64(idx.shape[0])
     while a < b:
         mid = (a + b) >> np.uint64(1)

@@ -78,7 +78,10 @@ def ring_sums(vert_pos, ring_ptr, ring_vert, ring_closed, i):
     and N_1 - G (m), which the second half needs.
     The cross sum is taken relative to N_1 and moved to G afterwards (for a
     closed fan it does not depend on the origin; for an open one it changes by
-    (N_eta - N_1) x (G - N_1)). Returns (Gx, Gy, Gz, nx, ny, nz, dx, dy, dz)."""
+    (N_eta - N_1) x (G - N_1)). Returns (Gx, Gy, Gz, nx, ny, nz, dx, dy, dz).
+    # Model: ring_ptr, ring_vert, ring_closed   # Data in: vert_pos (nvert, 3) m, i
+    # Data out: returns the 9 floats above
+    """
     # unsigned indices: numba then skips its negative-index wraparound, a
     # fifth of the instructions of each neighbour
     i = np.uint64(i)
@@ -113,7 +116,9 @@ def ring_sums(vert_pos, ring_ptr, ring_vert, ring_closed, i):
 @kernel(inline="always")
 def frame_axes(dx, dy, dz, nx, ny, nz):
     """Second half: unit n, t1 = unit tangential part of d = N_1 - G, t2 = n x t1,
-    from `ring_sums`. Returns (t1, t2, n) as 9 floats."""
+    from `ring_sums`. Returns (t1, t2, n) as 9 floats.
+    # Model: none   # Data in: d = N_1 - G (m), n (unnormalised)   # Data out: returns (t1, t2, n)
+    """
     r = 1.0 / math.sqrt(nx * nx + ny * ny + nz * nz)
     nx *= r
     ny *= r
@@ -130,7 +135,10 @@ def frame_axes(dx, dy, dz, nx, ny, nz):
 @kernel
 def ring_frame(vert_pos, ring_ptr, ring_vert, ring_closed, i):
     """The local frame of vertex i from its neighbour ring only: (G, t1, t2, n)
-    as 12 floats and |cross sum| (m^2), 0 when the frame is degenerate."""
+    as 12 floats and |cross sum| (m^2), 0 when the frame is degenerate.
+    # Model: ring_ptr, ring_vert, ring_closed   # Data in: vert_pos (nvert, 3) m, i
+    # Data out: returns (G, t1, t2, n, |cross sum|)
+    """
     gx, gy, gz, nx, ny, nz, dx, dy, dz = ring_sums(vert_pos, ring_ptr, ring_vert, ring_closed, i)
     nn = math.sqrt(nx * nx + ny * ny + nz * nz)
     tx, ty, tz, ux, uy, uz, nx, ny, nz = frame_axes(dx, dy, dz, nx, ny, nz)
@@ -170,7 +178,10 @@ def shape_memory_frame_coef(vert_pos, ring_ptr, ring_vert, ring_closed, verts) -
 
 @kernel(inline="always")
 def _store_ring_sums(sm_vert, ring_ptr, ring_vert, ring_closed, vert_pos, sm_sums, k):
-    """Row k of sm_sums: `ring_sums` of shape-memory point sm_vert[k]."""
+    """Row k of sm_sums: `ring_sums` of shape-memory point sm_vert[k].
+    # Model: sm_vert (nsm,) int32, ring_ptr, ring_vert, ring_closed   # Data in: vert_pos m, k
+    # Data out: sm_sums[k] (9 floats)
+    """
     gx, gy, gz, nx, ny, nz, dx, dy, dz = ring_sums(vert_pos, ring_ptr, ring_vert, ring_closed, sm_vert[k])
     sm_sums[k, 0] = gx
     sm_sums[k, 1] = gy
@@ -201,7 +212,10 @@ shape_memory_frames, shape_memory_frames_parallel = kernel_twin(_shape_memory_fr
 @kernel(inline="always")
 def shape_memory_force(sm_stiff, sm_coef, sm_sums, k, px, py, pz):
     """Second pass, one point: k (P_ideal - P) (N) for shape-memory point k at P (m),
-    P_ideal = G + alpha t1 + beta t2 + gamma n from its `shape_memory_frames` row."""
+    P_ideal = G + alpha t1 + beta t2 + gamma n from its `shape_memory_frames` row.
+    # Model: sm_stiff (nsm,) N/m, sm_coef (nsm, 3) m (alpha, beta, gamma)
+    # Data in: sm_sums (the frames' rows), k, P = (px, py, pz) m   # Data out: returns the force N
+    """
     gx, gy, gz = sm_sums[k, 0], sm_sums[k, 1], sm_sums[k, 2]
     tx, ty, tz, ux, uy, uz, nx, ny, nz = frame_axes(
         sm_sums[k, 6], sm_sums[k, 7], sm_sums[k, 8], sm_sums[k, 3], sm_sums[k, 4], sm_sums[k, 5]

@@ -31,7 +31,10 @@ __all__ = ["membrane_tangent_blocks", "fibre_tangent_blocks", "passive_fibres_ta
 
 @kernel(inline="always", fastmath=FAST_NO_FMA)
 def _add_block(mat, s, transpose, v0, v1, v2, v3, v4, v5, v6, v7, v8, diag):
-    """mat[s] += v + diag I (v row-major), or its transpose."""
+    """mat[s] += v + diag I (v row-major), or its transpose.
+    # Model: none   # Data in: s, transpose, v0..v8 (a 3x3 block, row-major), diag
+    # Data out: mat[s] (9,), added to
+    """
     b = mat[s]
     b[0] += v0 + diag
     b[4] += v4 + diag
@@ -50,6 +53,11 @@ def _add_block(mat, s, transpose, v0, v1, v2, v3, v4, v5, v6, v7, v8, diag):
 
 @kernel(inline="always", fastmath=FAST_NO_FMA)
 def _corner_weights(d00, d01, d11, n):
+    """Corner n's row (w0, w1) of [-1 -1; 1 0; 0 1] D, D = [d00 d01; 0 d11] the triangle's
+    rest inverse edge matrix: the corner's weights on the two columns of F.
+    # Model: d00, d01, d11 (a triangle's rest inverse, 1/m)   # Data in: n (corner 0..2)
+    # Data out: returns (w0, w1)
+    """
     if n == 0:
         return -d00, -(d01 + d11)
     if n == 1:
@@ -106,7 +114,10 @@ def membrane_tangent_blocks(mem_vert, mem_par, cache, kx, kv, slot, amat, pdiag)
 def _edge_blocks(tri, c, slot, scale, rank_e, rank_p, e_col, p_col, amat, pdiag):
     """The blocks of scale (rank G_m G_n^T + L_mn I) of a fibre triangle from its cache row c:
     columns 0..8 the edge vectors (edge k from corner k to k + 1), e_col / p_col the first
-    of the edges' exact / projected Laplacian coefficients."""
+    of the edges' exact / projected Laplacian coefficients.
+    # Model: tri (3,) the corners, slot (9,) int64   # Data in: c (the cache row), scale, rank_e, rank_p
+    # Data out: amat (nblocks, 9), pdiag (nvert, 9), added to
+    """
     re, rp = scale * rank_e, scale * rank_p
     for m in range(3):
         mp = (m + 2) % 3  # the edge that ends at m
@@ -162,7 +173,10 @@ def _edge_blocks(tri, c, slot, scale, rank_e, rank_p, e_col, p_col, amat, pdiag)
 @kernel(fastmath=FAST_NO_FMA)
 def fibre_tangent_blocks(fib_vert, cache, kx, slot, amat, pdiag):
     """amat[slot] += the muscle fibres' blocks of kx K, pdiag[corner] += the diagonal ones of K
-    projected, from `fibre_tangent_cache`."""
+    projected, from `fibre_tangent_cache`.
+    # Model: fib_vert (nf, 3) int32   # Data in: cache (fibre_tangent_cache), kx, slot (nf, 9) int64
+    # Data out: amat (nblocks, 9), pdiag (nvert, 9), added to
+    """
     for f in range(fib_vert.shape[0]):
         c = cache[f]
         if c[17] != 0.0:
@@ -172,7 +186,10 @@ def fibre_tangent_blocks(fib_vert, cache, kx, slot, amat, pdiag):
 @kernel(fastmath=FAST_NO_FMA)
 def passive_fibres_tangent_blocks(pf_vert, cache, kx, slot, amat, pdiag):
     """amat[slot] += the passive fibres' blocks of kx K, pdiag[corner] += the diagonal ones of
-    K projected, from `passive_fibres_tangent_cache`."""
+    K projected, from `passive_fibres_tangent_cache`.
+    # Model: pf_vert (nf, 3) int32   # Data in: cache (passive_fibres_tangent_cache), kx, slot (nf, 9) int64
+    # Data out: amat (nblocks, 9), pdiag (nvert, 9), added to
+    """
     for f in range(pf_vert.shape[0]):
         c = cache[f]
         if c[9] != 0.0:

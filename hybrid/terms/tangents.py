@@ -95,7 +95,9 @@ NPF_CACHE = 16
 
 @kernel(inline="always")
 def clamp_stress(s00, s01, s11):
-    """The 2 x 2 symmetric S with its negative eigenvalues set to 0 (closed form)."""
+    """The 2 x 2 symmetric S with its negative eigenvalues set to 0 (closed form).
+    # Model: none   # Data in: s00, s01, s11   # Data out: returns the clamped (s00, s01, s11)
+    """
     m = 0.5 * (s00 + s11)
     r = math.sqrt(0.25 * (s00 - s11) ** 2 + s01 * s01)
     lo, hi = m - r, m + r
@@ -178,7 +180,10 @@ def membrane_tangent_product(mem_vert, mem_par, cache, project, kx, kv, u, y):
 @kernel(inline="always")
 def _fibre_state(fib_vert, fib_par, fib_sched, sched_val, vert_pos, f):
     """(lambda, A T, g, g') of muscle triangle f (`hybrid.terms.fibres`); below MIN_STRETCH
-    (MIN_STRETCH, A T, g(MIN_STRETCH), g(MIN_STRETCH) / MIN_STRETCH): the Hessian of its quadratic."""
+    (MIN_STRETCH, A T, g(MIN_STRETCH), g(MIN_STRETCH) / MIN_STRETCH): the Hessian of its quadratic.
+    # Model: fib_vert, fib_par, fib_sched   # Data in: sched_val, vert_pos (nvert, 3) m, f
+    # Data out: returns (lambda, A T, g, g')
+    """
     sq = 0.0
     for k in range(3):
         i, j = fib_vert[f, k], fib_vert[f, (k + 1) % 3]
@@ -246,7 +251,10 @@ def fibre_tangent_cache(fib_vert, fib_par, fib_sched, sched_val, vert_pos, cache
 def _edge_product(c, e0, s_scale, g_scale, i0, i1, i2, u, y):
     """One fibre triangle's cached Hessian product, added to y: with a = c[0:9] . du (du
     the edges' u_(k+1) - u_k), edge k pushes its end by t_k = s_scale a c[3k:3k+3] +
-    g_scale c[e0 + k] du_k and its start by -t_k."""
+    g_scale c[e0 + k] du_k and its start by -t_k.
+    # Model: e0 (the column of the Laplacian coefficients), i0, i1, i2 (the corners)
+    # Data in: c (the cache row), s_scale, g_scale, u (nvert, 3)   # Data out: y (nvert, 3), added to
+    """
     d0x, d0y, d0z = u[i1, 0] - u[i0, 0], u[i1, 1] - u[i0, 1], u[i1, 2] - u[i0, 2]
     d1x, d1y, d1z = u[i2, 0] - u[i1, 0], u[i2, 1] - u[i1, 1], u[i2, 2] - u[i1, 2]
     d2x, d2y, d2z = u[i0, 0] - u[i2, 0], u[i0, 1] - u[i2, 1], u[i0, 2] - u[i2, 2]
@@ -294,7 +302,9 @@ def fibre_cached_product(fib_vert, cache, project, kx, u, y):
 @kernel
 def kelvin_voigt_dissipation(mem_vert, mem_par, vert_pos, vert_vel):
     """The membrane viscosity's dissipation function R = sum A0 tau W(dE/dt) (W),
-    whose minus velocity gradient at fixed positions is the viscous force."""
+    whose minus velocity gradient at fixed positions is the viscous force.
+    # Model: mem_vert, mem_par   # Data in: vert_pos m, vert_vel m/s   # Data out: returns R W
+    """
     total = 0.0
     for k in range(mem_vert.shape[0]):
         p = mem_par[k]
@@ -337,7 +347,10 @@ def kelvin_voigt_dissipation(mem_vert, mem_par, vert_pos, vert_vel):
 def fibre_energy(fib_vert, fib_par, fib_sched, sched_val, vert_pos):
     """The muscle's work function sum A T Psi(lambda) over its triangles (J), Psi(1) = 0:
     Psi = lambda - 1 without a force-length relation, w sqrt(pi) / 2 erf((lambda - 1) / w) with;
-    below MIN_STRETCH s, Psi(s) + g(s) (lambda^2 - s^2) / (2 s)."""
+    below MIN_STRETCH s, Psi(s) + g(s) (lambda^2 - s^2) / (2 s).
+    # Model: fib_vert, fib_par, fib_sched   # Data in: sched_val, vert_pos (nvert, 3) m
+    # Data out: returns the work function J
+    """
     total = 0.0
     for f in range(fib_vert.shape[0]):
         lam, at, g, dg = _fibre_state(fib_vert, fib_par, fib_sched, sched_val, vert_pos, f)
@@ -359,7 +372,9 @@ def fibre_energy(fib_vert, fib_par, fib_sched, sched_val, vert_pos):
 
 @kernel(inline="always")
 def _passive_strain(pf_vert, pf_par, vert_pos, f):
-    """The fibre strain e_f of triangle f (`hybrid.terms.passive_fibres`)."""
+    """The fibre strain e_f of triangle f (`hybrid.terms.passive_fibres`).
+    # Model: pf_vert, pf_par   # Data in: vert_pos (nvert, 3) m, f   # Data out: returns e_f
+    """
     e = 0.0
     for k in range(3):
         i, j = pf_vert[f, k], pf_vert[f, (k + 1) % 3]
@@ -433,7 +448,9 @@ def passive_fibres_cached_product(pf_vert, cache, project, kx, u, y):
 
 @kernel
 def passive_fibres_energy_kernel(pf_vert, pf_par, vert_pos):
-    """sum over triangles of A0 E_f / 2 max(e_f, 0)^2 (J), compiled."""
+    """sum over triangles of A0 E_f / 2 max(e_f, 0)^2 (J), compiled.
+    # Model: pf_vert, pf_par   # Data in: vert_pos (nvert, 3) m   # Data out: returns the energy J
+    """
     total = 0.0
     for f in range(pf_vert.shape[0]):
         e = _passive_strain(pf_vert, pf_par, vert_pos, f)

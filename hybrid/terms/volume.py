@@ -139,7 +139,10 @@ def ring_cross_sum(ring_ptr, ring_vert, vec, i):
     """sum_j (N_j - N_1) x (N_j+1 - N_1) over the closed fan of point i, with
     N_j = vec[ring_vert[j]]: six times the volume gradient at i of a surface
     whose points are `vec` (for a closed fan the sum does not depend on the
-    origin, so N_1 keeps it local and exact)."""
+    origin, so N_1 keeps it local and exact).
+    # Model: ring_ptr (nvert + 1,) int, ring_vert (closed fans)   # Data in: vec (nvert, 3), i
+    # Data out: returns (gx, gy, gz)
+    """
     # unsigned indices: numba then skips its negative-index wraparound, a
     # fifth of the instructions of each neighbour
     i = np.uint64(i)
@@ -159,7 +162,10 @@ def ring_cross_sum(ring_ptr, ring_vert, vec, i):
 
 
 def _position_sums(vert_pos, chunk_acc):
-    """Sum of the positions of each chunk of CHUNK_VERTS points into chunk_acc[:, :3]."""
+    """Sum of the positions of each chunk of CHUNK_VERTS points into chunk_acc[:, :3].
+    # Model: none   # Data in: vert_pos (nvert, 3) m
+    # Data out: chunk_acc[:, :3] (chunk_count(nvert), >= 3) m
+    """
     n = vert_pos.shape[0]
     for c in prange((n + CHUNK_VERTS - 1) // CHUNK_VERTS):
         sx = sy = sz = 0.0
@@ -179,7 +185,8 @@ _position_sums_serial, _position_sums_parallel = kernel_twin(_position_sums)
 def centroid(vert_pos, chunk_acc, parallel):
     """The mean of the positions (m), a tuple (x, y, z): the origin of the volume
     sums. The chunks' sums are added in order, so both builds agree to the bit.
-    # Data in: vert_pos (nvert, 3) m   # Scratch: chunk_acc (chunk_count(nvert), >= 3)
+    # Model: none   # Data in: vert_pos (nvert, 3) m   # Scratch: chunk_acc (chunk_count(nvert), >= 3)
+    # Data out: returns (x, y, z) m
     # parallel: a bool, the build to run; None: the serial one, the other not even compiled
     """
     if parallel is not None and parallel:
@@ -200,6 +207,7 @@ def face_volume(face_vert, vert_pos):
     """V = 1/6 sum_f a.(b x c) (m^3), coordinates relative to the centroid of
     the points: the volume measured independently of the projection, for observers.
     # Model: face_vert (nface, 3) int32   # Data in: vert_pos (nvert, 3) m
+    # Data out: returns V m^3
     """
     sx = sy = sz = 0.0
     for i in range(vert_pos.shape[0]):
@@ -220,7 +228,10 @@ def face_volume(face_vert, vert_pos):
 
 def _cubic_terms(ring_ptr, ring_vert, ref, vert_pos, dirn, chunk_acc):
     """Sums of x_i . grad_i V(D) and D_i . grad_i V(D), times 6, over each
-    chunk of CHUNK_VERTS points, into chunk_acc[:, :2]."""
+    chunk of CHUNK_VERTS points, into chunk_acc[:, :2].
+    # Model: ring_ptr, ring_vert   # Data in: ref (x, y, z) m, vert_pos m, dirn (nvert, 3)
+    # Data out: chunk_acc[:, :2] (chunk_count(nvert), >= 2)
+    """
     n = vert_pos.shape[0]
     for c in prange((n + CHUNK_VERTS - 1) // CHUNK_VERTS):
         s2 = s3 = 0.0
@@ -265,13 +276,18 @@ def volume_cubic(ring_ptr, ring_vert, ref, vert_pos, dirn, chunk_acc, out, paral
 
 @kernel
 def _cubic_at(c0, c1, c2, c3, x):
+    """c0 + c1 x + c2 x^2 + c3 x^3, by Horner's rule.
+    # Model: none   # Data in: c0..c3, x   # Data out: returns the value
+    """
     return ((c3 * x + c2) * x + c1) * x + c0
 
 
 @kernel
 def _root_between(c0, c1, c2, c3, a, b):
     """The root of the cubic on [a, b], where it is monotone and changes sign:
-    Newton kept inside a shrinking bracket (bisection when it leaves it)."""
+    Newton kept inside a shrinking bracket (bisection when it leaves it).
+    # Model: none   # Data in: c0..c3 (the cubic), a, b (the bracket)   # Data out: returns the root
+    """
     fa = _cubic_at(c0, c1, c2, c3, a)
     x = 0.5 * (a + b)
     for _ in range(200):
@@ -296,7 +312,9 @@ def _root_between(c0, c1, c2, c3, a, b):
 def _monotone_pieces(c0, c1, c2, c3):
     """(lo, k1, k2, hi): a bound R on every real root (lo = -R, hi = R) and the
     cubic's critical points k1 <= k2 clipped into [lo, hi] (equal to lo or hi
-    when absent). Between consecutive ones the cubic is monotone."""
+    when absent). Between consecutive ones the cubic is monotone.
+    # Model: none   # Data in: c0..c3 (the cubic)   # Data out: returns (lo, k1, k2, hi)
+    """
     lead = abs(c3) if c3 != 0.0 else (abs(c2) if c2 != 0.0 else abs(c1))
     r = 1.0 + max(abs(c0), abs(c1), abs(c2)) / lead  # Cauchy's bound
     k1, k2 = -r, r
@@ -324,6 +342,7 @@ def solve_cubic_near_zero(c0, c1, c2, c3):
     to 0; otherwise every monotone piece with a sign change is searched and
     the root nearest 0 wins. No allocation, so the step stays free of
     reference counting.
+    # Model: none   # Data in: c0..c3 (the cubic)   # Data out: returns (root, status PROJ_*)
     """
     if not (c1 > 0.0):
         return 0.0, PROJ_NO_GRADIENT
@@ -387,7 +406,11 @@ def solve_cubic_near_zero(c0, c1, c2, c3):
 def _volume_gather(ring_ptr, ring_vert, ref, vert_weight, vert_pos, grad, dirn, chunk_acc, shake):
     """Per point: grad_i V (closed fan), D_i = w_i grad_i V (kept as given when
     `shake`: taken at the step's start); per chunk of CHUNK_VERTS points, the sums
-    of the terms of 3 V and c1, x_i . g_i and D_i . g_i, into chunk_acc[:, :2]."""
+    of the terms of 3 V and c1, x_i . g_i and D_i . g_i, into chunk_acc[:, :2].
+    # Model: ring_ptr, ring_vert (closed fans), vert_weight (nvert,) 1/kg   # Data in: ref (x, y, z) m,
+    #        vert_pos (nvert, 3) m, dirn when `shake`
+    # Data out: grad (nvert, 3) m^2, dirn (unless `shake`), chunk_acc[:, :2] (chunk_count(nvert), >= 2)
+    """
     sixth = 1.0 / 6.0
     n = vert_weight.shape[0]
     for c in prange((n + CHUNK_VERTS - 1) // CHUNK_VERTS):
@@ -419,7 +442,10 @@ def _volume_gather(ring_ptr, ring_vert, ref, vert_weight, vert_pos, grad, dirn, 
 def _volume_direction(ring_ptr, ring_vert, vert_weight, vert_pos, dirn):
     """D_i = w_i grad_i V at vert_pos: SHAKE's projection direction, taken at the
     positions where the step starts (the constraint force's line of action over the
-    step), which keeps the scheme symplectic: a free body's energy stays bounded."""
+    step), which keeps the scheme symplectic: a free body's energy stays bounded.
+    # Model: ring_ptr, ring_vert (closed fans), vert_weight (nvert,) 1/kg   # Data in: vert_pos (nvert, 3) m
+    # Data out: dirn (nvert, 3)
+    """
     sixth = 1.0 / 6.0
     for i in prange(vert_weight.shape[0]):
         w = vert_weight[i] * sixth
@@ -430,7 +456,10 @@ def _volume_direction(ring_ptr, ring_vert, vert_weight, vert_pos, dirn):
 
 
 def _volume_update(vert_weight, phi, dirn, h, vert_pos, vert_vel):
-    """X += phi D, v += phi D / h on the points that carry the correction."""
+    """X += phi D, v += phi D / h on the points that carry the correction.
+    # Model: vert_weight (nvert,) 1/kg (0: not corrected)   # Data in: phi kg/m, dirn, h s
+    # Data in/out: vert_pos m, vert_vel m/s
+    """
     s = phi / h
     for i in prange(vert_weight.shape[0]):
         if vert_weight[i] != 0.0:
