@@ -23,13 +23,14 @@ from enum import IntEnum
 from typing import NamedTuple
 
 import numpy as np
-from numba import prange
+from numba import literal_unroll, prange
 
 from .implicit import EXPLICIT, IMPLICIT_ID, implicit_pressure, implicit_start_forces, implicit_step, implicit_work
 from .kernel import CHUNK_VERTS, chunk_count, kernel, kernel_twin
 from .model import MembraneArrays
 from .schedule import KIND_PYTHON, schedule_eval
 from .terms import (
+    STEP_FORCES,
     TERMS,
     AppliedForce,
     Attraction,
@@ -339,6 +340,11 @@ def membrane_forces(
     if passive is not None and on[T_PASSIVE_FIBRES] and not implicit:
         add_passive_fibres(m.pf_vert, m.pf_par, s.vert_pos, s.vert_force)
         s.term_calls[T_PASSIVE_FIBRES] += 1
+    for term in literal_unroll(STEP_FORCES):  # the terms that bring their own kernel (`Term.step_force`)
+        tid = term[0]
+        if tid >= 0 and on[tid]:
+            term[1](m, s, c)
+            s.term_calls[tid] += 1
     if implicit_start_forces(m, c.value, s.vert_pos, s.vert_vel, s.implicit, s.vert_force):
         for k in (T_MEMBRANE, T_MUSCLE_FIBRES, T_PASSIVE_FIBRES):
             s.term_calls[k] += on[k]

@@ -11,7 +11,7 @@ keep-in); `tangents` holds the continuum forces' Jacobians for implicit Euler (n
 one entry there.
 """
 
-from .base import CONSTRAINT_TYPES, FLAGGED, FORCE_TYPES, TERM_CLASSES, Build, Term, order_terms
+from .base import CONSTRAINT_TYPES, FLAGGED, FORCE_TYPES, TERM_CLASSES, Build, Term, order_terms, registered_forces
 from .fibres import MuscleFibres
 from .local import KeepIn, Nailed, Prescribed
 from .membrane import Membrane
@@ -30,6 +30,7 @@ __all__ = [
     "TERM_CLASSES",
     "FLAGGED",
     "TERMS",
+    "STEP_FORCES",
     "Gravity",
     "Damping",
     "ShapeMemory",
@@ -71,3 +72,5 @@ order_terms(
 
 #: names of the terms with a flag and a kernel, in id order (MembraneArrays.term_on)
 TERMS = tuple(cls.toml_type for cls in FLAGGED)
+#: ((id, kernel), ...) of the terms the step calls through the registry (`Term.step_force`)
+STEP_FORCES = registered_forces()

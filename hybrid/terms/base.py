@@ -33,6 +33,7 @@ from .. import checks
 from .. import regions as _regions
 from .. import schedule as _sched
 from ..errors import SceneError
+from ..kernel import kernel
 from ..mesh.validate import few
 
 __all__ = [
@@ -177,6 +178,21 @@ def order_terms(classes) -> None:
             FLAGGED.append(cls)
 
 
+@kernel(inline="always")
+def no_force(m, s, c):
+    """The end of `registered_forces`: adds nothing.
+    # Model: none   # Data in: none   # Data out: none
+    """
+
+
+def registered_forces() -> tuple:
+    """((id, step_force), ...) of the registered force terms that carry their own
+    `step_force` kernel, in id order, which the step calls in a loop unrolled when it
+    compiles (`hybrid.step.membrane_forces`); ending with (-1, `no_force`), so that the
+    tuple is never empty (numba unrolls no empty tuple)."""
+    return (*((cls.id, cls.step_force) for cls in FLAGGED if cls.step_force is not None), (-1, no_force))
+
+
 class Term:
     """Mixin of the term dataclasses (see the module docstring)."""
 
@@ -190,6 +206,10 @@ class Term:
     formulations: ClassVar[tuple] = FORMULATIONS
     #: the array whose rows are triangles (n, 3): each row kept when any of its corners moves
     triangle_rows: ClassVar[str | None] = None
+    #: the kernel `step_force(m, s, c)` the step calls for a force term it has no call of
+    #: its own for (`registered_forces`): m the model's arrays (this term's among them),
+    #: s the state (its vert_pos, vert_vel in, vert_force added to), c the inputs
+    step_force: ClassVar[object] = None
 
     def check_formulation(self, formulation: str, what: str) -> None:
         """Refuse, in one SceneError line, a term or a field of a formulation other
