@@ -286,7 +286,11 @@ def implicit_start_forces(m, sched_val, x, v, imp, vert_force):
 @kernel
 def newton_caches(m, rows, sched_val, x, face, fib, pf):
     """The tangent caches of the triangles `rows` at x, what `newton_product` reads: once
-    per Newton iteration, not once per conjugate-gradient iteration."""
+    per Newton iteration, not once per conjugate-gradient iteration.
+    # Model: m.term_on; rows (NewtonRows): mem_vert, mem_par, fib_vert, fib_par, fib_sched, pf_vert, pf_par
+    # Data in: sched_val (the inputs at t), x (nvert, 3) m
+    # Data out: face (nmem, NCACHE), fib (nfib, NFIB_CACHE), pf (npf, NPF_CACHE): the terms on (the others' kept)
+    """
     on = m.term_on
     if on[T_MEMBRANE]:
         membrane_tangent_cache(rows.mem_vert, rows.mem_par, x, face)
@@ -301,7 +305,11 @@ def newton_product(m, rows, face, fib, pf, h, project, u, y):
     """y = (M + h^2 K + h C) u on every point (no rows zeroed) with the triangles `rows`
     (all of the model's: the Newton matrix; `newton_rows`: its free points' rows): the
     matrix at the positions the caches face, fib, pf were taken at (`newton_caches`);
-    the Hessian projected per element when `project`."""
+    the Hessian projected per element when `project`.
+    # Model: m.vert_mass (nvert,) kg, m.damp_coef (nvert,) kg/s, m.term_on; rows: mem_vert, mem_par, fib_vert, pf_vert
+    # Data in: face, fib, pf (`newton_caches`), h (s), project, u (nvert, 3)
+    # Data out: y (nvert, 3), kg times u's unit
+    """
     on = m.term_on
     for i in range(y.shape[0]):
         c = m.vert_mass[i] + (h * m.damp_coef[i] if on[T_DAMPING] else 0.0)
@@ -317,7 +325,9 @@ def newton_product(m, rows, face, fib, pf, h, project, u, y):
 
 @kernel(inline="always")
 def _gather(rows_of, c, full, out):
-    """out[f] = c full[rows_of[f]]: a vector of every point to the Newton matrix's numbering."""
+    """out[f] = c full[rows_of[f]]: a vector of every point to the Newton matrix's numbering.
+    # Model: rows_of (nfree,) int64 (NewtonMatrix.free)   # Data in: c, full (nvert, 3)   # Data out: out (nfree, 3)
+    """
     for f in range(rows_of.shape[0]):
         for a in range(3):
             out[f, a] = c * full[rows_of[f], a]
@@ -325,7 +335,10 @@ def _gather(rows_of, c, full, out):
 
 @kernel(inline="always")
 def _scatter(rows_of, x, full):
-    """full[rows_of[f]] = x[f]: the Newton matrix's numbering to a vector of every point."""
+    """full[rows_of[f]] = x[f]: the Newton matrix's numbering to a vector of every point.
+    # Model: rows_of (nfree,) int64 (NewtonMatrix.free)   # Data in: x (nfree, 3)
+    # Data out: full (nvert, 3), its free points' rows (the others left as they are)
+    """
     for f in range(rows_of.shape[0]):
         for a in range(3):
             full[rows_of[f], a] = x[f, a]
@@ -333,7 +346,10 @@ def _scatter(rows_of, x, full):
 
 @kernel(inline="always")
 def _scatter_add(rows_of, c, x, full):
-    """full[rows_of[f]] += c x[f]."""
+    """full[rows_of[f]] += c x[f].
+    # Model: rows_of (nfree,) int64 (NewtonMatrix.free)   # Data in: c, x (nfree, 3)
+    # Data in/out: full (nvert, 3), its free points' rows
+    """
     for f in range(rows_of.shape[0]):
         for a in range(3):
             full[rows_of[f], a] += c * x[f, a]
@@ -343,7 +359,11 @@ def _scatter_add(rows_of, c, x, full):
 def _product(m, w, h, project, u, y):
     """y = the Newton matrix times u ((nfree, 3), the matrix's numbering): assembled, or
     with the Hessian projected element by element (the rare projected Newton iteration,
-    on every point: w.full_u is zero on the fixed ones)."""
+    on every point: w.full_u is zero on the fixed ones).
+    # Model: w.mat's pattern (free, row_ptr, col); projected: m (vert_mass, damp_coef, term_on), w.rows
+    # Data in: project, u (nfree, 3); assembled: w.mat.amat; projected: w.face, w.fib, w.pf, h (s)
+    # Data out: y (nfree, 3)   # Scratch: w.full_u, w.full_y (nvert, 3) (projected)
+    """
     if not project:
         matrix_product(w.mat, u, y)
         return
@@ -356,7 +376,12 @@ def _product(m, w, h, project, u, y):
 def _solve(m, w, h, project, target, cg_max):
     """w.cg_x = the preconditioned conjugate gradients' solution of (Newton matrix) x = w.cg_r
     ((nfree, 3), the matrix's numbering), to |residual| <= target or cg_max iterations.
-    Returns the iterations."""
+    Returns the iterations (-1: negative curvature at the first, as `split_cg`).
+    # Model: w.mat's pattern (free, row_ptr, col); projected: m, w.rows
+    # Data in: w.mat (amat, sdiag, dinv: `assemble`), h (s), project, target (N s), cg_max; projected: w.face, w.fib, w.pf
+    # Data in/out: w.cg_r (nfree, 3) N s (h res in, the recursive residual out)   # Data out: w.cg_x (nfree, 3) m/s
+    # Scratch: w.cg_z, w.cg_p, w.cg_q (nfree, 3), w.mat.acc; projected: w.full_u, w.full_y
+    """
     x, r, z, p, q = w.cg_x, w.cg_r, w.cg_z, w.cg_p, w.cg_q
     for i in range(x.shape[0]):
         for a in range(3):
@@ -387,7 +412,10 @@ def _solve(m, w, h, project, target, cg_max):
 
 @kernel
 def _trial(m, pos, vel, h, dv, w):
-    """w.v_try = vel + dv, w.x_try = pos + h w.v_try on the free points; pos, vel on the others."""
+    """w.v_try = vel + dv, w.x_try = pos + h w.v_try on the free points; pos, vel on the others.
+    # Model: m.vert_free (nvert,) uint8   # Data in: pos (nvert, 3) m, vel (nvert, 3) m/s, h (s), dv (nvert, 3) m/s
+    # Data out: w.x_try (nvert, 3) m, w.v_try (nvert, 3) m/s
+    """
     xt, vt = w.x_try, w.v_try
     free = m.vert_free
     for i in range(pos.shape[0]):
@@ -403,7 +431,11 @@ def _trial(m, pos, vel, h, dv, w):
 @kernel
 def _residual(m, sched_val, pos, vel, h, w):
     """At dv: x_try, v_try, f = f_i(x_try, v_try), res = f + f_expl - M dv / h (0 on fixed
-    points). Returns (|res|, |f| + |f_expl| + |M dv / h|, the vertex of the largest residual)."""
+    points). Returns (|res|, |f| + |f_expl| + |M dv / h|, the vertex of the largest residual).
+    # Model: m (vert_free, vert_mass kg, term_on, kv_on, damp_coef kg/s), w.rows (the triangles of f_i)
+    # Data in: sched_val (the inputs at t), pos (nvert, 3) m, vel (nvert, 3) m/s, h (s), w.dv m/s, w.f_expl N
+    # Data out: w.x_try m, w.v_try m/s (`_trial`), w.f, w.res (nvert, 3) N; returns (N, N, a vertex)
+    """
     dv, xt, vt, res = w.dv, w.x_try, w.v_try, w.res
     free = m.vert_free
     _trial(m, pos, vel, h, dv, w)
@@ -434,9 +466,13 @@ def _residual(m, sched_val, pos, vel, h, w):
 def _merit(m, sched_val, h, dv, w):
     """The incremental potential at dv (w.x_try, w.v_try taken there: `_trial`), whose
     dv-gradient is minus h res: 1/2 dv M dv - h f_e . dv + E(x_try) + h/2 sum c |v_try|^2
-    + h R(x_try, v_try), E the membrane's and fibres' energies, R the viscosity's
+    + h R(x_kv, v_try), E the membrane's and fibres' energies, R the viscosity's
     dissipation function at the positions x_kv where the Newton iteration started (the
-    gradient there exact)."""
+    gradient there exact).
+    # Model: m (vert_free, vert_mass kg, damp_coef kg/s, term_on, kv_on), w.rows
+    # Data in: sched_val (the inputs at t), h (s), dv (nvert, 3) m/s, w.f_expl N, w.x_try m, w.v_try m/s, w.x_kv m
+    # Data out: returns J
+    """
     on = m.term_on
     total = 0.0
     for i in range(dv.shape[0]):
@@ -461,7 +497,9 @@ def _merit(m, sched_val, h, dv, w):
 @kernel
 def _volume_gradient(face_vert, pos, grad):
     """grad = grad V at pos (m^2), face by face: whole at the points all of whose faces
-    face_vert lists (`NewtonRows.face_vert`: at the free points)."""
+    face_vert lists (`NewtonRows.face_vert`: at the free points).
+    # Model: face_vert (nface, 3) int32   # Data in: pos (nvert, 3) m   # Data out: grad (nvert, 3) m^2
+    """
     for i in range(grad.shape[0]):
         grad[i, 0] = grad[i, 1] = grad[i, 2] = 0.0
     sixth = 1.0 / 6.0
@@ -625,7 +663,10 @@ def implicit_step(m, s, sched_val, step, imp):
 def implicit_pressure(imp, projected):
     """The step's pressure (Pa) from the volume projection's `projected` = phi / h^2:
     itself for the other integrators; for implicit Euler plus the pressure its solve
-    carried (kept as the next step's)."""
+    carried (kept as the next step's).
+    # Model: none   # Data in: projected (Pa), imp.info[CARRIED] (Pa)
+    # Data out: imp.info[PRESSURE] (Pa) for implicit Euler; returns Pa
+    """
     if imp is None:
         return projected
     p = imp.info[I_CARRIED] + projected

@@ -122,9 +122,15 @@ def newton_matrix(nvert: int, vert_free, mem_vert, fib_vert, pf_vert) -> NewtonM
 @kernel
 def assemble(m, rows, face, fib, pf, h, mat):
     """mat.amat = M + h^2 K + h C on the free points, mat.pdiag its diagonal blocks with K
-    projected, from the tangent caches of `rows` (`hybrid.implicit.newton_caches`); mat.dinv,
-    mat.gchol, mat.ediag. One thread in both builds (threads summing into shared blocks
-    would change their last bits from one build to the other)."""
+    projected, from the tangent caches of `rows` (`hybrid.implicit.newton_caches`); mat.sdiag,
+    mat.dinv, mat.gchol, mat.ediag. One thread in both builds (threads summing into shared blocks
+    would change their last bits from one build to the other).
+    # Model: m (vert_mass kg, damp_coef kg/s, term_on); rows (NewtonRows): mem_vert, mem_par, fib_vert, pf_vert;
+    #        mat's pattern: free, row_ptr, mem_slot, fib_slot, pf_slot
+    # Data in: face, fib, pf (the tangent caches), h (s)
+    # Data out: mat.amat (nblocks, 9) kg, mat.pdiag (nvert, 9) kg (the free points' rows), mat.sdiag (nfree, 9) kg,
+    #           mat.dinv (nfree, 9) 1/kg, mat.gchol (nfree, 6) kg^1/2, mat.ediag (nfree, 9) kg
+    """
     amat, pdiag = mat.amat, mat.pdiag
     for k in range(amat.shape[0]):
         for r in range(9):
@@ -157,7 +163,10 @@ def assemble(m, rows, face, fib, pf, h, mat):
 @kernel(inline="always")
 def _cholesky(a, g):
     """g = the lower Cholesky factor of the 3 x 3 block a (row-major), (g00, g10, g11, g20, g21,
-    g22); of its diagonal if a is not positive definite (which the projection rules out)."""
+    g22); of its diagonal's absolute values if a is not positive definite (a pivot not > 0,
+    which the projection rules out).
+    # Model: none   # Data in: a (9,), symmetric (its lower triangle read)   # Data out: g (6,)
+    """
     d0 = a[0]
     if d0 > 0.0:
         g00 = math.sqrt(d0)
@@ -178,7 +187,10 @@ def _cholesky(a, g):
 @kernel
 def upper_solve(mat, u, t):
     """t = (D + U)^-1 u (D = sdiag; (nfree, 3); t may be u: row i reads u_i before writing
-    t_i, and t_j of the rows after it)."""
+    t_i, and t_j of the rows after it).
+    # Model: mat.row_ptr (nfree + 1,), mat.col (nblocks,)
+    # Data in: mat.amat (U: its off-diagonal blocks), mat.dinv (D^-1), u (nfree, 3)   # Data out: t (nfree, 3)
+    """
     a, col, ptr, dinv = mat.amat, mat.col, mat.row_ptr, mat.dinv
     for i in range(ptr.shape[0] - 2, -1, -1):
         sx, sy, sz = u[i, 0], u[i, 1], u[i, 2]
@@ -196,7 +208,10 @@ def upper_solve(mat, u, t):
 
 @kernel
 def lower_solve(mat, v, s):
-    """s = (D + L)^-1 v (D = sdiag, L = U^T read by rows of U; (nfree, 3))."""
+    """s = (D + L)^-1 v (D = sdiag, L = U^T read by rows of U; (nfree, 3)).
+    # Model: mat.row_ptr, mat.col   # Data in: mat.amat (U), mat.dinv (D^-1), v (nfree, 3)
+    # Data out: s (nfree, 3)   # Scratch: mat.acc (nfree, 3)
+    """
     a, col, ptr, dinv, acc = mat.amat, mat.col, mat.row_ptr, mat.dinv, mat.acc
     n = ptr.shape[0] - 1
     for i in range(n):
@@ -218,7 +233,10 @@ def lower_solve(mat, v, s):
 @kernel(inline="always")
 def _invert(a, b):
     """b = the inverse of the 3 x 3 block a (row-major); its diagonal's inverse (Jacobi)
-    if a is not positive definite (which the projection rules out)."""
+    if its determinant is not > 0 (a not positive definite, which the projection rules out;
+    the test is the determinant's alone, unlike `_cholesky`'s pivots).
+    # Model: none   # Data in: a (9,)   # Data out: b (9,)
+    """
     c00 = a[4] * a[8] - a[5] * a[7]
     c01 = a[2] * a[7] - a[1] * a[8]
     c02 = a[1] * a[5] - a[2] * a[4]
@@ -245,7 +263,10 @@ def _invert(a, b):
 @kernel
 def matrix_product(mat, u, y):
     """y = A u ((nfree, 3)), A the assembled matrix: each upper block B at (i, j) adds B u_j
-    to row i and B^T u_i to row j."""
+    to row i and B^T u_i to row j.
+    # Model: mat.row_ptr, mat.col   # Data in: mat.amat (nblocks, 9), u (nfree, 3)
+    # Data out: y (nfree, 3) (zeroed first: not u)
+    """
     a, col, ptr = mat.amat, mat.col, mat.row_ptr
     n = ptr.shape[0] - 1
     for i in range(n):
@@ -273,7 +294,10 @@ def matrix_product(mat, u, y):
 @kernel
 def sgs_sweep(mat, r, z):
     """z = (D + U)^-1 D (D + L)^-1 r ((nfree, 3)), L = U^T: `lower_solve`, D, `upper_solve`
-    (in place)."""
+    (in place).
+    # Model: mat.row_ptr, mat.col   # Data in: mat.amat, mat.sdiag (D), mat.dinv, r (nfree, 3)
+    # Data out: z (nfree, 3)   # Scratch: mat.acc
+    """
     lower_solve(mat, r, z)
     sdiag = mat.sdiag
     for i in range(sdiag.shape[0]):
@@ -287,7 +311,9 @@ def sgs_sweep(mat, r, z):
 
 @kernel
 def dot(a, b):
-    """a . b of two (n, 3) arrays."""
+    """a . b of two (n, 3) arrays.
+    # Model: none   # Data in: a, b (n, 3)   # Data out: returns the sum
+    """
     s = 0.0
     for i in range(a.shape[0]):
         s += a[i, 0] * b[i, 0] + a[i, 1] * b[i, 1] + a[i, 2] * b[i, 2]
@@ -296,7 +322,9 @@ def dot(a, b):
 
 @kernel(inline="always")
 def cg_update(alpha, p, q, x, r):
-    """x += alpha p, r -= alpha q ((n, 3)); returns |r|^2."""
+    """x += alpha p, r -= alpha q ((n, 3)); returns |r|^2.
+    # Model: none   # Data in: alpha, p, q (n, 3)   # Data in/out: x, r (n, 3)   # Data out: returns |r|^2
+    """
     rr = 0.0
     for i in range(p.shape[0]):
         for a in range(3):
@@ -320,8 +348,9 @@ def split_cg(mat, r, x, y, p, q, t, b, target, cg_max):
     target, looked at when |C^-1 r| has fallen by target / |r_0| (then replacing the
     recursive C^-1 r if not yet), or at negative curvature as `_solve`. Returns the
     iterations (-1: negative curvature at once).
-    # Data in: mat, r (nfree, 3) (overwritten: C^-1 r)   # Data out: x (nfree, 3)
-    # Scratch: y, p, q, t, b (nfree, 3)
+    # Model: mat.row_ptr, mat.col   # Data in: mat.amat, mat.dinv, mat.gchol, mat.ediag, target, cg_max
+    # Data in/out: r (nfree, 3) (out: the recursive C^-1 r)   # Data out: x (nfree, 3)
+    # Scratch: y, p, q, t, b (nfree, 3), mat.acc
     """
     g, e = mat.gchol, mat.ediag
     n = r.shape[0]
@@ -384,7 +413,10 @@ def split_cg(mat, r, x, y, p, q, t, b, target, cg_max):
 
 @kernel
 def _true_residual(mat, g, y, b, x, q, t):
-    """x = C^-T y = (D + U)^-1 G y; q = b - A x (t: scratch); |q|."""
+    """x = C^-T y = (D + U)^-1 G y; q = b - A x (t: scratch); |q|.
+    # Model: mat.row_ptr, mat.col   # Data in: mat.amat, mat.dinv, g (nfree, 6) (mat.gchol), y, b (nfree, 3)
+    # Data out: x, q (nfree, 3); returns |q|   # Scratch: t (nfree, 3)
+    """
     n = y.shape[0]
     for i in range(n):
         _g(g[i], y[i, 0], y[i, 1], y[i, 2], t, i)
@@ -400,7 +432,9 @@ def _true_residual(mat, g, y, b, x, q, t):
 
 @kernel(inline="always")
 def _g(g, vx, vy, vz, out, i):
-    """out[i] = G v, G lower triangular (g00, g10, g11, g20, g21, g22)."""
+    """out[i] = G v, G lower triangular (g00, g10, g11, g20, g21, g22).
+    # Model: none   # Data in: g (6,) (a row of mat.gchol), v = (vx, vy, vz), i   # Data out: out[i] (3,)
+    """
     out[i, 0] = g[0] * vx
     out[i, 1] = g[1] * vx + g[2] * vy
     out[i, 2] = g[3] * vx + g[4] * vy + g[5] * vz
@@ -408,7 +442,9 @@ def _g(g, vx, vy, vz, out, i):
 
 @kernel(inline="always")
 def _gt(g, vx, vy, vz, out, i):
-    """out[i] = G^T v."""
+    """out[i] = G^T v.
+    # Model: none   # Data in: g (6,) (a row of mat.gchol), v = (vx, vy, vz), i   # Data out: out[i] (3,)
+    """
     out[i, 0] = g[0] * vx + g[1] * vy + g[3] * vz
     out[i, 1] = g[2] * vy + g[4] * vz
     out[i, 2] = g[5] * vz
