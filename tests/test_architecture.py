@@ -1,4 +1,4 @@
-"""docs/architecture.md's worked example holds: the three edits it shows, applied
+"""docs/architecture.md's worked example holds: the two edits it shows, applied
 to a copy of the package, give a working new term (scene vocabulary, scene file,
 compiled step)."""
 
@@ -30,9 +30,9 @@ def _insert_after(text: str, anchor: str, new: str) -> str:
     return text.replace(anchor, anchor + new)
 
 
-def test_adding_a_term_takes_the_three_edits_the_architecture_page_shows(tmp_path):
+def test_adding_a_term_takes_the_two_edits_the_architecture_page_shows(tmp_path):
     blocks = _blocks()
-    assert {k.split(":")[0] for k in blocks} == {"edit 1", "edit 2", "edit 3"}
+    assert {k.split(":")[0] for k in blocks} == {"edit 1", "edit 2"}
     pkg = tmp_path / "hybrid"
     shutil.copytree(ROOT / "hybrid", pkg, ignore=shutil.ignore_patterns("__pycache__"))
     shutil.copytree(ROOT / "models", tmp_path / "models")
@@ -46,19 +46,6 @@ def test_adding_a_term_takes_the_three_edits_the_architecture_page_shows(tmp_pat
     tuple_text = re.search(r"order_terms\(\(.*?\)\)", edit2, re.S).group(0)
     init = re.sub(r"order_terms\(\s*\(.*?\),?\s*\)\n", tuple_text + "\n", init, count=1, flags=re.S)
     (pkg / "terms" / "__init__.py").write_text(init)
-    # edit 3: the call in the step, and its import and id at the top
-    step = (pkg / "step.py").read_text()
-    step = _insert_after(
-        step,
-        "from .terms.springs import add_applied, add_attraction, add_mass_spring\n",
-        blocks["edit 3: hybrid/step.py, at the top"],
-    )
-    step = _insert_after(
-        step,
-        "        s.term_calls[T_MUSCLE] += 1\n",
-        blocks["edit 3: hybrid/step.py, in membrane_forces after the muscle"],
-    )
-    (pkg / "step.py").write_text(step)
 
     # a sphere dropped on the floor, written as a scene file: it comes to rest on it
     script = """
