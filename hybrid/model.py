@@ -60,6 +60,7 @@ _CORE_AFTER = {
 _TERM_ARRAYS = {name: default for cls in TERM_CLASSES for name, default in cls.arrays.items()}
 
 if TYPE_CHECKING:
+    from .rigid.system import CoupledRigid
     from .schedule import ScheduleTable
 
     class MembraneArrays(NamedTuple):
@@ -116,7 +117,7 @@ class Model:
     python_schedules: tuple
     vert_stiffness: np.ndarray
     dt_stable_s: float
-    rigid: object = None
+    rigid: CoupledRigid | None = None
     link_vert: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
     vert_viscosity: np.ndarray | None = None  # N s/m: the membrane's Kelvin-Voigt share per point
     # the inputs a step reads, one per schedule row: (scene key, components), e.g.
