@@ -12,7 +12,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass, field
-from typing import NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
@@ -59,7 +59,37 @@ _CORE_AFTER = {
 }
 _TERM_ARRAYS = {name: default for cls in TERM_CLASSES for name, default in cls.arrays.items()}
 
-MembraneArrays = NamedTuple("MembraneArrays", [(k, object) for k in (*_CORE_BEFORE, *_TERM_ARRAYS, *_CORE_AFTER)])
+if TYPE_CHECKING:
+    from .rigid.system import CoupledRigid
+    from .schedule import ScheduleTable
+
+    class MembraneArrays(NamedTuple):
+        """What the type checker sees: the core fields above with their types; the
+        terms' arrays (listed at import from hybrid.terms) as attributes of any name."""
+
+        face_vert: np.ndarray
+        ring_ptr: np.ndarray
+        ring_vert: np.ndarray
+        ring_closed: np.ndarray
+        vert_rest: np.ndarray
+        vert_mass: np.ndarray
+        vert_free: np.ndarray
+        vert_weight: np.ndarray
+        term_on: np.ndarray
+        vol0: float
+        sched: ScheduleTable
+        dt: float
+        integrator: int
+        implicit_tol: float
+        implicit_max_iter: int
+        max_speed: float
+        volume_shake: bool
+        parallel: bool
+
+        def __getattr__(self, name: str) -> Any: ...
+
+else:
+    MembraneArrays = NamedTuple("MembraneArrays", [(k, object) for k in (*_CORE_BEFORE, *_TERM_ARRAYS, *_CORE_AFTER)])
 MembraneArrays.__doc__ = (
     "What the compiled step reads, built by `compile_scene`: "
     + "; ".join(f"{k} {v}" for k, v in {**_CORE_BEFORE, **_CORE_AFTER}.items() if v)
@@ -87,7 +117,7 @@ class Model:
     python_schedules: tuple
     vert_stiffness: np.ndarray
     dt_stable_s: float
-    rigid: object = None
+    rigid: CoupledRigid | None = None
     link_vert: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
     vert_viscosity: np.ndarray | None = None  # N s/m: the membrane's Kelvin-Voigt share per point
     # the inputs a step reads, one per schedule row: (scene key, components), e.g.

@@ -308,7 +308,7 @@ def nearest_surface_point(vert_pos: np.ndarray, face_vert: np.ndarray, point) ->
     pos = np.asarray(vert_pos, float)
     x = np.asarray(point, float)
     a, b, c = (pos[np.asarray(face_vert)[:, k]] for k in range(3))
-    cand = []
+    cand: list[np.ndarray] = []
     for p0, p1 in ((a, b), (b, c), (c, a)):  # the nearest point of each edge segment
         d = p1 - p0
         t = np.clip(np.sum((x - p0) * d, axis=1) / np.maximum(np.sum(d * d, axis=1), 1e-300), 0.0, 1.0)
@@ -321,10 +321,10 @@ def nearest_surface_point(vert_pos: np.ndarray, face_vert: np.ndarray, point) ->
     for p0, p1 in ((a, b), (b, c), (c, a)):  # the projection lies left of every edge
         inside &= np.sum(np.cross(p1 - p0, proj - p0) * n, axis=1) >= 0
     cand.append(np.where(inside[:, None], proj, cand[0]))
-    cand = np.stack(cand)  # (4, nface, 3)
-    d2 = np.sum((cand - x) ** 2, axis=2)
+    cands = np.stack(cand)  # (4, nface, 3)
+    d2 = np.sum((cands - x) ** 2, axis=2)
     k, f = np.unravel_index(np.argmin(d2), d2.shape)
-    return cand[k, f]
+    return cands[k, f]
 
 
 def _expand(sel, selectors: dict, depth: int = 0):

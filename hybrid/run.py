@@ -256,7 +256,7 @@ def _thorax(model: Model):
     frame) of the thoracic body the scene's ribs hang on (`rigid.ribs.body`), or None."""
     rigid = model.rigid
     ribs = getattr(rigid, "ribs", None) if rigid is not None else None
-    if ribs is None:
+    if rigid is None or ribs is None:
         return None
     b = int(rigid.model.body(ribs.body).id)
     return b - 1, ribs.anterior, ribs.cranial

@@ -249,7 +249,7 @@ def evaluate(s: Schedule, t: float) -> np.ndarray:
     """Value of one schedule at time t, in Python (for plots, tests and summaries)."""
     table, fns = stack_schedules([s])
     if fns:
-        return np.atleast_1d(np.asarray(s.fn(t), float))
+        return np.atleast_1d(np.asarray(fns[0][1](t), float))  # s.fn
     out = np.zeros(3)
     schedule_eval(table, 0, float(t), out)
     return out

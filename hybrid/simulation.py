@@ -232,7 +232,7 @@ class Simulation:
         count = run_steps(
             arrays, self.state, self.control.arrays, stops, step0, frames.arrays(first), rig, *step_switches(arrays)
         )
-        if rig is not None:
+        if self.rigid is not None and rig is not None:  # both or neither
             done = (int(stops[-1]) if count == len(stops) else int(self.state.status[1])) - step0
             self.rigid.finish(rig, self.state, step0, done)
         return count
@@ -313,6 +313,7 @@ class Simulation:
         h = model.arrays.dt
         t = step * h
         if code == IMPLICIT_NOT_CONVERGED:
+            assert s.implicit is not None  # the code only implicit Euler's step sets
             info = s.implicit.info
             a = model.arrays
             err: Exception = SimulationDiverged(
@@ -471,6 +472,7 @@ class Simulation:
             s.implicit.dv[:] = state.implicit_dv
             s.implicit.info[:] = state.implicit_info
         if self.rigid is not None:
+            assert state.mj_state is not None  # its shape checked above
             self.rigid.set_mj_state(state.mj_state)
         self.steps_done = int(state.steps_done)
         self.failed = None

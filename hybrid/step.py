@@ -25,7 +25,15 @@ from typing import NamedTuple
 import numpy as np
 from numba import literal_unroll, prange
 
-from .implicit import EXPLICIT, IMPLICIT_ID, implicit_pressure, implicit_start_forces, implicit_step, implicit_work
+from .implicit import (
+    EXPLICIT,
+    IMPLICIT_ID,
+    ImplicitWork,
+    implicit_pressure,
+    implicit_start_forces,
+    implicit_step,
+    implicit_work,
+)
 from .kernel import CHUNK_VERTS, chunk_count, kernel, kernel_twin
 from .model import MembraneArrays
 from .schedule import KIND_PYTHON, schedule_eval
@@ -159,7 +167,7 @@ class MembraneState(NamedTuple):
     scal: np.ndarray
     status: np.ndarray
     term_calls: np.ndarray
-    implicit: object = None
+    implicit: ImplicitWork | None = None
 
 
 def new_state(arrays: MembraneArrays) -> MembraneState:

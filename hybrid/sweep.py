@@ -157,7 +157,7 @@ def _outcome_value(outcome: tuple, p: Any, pickled: bool):
         if hasattr(err, "add_note"):
             err.add_note("the worker process running this task, or another one, died (killed, out of memory)")
     try:
-        err.sweep_params = p
+        err.sweep_params = p  # type: ignore[attr-defined]  # our own attribute, on an exception of any class
     except AttributeError:  # an exception class with __slots__
         pass
     return err

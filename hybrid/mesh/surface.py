@@ -83,6 +83,18 @@ class Mesh:
         "border_vert",
         "name",
     )
+    # the slots' types (annotations only: no class attribute, so no clash with __slots__)
+    vert_pos: np.ndarray
+    face_vert: np.ndarray
+    nvert: int
+    nface: int
+    closed: bool
+    ring_ptr: np.ndarray
+    ring_vert: np.ndarray
+    ring_closed: np.ndarray
+    edge_vert: np.ndarray
+    border_vert: np.ndarray
+    name: str
 
     def __init__(self, vert_pos, face_vert, *, name: str = "mesh"):
         name = str(name)

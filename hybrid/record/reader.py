@@ -78,7 +78,7 @@ class _Decoder:
         self.wanted = wanted
         self.parts: dict[str, dict[str, list]] = {}
         self.rgba: dict[str, np.ndarray] = {}
-        self.bodies = None
+        self.bodies: list[str] | None = None
 
     def chunk(self, raw: bytes, msgs: list, lo: int, hi: int) -> dict[str, dict]:
         """The chunk's messages in [lo, hi] of the wanted topics, as arrays by topic."""
@@ -104,12 +104,12 @@ class _Decoder:
 
     def _decode(self, topic: str, decode, datas: list, t: np.ndarray) -> dict:
         if topic == "/membrane/points":
-            pos = []
+            xyz = []
             for data in datas:
                 arr = np.frombuffer(decode(data).data, dtype=[("xyz", "<f4", 3), ("rgba", "u1", 4)])
-                pos.append(arr["xyz"])
+                xyz.append(arr["xyz"])
                 self.rgba[topic] = arr["rgba"]
-            return {"t": t, "pos": np.stack(pos)}
+            return {"t": t, "pos": np.stack(xyz)}
         if topic == "/membrane/mesh":
             pos = np.empty((len(datas), 0, 3))
             for i, data in enumerate(datas):
@@ -122,13 +122,13 @@ class _Decoder:
                     self.rgba[topic] = np.array([(c.r, c.g, c.b, c.a) for c in tri.colors], float)
             return {"t": t, "pos": pos}
         if topic == "/rigid/transforms":
-            pos, quat = [], []
+            trans, quat = [], []
             for data in datas:
                 tfs = decode(data).transforms
                 self.bodies = self.bodies or [tf.child_frame_id for tf in tfs]
-                pos.append([(tf.translation.x, tf.translation.y, tf.translation.z) for tf in tfs])
+                trans.append([(tf.translation.x, tf.translation.y, tf.translation.z) for tf in tfs])
                 quat.append([(tf.rotation.w, tf.rotation.x, tf.rotation.y, tf.rotation.z) for tf in tfs])
-            return {"t": t, "pos": np.array(pos, float), "quat": np.array(quat, float)}
+            return {"t": t, "pos": np.array(trans, float), "quat": np.array(quat, float)}
         if topic in SCALAR_CHANNELS or topic.startswith("/loads/"):
             return {"t": t, "value": np.array([decode(d).value for d in datas], float)}
         return {"t": t}
@@ -140,7 +140,7 @@ class _Decoder:
                 parts.setdefault(key, []).append(arr)
 
     def result(self) -> dict[str, dict]:
-        out = {}
+        out: dict[str, dict] = {}
         for topic, parts in self.parts.items():
             out[topic] = {key: np.concatenate(arrs) for key, arrs in parts.items()}
             if topic in self.rgba:

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections import defaultdict
+from collections.abc import Mapping
 from typing import ClassVar
 
 import numpy as np
@@ -105,7 +106,7 @@ class Rows:
         return np.zeros((0, *self.tail), self.dtype)
 
 
-def check_value(where: str, kind: str, value, meta: dict | None = None):
+def check_value(where: str, kind: str, value, meta: Mapping | None = None):
     """`value` checked as a field of `kind`; returns it normalised (floats, tuples)."""
     meta = meta or {}
     if kind == "positive":
