@@ -2,8 +2,9 @@
 `hybrid inspect`.
 
 Bad input prints one line naming the culprit on stderr and exits with
-status 2, without a traceback; a run that fails still writes what it
-recorded.
+status 2, without a traceback; a file that cannot be written (a full disk)
+prints one line naming it and exits with status 74 (EX_IOERR); a run that
+fails still writes what it recorded.
 """
 
 from __future__ import annotations
@@ -365,8 +366,13 @@ def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     args = build_parser().parse_args(argv)
     args.argv = argv  # the command line, for the run's provenance
+    from .outputs import EXIT_IO, OutputError
+
     try:
         return args.func(args)
+    except OutputError as exc:  # the file system refused, not the input: its own status
+        sys.stderr.write(f"hybrid: error: {' '.join(str(exc).split())}\n")
+        return EXIT_IO
     except HybridError as exc:
         msg = " ".join(str(exc).split())  # one line, whatever the message
         sys.stderr.write(f"hybrid: error: {msg}\n")
@@ -374,7 +380,7 @@ def main(argv: list[str] | None = None) -> int:
     except OSError as exc:  # the file system refused (a full disk, say): what and where
         where = f" {str(exc.filename)!r}" if exc.filename else ""
         sys.stderr.write(f"hybrid: error: cannot read or write{where}: {exc.strerror or exc}\n")
-        return 2
+        return EXIT_IO
     except KeyboardInterrupt:
         sys.stderr.write("hybrid: interrupted\n")
         return 130

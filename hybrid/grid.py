@@ -29,6 +29,7 @@ from pathlib import Path
 
 from .errors import HybridError
 from .model import compile_scene
+from .outputs import FolderLock, read_own, replaced, write_text
 from .resolve import resolve_scene
 from .run import out_folder, run, run_steps
 from .simulation import Simulation
@@ -119,11 +120,21 @@ def run_grid(
     without = tuple(without)
     models = _checked(source, cases, without, duration_s)
     out = out_folder(Path(out))
+    # as a run's: a second sweep into the folder is refused while this one writes there
+    lock = FolderLock(out, what="sweep")
+    try:
+        return _run_locked(source, cases, models, without, duration_s, out, metric, workers)
+    finally:
+        lock.release()
+
+
+def _run_locked(source, cases, models, without, duration_s, out: Path, metric, workers) -> dict:
     meta = {"scene": source, "without": list(without), "duration_s": duration_s, "keys": list(cases[0])}
     meta_path = out / "sweep.json"
-    if meta_path.exists():
+    text = read_own(meta_path)
+    if text is not None:
         try:
-            before = json.loads(meta_path.read_text(encoding="utf-8"))
+            before = json.loads(text)
         except ValueError:
             before = None
         if before != meta:
@@ -131,7 +142,7 @@ def run_grid(
                 f"--out {str(out)!r}: holds a sweep of {before}, expected {meta}; "
                 f"choose another folder to sweep other settings"
             )
-    meta_path.write_text(json.dumps(meta, indent=2) + "\n", encoding="utf-8")
+    write_text(meta_path, json.dumps(meta, indent=2) + "\n")
     # compiled code loaded (or compiled, once) here, before the workers start
     try:
         run(Simulation(models[0]), models[0].dt_s)
@@ -176,7 +187,7 @@ def _number(v) -> bool:
 
 def _write_csv(rows: list[dict], keys: list, path: Path) -> None:
     columns = list(dict.fromkeys([*keys, "status", "error", *(k for r in rows for k in r)]))
-    with open(path, "w", newline="", encoding="utf-8") as f:
+    with replaced(path, "w", newline="", encoding="utf-8") as f:
         writer = csv.DictWriter(f, columns, restval="")
         writer.writeheader()
         for r in rows:
@@ -209,5 +220,8 @@ def _plot(rows: list[dict], keys: list, metric: str, path: Path, *, title: str) 
     ax.set_title(title)
     if others:
         ax.legend(fontsize="small")
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    try:
+        with replaced(path, "wb") as f:
+            fig.savefig(f, dpi=120, format="png")
+    finally:
+        plt.close(fig)

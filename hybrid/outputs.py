@@ -10,7 +10,9 @@ holds one; an explicit --out that holds a run is refused. `overwrite=True`
 
 from __future__ import annotations
 
+import contextlib
 import json
+import os
 import tempfile
 from pathlib import Path
 
@@ -21,6 +23,12 @@ from .errors import HybridError
 
 __all__ = [
     "out_folder",
+    "replaced",
+    "replacing",
+    "write_text",
+    "create_new",
+    "open_append",
+    "OutputError",
     "default_out",
     "LOCK_NAME",
     "FolderLock",
@@ -48,6 +56,116 @@ def out_folder(out: Path) -> Path:
     return out
 
 
+class OutputError(HybridError, OSError):
+    """An output file could not be written (a full disk, a folder that refuses):
+    not the input's fault, so the command line exits `EXIT_IO`, not 2."""
+
+    def __init__(self, path, exc: OSError):
+        OSError.__init__(self, exc.errno, exc.strerror or str(exc), str(path))
+        self.args = (f"cannot write {str(path)!r}: {exc.strerror or exc}",)
+
+    def __str__(self) -> str:
+        return self.args[0]
+
+
+#: the command line's status when an output cannot be written (sysexits' EX_IOERR)
+EXIT_IO = 74
+
+# Output files are never followed through a link someone left in the folder: a file
+# is written aside under a fresh name (created exclusively) and renamed over the
+# name it goes to, or created after whatever held its name is removed; rename and
+# unlink act on a link itself, never on its target.
+_NOFOLLOW = getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0)
+
+
+@contextlib.contextmanager
+def replacing(path):
+    """A fresh file's path beside `path` (same suffix), renamed to `path` when the
+    block ends without an exception, removed otherwise: `path` is replaced whole,
+    whatever was there (a link stays untouched where it points). An OSError is
+    an `OutputError` naming `path`."""
+    path = Path(path)
+    try:
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=f".part{path.suffix}")
+        os.close(fd)
+    except OSError as exc:
+        raise OutputError(path, exc) from None
+    try:
+        yield Path(tmp)
+        os.replace(tmp, path)
+    except BaseException as exc:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        if isinstance(exc, OSError) and not isinstance(exc, HybridError):
+            raise OutputError(path, exc) from None
+        raise
+
+
+@contextlib.contextmanager
+def replaced(path, mode: str = "w", **kwargs):
+    """`replacing(path)` as an open file (`mode` "w" or "wb", open()'s keywords)."""
+    with replacing(path) as tmp:
+        try:
+            with open(tmp, mode, **kwargs) as f:
+                yield f
+        except OSError as exc:
+            if isinstance(exc, HybridError):
+                raise
+            raise OutputError(path, exc) from None
+
+
+def write_text(path, text: str) -> None:
+    """`text` into `path` (UTF-8), replaced whole, never through a link."""
+    with replaced(path, "w", encoding="utf-8") as f:
+        f.write(text)
+
+
+def _drop(path: Path) -> None:
+    """Remove what holds `path`'s name: a link goes, its target stays untouched."""
+    try:
+        os.unlink(path)
+    except FileNotFoundError:
+        pass
+    except OSError as exc:
+        raise OutputError(path, exc) from None
+
+
+def create_new(path, mode: str = "wb"):
+    """`path` created anew for writing (an earlier file or link of that name removed
+    first, the new one created exclusively, never through a link): an open file."""
+    path = Path(path)
+    _drop(path)
+    try:
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | _NOFOLLOW, 0o644)
+    except OSError as exc:
+        raise OutputError(path, exc) from None
+    return os.fdopen(fd, mode)
+
+
+def open_append(path, mode: str = "a", **kwargs):
+    """`path` opened to append, created if absent; a link of that name is removed
+    first (its target untouched) and the file opened without following links."""
+    path = Path(path)
+    if path.is_symlink():
+        _drop(path)
+    try:
+        fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | _NOFOLLOW, 0o644)
+    except OSError as exc:
+        raise OutputError(path, exc) from None
+    return os.fdopen(fd, mode, **kwargs)
+
+
+def read_own(path, default=None) -> str | None:
+    """The text of an output file of ours, or `default` when there is none or a link
+    holds its name (a link is never read as ours)."""
+    try:
+        fd = os.open(path, os.O_RDONLY | _NOFOLLOW)
+    except OSError:
+        return default
+    with os.fdopen(fd, encoding="utf-8", errors="replace") as f:
+        return f.read()
+
+
 def default_out(scene_name: str) -> Path:
     """runs/<scene name>, the folder of a run without --out. The name is a name:
     one that could lead elsewhere (a path separator, '..', a NUL) or none at all
@@ -69,12 +187,16 @@ class FolderLock:
     with a HybridError naming the first's process id. The lock goes with the process,
     however it ends; the file stays."""
 
-    def __init__(self, folder: Path):
+    def __init__(self, folder: Path, *, what: str = "run"):
         import fcntl
-        import os
 
         path = folder / LOCK_NAME
-        self._fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+        if path.is_symlink():  # never followed: the link goes, its target stays
+            _drop(path)
+        try:
+            self._fd = os.open(path, os.O_RDWR | os.O_CREAT | _NOFOLLOW, 0o644)
+        except OSError as exc:
+            raise OutputError(path, exc) from None
         try:
             fcntl.flock(self._fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
@@ -82,14 +204,12 @@ class FolderLock:
             os.close(self._fd)
             raise HybridError(
                 f"--out: expected a folder no other run is writing, received {str(folder)!r}, "
-                f"in use by hybrid run process {holder}; wait for it or choose another --out"
+                f"in use by hybrid {what} process {holder}; wait for it or choose another --out"
             ) from None
         os.ftruncate(self._fd, 0)
         os.pwrite(self._fd, f"{os.getpid()}\n".encode(), 0)
 
     def release(self) -> None:
-        import os
-
         if self._fd is not None:
             os.close(self._fd)  # closing the descriptor releases the flock
             self._fd = None
@@ -98,7 +218,7 @@ class FolderLock:
 def holds_run(folder: Path) -> str | None:
     """The file that shows a run was made (or is being made) in `folder`, else None."""
     for name in RUN_FILES:
-        if (folder / name).exists():
+        if os.path.lexists(folder / name):  # a link, even dangling, counts: it is never followed
             return name
     return None
 
@@ -154,10 +274,9 @@ def claim_folder(out: Path, *, explicit: bool, overwrite: bool = False) -> tuple
 
 
 def write_summary(summary: dict, out_dir: Path) -> None:
-    """summary.json in out_dir, replaced whole (written aside, then renamed)."""
-    tmp = out_dir / "summary.json.part"
-    tmp.write_text(json.dumps(summary, indent=2, allow_nan=False) + "\n")
-    tmp.replace(out_dir / "summary.json")
+    """summary.json in out_dir, replaced whole (written aside, then renamed; never
+    through a link)."""
+    write_text(out_dir / "summary.json", json.dumps(summary, indent=2, allow_nan=False) + "\n")
 
 
 def plot_name(scene_name: str) -> str:
@@ -222,5 +341,8 @@ def plot_trace(trace, path: Path, *, title: str = "") -> None:
         ax.grid(alpha=0.3)
     axes[-1].set_xlabel("time (s)")
     axes[0].set_title(title)
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    try:
+        with replaced(path, "wb") as f:
+            fig.savefig(f, dpi=100, format="png")
+    finally:
+        plt.close(fig)

@@ -189,10 +189,12 @@ class _Table:
     def __init__(self, folder):
         folder = Path(folder)
         folder.mkdir(parents=True, exist_ok=True)
+        from .outputs import open_append, read_own
+
         self.path = folder / TABLE_NAME
         self.done: dict[str, Any] = {}
-        if self.path.exists():
-            text = self.path.read_text(encoding="utf-8")
+        text = read_own(self.path)  # a link of that name is no table of ours, and never followed
+        if text is not None:
             for line in text.splitlines():
                 try:
                     row = json.loads(line)
@@ -200,11 +202,11 @@ class _Table:
                     continue
                 if isinstance(row, dict) and row.get("status") == "ok" and "params" in row:
                     self.done[_key(row["params"])] = row.get("result")
-            self._file = open(self.path, "a", encoding="utf-8")
+            self._file = open_append(self.path, encoding="utf-8")
             if text and not text.endswith("\n"):
                 self._file.write("\n")
         else:
-            self._file = open(self.path, "a", encoding="utf-8")
+            self._file = open_append(self.path, encoding="utf-8")
 
     def write(self, p, value) -> None:
         row: dict = {"params": _jsonable(p)}

@@ -14,6 +14,7 @@ import numpy as np
 
 from ..errors import HybridError
 from ..loads import Loads, LoadsObserver
+from ..outputs import create_new
 from ..provenance import run_provenance
 from ..run import TRACE_KEYS, scene_parts
 from ..step import F_PRESSURE, F_TIME, F_VOLUME
@@ -135,7 +136,9 @@ class Recorder:
         self._closed = False
         mesh_every = int(mesh_every) if mesh_every else (1 if n <= MESH_EVERY_FRAME_MAX else 10)
         _load_encoder()
-        self._file = open(self.path, "wb")  # a path that cannot be written fails here, at once
+        # a path that cannot be written fails here, at once; a file or link of that name is
+        # replaced, a link never followed
+        self._file = create_new(self.path, "wb")
         self._fw: _FrameWriter | None = None
 
         def make_writer() -> _FrameWriter:  # the file's head, and the encoder loaded
