@@ -240,17 +240,43 @@ def _cmd_bench(args) -> int:
 
 
 def _cmd_sweep(args) -> int:
-    from .grid import run_grid
+    """The grid run; SIGTERM and SIGHUP stop it as Ctrl-C does: the workers ended, the
+    rows finished kept in sweep.jsonl (a rerun skips them), one line, 128 + the signal."""
+    import signal
 
-    done = run_grid(
-        args.scene,
-        args.set or (),
-        without=args.without or (),
-        duration_s=args.duration,
-        out=_out_arg(args.out),
-        metric=args.metric,
-        workers=args.workers,
-    )
+    from .grid import run_grid
+    from .sweep import TABLE_NAME
+
+    out = _out_arg(args.out)
+    caught = []
+
+    def as_interrupt(signum, frame):
+        caught.append(signum)
+        raise KeyboardInterrupt(signal.Signals(signum).name)
+
+    stops = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+    previous = {sig: signal.signal(sig, as_interrupt) for sig in stops}
+    try:
+        done = run_grid(
+            args.scene,
+            args.set or (),
+            without=args.without or (),
+            duration_s=args.duration,
+            out=out,
+            metric=args.metric,
+            workers=args.workers,
+        )
+    except KeyboardInterrupt:
+        for sig in stops:  # the one line below, whatever comes next
+            signal.signal(sig, signal.SIG_IGN)
+        signum = caught[-1] if caught else signal.SIGINT
+        table = out / TABLE_NAME
+        kept = f"; the runs finished are in {table} (a rerun skips them)" if table.is_file() else ""
+        sys.stderr.write(f"hybrid: sweep interrupted by {signal.Signals(signum).name}{kept}\n")
+        return 128 + int(signum)
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
     print(f"{len(done['rows'])} runs, {done['failed']} failed -> {done['csv']}, {done['plot']} ({done['metric']})")
     return 1 if done["failed"] else 0
 
