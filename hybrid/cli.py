@@ -206,6 +206,8 @@ def _cmd_render(args) -> int:
         overrides=args.set or (),
         without=args.without or (),
     )
+    if result.get("died"):
+        sys.stderr.write(f"hybrid: the run recorded in {args.source} was interrupted: {result['died']}\n")
     extra = f" and {result['video']}" if result["video"] else ""
     frames = ", ".join(f"{name} t = {t:.2f} s" for name, t in zip(result["titles"], result["frames"]))
     print(f"{frames} -> {result['figure']}{extra}")

@@ -33,6 +33,8 @@ __all__ = [
     "LOCK_NAME",
     "FolderLock",
     "holds_run",
+    "run_status",
+    "recording_path",
     "claim_folder",
     "write_summary",
     "write_outputs",
@@ -223,6 +225,91 @@ def holds_run(folder: Path) -> str | None:
     return None
 
 
+def _lock_free(folder: Path) -> bool | None:
+    """Whether no process holds the folder's lock (None: no lock file of ours there)."""
+    import fcntl
+
+    try:
+        fd = os.open(Path(folder) / LOCK_NAME, os.O_RDONLY | _NOFOLLOW)
+    except OSError:
+        return None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return False
+    finally:
+        os.close(fd)  # a lock taken here goes with the descriptor
+    return True
+
+
+def _alive(pid) -> bool:
+    if not isinstance(pid, int) or isinstance(pid, bool) or pid <= 0:
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # someone else's process: alive
+        return True
+    return True
+
+
+def run_status(folder) -> dict | None:
+    """The summary of the run in `folder` (None without one), as it stands: a summary
+    that says "running" while the folder's lock is free (or, without a lock file, its
+    process "pid" is gone) is of a run that died (killed, a full disk): its "status" is
+    then "interrupted" and "died" says why."""
+    text = read_own(Path(folder) / "summary.json")
+    if text is None:
+        return None
+    try:
+        summary = json.loads(text)
+    except ValueError:
+        return None
+    if not isinstance(summary, dict) or summary.get("status") != "running":
+        return summary
+    free = _lock_free(folder)
+    pid = summary.get("pid")
+    if free or (free is None and not _alive(pid)):
+        summary["status"] = "interrupted"
+        summary["died"] = f"its process {pid} ended without finishing summary.json (killed, or a full disk)"
+    return summary
+
+
+#: bytes of an MCAP file's magic: a file of no more holds no record
+MCAP_MAGIC_BYTES = 8
+
+
+def recording_path(path, *, strict: bool = True) -> Path:
+    """`path` as `hybrid.read` takes it, checked: a str or path naming an existing file
+    (a HybridError naming what was received otherwise); with `strict`, a file of at
+    most the MCAP magic's 8 bytes (a run killed before its first record) is refused.
+    A recording whose run died (`run_status`) is read with a RecordingWarning saying so."""
+    import warnings
+
+    from .record.mcap_reader import RecordingError, RecordingWarning
+
+    if not isinstance(path, (str, os.PathLike)) or isinstance(path, bytes):
+        raise HybridError(f"path: expected a path to a .mcap recording, received {path!r} ({type(path).__name__})")
+    path = Path(path)
+    if not path.exists():
+        raise HybridError(f"path: expected an existing .mcap recording, received {str(path)!r}, which does not exist")
+    if not path.is_file():
+        raise HybridError(f"path: expected a .mcap recording file, received {str(path)!r}, which is a folder")
+    size = path.stat().st_size
+    if strict and size <= MCAP_MAGIC_BYTES:
+        raise RecordingError(
+            f"{str(path)!r}: expected an MCAP recording, received a file of {size} bytes, which holds no "
+            f"record (a run killed before it wrote any); strict=False reads it as empty"
+        )
+    run = run_status(path.parent) if path.name == "run.mcap" else None
+    if run is not None and run.get("died"):
+        warnings.warn(
+            f"recording {str(path)!r}: the run was interrupted: {run['died']}", RecordingWarning, stacklevel=3
+        )
+    return path
+
+
 #: runs/NAME-2 up to this suffix are tried before a default folder is refused
 MAX_SUFFIX = 10_000
 
@@ -250,6 +337,9 @@ def claim_folder(out: Path, *, explicit: bool, overwrite: bool = False) -> tuple
         found = holds_run(out) if not overwrite else None
         if found is not None:
             lock.release()
+            earlier = run_status(out)
+            if earlier is not None and earlier.get("died"):
+                found += f", interrupted: {earlier['died']}"
             raise HybridError(
                 f"--out: expected a folder that holds no earlier run, received {str(out)!r}, "
                 f"which holds one ({found}); add --overwrite to replace it, or choose another --out"

@@ -579,6 +579,14 @@ def _send_video(fig, fr, picks, writer, centre, half, px_per_m) -> None:
         plt.close(fig)
 
 
+def _died(recording: Path) -> str | None:
+    """Why the run that wrote `recording` is no longer running though its summary says so, or None."""
+    from .outputs import run_status
+
+    run = run_status(recording.parent) if recording.name == "run.mcap" else None
+    return run.get("died") if run is not None else None
+
+
 def render(
     source: str | None,
     out_dir: str | Path,
@@ -601,7 +609,9 @@ def render(
                 f"{source!r} (run the scene again with {given}, or render the scene itself)"
             )
         fr = frames_from_recording(source)
+        died = _died(Path(source))
     else:
+        died = None
         fr = frames_from_scene(source, duration_s, full=video, overrides=overrides, without=without)
     if len(fr.t) < 2:
         raise HybridError(f"{source}: fewer than two frames to draw")
@@ -612,6 +622,7 @@ def render(
         "frames": [float(fr.t[k]) for k in picked],
         "titles": [t.split(". ", 1)[-1] for t in panel_titles(fr)],
         "video": None,
+        "died": died,
     }
     if video:
         result["video"] = out / "run.mp4"
