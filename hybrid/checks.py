@@ -26,6 +26,10 @@ MAX_DT_S = 1e3  # the stability study probes steps of seconds on soft bodies
 MAX_DURATION_S = 1e9
 MAX_MODULUS_PA = 1e12  # a bulk modulus (diamond's is 4.4e11 Pa)
 MAX_DRAG_N_S_PER_M3 = 1e12
+MAX_SPEED_M_S = 299_792_458.0  # the runaway guard's speed: at most light's
+#: the longest name a run's files take ("NAME.png", and the fresh name it is written under
+#: first, 23 characters more, within the 255 bytes a file name may have)
+MAX_NAME_CHARS = 200
 #: the most points a mesh may have, checked before any array is allocated: building and
 #: checking a mesh takes about `MESH_BYTES_PER_POINT` a point (1.9 kB measured from mesh
 #: level 10 to 12: 323 -> 771 MB of peak memory for 80 k -> 319 k points), so 2^21 points
@@ -65,8 +69,8 @@ def mesh_points(where: str, npoint: int, how: str = "", *, error=None) -> int:
     if npoint > limit:
         need = npoint * MESH_BYTES_PER_POINT / 1e9
         raise (error or SceneError)(
-            f"{where}: {how}{npoint:,} points, about {need:.1f} GB to build and check; "
-            f"expected at most {limit:,} points ({why})"
+            f"{where}: {how}{npoint} points, about {need:.3g} GB to build and check; "
+            f"expected at most {limit} points ({why})"
         )
     return npoint
 
@@ -141,7 +145,9 @@ def plain_name(where, v) -> str:
     if not isinstance(v, str):
         fail(where, f"expected a string, received {show(v)}")
     why = (
-        "is empty"
+        f"has {len(v)} characters, more than {MAX_NAME_CHARS}"
+        if len(v) > MAX_NAME_CHARS
+        else "is empty"
         if not v.strip()
         else "holds a NUL character"
         if "\0" in v
@@ -157,7 +163,7 @@ def plain_name(where, v) -> str:
         fail(
             where,
             f"expected a plain name (the folder runs/<name> when --out is not given), received "
-            f"{v!r}, which {why}; choose the folder with --out",
+            f"{show(v)}, which {why}" + ("" if len(v) > MAX_NAME_CHARS else "; choose the folder with --out"),
         )
     return v
 

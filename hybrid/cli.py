@@ -40,6 +40,11 @@ def _cmd_run(args) -> int:
     scene = resolve_scene(args.scene, overrides=args.set or (), without=args.without or ())
     if args.dt is not None:
         scene = dataclasses.replace(scene, dt_s=args.dt)
+    if args.duration is not None:  # --duration replaces the scene's own before it is checked
+        from . import checks
+
+        checks.positive("--duration", args.duration, checks.MAX_DURATION_S, " s")
+        scene = dataclasses.replace(scene, duration_s=args.duration)
     # a first run (nothing in the compile cache) says so before it compiles
     with compile_notice(COMPILE_ESTIMATE_S["rigid" if scene.rigid is not None else "membrane"]):
         return _load_and_run(args, scene)
@@ -58,7 +63,13 @@ def _load_and_run(args, scene) -> int:
 
     duration = scene.duration_s if args.duration is None else args.duration
     out = _out_arg(args.out) if args.out is not None else default_out(scene.name)
-    sim = Simulation(compile_scene(scene))
+    try:
+        sim = Simulation(compile_scene(scene))
+    except HybridError as exc:
+        text = str(exc)
+        if args.duration is not None and text.startswith("duration_s:"):  # the duration is --duration's
+            raise HybridError("--duration" + text[len("duration_s") :]) from None
+        raise
     run_steps(duration, sim.model.dt_s, confirmed=args.yes)
     if not args.no_record:
         from .record import record_steps

@@ -61,6 +61,15 @@ def split_values(item: str) -> tuple[str, list[str]]:
         elif ch == "," and depth <= 0:
             values.append(text[start:k].strip())
             start = k + 1
+    if quote or depth:  # a value cut short: refused rather than split elsewhere or dropped
+        what = (
+            f"a closing {quote}"
+            if quote
+            else "a closing ] or }"
+            if depth > 0
+            else "an opening [ or { before a closing one"
+        )
+        raise HybridError(f"--set {item!r}: expected brackets and quotes that close; the values lack {what}")
     if not key or not all(values):
         raise HybridError(f"--set {item!r}: expected KEY=V1,V2,... with a key and no empty value")
     return key, values

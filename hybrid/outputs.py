@@ -62,12 +62,16 @@ class OutputError(HybridError, OSError):
     """An output file could not be written (a full disk, a folder that refuses):
     not the input's fault, so the command line exits `EXIT_IO`, not 2."""
 
-    def __init__(self, path, exc: OSError):
-        OSError.__init__(self, exc.errno, exc.strerror or str(exc), str(path))
-        self.args = (f"cannot write {str(path)!r}: {exc.strerror or exc}",)
+    def __init__(self, path: str, reason: str, code: int = 0):
+        OSError.__init__(self, code, reason, path)
+        self.args = (f"cannot write {path!r}: {reason}",)
 
     def __str__(self) -> str:
         return self.args[0]
+
+
+def _output_error(path, exc: OSError) -> OutputError:
+    return OutputError(str(path), exc.strerror or str(exc), exc.errno or 0)
 
 
 #: the command line's status when an output cannot be written (sysexits' EX_IOERR)
@@ -91,7 +95,7 @@ def replacing(path):
         fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=f".part{path.suffix}")
         os.close(fd)
     except OSError as exc:
-        raise OutputError(path, exc) from None
+        raise _output_error(path, exc) from None
     try:
         yield Path(tmp)
         os.replace(tmp, path)
@@ -99,7 +103,7 @@ def replacing(path):
         with contextlib.suppress(OSError):
             os.unlink(tmp)
         if isinstance(exc, OSError) and not isinstance(exc, HybridError):
-            raise OutputError(path, exc) from None
+            raise _output_error(path, exc) from None
         raise
 
 
@@ -113,7 +117,7 @@ def replaced(path, mode: str = "w", **kwargs):
         except OSError as exc:
             if isinstance(exc, HybridError):
                 raise
-            raise OutputError(path, exc) from None
+            raise _output_error(path, exc) from None
 
 
 def write_text(path, text: str) -> None:
@@ -129,7 +133,7 @@ def _drop(path: Path) -> None:
     except FileNotFoundError:
         pass
     except OSError as exc:
-        raise OutputError(path, exc) from None
+        raise _output_error(path, exc) from None
 
 
 def create_new(path, mode: str = "wb"):
@@ -140,7 +144,7 @@ def create_new(path, mode: str = "wb"):
     try:
         fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | _NOFOLLOW, 0o644)
     except OSError as exc:
-        raise OutputError(path, exc) from None
+        raise _output_error(path, exc) from None
     return os.fdopen(fd, mode)
 
 
@@ -153,7 +157,7 @@ def open_append(path, mode: str = "a", **kwargs):
     try:
         fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | _NOFOLLOW, 0o644)
     except OSError as exc:
-        raise OutputError(path, exc) from None
+        raise _output_error(path, exc) from None
     return os.fdopen(fd, mode, **kwargs)
 
 
@@ -198,7 +202,7 @@ class FolderLock:
         try:
             self._fd = os.open(path, os.O_RDWR | os.O_CREAT | _NOFOLLOW, 0o644)
         except OSError as exc:
-            raise OutputError(path, exc) from None
+            raise _output_error(path, exc) from None
         try:
             fcntl.flock(self._fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:

@@ -8,6 +8,7 @@ unless the scene has Python schedules (evaluated between steps).
 from __future__ import annotations
 
 import copy
+import dataclasses
 import math
 import time
 
@@ -15,7 +16,7 @@ import numpy as np
 
 from . import readouts
 from .builds import BuildChoice
-from .errors import ConstraintError, SceneError, SimulationDiverged
+from .errors import ArgumentError, ConstraintError, SceneError, SimulationDiverged
 from .implicit import IMPLICIT_NOT_CONVERGED, Info
 from .model import TERMS, Model
 from .step import (
@@ -64,6 +65,7 @@ class Simulation:
     """
 
     def __init__(self, model: Model, build: str = "auto"):
+        _check_model(model)
         self.model = model
         self.builds = BuildChoice(model.arrays.parallel, build)
         # the model's arrays with each build's flag: what the compiled calls take
@@ -179,8 +181,10 @@ class Simulation:
         the state then holds the failing step and further steps refuse."""
         if self.failed is not None:
             raise self.failed
-        if not (isinstance(n, (int, np.integer)) and n >= 0):
-            raise ValueError(f"n: expected an integer >= 0, received {n!r}")
+        if not (isinstance(n, (int, np.integer)) and not isinstance(n, bool) and n >= 0):
+            raise ArgumentError(f"n: expected an integer >= 0, received {_described(n)}")
+        if n >= MAX_STEP_COUNT:  # the compiled loop counts in int64
+            raise ArgumentError(f"n: expected fewer than 2^63 steps, received {n}")
         s = self.state
         if not self.model.python_schedules:
             left = int(n)
@@ -443,7 +447,8 @@ class Simulation:
         qpos (nq,), qvel (nv,): MuJoCo's generalized positions and velocities of the
         rigid part (`mj_model.nq`, `mj_model.nv`), only for a scene with one.
 
-        Every value is checked (shape, finite) before any is set: ValueError names
+        Every value is checked (shape, finite) before any is set: ArgumentError (a
+        HybridError and a ValueError) names
         the argument, what was expected and what was received. A run that failed
         steps again from the new state.
         """
@@ -453,13 +458,13 @@ class Simulation:
         if time_s is not None:
             ok = isinstance(time_s, (int, float, np.integer, np.floating)) and not isinstance(time_s, bool)
             if not (ok and math.isfinite(time_s) and time_s >= 0):
-                raise ValueError(f"time_s: expected a finite time >= 0 s, received {time_s!r}")
+                raise ArgumentError(f"time_s: expected a finite time >= 0 s, received {time_s!r}")
         rigid = {}
         for name, value, size in (("qpos", qpos, "nq"), ("qvel", qvel, "nv")):
             if value is None:
                 continue
             if self.rigid is None:
-                raise ValueError(
+                raise ArgumentError(
                     f"{name}: expected None (scene {self.model.scene.name!r} has no rigid part), "
                     f"received {_described(value)}"
                 )
@@ -483,29 +488,58 @@ class Simulation:
         self.failed = None
 
 
+#: step counts `step` takes: below 2^63, what the compiled loop's int64 holds
+MAX_STEP_COUNT = 2**63
+
+
+def _check_model(model) -> None:
+    """`Simulation(model)`'s argument: a compiled Model (a Scene is compiled first), and
+    breathing periods of at least two steps (a waveform shorter than a step is sampled
+    at random phases, not breathed)."""
+    if not isinstance(model, Model):
+        raise ArgumentError(
+            f"model: expected a hybrid.Model (hybrid.compile_scene(scene); or hybrid.load(scene) for a "
+            f"Simulation at once), received {_described(model)}"
+        )
+    from .schedule import Breathing
+
+    dt = model.dt_s
+    for term in (*model.scene.forces, *model.scene.constraints):
+        for field in dataclasses.fields(term) if dataclasses.is_dataclass(term) else ():
+            value = getattr(term, field.name)
+            if isinstance(value, Breathing) and not value.period_s >= 2 * dt:
+                raise SceneError(
+                    f"{getattr(term, 'name', type(term).__name__)}.{field.name}.period_s: expected at least "
+                    f"two steps of dt_s = {dt:g} s, received {value.period_s:g} s"
+                )
+
+
 def _described(value) -> str:
-    """What an argument was, for an error message: its shape, or its type."""
+    """What an argument was, for an error message: its shape and kind, or its type."""
     if isinstance(value, (np.ndarray, list, tuple)):
         try:
-            return f"an array of shape {np.shape(value)}"
+            arr = np.asarray(value)
         except ValueError:  # nested sequences of different lengths
             return f"a ragged {type(value).__name__}"
-    return f"{type(value).__name__} {value!r}"
+        kind = "numbers" if arr.dtype.kind in "biuf" else f"{arr.dtype.kind!r} values ({arr.dtype})"
+        return f"an array of shape {arr.shape} of {kind}"
+    text = repr(value)
+    return f"{type(value).__name__} {text if len(text) <= 80 else text[:77] + '...'}"
 
 
 def _checked_array(name: str, value, shape: tuple, what: str) -> np.ndarray | None:
-    """`value` as a float array of `shape` with finite entries (None stays None), or ValueError."""
+    """`value` as a float array of `shape` with finite entries (None stays None), or ArgumentError."""
     if value is None:
         return None
     try:
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError):
-        raise ValueError(f"{name}: expected finite {what} of shape {shape}, received {_described(value)}") from None
+        raise ArgumentError(f"{name}: expected finite {what} of shape {shape}, received {_described(value)}") from None
     if arr.shape != shape:
-        raise ValueError(f"{name}: expected finite {what} of shape {shape}, received {_described(value)}")
+        raise ArgumentError(f"{name}: expected finite {what} of shape {shape}, received {_described(value)}")
     bad = np.argwhere(~np.isfinite(arr))
     if bad.size:
-        raise ValueError(
+        raise ArgumentError(
             f"{name}: expected finite {what}, received {arr[tuple(bad[0])]} at index "
             f"{tuple(int(i) for i in bad[0])} ({len(bad)} non-finite)"
         )

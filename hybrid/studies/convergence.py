@@ -87,6 +87,25 @@ def base_step(scene, overrides, level) -> tuple[float, int]:
     return min(m.dt_s, auto_dt(m.dt_stable_s)), m.nvert
 
 
+def _check_metrics(scene, overrides, level, metrics) -> None:
+    """The metrics are series the scene reports (`hybrid.run.scene_parts`), checked on
+    one step of the coarsest level, so that a wrong --metric is refused at once."""
+    from ..run import METRIC_KEYS
+    from ..run import run as run_scene
+    from ..simulation import Simulation
+
+    unknown = [k for k in metrics if k not in METRIC_KEYS]
+    if unknown:
+        raise HybridError(f"--metric: expected series among {list(METRIC_KEYS)}, received {unknown}")
+    model = _model(scene, overrides, level, None)
+    table = run_scene(Simulation(model), model.dt_s)["summary"]["metrics"]
+    missing = [k for k in metrics if k not in table]
+    if missing:
+        raise HybridError(
+            f"--metric: scene {model.scene.name!r} has no series {missing}; expected some of {sorted(table)}"
+        )
+
+
 def simulate(scene, overrides, level, dt, duration_s, metrics) -> dict:
     """One run of the grid (a sweep task): {"values": {metric: its max}, "wall_s",
     "nvert", "status"}."""
@@ -308,6 +327,7 @@ def run(
         )
     duration = float(size["duration_s"] or sc.duration_s) if duration_s is None else float(duration_s)
     metrics = tuple(metrics)
+    _check_metrics(scene, overrides, levels[0], metrics)  # before any run of the study
     grid = []
     for level in levels:
         dt0, _ = base_step(scene, overrides, level)
