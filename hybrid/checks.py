@@ -10,6 +10,7 @@ expected and what was received; otherwise it returns the value normalised
 from __future__ import annotations
 
 import math
+import numbers
 
 from .errors import SceneError
 
@@ -93,7 +94,8 @@ def show(v) -> str:
 
 
 def is_number(v) -> bool:
-    return isinstance(v, (int, float)) and not isinstance(v, bool)
+    """An int or a float, numpy's scalars too (np.float32(1e-3) is a step); never a bool."""
+    return isinstance(v, numbers.Real) and not isinstance(v, bool) and type(v).__name__ != "bool_"
 
 
 def number(where, v, *, lo=None, lo_open=True, hi=None, hi_open=True) -> float:

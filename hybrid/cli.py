@@ -162,7 +162,9 @@ def _run_into(args, sim, duration: float, out: Path, provenance: dict) -> int:
         raise
     finally:
         for sig, handler in previous.items():
-            signal.signal(sig, handler)
+            # as a command (not main() called in a program), a signal after the run has ended
+            # changes nothing: the summary already says how it ended, and the status agrees
+            signal.signal(sig, signal.SIG_IGN if getattr(args, "own_process", False) else handler)
     s = result["summary"]
     if failure is not None:
         raise failure
@@ -402,8 +404,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     prune_old_caches()
+    own = argv is None
     argv = sys.argv[1:] if argv is None else list(argv)
     args = build_parser().parse_args(argv)
+    args.own_process = own  # the command itself, not main() called by a program
     args.argv = argv  # the command line, for the run's provenance
     from .outputs import EXIT_IO, OutputError
 

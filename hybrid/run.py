@@ -526,7 +526,7 @@ def run(
                 rest_return_mm = float(np.linalg.norm(at - rest, axis=1).max() * 1e3)
             if bar:
                 bar.update(int(batch[-1]))
-            if stop is not None and stop():
+            if stop is not None and stop() and int(batch[-1]) < nstep:  # after the last step: done
                 raise KeyboardInterrupt
     except HybridError as exc:
         error = exc
