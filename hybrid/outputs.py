@@ -138,9 +138,24 @@ def _drop(path: Path) -> None:
 
 def create_new(path, mode: str = "wb"):
     """`path` created anew for writing (an earlier file or link of that name removed
-    first, the new one created exclusively, never through a link): an open file."""
+    first, the new one created exclusively, never through a link): an open file. A
+    device or a pipe of that name (/dev/null) is opened as it is, never removed."""
+    import stat
+
     path = Path(path)
-    _drop(path)
+    try:
+        kind = os.lstat(path).st_mode
+    except FileNotFoundError:
+        kind = None
+    except OSError as exc:
+        raise _output_error(path, exc) from None
+    if kind is not None and not (stat.S_ISLNK(kind) or stat.S_ISREG(kind)):  # a device (/dev/null), a pipe
+        try:
+            return os.fdopen(os.open(path, os.O_WRONLY | _NOFOLLOW), mode)
+        except OSError as exc:
+            raise _output_error(path, exc) from None
+    if kind is not None:  # a file or a link: removed (a link's target untouched), never written through
+        _drop(path)
     try:
         fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | _NOFOLLOW, 0o644)
     except OSError as exc:
