@@ -206,7 +206,9 @@ class Rigid:
     what the scene changes in the model (`hybrid.rigid.controls`): bodies fixed or
     welded to the world, joints held by stiff springs or locked, the keyframe it
     starts from, actuators driven by schedules, MuJoCo's integrator. Names of joints
-    and actuators may be glob patterns ("lumbar*", "*"). The model's file is only read.
+    and actuators may be glob patterns ("lumbar*", "*"). The model's file is only read;
+    MuJoCo reads, as its own, every file an `<include file="...">` in it names, any XML
+    file the account can read: compose models only from files you trust.
     """
 
     mjcf: str
@@ -250,7 +252,7 @@ class Scene:
     duration_s: float = param("positive", 1.0, hi=checks.MAX_DURATION_S)
     # a point faster than this has run away (tissue moves at cm/s); at most the speed of
     # light, so that the guard can never be switched off by a huge value
-    max_speed_m_s: float = param("positive", 50.0, hi=checks.MAX_SPEED_M_S, unit=" m/s")
+    max_speed_m_s: float = param("positive", 50.0, hi=checks.MAX_SPEED_M_S)
     name: str = param("name", "scene")
     base_dir: str | None = None  # relative paths (mesh, MJCF) resolve here
 
