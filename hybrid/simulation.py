@@ -320,15 +320,21 @@ class Simulation:
         if code == IMPLICIT_NOT_CONVERGED:
             info = s.implicit.info
             a = model.arrays
+            # the iterations ran out: more of them is what helps (a smaller step needs them too)
+            capped = int(info[Info.NEWTON]) >= a.implicit_max_iter
+            remedy = (
+                f"raise implicit_max_iter (now {a.implicit_max_iter}, all used; the step can stay)"
+                if capped
+                else f"raise implicit_max_iter (now {a.implicit_max_iter}) or take dt_s <= {0.5 * h:.3g} s"
+            )
             err: Exception = SimulationDiverged(
                 f"implicit Euler did not converge at t = {t:.6g} s (step {step}): residual {info[Info.RESIDUAL]:.3g} "
                 f"of the forces after {int(info[Info.NEWTON])} Newton iterations, above implicit_tol = "
-                f"{a.implicit_tol:g} (largest at vertex {vert}); raise implicit_max_iter (now {a.implicit_max_iter}) "
-                f"or take dt_s <= {0.5 * h:.3g} s",
+                f"{a.implicit_tol:g} (largest at vertex {vert}); {remedy}",
                 time_s=t,
                 step=step,
                 vert=vert,
-                dt_suggested_s=0.5 * h,
+                dt_suggested_s=h if capped else 0.5 * h,
             )
         elif code == VOLUME_FAILED:
             why = (
@@ -388,6 +394,18 @@ class Simulation:
         return self._advice()[1]
 
     def _advice(self) -> tuple[str, float]:
+        """What to try after a divergence, and the step it suggests (nan: none helps);
+        a mesh far larger than a body is named first (a file in millimetres)."""
+        remedy, suggest = self._step_advice()
+        span = float(np.ptp(self.model.arrays.vert_rest, axis=0).max())
+        if span > BODY_SPAN_MAX_M:
+            remedy = (
+                f"the mesh spans {span:.3g} m, no body's size: a mesh file in millimetres needs "
+                f"mesh.unit_scale = 0.001 (a generator, radius_m in metres); if the size is meant, {remedy}"
+            )
+        return remedy, suggest
+
+    def _step_advice(self) -> tuple[str, float]:
         """What to try after a divergence, and the step it suggests (nan: none helps)."""
         model, a = self.model, self.model.arrays
         h = a.dt
@@ -455,6 +473,14 @@ class Simulation:
         nvert = self.model.nvert
         pos = _checked_array("vert_pos", vert_pos, (nvert, 3), "positions (m)")
         vel = _checked_array("vert_vel", vert_vel, (nvert, 3), "velocities (m/s)")
+        if vel is not None:  # a state the runaway guard stops at once: no step would help
+            speed = np.hypot(np.hypot(vel[:, 0], vel[:, 1]), vel[:, 2])  # no overflow at 1e200
+            fast = int(np.argmax(speed))
+            if speed[fast] > self.model.arrays.max_speed:
+                raise ArgumentError(
+                    f"vert_vel: expected speeds at most max_speed_m_s = {self.model.arrays.max_speed:g} m/s "
+                    f"(the runaway guard), received {speed[fast]:.3g} m/s at vertex {fast}"
+                )
         if time_s is not None:
             ok = isinstance(time_s, (int, float, np.integer, np.floating)) and not isinstance(time_s, bool)
             if not (ok and math.isfinite(time_s) and time_s >= 0):
@@ -487,6 +513,9 @@ class Simulation:
             self.rigid.set_state(s, time_s=None if time_s is None else float(time_s), **rigid)
         self.failed = None
 
+
+#: a mesh wider than this (m) is taken for one in the wrong units when a run diverges
+BODY_SPAN_MAX_M = 5.0
 
 #: step counts `step` takes: below 2^63, what the compiled loop's int64 holds
 MAX_STEP_COUNT = 2**63

@@ -126,3 +126,36 @@ def test_a_signal_after_the_last_step_leaves_the_run_ok_and_status_0(tmp_path):
     assert summary["status"] == "ok"
     assert proc.returncode == 0, (proc.returncode, proc.stderr)
     assert proc.returncode != 128 + signal.SIGINT
+
+
+# ------------------------------------------------------------------ advice that works when followed
+
+
+def test_a_mesh_in_millimetres_is_named_in_the_advice_and_following_it_runs():
+    import helpers  # noqa: F401 - tests/ on the path
+    from test_implicit import trunk
+
+    def scaled(k: float):
+        sc = trunk()
+        regions = {
+            "pelvis": hybrid.HalfSpace((0, 0, -0.09 * k), (0, 0, -1)),
+            "dome": hybrid.HalfSpace((0, 0, 0.05 * k), (0, 0, 1)),
+        }
+        forces = tuple(
+            dataclasses.replace(f, toward_m=(0, 0, 0.12 * k)) if isinstance(f, hybrid.MuscleFibres) else f
+            for f in sc.forces
+        )
+        mesh = dataclasses.replace(sc.mesh, radius_m=0.12 * k)
+        return dataclasses.replace(sc, mesh=mesh, regions=regions, forces=forces)
+
+    sim = hybrid.Simulation(hybrid.compile_scene(scaled(1000.0)))  # radius 120: millimetres taken for metres
+    with pytest.raises(hybrid.SimulationDiverged) as info:
+        sim.step(1000)
+    assert "unit_scale = 0.001" in str(info.value) and "spans 240 m" in str(info.value)
+    followed = hybrid.Simulation(hybrid.compile_scene(scaled(1.0)))
+    followed.step(1000)  # in metres, the same step runs
+
+
+def test_set_state_refuses_speeds_the_runaway_guard_stops_at_once(sim):
+    vel = np.full((sim.model.nvert, 3), 1e200)
+    _refused(lambda: sim.set_state(vert_vel=vel), "vert_vel", "max_speed_m_s", "1.73e+200")
