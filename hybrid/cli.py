@@ -149,6 +149,10 @@ def _run_into(args, sim, duration: float, out: Path, provenance: dict) -> int:
         write_summary({**base, "status": "interrupted", "steps": sim.steps_done, "duration_s": sim.time}, out)
         return _interrupted(caught, sim, out)
     except (HybridError, OSError) as exc:
+        if isinstance(exc, OSError) and not isinstance(exc, HybridError) and not exc.filename:
+            from .outputs import OutputError  # a full disk under the trace's spill file: name the folder
+
+            exc = OutputError(str(out), exc.strerror or str(exc), exc.errno or 0)
         write_summary(
             {
                 **base,
@@ -159,7 +163,7 @@ def _run_into(args, sim, duration: float, out: Path, provenance: dict) -> int:
             },
             out,
         )
-        raise
+        raise exc from None
     finally:
         for sig, handler in previous.items():
             # as a command (not main() called in a program), a signal after the run has ended

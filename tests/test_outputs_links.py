@@ -129,3 +129,19 @@ def test_a_full_disk_is_one_line_naming_the_path_no_stray_file_and_not_status_2(
     assert status == outputs.EXIT_IO != 2
     assert len(err) == 1 and str(out / "summary.json") in err[0] and "No space left" in err[0], err
     assert sorted(p.name for p in out.iterdir()) == [LOCK_NAME]
+
+
+def test_a_full_disk_under_the_recording_names_the_recording():
+    """/dev/full refuses every write with ENOSPC: the recorder's error names its file."""
+    import hybrid
+    from hybrid.outputs import OutputError
+    from hybrid.record import Recorder
+
+    if not os.path.exists("/dev/full"):
+        pytest.skip("no /dev/full here")
+    sim = hybrid.load("membrane_demo")
+    with pytest.raises(OutputError) as info:
+        with Recorder("/dev/full", sim) as rec:
+            hybrid.run(sim, 0.2, observers=[rec])
+    assert str(info.value) == "cannot write '/dev/full': No space left on device"
+    assert info.value.errno == errno.ENOSPC

@@ -76,6 +76,15 @@ class _Frames:
 _SCALAR_COLS = [TRACE_KEYS.index(key) for key in SCALAR_CHANNELS.values()]
 
 
+def _named(exc: BaseException, path) -> BaseException:
+    """A file system error of the recording (a full disk) as one naming its file."""
+    if isinstance(exc, OSError) and not isinstance(exc, HybridError):
+        from ..outputs import OutputError
+
+        return OutputError(str(path), exc.strerror or str(exc), exc.errno or 0)
+    return exc
+
+
 class Recorder:
     """Write a run's frames to an MCAP file; an observer for `hybrid.run.run`.
 
@@ -267,7 +276,7 @@ class Recorder:
                 number = buf.numbers(nframe)
                 self._fw.write(number[:, 0], number, buf.pos[:nframe], first)
         except BaseException as exc:  # raised again in the run's thread
-            self._error = exc
+            self._error = _named(exc, self.path)
         finally:
             if self._todo is not None:
                 self._free.put(item[0])
@@ -283,7 +292,7 @@ class Recorder:
                 try:
                     self._fw = make_writer()
                 except BaseException as exc:  # raised again in the run's thread
-                    self._error = exc
+                    self._error = _named(exc, self.path)
             try:
                 if item is None:
                     return
@@ -313,10 +322,14 @@ class Recorder:
                     self._todo.put(None)
                     self._thread.join()
         finally:
-            if self._fw is not None:
-                self._fw.close()
-            else:
-                self._file.close()
+            try:
+                if self._fw is not None:
+                    self._fw.close()
+                else:
+                    self._file.close()
+            except OSError as exc:  # the last bytes refused (a full disk): named, after any earlier error
+                if self._error is None:
+                    raise _named(exc, self.path) from None
         if self._error is not None:
             raise self._error
 
