@@ -128,6 +128,15 @@ def run_grid(
     cases = grid_cases(sets)
     without = tuple(without)
     models = _checked(source, cases, without, duration_s)
+    # compiled code loaded (or compiled, once) here, before the workers start; its one step
+    # tells the metrics a run reports, so that a wrong --metric is refused before the sweep
+    try:
+        first = run(Simulation(models[0]), models[0].dt_s)["summary"]
+    except HybridError:  # a case that fails at once is a row of the table, not a refusal
+        first = None
+    if metric is not None and first is not None and not _number(first.get(metric)):
+        names = sorted(k for k, v in first.items() if _number(v))
+        raise HybridError(f"--metric {metric!r}: expected a metric the runs report, one of {names}")
     out = out_folder(Path(out))
     # as a run's: a second sweep into the folder is refused while this one writes there
     lock = FolderLock(out, what="sweep")
@@ -152,11 +161,6 @@ def _run_locked(source, cases, models, without, duration_s, out: Path, metric, w
                 f"choose another folder to sweep other settings"
             )
     write_text(meta_path, json.dumps(meta, indent=2) + "\n")
-    # compiled code loaded (or compiled, once) here, before the workers start
-    try:
-        run(Simulation(models[0]), models[0].dt_s)
-    except HybridError:  # a case that fails at once is a row of the table, not a refusal
-        pass
     task = functools.partial(run_case, source, without, duration_s)
     results = sweep(task, cases, workers=workers or min(local_workers(), len(cases)), on_error="return", out=out)
     rows = [_row(case, r) for case, r in zip(cases, results)]

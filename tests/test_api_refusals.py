@@ -159,3 +159,12 @@ def test_a_mesh_in_millimetres_is_named_in_the_advice_and_following_it_runs():
 def test_set_state_refuses_speeds_the_runaway_guard_stops_at_once(sim):
     vel = np.full((sim.model.nvert, 3), 1e200)
     _refused(lambda: sim.set_state(vert_vel=vel), "vert_vel", "max_speed_m_s", "1.73e+200")
+
+
+def test_a_sweeps_unknown_metric_is_refused_before_any_run(tmp_path, capsys):
+    out = tmp_path / "sw"
+    argv = ["sweep", "membrane_demo", "--set", "dt_s=1e-3,5e-4", "--duration", "100", "--metric", "nonsense"]
+    assert main([*argv, "--workers", "1", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--metric 'nonsense'" in err[0] and "apex_descent_mm" in err[0], err
+    assert not out.exists()  # refused before the folder, and before 2 runs of 100 s
