@@ -26,6 +26,7 @@ __all__ = [
     "replaced",
     "replacing",
     "write_text",
+    "save_figure",
     "create_new",
     "open_append",
     "OutputError",
@@ -124,6 +125,12 @@ def write_text(path, text: str) -> None:
     """`text` into `path` (UTF-8), replaced whole, never through a link."""
     with replaced(path, "w", encoding="utf-8") as f:
         f.write(text)
+
+
+def save_figure(fig, path, **kwargs) -> None:
+    """A matplotlib figure into `path` as PNG, replaced whole, never through a link."""
+    with replaced(path, "wb") as f:
+        fig.savefig(f, format="png", **kwargs)
 
 
 def _drop(path: Path) -> None:

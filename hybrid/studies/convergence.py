@@ -43,6 +43,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import HybridError
+from ..outputs import save_figure as _save_figure
+from ..outputs import write_text as _write_text
 from ..sweep import sweep
 from .stability.report import write_json
 
@@ -394,7 +396,7 @@ def write(out, res: dict) -> dict:
         "finest_change": _finest_change(runs, metrics, levels),
     }
     write_json(out / "convergence.json", res)
-    (out / "convergence.md").write_text(_markdown(res))
+    _write_text(out / "convergence.md", _markdown(res))
     _plot(out / "convergence.png", res)
     return res
 
@@ -509,5 +511,5 @@ def _plot(path: Path, res: dict) -> None:
         ax.grid(True, which="both", alpha=0.3)
     axes[0][0].legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    _save_figure(fig, path, dpi=110)
     plt.close(fig)
