@@ -165,7 +165,8 @@ def plain_name(where, v) -> str:
         fail(
             where,
             f"expected a plain name (the folder runs/<name> when --out is not given), received "
-            f"{show(v)}, which {why}" + ("" if len(v) > MAX_NAME_CHARS else "; choose the folder with --out"),
+            f"{show(v) if len(v) > MAX_NAME_CHARS else repr(v)}, which {why}"
+            + ("" if len(v) > MAX_NAME_CHARS else "; choose the folder with --out"),
         )
     return v
 

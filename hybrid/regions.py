@@ -216,7 +216,7 @@ def check_region_names(regions: dict) -> None:
             elif nxt in path:
                 cycle = path[path.index(nxt) :] + [nxt]
                 raise SceneError(
-                    f"regions: expected regions that do not refer to themselves, received the cycle "
+                    f"region {nxt!r}: expected a region that does not refer to itself, received the cycle "
                     f"{' -> '.join(map(repr, cycle))}"
                 )
             elif nxt in refs and nxt not in done:
