@@ -40,11 +40,6 @@ def _cmd_run(args) -> int:
     scene = resolve_scene(args.scene, overrides=args.set or (), without=args.without or ())
     if args.dt is not None:
         scene = dataclasses.replace(scene, dt_s=args.dt)
-    if args.duration is not None:  # --duration replaces the scene's own before it is checked
-        from . import checks
-
-        checks.positive("--duration", args.duration, checks.MAX_DURATION_S, " s")
-        scene = dataclasses.replace(scene, duration_s=args.duration)
     # a first run (nothing in the compile cache) says so before it compiles
     with compile_notice(COMPILE_ESTIMATE_S["rigid" if scene.rigid is not None else "membrane"]):
         return _load_and_run(args, scene)
@@ -66,10 +61,17 @@ def _load_and_run(args, scene) -> int:
     try:
         sim = Simulation(compile_scene(scene))
     except HybridError as exc:
-        text = str(exc)
-        if args.duration is not None and text.startswith("duration_s:"):  # the duration is --duration's
-            raise HybridError("--duration" + text[len("duration_s") :]) from None
-        raise
+        if args.duration is None or not str(exc).startswith("duration_s:"):
+            raise
+        # the scene's own duration is refused, but --duration replaces it: checked with that instead
+        run_steps(args.duration, abs(args.duration) or 1.0)  # no finite time > 0 s: refused, named --duration
+        try:
+            sim = Simulation(compile_scene(dataclasses.replace(scene, duration_s=args.duration)))
+        except HybridError as again:
+            text = str(again)
+            if text.startswith("duration_s:"):
+                raise HybridError("--duration" + text[len("duration_s") :]) from None
+            raise
     run_steps(duration, sim.model.dt_s, confirmed=args.yes)
     if not args.no_record:
         from .record import record_steps
