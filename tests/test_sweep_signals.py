@@ -105,6 +105,7 @@ def test_a_stopped_sweep_ends_its_workers_keeps_its_rows_and_says_one_line(tmp_p
 
 def test_a_second_sweep_into_a_busy_folder_is_refused(tmp_path):
     out = tmp_path / "sw"
+    first = second = None
     first = _sweep(out)
     try:
         _wait_rows(out, first, 2)
@@ -114,7 +115,9 @@ def test_a_second_sweep_into_a_busy_folder_is_refused(tmp_path):
         lines = err.strip().splitlines()
         assert len(lines) == 1 and f"in use by hybrid sweep process {first.pid}" in lines[0], err
         assert len(_rows(out)) == 2  # nothing run twice
-    finally:
-        if _group_alive(first.pid):
-            os.killpg(first.pid, signal.SIGKILL)
-        first.communicate()
+    finally:  # neither sweep left running, whatever failed (a second that runs is a sweep of hours)
+        for proc in (first, second):
+            if proc is not None and _group_alive(proc.pid):
+                os.killpg(proc.pid, signal.SIGKILL)
+            if proc is not None:
+                proc.communicate()
