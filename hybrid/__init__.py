@@ -146,11 +146,19 @@ def load(
     return Simulation(compile_scene(load_scene(source, overrides=overrides, without=without)))
 
 
+def _read(path, *, t_s=None, topics=None, strict: bool = True) -> dict:
+    """The recorded channels of `path` as numpy arrays, by topic (`hybrid.record.read`),
+    the path checked first (`hybrid.outputs.recording_path`): a HybridError on one line
+    for what is no recording, a RecordingWarning for the recording of a run that died."""
+    from .outputs import recording_path
+    from .record import read
+
+    return read(recording_path(path, strict=strict), t_s=t_s, topics=topics, strict=strict)
+
+
 def __getattr__(name: str):
     # the recording's reader, with its MCAP decoding, only when asked for
     if name == "read":
-        from .record import read
-
-        globals()["read"] = read
-        return read
+        globals()["read"] = _read
+        return _read
     raise AttributeError(f"module 'hybrid' has no attribute {name!r}")

@@ -433,7 +433,9 @@ def run_bench(
     if "flex" in want and not quick:
         result["flex"] = flex_rows()
     if json_path is not None:
-        Path(json_path).write_text(json.dumps(result, indent=2) + "\n")
+        from .outputs import write_text
+
+        write_text(json_path, json.dumps(result, indent=2) + "\n")
     return result
 
 

@@ -2,8 +2,9 @@
 `hybrid inspect`.
 
 Bad input prints one line naming the culprit on stderr and exits with
-status 2, without a traceback; a run that fails still writes what it
-recorded.
+status 2, without a traceback; a file that cannot be written (a full disk)
+prints one line naming it and exits with status 74 (EX_IOERR); a run that
+fails still writes what it recorded.
 """
 
 from __future__ import annotations
@@ -57,7 +58,20 @@ def _load_and_run(args, scene) -> int:
 
     duration = scene.duration_s if args.duration is None else args.duration
     out = _out_arg(args.out) if args.out is not None else default_out(scene.name)
-    sim = Simulation(compile_scene(scene))
+    try:
+        sim = Simulation(compile_scene(scene))
+    except HybridError as exc:
+        if args.duration is None or not str(exc).startswith("duration_s:"):
+            raise
+        # the scene's own duration is refused, but --duration replaces it: checked with that instead
+        run_steps(args.duration, abs(args.duration) or 1.0)  # no finite time > 0 s: refused, named --duration
+        try:
+            sim = Simulation(compile_scene(dataclasses.replace(scene, duration_s=args.duration)))
+        except HybridError as again:
+            text = str(again)
+            if text.startswith("duration_s:"):
+                raise HybridError("--duration" + text[len("duration_s") :]) from None
+            raise
     run_steps(duration, sim.model.dt_s, confirmed=args.yes)
     if not args.no_record:
         from .record import record_steps
@@ -137,6 +151,10 @@ def _run_into(args, sim, duration: float, out: Path, provenance: dict) -> int:
         write_summary({**base, "status": "interrupted", "steps": sim.steps_done, "duration_s": sim.time}, out)
         return _interrupted(caught, sim, out)
     except (HybridError, OSError) as exc:
+        if isinstance(exc, OSError) and not isinstance(exc, HybridError) and not exc.filename:
+            from .outputs import OutputError  # a full disk under the trace's spill file: name the folder
+
+            exc = OutputError(str(out), exc.strerror or str(exc), exc.errno or 0)
         write_summary(
             {
                 **base,
@@ -147,10 +165,12 @@ def _run_into(args, sim, duration: float, out: Path, provenance: dict) -> int:
             },
             out,
         )
-        raise
+        raise exc from None
     finally:
         for sig, handler in previous.items():
-            signal.signal(sig, handler)
+            # as a command (not main() called in a program), a signal after the run has ended
+            # changes nothing: the summary already says how it ended, and the status agrees
+            signal.signal(sig, signal.SIG_IGN if getattr(args, "own_process", False) else handler)
     s = result["summary"]
     if failure is not None:
         raise failure
@@ -205,6 +225,8 @@ def _cmd_render(args) -> int:
         overrides=args.set or (),
         without=args.without or (),
     )
+    if result.get("died"):
+        sys.stderr.write(f"hybrid: the run recorded in {args.source} was interrupted: {result['died']}\n")
     extra = f" and {result['video']}" if result["video"] else ""
     frames = ", ".join(f"{name} t = {t:.2f} s" for name, t in zip(result["titles"], result["frames"]))
     print(f"{frames} -> {result['figure']}{extra}")
@@ -239,17 +261,43 @@ def _cmd_bench(args) -> int:
 
 
 def _cmd_sweep(args) -> int:
-    from .grid import run_grid
+    """The grid run; SIGTERM and SIGHUP stop it as Ctrl-C does: the workers ended, the
+    rows finished kept in sweep.jsonl (a rerun skips them), one line, 128 + the signal."""
+    import signal
 
-    done = run_grid(
-        args.scene,
-        args.set or (),
-        without=args.without or (),
-        duration_s=args.duration,
-        out=_out_arg(args.out),
-        metric=args.metric,
-        workers=args.workers,
-    )
+    from .grid import run_grid
+    from .sweep import TABLE_NAME
+
+    out = _out_arg(args.out)
+    caught = []
+
+    def as_interrupt(signum, frame):
+        caught.append(signum)
+        raise KeyboardInterrupt(signal.Signals(signum).name)
+
+    stops = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+    previous = {sig: signal.signal(sig, as_interrupt) for sig in stops}
+    try:
+        done = run_grid(
+            args.scene,
+            args.set or (),
+            without=args.without or (),
+            duration_s=args.duration,
+            out=out,
+            metric=args.metric,
+            workers=args.workers,
+        )
+    except KeyboardInterrupt:
+        for sig in stops:  # the one line below, whatever comes next
+            signal.signal(sig, signal.SIG_IGN)
+        signum = caught[-1] if caught else signal.SIGINT
+        table = out / TABLE_NAME
+        kept = f"; the runs finished are in {table} (a rerun skips them)" if table.is_file() else ""
+        sys.stderr.write(f"hybrid: sweep interrupted by {signal.Signals(signum).name}{kept}\n")
+        return 128 + int(signum)
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
     print(f"{len(done['rows'])} runs, {done['failed']} failed -> {done['csv']}, {done['plot']} ({done['metric']})")
     return 1 if done["failed"] else 0
 
@@ -366,11 +414,18 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     prune_old_caches()
+    own = argv is None
     argv = sys.argv[1:] if argv is None else list(argv)
     args = build_parser().parse_args(argv)
+    args.own_process = own  # the command itself, not main() called by a program
     args.argv = argv  # the command line, for the run's provenance
+    from .outputs import EXIT_IO, OutputError
+
     try:
         return args.func(args)
+    except OutputError as exc:  # the file system refused, not the input: its own status
+        sys.stderr.write(f"hybrid: error: {' '.join(str(exc).split())}\n")
+        return EXIT_IO
     except HybridError as exc:
         msg = " ".join(str(exc).split())  # one line, whatever the message
         sys.stderr.write(f"hybrid: error: {msg}\n")
@@ -378,7 +433,7 @@ def main(argv: list[str] | None = None) -> int:
     except OSError as exc:  # the file system refused (a full disk, say): what and where
         where = f" {str(exc.filename)!r}" if exc.filename else ""
         sys.stderr.write(f"hybrid: error: cannot read or write{where}: {exc.strerror or exc}\n")
-        return 2
+        return EXIT_IO
     except KeyboardInterrupt:
         sys.stderr.write("hybrid: interrupted\n")
         return 130

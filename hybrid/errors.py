@@ -16,6 +16,7 @@ __all__ = [
     "HybridError",
     "MeshError",
     "SceneError",
+    "ArgumentError",
     "ConstraintError",
     "RigidError",
     "SimulationDiverged",
@@ -50,6 +51,12 @@ class MeshError(HybridError, ValueError):
 
 class SceneError(HybridError, ValueError):
     """A scene (TOML file or dataclasses) has a wrong key, type or value."""
+
+
+class ArgumentError(HybridError, ValueError):
+    """A call of the Python API received an argument of the wrong kind or value
+    (a Scene where a Simulation goes, a string where a list goes, a step count
+    that is not an integer)."""
 
 
 class ConstraintError(HybridError, RuntimeError):

@@ -29,6 +29,7 @@ from pathlib import Path
 
 from .errors import HybridError
 from .model import compile_scene
+from .outputs import FolderLock, read_own, replaced, write_text
 from .resolve import resolve_scene
 from .run import out_folder, run, run_steps
 from .simulation import Simulation
@@ -60,6 +61,15 @@ def split_values(item: str) -> tuple[str, list[str]]:
         elif ch == "," and depth <= 0:
             values.append(text[start:k].strip())
             start = k + 1
+    if quote or depth:  # a value cut short: refused rather than split elsewhere or dropped
+        what = (
+            f"a closing {quote}"
+            if quote
+            else "a closing ] or }"
+            if depth > 0
+            else "an opening [ or { before a closing one"
+        )
+        raise HybridError(f"--set {item!r}: expected brackets and quotes that close; the values lack {what}")
     if not key or not all(values):
         raise HybridError(f"--set {item!r}: expected KEY=V1,V2,... with a key and no empty value")
     return key, values
@@ -118,12 +128,31 @@ def run_grid(
     cases = grid_cases(sets)
     without = tuple(without)
     models = _checked(source, cases, without, duration_s)
+    # compiled code loaded (or compiled, once) here, before the workers start; its one step
+    # tells the metrics a run reports, so that a wrong --metric is refused before the sweep
+    try:
+        first = run(Simulation(models[0]), models[0].dt_s)["summary"]
+    except HybridError:  # a case that fails at once is a row of the table, not a refusal
+        first = None
+    if metric is not None and first is not None and not _number(first.get(metric)):
+        names = sorted(k for k, v in first.items() if _number(v))
+        raise HybridError(f"--metric {metric!r}: expected a metric the runs report, one of {names}")
     out = out_folder(Path(out))
+    # as a run's: a second sweep into the folder is refused while this one writes there
+    lock = FolderLock(out, what="sweep")
+    try:
+        return _run_locked(source, cases, models, without, duration_s, out, metric, workers)
+    finally:
+        lock.release()
+
+
+def _run_locked(source, cases, models, without, duration_s, out: Path, metric, workers) -> dict:
     meta = {"scene": source, "without": list(without), "duration_s": duration_s, "keys": list(cases[0])}
     meta_path = out / "sweep.json"
-    if meta_path.exists():
+    text = read_own(meta_path)
+    if text is not None:
         try:
-            before = json.loads(meta_path.read_text(encoding="utf-8"))
+            before = json.loads(text)
         except ValueError:
             before = None
         if before != meta:
@@ -131,12 +160,7 @@ def run_grid(
                 f"--out {str(out)!r}: holds a sweep of {before}, expected {meta}; "
                 f"choose another folder to sweep other settings"
             )
-    meta_path.write_text(json.dumps(meta, indent=2) + "\n", encoding="utf-8")
-    # compiled code loaded (or compiled, once) here, before the workers start
-    try:
-        run(Simulation(models[0]), models[0].dt_s)
-    except HybridError:  # a case that fails at once is a row of the table, not a refusal
-        pass
+    write_text(meta_path, json.dumps(meta, indent=2) + "\n")
     task = functools.partial(run_case, source, without, duration_s)
     results = sweep(task, cases, workers=workers or min(local_workers(), len(cases)), on_error="return", out=out)
     rows = [_row(case, r) for case, r in zip(cases, results)]
@@ -176,7 +200,7 @@ def _number(v) -> bool:
 
 def _write_csv(rows: list[dict], keys: list, path: Path) -> None:
     columns = list(dict.fromkeys([*keys, "status", "error", *(k for r in rows for k in r)]))
-    with open(path, "w", newline="", encoding="utf-8") as f:
+    with replaced(path, "w", newline="", encoding="utf-8") as f:
         writer = csv.DictWriter(f, columns, restval="")
         writer.writeheader()
         for r in rows:
@@ -209,5 +233,8 @@ def _plot(rows: list[dict], keys: list, metric: str, path: Path, *, title: str) 
     ax.set_title(title)
     if others:
         ax.legend(fontsize="small")
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    try:
+        with replaced(path, "wb") as f:
+            fig.savefig(f, dpi=120, format="png")
+    finally:
+        plt.close(fig)

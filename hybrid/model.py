@@ -372,7 +372,13 @@ AUTO_DT_SHARE = 0.5
 
 
 def nice_floor(x: float) -> float:
-    """The largest 1, 2 or 5 x 10^k at most x (> 0): a step that reads well in tables."""
+    """The largest 1, 2 or 5 x 10^k at most x (> 0): a step that reads well in tables.
+    A step that underflows (x of 0, or too small for 10^k to be a float > 0) is refused."""
+    if not (x > 0 and 10.0 ** math.floor(math.log10(x)) > 0):
+        raise SceneError(
+            f"dt_s: expected a stable-step estimate > 0 s to choose the step from, received {x:g} s "
+            f"(masses far too light, or stiffnesses far too high, for any time step)"
+        )
     k = math.floor(math.log10(x))
     for mant in (5.0, 2.0, 1.0):
         if mant * 10.0**k <= x * (1 + 1e-12):

@@ -10,7 +10,9 @@ holds one; an explicit --out that holds a run is refused. `overwrite=True`
 
 from __future__ import annotations
 
+import contextlib
 import json
+import os
 import tempfile
 from pathlib import Path
 
@@ -21,10 +23,19 @@ from .errors import HybridError
 
 __all__ = [
     "out_folder",
+    "replaced",
+    "replacing",
+    "write_text",
+    "save_figure",
+    "create_new",
+    "open_append",
+    "OutputError",
     "default_out",
     "LOCK_NAME",
     "FolderLock",
     "holds_run",
+    "run_status",
+    "recording_path",
     "claim_folder",
     "write_summary",
     "write_outputs",
@@ -48,6 +59,141 @@ def out_folder(out: Path) -> Path:
     return out
 
 
+class OutputError(HybridError, OSError):
+    """An output file could not be written (a full disk, a folder that refuses):
+    not the input's fault, so the command line exits `EXIT_IO`, not 2."""
+
+    def __init__(self, path: str, reason: str, code: int = 0):
+        OSError.__init__(self, code, reason, path)
+        self.args = (f"cannot write {path!r}: {reason}",)
+
+    def __str__(self) -> str:
+        return self.args[0]
+
+
+def _output_error(path, exc: OSError) -> OutputError:
+    return OutputError(str(path), exc.strerror or str(exc), exc.errno or 0)
+
+
+#: the command line's status when an output cannot be written (sysexits' EX_IOERR)
+EXIT_IO = 74
+
+# Output files are never followed through a link someone left in the folder: a file
+# is written aside under a fresh name (created exclusively) and renamed over the
+# name it goes to, or created after whatever held its name is removed; rename and
+# unlink act on a link itself, never on its target.
+_NOFOLLOW = getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0)
+
+
+@contextlib.contextmanager
+def replacing(path):
+    """A fresh file's path beside `path` (same suffix), renamed to `path` when the
+    block ends without an exception, removed otherwise: `path` is replaced whole,
+    whatever was there (a link stays untouched where it points). An OSError is
+    an `OutputError` naming `path`."""
+    path = Path(path)
+    try:
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=f".part{path.suffix}")
+        os.close(fd)
+    except OSError as exc:
+        raise _output_error(path, exc) from None
+    try:
+        yield Path(tmp)
+        os.replace(tmp, path)
+    except BaseException as exc:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        if isinstance(exc, OSError) and not isinstance(exc, HybridError):
+            raise _output_error(path, exc) from None
+        raise
+
+
+@contextlib.contextmanager
+def replaced(path, mode: str = "w", **kwargs):
+    """`replacing(path)` as an open file (`mode` "w" or "wb", open()'s keywords)."""
+    with replacing(path) as tmp:
+        try:
+            with open(tmp, mode, **kwargs) as f:
+                yield f
+        except OSError as exc:
+            if isinstance(exc, HybridError):
+                raise
+            raise _output_error(path, exc) from None
+
+
+def write_text(path, text: str) -> None:
+    """`text` into `path` (UTF-8), replaced whole, never through a link."""
+    with replaced(path, "w", encoding="utf-8") as f:
+        f.write(text)
+
+
+def save_figure(fig, path, **kwargs) -> None:
+    """A matplotlib figure into `path` as PNG, replaced whole, never through a link."""
+    with replaced(path, "wb") as f:
+        fig.savefig(f, format="png", **kwargs)
+
+
+def _drop(path: Path) -> None:
+    """Remove what holds `path`'s name: a link goes, its target stays untouched."""
+    try:
+        os.unlink(path)
+    except FileNotFoundError:
+        pass
+    except OSError as exc:
+        raise _output_error(path, exc) from None
+
+
+def create_new(path, mode: str = "wb"):
+    """`path` created anew for writing (an earlier file or link of that name removed
+    first, the new one created exclusively, never through a link): an open file. A
+    device or a pipe of that name (/dev/null) is opened as it is, never removed."""
+    import stat
+
+    path = Path(path)
+    try:
+        kind = os.lstat(path).st_mode
+    except FileNotFoundError:
+        kind = None
+    except OSError as exc:
+        raise _output_error(path, exc) from None
+    if kind is not None and not (stat.S_ISLNK(kind) or stat.S_ISREG(kind)):  # a device (/dev/null), a pipe
+        try:
+            return os.fdopen(os.open(path, os.O_WRONLY | _NOFOLLOW), mode)
+        except OSError as exc:
+            raise _output_error(path, exc) from None
+    if kind is not None:  # a file or a link: removed (a link's target untouched), never written through
+        _drop(path)
+    try:
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | _NOFOLLOW, 0o644)
+    except OSError as exc:
+        raise _output_error(path, exc) from None
+    return os.fdopen(fd, mode)
+
+
+def open_append(path, mode: str = "a", **kwargs):
+    """`path` opened to append, created if absent; a link of that name is removed
+    first (its target untouched) and the file opened without following links."""
+    path = Path(path)
+    if path.is_symlink():
+        _drop(path)
+    try:
+        fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | _NOFOLLOW, 0o644)
+    except OSError as exc:
+        raise _output_error(path, exc) from None
+    return os.fdopen(fd, mode, **kwargs)
+
+
+def read_own(path, default=None) -> str | None:
+    """The text of an output file of ours, or `default` when there is none or a link
+    holds its name (a link is never read as ours)."""
+    try:
+        fd = os.open(path, os.O_RDONLY | _NOFOLLOW)
+    except OSError:
+        return default
+    with os.fdopen(fd, encoding="utf-8", errors="replace") as f:
+        return f.read()
+
+
 def default_out(scene_name: str) -> Path:
     """runs/<scene name>, the folder of a run without --out. The name is a name:
     one that could lead elsewhere (a path separator, '..', a NUL) or none at all
@@ -69,12 +215,16 @@ class FolderLock:
     with a HybridError naming the first's process id. The lock goes with the process,
     however it ends; the file stays."""
 
-    def __init__(self, folder: Path):
+    def __init__(self, folder: Path, *, what: str = "run"):
         import fcntl
-        import os
 
         path = folder / LOCK_NAME
-        self._fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+        if path.is_symlink():  # never followed: the link goes, its target stays
+            _drop(path)
+        try:
+            self._fd = os.open(path, os.O_RDWR | os.O_CREAT | _NOFOLLOW, 0o644)
+        except OSError as exc:
+            raise _output_error(path, exc) from None
         try:
             fcntl.flock(self._fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
@@ -82,14 +232,12 @@ class FolderLock:
             os.close(self._fd)
             raise HybridError(
                 f"--out: expected a folder no other run is writing, received {str(folder)!r}, "
-                f"in use by hybrid run process {holder}; wait for it or choose another --out"
+                f"in use by hybrid {what} process {holder}; wait for it or choose another --out"
             ) from None
         os.ftruncate(self._fd, 0)
         os.pwrite(self._fd, f"{os.getpid()}\n".encode(), 0)
 
     def release(self) -> None:
-        import os
-
         if self._fd is not None:
             os.close(self._fd)  # closing the descriptor releases the flock
             self._fd = None
@@ -98,9 +246,94 @@ class FolderLock:
 def holds_run(folder: Path) -> str | None:
     """The file that shows a run was made (or is being made) in `folder`, else None."""
     for name in RUN_FILES:
-        if (folder / name).exists():
+        if os.path.lexists(folder / name):  # a link, even dangling, counts: it is never followed
             return name
     return None
+
+
+def _lock_free(folder: Path) -> bool | None:
+    """Whether no process holds the folder's lock (None: no lock file of ours there)."""
+    import fcntl
+
+    try:
+        fd = os.open(Path(folder) / LOCK_NAME, os.O_RDONLY | _NOFOLLOW)
+    except OSError:
+        return None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return False
+    finally:
+        os.close(fd)  # a lock taken here goes with the descriptor
+    return True
+
+
+def _alive(pid) -> bool:
+    if not isinstance(pid, int) or isinstance(pid, bool) or pid <= 0:
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # someone else's process: alive
+        return True
+    return True
+
+
+def run_status(folder) -> dict | None:
+    """The summary of the run in `folder` (None without one), as it stands: a summary
+    that says "running" while the folder's lock is free (or, without a lock file, its
+    process "pid" is gone) is of a run that died (killed, a full disk): its "status" is
+    then "interrupted" and "died" says why."""
+    text = read_own(Path(folder) / "summary.json")
+    if text is None:
+        return None
+    try:
+        summary = json.loads(text)
+    except ValueError:
+        return None
+    if not isinstance(summary, dict) or summary.get("status") != "running":
+        return summary
+    free = _lock_free(folder)
+    pid = summary.get("pid")
+    if free or (free is None and not _alive(pid)):
+        summary["status"] = "interrupted"
+        summary["died"] = f"its process {pid} ended without finishing summary.json (killed, or a full disk)"
+    return summary
+
+
+#: bytes of an MCAP file's magic: a file of no more holds no record
+MCAP_MAGIC_BYTES = 8
+
+
+def recording_path(path, *, strict: bool = True) -> Path:
+    """`path` as `hybrid.read` takes it, checked: a str or path naming an existing file
+    (a HybridError naming what was received otherwise); with `strict`, a file of at
+    most the MCAP magic's 8 bytes (a run killed before its first record) is refused.
+    A recording whose run died (`run_status`) is read with a RecordingWarning saying so."""
+    import warnings
+
+    from .record.mcap_reader import RecordingError, RecordingWarning
+
+    if not isinstance(path, (str, os.PathLike)) or isinstance(path, bytes):
+        raise HybridError(f"path: expected a path to a .mcap recording, received {path!r} ({type(path).__name__})")
+    path = Path(path)
+    if not path.exists():
+        raise HybridError(f"path: expected an existing .mcap recording, received {str(path)!r}, which does not exist")
+    if not path.is_file():
+        raise HybridError(f"path: expected a .mcap recording file, received {str(path)!r}, which is a folder")
+    size = path.stat().st_size
+    if strict and size <= MCAP_MAGIC_BYTES:
+        raise RecordingError(
+            f"{str(path)!r}: expected an MCAP recording, received a file of {size} bytes, which holds no "
+            f"record (a run killed before it wrote any); strict=False reads it as empty"
+        )
+    run = run_status(path.parent) if path.name == "run.mcap" else None
+    if run is not None and run.get("died"):
+        warnings.warn(
+            f"recording {str(path)!r}: the run was interrupted: {run['died']}", RecordingWarning, stacklevel=3
+        )
+    return path
 
 
 #: runs/NAME-2 up to this suffix are tried before a default folder is refused
@@ -130,6 +363,9 @@ def claim_folder(out: Path, *, explicit: bool, overwrite: bool = False) -> tuple
         found = holds_run(out) if not overwrite else None
         if found is not None:
             lock.release()
+            earlier = run_status(out)
+            if earlier is not None and earlier.get("died"):
+                found += f", interrupted: {earlier['died']}"
             raise HybridError(
                 f"--out: expected a folder that holds no earlier run, received {str(out)!r}, "
                 f"which holds one ({found}); add --overwrite to replace it, or choose another --out"
@@ -154,10 +390,9 @@ def claim_folder(out: Path, *, explicit: bool, overwrite: bool = False) -> tuple
 
 
 def write_summary(summary: dict, out_dir: Path) -> None:
-    """summary.json in out_dir, replaced whole (written aside, then renamed)."""
-    tmp = out_dir / "summary.json.part"
-    tmp.write_text(json.dumps(summary, indent=2, allow_nan=False) + "\n")
-    tmp.replace(out_dir / "summary.json")
+    """summary.json in out_dir, replaced whole (written aside, then renamed; never
+    through a link)."""
+    write_text(out_dir / "summary.json", json.dumps(summary, indent=2, allow_nan=False) + "\n")
 
 
 def plot_name(scene_name: str) -> str:
@@ -222,5 +457,8 @@ def plot_trace(trace, path: Path, *, title: str = "") -> None:
         ax.grid(alpha=0.3)
     axes[-1].set_xlabel("time (s)")
     axes[0].set_title(title)
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    try:
+        with replaced(path, "wb") as f:
+            fig.savefig(f, dpi=100, format="png")
+    finally:
+        plt.close(fig)

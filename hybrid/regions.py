@@ -180,6 +180,50 @@ def select(
     return idx
 
 
+def _names_in(sel, depth: int = 0) -> list:
+    """The region names a selector refers to (not "all")."""
+    if depth > MAX_SELECTOR_DEPTH:
+        return []
+    if isinstance(sel, str):
+        return [] if sel == "all" else [sel]
+    if isinstance(sel, (Union_, Intersection)):
+        return [n for p in sel.parts for n in _names_in(p, depth + 1)]
+    if isinstance(sel, Difference):
+        return _names_in(sel.base, depth + 1) + _names_in(sel.minus, depth + 1)
+    return []
+
+
+def check_region_names(regions: dict) -> None:
+    """A scene's regions: none named "all" (the built-in region of every point, which a
+    definition would silently shadow) and none that refers to itself through others (a
+    cycle), each refused on one line naming it."""
+    if "all" in regions:
+        raise SceneError(
+            f"regions.all: expected a name other than 'all' (the built-in region of every point), "
+            f"received a definition of it: {regions['all']!r:.80}"
+        )
+    refs = {name: _names_in(sel) for name, sel in regions.items()}
+    done: set = set()  # regions whose references hold no cycle
+    for start in refs:
+        if start in done:
+            continue
+        path, todo = [start], [iter(refs[start])]
+        while todo:  # depth first, each region left once done: linear in the references
+            nxt = next(todo[-1], None)
+            if nxt is None:
+                done.add(path.pop())
+                todo.pop()
+            elif nxt in path:
+                cycle = path[path.index(nxt) :] + [nxt]
+                raise SceneError(
+                    f"region {nxt!r}: expected a region that does not refer to itself, received the cycle "
+                    f"{' -> '.join(map(repr, cycle))}"
+                )
+            elif nxt in refs and nxt not in done:
+                path.append(nxt)
+                todo.append(iter(refs[nxt]))
+
+
 #: how deep union, intersection and difference may nest (a scene needs a few levels)
 MAX_SELECTOR_DEPTH = 32
 

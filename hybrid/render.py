@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import HybridError
+from .outputs import replaced, replacing
 
 __all__ = [
     "Frames",
@@ -516,8 +517,11 @@ def draw_figure(fr: Frames, path: str | Path, frames=None, *, membrane: bool = T
     fig, frames = build_figure(fr, frames, membrane=membrane, dpi=dpi)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=dpi)
-    plt.close(fig)
+    try:
+        with replaced(path, "wb") as f:  # never through a link left at path
+            fig.savefig(f, dpi=dpi, format="png")
+    finally:
+        plt.close(fig)
     return frames
 
 
@@ -545,7 +549,22 @@ def write_video(fr: Frames, path: str | Path, *, fps: int = 25, every_s: float |
     fig = plt.figure(figsize=(6.4, 6.4), dpi=dpi)  # 512 x 512: both even, as H.264 needs
     px_per_m = 6.4 * dpi * 0.75 / (2 * half)
     w, h = fig.canvas.get_width_height()
-    writer = imageio_ffmpeg.write_frames(str(path), (w, h), fps=fps, quality=7, macro_block_size=16)
+    with replacing(path) as tmp:  # ffmpeg writes a fresh file, renamed over path: never through a link
+        _send_video(
+            fig,
+            fr,
+            picks,
+            imageio_ffmpeg.write_frames(str(tmp), (w, h), fps=fps, quality=7, macro_block_size=16),
+            centre,
+            half,
+            px_per_m,
+        )
+    return len(picks)
+
+
+def _send_video(fig, fr, picks, writer, centre, half, px_per_m) -> None:
+    import matplotlib.pyplot as plt
+
     writer.send(None)
     try:
         for k in picks:
@@ -558,7 +577,14 @@ def write_video(fr: Frames, path: str | Path, *, fps: int = 25, every_s: float |
     finally:
         writer.close()
         plt.close(fig)
-    return len(picks)
+
+
+def _died(recording: Path) -> str | None:
+    """Why the run that wrote `recording` is no longer running though its summary says so, or None."""
+    from .outputs import run_status
+
+    run = run_status(recording.parent) if recording.name == "run.mcap" else None
+    return run.get("died") if run is not None else None
 
 
 def render(
@@ -583,7 +609,9 @@ def render(
                 f"{source!r} (run the scene again with {given}, or render the scene itself)"
             )
         fr = frames_from_recording(source)
+        died = _died(Path(source))
     else:
+        died = None
         fr = frames_from_scene(source, duration_s, full=video, overrides=overrides, without=without)
     if len(fr.t) < 2:
         raise HybridError(f"{source}: fewer than two frames to draw")
@@ -594,6 +622,7 @@ def render(
         "frames": [float(fr.t[k]) for k in picked],
         "titles": [t.split(". ", 1)[-1] for t in panel_titles(fr)],
         "video": None,
+        "died": died,
     }
     if video:
         result["video"] = out / "run.mp4"

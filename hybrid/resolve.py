@@ -57,8 +57,25 @@ def resolve_scene(
         raise SceneError(
             f"scene: expected a Scene, a .toml path or one of {scene_names()}, received {type(source).__name__}"
         )
+    overrides, without = _strings("overrides", overrides, "KEY=VALUE"), _strings("without", without, "NAME")
     if overrides:
         scene = scenefile.apply_overrides(scene, list(overrides))
     if without:
         scene = scene.without(*without)
     return scene
+
+
+def _strings(name: str, value, form: str) -> tuple:
+    """A list of strings as given: a string alone is refused, not split into characters."""
+    if isinstance(value, (str, bytes)):
+        raise SceneError(
+            f"{name}: expected a list of {form} strings, received the string {value!r:.80}; put it in a list"
+        )
+    try:
+        items = tuple(value)
+    except TypeError:
+        raise SceneError(f"{name}: expected a list of {form} strings, received {type(value).__name__}") from None
+    bad = [v for v in items if not isinstance(v, str)]
+    if bad:
+        raise SceneError(f"{name}: expected a list of {form} strings, received an item {bad[0]!r:.80}")
+    return items

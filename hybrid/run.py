@@ -20,7 +20,7 @@ import time
 
 import numpy as np
 
-from .errors import HybridError, reduce_exception
+from .errors import ArgumentError, HybridError, reduce_exception
 from .loads import Loads, LoadsObserver
 from .loop import capture_frame
 from .model import Model
@@ -397,6 +397,7 @@ def run(
     error is re-raised as `RunFailed` carrying the partial result; on a
     KeyboardInterrupt, "status": "interrupted", re-raised as `RunInterrupted`.
     """
+    observers = _check_run_args(sim, frame_dt_s, observers)
     model = sim.model
     h = model.dt_s
     nstep = run_steps(duration_s, h, name="duration_s")
@@ -526,7 +527,7 @@ def run(
                 rest_return_mm = float(np.linalg.norm(at - rest, axis=1).max() * 1e3)
             if bar:
                 bar.update(int(batch[-1]))
-            if stop is not None and stop():
+            if stop is not None and stop() and int(batch[-1]) < nstep:  # after the last step: done
                 raise KeyboardInterrupt
     except HybridError as exc:
         error = exc
@@ -568,6 +569,23 @@ def run(
     if interrupted is not None:
         raise RunInterrupted(result) from interrupted
     return result
+
+
+def _check_run_args(sim, frame_dt_s, observers) -> tuple:
+    """`run`'s arguments that its loop takes on trust: a Simulation, a frame interval
+    that is a finite time > 0 s, observers as a list (not a string, not one observer)."""
+    if not isinstance(sim, Simulation):
+        hint = "; hybrid.load(name) makes one" if isinstance(sim, str) else ""
+        raise ArgumentError(f"sim: expected a hybrid.Simulation{hint}, received {type(sim).__name__} {sim!r:.80}")
+    ok = isinstance(frame_dt_s, (int, float, np.integer, np.floating)) and not isinstance(frame_dt_s, bool)
+    if not (ok and math.isfinite(frame_dt_s) and frame_dt_s > 0):
+        raise ArgumentError(f"frame_dt_s: expected a finite time > 0 s, received {frame_dt_s!r}")
+    if isinstance(observers, (str, bytes)) or callable(observers) or hasattr(observers, "frames"):
+        raise ArgumentError(f"observers: expected a list of observers, received {type(observers).__name__}")
+    try:
+        return tuple(observers)
+    except TypeError:
+        raise ArgumentError(f"observers: expected a list of observers, received {type(observers).__name__}") from None
 
 
 def _loads_observer(sim: Simulation, loads, observers):

@@ -206,7 +206,9 @@ class Rigid:
     what the scene changes in the model (`hybrid.rigid.controls`): bodies fixed or
     welded to the world, joints held by stiff springs or locked, the keyframe it
     starts from, actuators driven by schedules, MuJoCo's integrator. Names of joints
-    and actuators may be glob patterns ("lumbar*", "*"). The model's file is only read.
+    and actuators may be glob patterns ("lumbar*", "*"). The model's file is only read;
+    MuJoCo reads, as its own, every file an `<include file="...">` in it names, any XML
+    file the account can read: compose models only from files you trust.
     """
 
     mjcf: str
@@ -248,10 +250,41 @@ class Scene:
     implicit_tol: float = param("positive", 1e-6, hi=0.1, unit="of the forces")
     implicit_max_iter: int = param("integer", 50, lo=1, hi=1000)
     duration_s: float = param("positive", 1.0, hi=checks.MAX_DURATION_S)
-    # a point faster than this has run away (tissue moves at cm/s)
-    max_speed_m_s: float = param("positive", 50.0)
+    # a point faster than this has run away (tissue moves at cm/s); at most the speed of
+    # light, so that the guard can never be switched off by a huge value
+    max_speed_m_s: float = param("positive", 50.0, hi=checks.MAX_SPEED_M_S)
     name: str = param("name", "scene")
     base_dir: str | None = None  # relative paths (mesh, MJCF) resolve here
+
+    def __post_init__(self):
+        # the containers' kinds, before anything iterates them (one term for a tuple of
+        # terms, a list of regions for a table of them)
+        for key in ("forces", "constraints"):
+            value = getattr(self, key)
+            if not isinstance(value, (tuple, list)):
+                raise SceneError(
+                    f"Scene.{key}: expected a tuple of terms, received {type(value).__name__}"
+                    + (f"; write ({type(value).__name__}(...),)" if hasattr(value, "name") else "")
+                )
+        if not isinstance(self.regions, dict):
+            raise SceneError(
+                f"Scene.regions: expected a dict of name -> selector, received {type(self.regions).__name__}"
+            )
+        from .regions import check_region_names
+
+        check_region_names(self.regions)
+        volumes = [c for c in (*self.forces, *self.constraints) if isinstance(c, Volume)]
+        if len(volumes) > 1:  # two exact constraints on one volume: the projection has no meaning
+            raise SceneError(
+                f"constraints: expected at most one volume constraint, received {len(volumes)} "
+                f"({', '.join(repr(getattr(v, 'name', 'volume')) for v in volumes)})"
+            )
+        for link in getattr(self.rigid, "links", None) or ():
+            if getattr(link, "body", None) == "world":
+                raise SceneError(
+                    f"rigid.links[{getattr(link, 'name', '?')!r}].body: expected a body that moves, received "
+                    f"'world' (MuJoCo's fixed frame); hold the region still with a nailed constraint instead"
+                )
 
     def term_names(self) -> list[str]:
         """Names of all force terms, constraints and rigid links, in order."""

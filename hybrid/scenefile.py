@@ -553,7 +553,12 @@ def scene_to_toml(scene: Scene) -> str:
 def _parse_value(text: str):
     try:
         return tomllib.loads(f"v = {text}")["v"]
-    except tomllib.TOMLDecodeError:
+    except tomllib.TOMLDecodeError as exc:
+        if any(c in text for c in "\"'[]{}"):  # meant as TOML, but malformed: not a word
+            raise SceneError(
+                f'--set value {text[:80]!r}: expected a TOML value (a number, "a string", [a, list], '
+                f"{{a = table}}) or a bare word, received one that does not parse ({exc})"
+            ) from None
         return text.strip()  # a bare word: a string
     except RecursionError:  # the TOML reader recurses once per nested table or list
         raise SceneError(

@@ -132,9 +132,27 @@ def _validate(s: Schedule, *, name: str, ncomp: int) -> None:
         if not (s.onset_s >= 0 and math.isfinite(s.onset_s)):
             raise SceneError(f"{name}.onset_s: expected >= 0, received {s.onset_s!r}")
     elif isinstance(s, Function):
-        pass  # checked when called: see ScheduleTable.update_python
+        _probe(s, name=name, ncomp=ncomp)  # and checked each time it is called
     else:  # pragma: no cover - guarded by as_schedule
         raise SceneError(f"{name}: expected a constant, table, breathing waveform or function, received {s!r}")
+
+
+def _probe(s: Function, *, name: str, ncomp: int) -> None:
+    """A function's value at t = 0 s, of `ncomp` components (a scalar schedule that
+    returns a vector would be read as its first component): a function that fails
+    there is left to fail when the run calls it."""
+    if not callable(s.fn):
+        raise SceneError(f"{name}: expected a callable f(t_s), received {s.fn!r}")
+    try:
+        value = np.asarray(s.fn(0.0), dtype=float)
+    except Exception:  # noqa: BLE001 - the run reports it at its time
+        return
+    if value.size != ncomp:
+        want = "a number" if ncomp == 1 else "a 3-vector"
+        raise SceneError(
+            f"{name}: expected a function returning {want}, received {getattr(s.fn, '__name__', s.fn)!r}, "
+            f"which returns {value.size} values ({value.reshape(-1)[:4].tolist()}) at t = 0 s"
+        )
 
 
 class ScheduleTable(NamedTuple):

@@ -7,6 +7,7 @@ unless the scene has Python schedules (evaluated between steps).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 
@@ -15,30 +16,24 @@ import numpy as np
 from . import readouts
 from .builds import BuildChoice
 from .control import Control
-from .errors import ConstraintError, SceneError, SimulationDiverged
-from .implicit import IMPLICIT_NOT_CONVERGED, Info
+from .diagnosis import advice, failure
+from .errors import ArgumentError, SceneError, SimulationDiverged
+from .implicit import Info
 from .loop import Frames, kinetic_energy_of, run_steps
 from .model import TERMS, Model
 from .state import State
 from .step import (
-    DIVERGED_NONFINITE,
-    S_MAXDISP,
     S_ORIGIN,
     S_PHI,
     S_PRESSURE,
     S_TIME,
-    VOLUME_FAILED,
     new_control,
     new_state,
     step_switches,
 )
-from .terms.volume import PROJ_NO_GRADIENT, face_volume
+from .terms.volume import face_volume
 
 __all__ = ["Simulation"]
-
-# below this fraction of critical damping the shape-memory force excites
-# itself on the breathing membrane (measured by `hybrid study stability`)
-SELF_EXCITATION_DAMPING = 0.15
 
 
 def _read_only(a: np.ndarray) -> np.ndarray:
@@ -59,6 +54,7 @@ class Simulation:
     """
 
     def __init__(self, model: Model, build: str = "auto"):
+        _check_model(model)
         self.model = model
         self.builds = BuildChoice(model.arrays.parallel, build)
         # the model's arrays with each build's flag: what the compiled calls take
@@ -189,8 +185,10 @@ class Simulation:
         the state then holds the failing step and further steps refuse."""
         if self.failed is not None:
             raise self.failed
-        if not (isinstance(n, (int, np.integer)) and n >= 0):
-            raise ValueError(f"n: expected an integer >= 0, received {n!r}")
+        if not (isinstance(n, (int, np.integer)) and not isinstance(n, bool) and n >= 0):
+            raise ArgumentError(f"n: expected an integer >= 0, received {_described(n)}")
+        if n >= MAX_STEP_COUNT:  # the compiled loop counts in int64
+            raise ArgumentError(f"n: expected fewer than 2^63 steps, received {n}")
         if not self.model.python_schedules:
             left = int(n)
             while True:  # one compiled call, or pieces timed for the choice of build
@@ -308,129 +306,16 @@ class Simulation:
                 out[row, : val.size] = val
 
     def _raise(self) -> None:
-        s, model = self.state, self.model
-        code, step, vert = int(s.status[0]), int(s.status[1]), int(s.status[2])
-        h = model.arrays.dt
-        t = step * h
-        if code == IMPLICIT_NOT_CONVERGED:
-            assert s.implicit is not None  # the code only implicit Euler's step sets
-            info = s.implicit.info
-            a = model.arrays
-            err: Exception = SimulationDiverged(
-                f"implicit Euler did not converge at t = {t:.6g} s (step {step}): residual {info[Info.RESIDUAL]:.3g} "
-                f"of the forces after {int(info[Info.NEWTON])} Newton iterations, above implicit_tol = "
-                f"{a.implicit_tol:g} (largest at vertex {vert}); raise implicit_max_iter (now {a.implicit_max_iter}) "
-                f"or take dt_s <= {0.5 * h:.3g} s",
-                time_s=t,
-                step=step,
-                vert=vert,
-                dt_suggested_s=0.5 * h,
-            )
-        elif code == VOLUME_FAILED:
-            why = (
-                "the volume gradient vanished on the free points"
-                if s.status[3] == PROJ_NO_GRADIENT
-                else "the volume cubic has no real root"
-            )
-            if step == 0:  # the first projection: the surface or its free points are at fault
-                err = ConstraintError(
-                    f"volume projection failed at t = {t:.6g} s (step {step}): {why}; expected a closed surface "
-                    f"with free points to move"
-                )
-            else:  # projections that held until now: the surface has folded, the run diverged
-                moved = float(np.sqrt(((s.vert_pos - model.arrays.vert_rest) ** 2).sum(axis=1)).max())
-                remedy, suggest = self._advice()
-                err = SimulationDiverged(
-                    f"simulation diverged at t = {t:.6g} s (step {step}): the volume projection failed ({why}): "
-                    f"the surface folded, a point {moved:.3g} m from rest; time step {h:.3g} s with "
-                    f"{model.scene.integrator}; {remedy}",
-                    time_s=t,
-                    step=step,
-                    vert=vert,
-                    dt_suggested_s=suggest,
-                )
-        else:
-            disp = float(s.scal[S_MAXDISP])
-            if code == DIVERGED_NONFINITE:
-                what = "became non-finite"
-            else:
-                what = f"reached {disp / h:.3g} m/s, above max_speed_m_s = {model.arrays.max_speed:.3g}"
-            remedy, suggest = self._advice()
-            err = SimulationDiverged(
-                f"simulation diverged at t = {t:.6g} s (step {step}): vertex {vert} {what}; "
-                f"time step {h:.3g} s with {model.scene.integrator}; {remedy}",
-                time_s=t,
-                step=step,
-                vert=vert,
-                dt_suggested_s=suggest,
-            )
-        self.failed = err
-        raise err
-
-    def _damping_fraction(self) -> float:
-        """The smallest damping, as a fraction of critical, over the integrated
-        shape-memory points (inf when the model has no shape memory)."""
-        a = self.model.arrays
-        if a.sm_vert.size == 0:
-            return math.inf
-        i = a.sm_vert[a.vert_free[a.sm_vert] > 0]
-        k = self.model.vert_stiffness[i]
-        return float(np.min(a.damp_coef[i] / (2.0 * np.sqrt(k * a.vert_mass[i])))) if i.size else math.inf
+        """Raise the failure the state records (`hybrid.diagnosis.failure`); further steps refuse."""
+        self.failed = failure(self.model, self.state)
+        raise self.failed
 
     def suggest_dt(self) -> float:
         """A time step (s) to try after a divergence: half the linear stability
         bound, and at most a quarter of the step that failed; nan where no step
         is stable (explicit Euler on an undamped spring)."""
-        return self._advice()[1]
+        return advice(self.model)[1]
 
-    def _advice(self) -> tuple[str, float]:
-        """What to try after a divergence, and the step it suggests (nan: none helps)."""
-        model, a = self.model, self.model.arrays
-        h = a.dt
-        k, c, m = model.vert_stiffness, a.damp_coef, a.vert_mass
-        held = (a.vert_free > 0) & (k > 0)
-        if a.integrator == 0 and np.any(held & (c == 0)):
-            # one step of x'' = -k/m x multiplies the amplitude by sqrt(1 + h^2 k/m) > 1
-            undamped = np.flatnonzero(held & (c == 0))
-            i = int(undamped[0])
-            # symplectic Euler keeps a conservative spring bounded, not shape memory
-            # (it excites itself below SELF_EXCITATION_DAMPING): there only damping helps
-            other = "" if np.isin(undamped, a.sm_vert).any() else " or use integrator = 'symplectic_euler'"
-            return (
-                f"explicit Euler grows every undamped oscillation whatever the step (vertex {i} has stiffness "
-                f"{k[i]:.3g} N/m and no damping), so no smaller step helps; add Damping(critical_fraction=0.3)"
-                f"{other}"
-            ), math.nan
-        bound = model.dt_stable_s
-        if bound == 0.0:
-            # below what the stability estimate resolves (1e-9 s): the tightest point's
-            # bound in closed form: c/k for damped explicit Euler (|1 - h c/m + h^2 k/m| < 1),
-            # 2 sqrt(m/k) for symplectic Euler, 2 m/c for the damping alone
-            with np.errstate(divide="ignore", invalid="ignore", over="ignore", under="ignore"):
-                spring = np.where(k > 0, c / k if a.integrator == 0 else 2.0 * np.sqrt(m / k), np.inf)
-                drag = np.where(c > 0, 2.0 * m / c, np.inf)
-            per = np.where(a.vert_free > 0, np.minimum(spring, drag), np.inf)
-            i = int(np.argmin(per))
-            est = float(per[i])
-            stiff = f"vertex {i}: stiffness {k[i]:.3g} N/m, damping {c[i]:.3g} N s/m, mass {m[i]:.3g} kg"
-            if not est > 0:
-                return f"no representable step is stable ({stiff}); lower the stiffness or damping", math.nan
-            return (
-                f"a stable step would be about {est:.3g} s ({stiff}), {1.0 / est:.3g} steps per simulated "
-                f"second: lower the stiffness or damping (or raise the mass) rather than the step"
-            ), 0.5 * est
-        suggest = min(0.5 * bound, h / 4.0)
-        damping = self._damping_fraction()
-        if h <= bound and damping < SELF_EXCITATION_DAMPING:
-            # the step is not the cause: the non-conservative shape memory excites itself
-            return (
-                f"the step is within the stability bound {bound:.3g} s but damping is {damping:.3g} of "
-                f"critical, below the {SELF_EXCITATION_DAMPING} where shape memory excites itself; add "
-                f"Damping(critical_fraction=0.3)"
-            ), suggest
-        return f"try dt_s <= {suggest:.3g} s", suggest
-
-    # ------------------------------------------------------------ a state set by hand
     def get_state(self) -> State:
         """A copy of the run's state (`hybrid.State`): `set_state(state)` restarts from it
         bit for bit, in this `Simulation` or another of the same model."""
@@ -459,7 +344,7 @@ class Simulation:
         for name, shape in want.items():
             got = getattr(state, name)
             if (None if got is None else np.shape(got)) != shape:
-                raise ValueError(
+                raise ArgumentError(
                     f"state.{name}: expected {'None' if shape is None else f'shape {shape}'} (scene "
                     f"{model.scene.name!r}, integrator {model.scene.integrator}), received {_described(got)}"
                 )
@@ -499,31 +384,40 @@ class Simulation:
         qpos (nq,), qvel (nv,): MuJoCo's generalized positions and velocities of the
         rigid part (`mj_model.nq`, `mj_model.nv`), only for a scene with one.
 
-        Every value is checked (shape, finite) before any is set: ValueError names
+        Every value is checked (shape, finite) before any is set: ArgumentError (a
+        HybridError and a ValueError) names
         the argument, what was expected and what was received. A run that failed
         steps again from the new state.
         """
         if state is not None:
             if not isinstance(state, State):
-                raise ValueError(
+                raise ArgumentError(
                     f"state: expected a hybrid.State (Simulation.get_state()), received {_described(state)}"
                 )
             if any(v is not None for v in (vert_pos, vert_vel, time_s, qpos, qvel)):
-                raise ValueError("set_state: expected a State or keyword parts, received both")
+                raise ArgumentError("set_state: expected a State or keyword parts, received both")
             return self._restore(state)
         nvert = self.model.nvert
         pos = _checked_array("vert_pos", vert_pos, (nvert, 3), "positions (m)")
         vel = _checked_array("vert_vel", vert_vel, (nvert, 3), "velocities (m/s)")
+        if vel is not None:  # a state the runaway guard stops at once: no step would help
+            speed = np.hypot(np.hypot(vel[:, 0], vel[:, 1]), vel[:, 2])  # no overflow at 1e200
+            fast = int(np.argmax(speed))
+            if speed[fast] > self.model.arrays.max_speed:
+                raise ArgumentError(
+                    f"vert_vel: expected speeds at most max_speed_m_s = {self.model.arrays.max_speed:g} m/s "
+                    f"(the runaway guard), received {speed[fast]:.3g} m/s at vertex {fast}"
+                )
         if time_s is not None:
             ok = isinstance(time_s, (int, float, np.integer, np.floating)) and not isinstance(time_s, bool)
             if not (ok and math.isfinite(time_s) and time_s >= 0):
-                raise ValueError(f"time_s: expected a finite time >= 0 s, received {time_s!r}")
+                raise ArgumentError(f"time_s: expected a finite time >= 0 s, received {time_s!r}")
         rigid = {}
         for name, value, size in (("qpos", qpos, "nq"), ("qvel", qvel, "nv")):
             if value is None:
                 continue
             if self.rigid is None:
-                raise ValueError(
+                raise ArgumentError(
                     f"{name}: expected None (scene {self.model.scene.name!r} has no rigid part), "
                     f"received {_described(value)}"
                 )
@@ -548,29 +442,58 @@ class Simulation:
         self.failed = None
 
 
+#: step counts `step` takes: below 2^63, what the compiled loop's int64 holds
+MAX_STEP_COUNT = 2**63
+
+
+def _check_model(model) -> None:
+    """`Simulation(model)`'s argument: a compiled Model (a Scene is compiled first), and
+    breathing periods of at least two steps (a waveform shorter than a step is sampled
+    at random phases, not breathed)."""
+    if not isinstance(model, Model):
+        raise ArgumentError(
+            f"model: expected a hybrid.Model (hybrid.compile_scene(scene); or hybrid.load(scene) for a "
+            f"Simulation at once), received {_described(model)}"
+        )
+    from .schedule import Breathing
+
+    dt = model.dt_s
+    for term in (*model.scene.forces, *model.scene.constraints):
+        for field in dataclasses.fields(term) if dataclasses.is_dataclass(term) else ():
+            value = getattr(term, field.name)
+            if isinstance(value, Breathing) and not value.period_s >= 2 * dt:
+                raise SceneError(
+                    f"{getattr(term, 'name', type(term).__name__)}.{field.name}.period_s: expected at least "
+                    f"two steps of dt_s = {dt:g} s, received {value.period_s:g} s"
+                )
+
+
 def _described(value) -> str:
-    """What an argument was, for an error message: its shape, or its type."""
+    """What an argument was, for an error message: its shape and kind, or its type."""
     if isinstance(value, (np.ndarray, list, tuple)):
         try:
-            return f"an array of shape {np.shape(value)}"
+            arr = np.asarray(value)
         except ValueError:  # nested sequences of different lengths
             return f"a ragged {type(value).__name__}"
-    return f"{type(value).__name__} {value!r}"
+        kind = "numbers" if arr.dtype.kind in "biuf" else f"{arr.dtype.kind!r} values ({arr.dtype})"
+        return f"an array of shape {arr.shape} of {kind}"
+    text = repr(value)
+    return f"{type(value).__name__} {text if len(text) <= 80 else text[:77] + '...'}"
 
 
 def _checked_array(name: str, value, shape: tuple, what: str) -> np.ndarray | None:
-    """`value` as a float array of `shape` with finite entries (None stays None), or ValueError."""
+    """`value` as a float array of `shape` with finite entries (None stays None), or ArgumentError."""
     if value is None:
         return None
     try:
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError):
-        raise ValueError(f"{name}: expected finite {what} of shape {shape}, received {_described(value)}") from None
+        raise ArgumentError(f"{name}: expected finite {what} of shape {shape}, received {_described(value)}") from None
     if arr.shape != shape:
-        raise ValueError(f"{name}: expected finite {what} of shape {shape}, received {_described(value)}")
+        raise ArgumentError(f"{name}: expected finite {what} of shape {shape}, received {_described(value)}")
     bad = np.argwhere(~np.isfinite(arr))
     if bad.size:
-        raise ValueError(
+        raise ArgumentError(
             f"{name}: expected finite {what}, received {arr[tuple(bad[0])]} at index "
             f"{tuple(int(i) for i in bad[0])} ({len(bad)} non-finite)"
         )

@@ -81,8 +81,13 @@ def local_workers() -> int:
 
 def _worker_init() -> None:
     """Process-pool initializer: numba on one thread (before it is imported
-    when possible, else through its runtime setting)."""
+    when possible, else through its runtime setting). Ctrl-C reaches the whole
+    process group: a worker leaves it to the caller, which ends the workers
+    (`_end_workers`), instead of dying in a traceback of its own."""
+    import signal
+
     os.environ["NUMBA_NUM_THREADS"] = "1"
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     _numba_one_thread()
 
 
@@ -189,10 +194,12 @@ class _Table:
     def __init__(self, folder):
         folder = Path(folder)
         folder.mkdir(parents=True, exist_ok=True)
+        from .outputs import open_append, read_own
+
         self.path = folder / TABLE_NAME
         self.done: dict[str, Any] = {}
-        if self.path.exists():
-            text = self.path.read_text(encoding="utf-8")
+        text = read_own(self.path)  # a link of that name is no table of ours, and never followed
+        if text is not None:
             for line in text.splitlines():
                 try:
                     row = json.loads(line)
@@ -200,11 +207,11 @@ class _Table:
                     continue
                 if isinstance(row, dict) and row.get("status") == "ok" and "params" in row:
                     self.done[_key(row["params"])] = row.get("result")
-            self._file = open(self.path, "a", encoding="utf-8")
+            self._file = open_append(self.path, encoding="utf-8")
             if text and not text.endswith("\n"):
                 self._file.write("\n")
         else:
-            self._file = open(self.path, "a", encoding="utf-8")
+            self._file = open_append(self.path, encoding="utf-8")
 
     def write(self, p, value) -> None:
         row: dict = {"params": _jsonable(p)}
@@ -313,6 +320,7 @@ def _sweep_local(fn, params, todo, n, finish, on_error, failed) -> None:
         else:
             os.environ["NUMBA_NUM_THREADS"] = saved
     taken = set()
+    ended = False
     try:
         for f in as_completed(futures):
             if f.cancelled():
@@ -323,8 +331,13 @@ def _sweep_local(fn, params, todo, n, finish, on_error, failed) -> None:
             if failed and on_error == "raise":
                 for g in futures:  # those not yet started
                     g.cancel()
-    finally:  # on a failure (or Ctrl-C): drop the tasks not yet started, keep those that finish
-        pool.shutdown(wait=True, cancel_futures=True)
+    except BaseException:  # Ctrl-C, or a signal taken as one: the workers end now, the rows in stay
+        ended = True
+        _end_workers(pool)
+        raise
+    finally:  # on a failure: drop the tasks not yet started, keep those that finish
+        if not ended:
+            pool.shutdown(wait=True, cancel_futures=True)
     for f, i in futures.items():
         if f not in taken and f.done() and not f.cancelled():
             exc = f.exception()
@@ -340,9 +353,41 @@ def _first_alone(pool, fn: Callable, p: Any):
     try:
         wait([future])
     except BaseException:  # Ctrl-C: the pool goes with it
-        pool.shutdown(wait=False, cancel_futures=True)
+        _end_workers(pool)
         raise
     return future
+
+
+#: seconds a worker is given to end on SIGTERM before it is killed
+END_WAIT_S = 3.0
+
+
+def _end_workers(pool) -> None:
+    """Every worker of `pool` ended (SIGTERM, then SIGKILL after `END_WAIT_S`) and the
+    pool shut down, further signals ignored meanwhile: nothing is left running
+    after a sweep that was interrupted, and no worker waits for its task to end."""
+    import signal
+    import threading
+    import time
+
+    main = threading.current_thread() is threading.main_thread()
+    stops = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+    previous = {s: signal.signal(s, signal.SIG_IGN) for s in stops} if main else {}
+    try:
+        procs = list((getattr(pool, "_processes", None) or {}).values())
+        for proc in procs:
+            if proc.is_alive():
+                proc.terminate()
+        deadline = time.monotonic() + END_WAIT_S
+        for proc in procs:
+            proc.join(max(deadline - time.monotonic(), 0.0))
+            if proc.is_alive():
+                proc.kill()
+                proc.join(1.0)
+        pool.shutdown(wait=False, cancel_futures=True)
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
 
 
 def _sweep_dask(fn: Callable, params: list, todo: list, address: str, finish, on_error: str) -> None:

@@ -126,6 +126,9 @@ def generated(tmp_path_factory) -> Path:
     (gen / "text.mcap").write_text("a recording, honestly\n")
     (gen / "summary.mcap").write_bytes((rec / "summary.json").read_bytes())
     (gen / "deep_nesting.toml").write_text(_nested_scene(400))
+    # a binary STL whose header claims 4e9 triangles (200 GB) in a file of one
+    (gen / "huge_claim.stl").write_bytes(b"\0" * 80 + (4_000_000_000).to_bytes(4, "little") + b"\0" * 50)
+    (gen / "huge_claim.toml").write_text('[mesh]\npath = "huge_claim.stl"\n[masses]\ntotal_kg = 1.0\n')
     return gen
 
 

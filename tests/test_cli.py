@@ -139,7 +139,7 @@ def test_study_subcommand_reaches_the_studies(tmp_path):
     assert len(lines) == 1 and "nosuchstudy" in lines[0], proc.stderr
 
 
-def test_a_file_system_error_during_a_run_is_one_line_with_status_2(tmp_path, monkeypatch, capsys):
+def test_a_file_system_error_during_a_run_is_one_line_with_status_74(tmp_path, monkeypatch, capsys):
     import errno
     import importlib
 
@@ -149,7 +149,8 @@ def test_a_file_system_error_during_a_run_is_one_line_with_status_2(tmp_path, mo
         raise OSError(errno.ENOSPC, "No space left on device", str(out / "summary.json"))
 
     monkeypatch.setattr(runner, "write_outputs", full_disk)
-    assert main(["run", "membrane_demo", "--duration", "0.01", "--out", str(tmp_path / "o")]) == 2
+    # issue 31: a full disk is not bad input: EX_IOERR, not 2
+    assert main(["run", "membrane_demo", "--duration", "0.01", "--out", str(tmp_path / "o")]) == 74
     err = capsys.readouterr().err.strip().splitlines()
     assert err == [
         f"hybrid: error: cannot read or write {str(tmp_path / 'o' / 'summary.json')!r}: No space left on device"

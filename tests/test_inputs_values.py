@@ -2,6 +2,7 @@
 
 import pytest
 
+from hybrid.checks import MAX_POINTS
 from hybrid.errors import MeshError, SceneError
 from hybrid.mesh import uv_sphere
 from hybrid.model import compile_scene
@@ -96,7 +97,8 @@ BAD = [
     (
         "huge sphere",
         dict(mesh=MeshSpec(segments=10**6, rings=10**6)),
-        r"mesh: segments = 1000000 x rings = 1000000 gives 999999000002 points; expected at most 10000000",
+        # issue 31: the limit is MAX_POINTS, lowered from 10^7 to 2^21 (memory: 2 kB a point to build)
+        rf"mesh: segments = 1000000 x rings = 1000000 gives 999999000002 points; expected at most {MAX_POINTS}",
     ),
 ]
 
@@ -113,7 +115,9 @@ def test_nonsense_scene_values_are_refused_with_one_line(kw, pattern):
 
 def test_a_huge_uv_sphere_is_refused_before_allocating():
     """Item 7: the generator itself checks the size (10^12 points would need 24 TB)."""
-    with pytest.raises(MeshError, match=r"uv_sphere: segments = 1000000 x rings = 1000000 gives .* at most 10000000"):
+    with pytest.raises(
+        MeshError, match=rf"uv_sphere: segments = 1000000 x rings = 1000000 gives .* at most {MAX_POINTS}"
+    ):
         uv_sphere(segments=10**6, rings=10**6)
 
 

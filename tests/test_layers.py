@@ -25,7 +25,7 @@ LAYERS = (
     ("step", ("step", "readouts", "implicit", "implicit_matrix")),
     ("step loop", ("loop",)),
     ("coupled step", ("coupling",)),
-    ("simulation", ("simulation", "builds", "control", "state")),
+    ("simulation", ("simulation", "builds", "control", "state", "diagnosis")),
     ("observers", ("run", "loads", "record", "record.*", "render", "sweep", "grid", "outputs", "provenance")),
     ("public API", ("",)),  # hybrid/__init__.py
     (

@@ -16,7 +16,7 @@ from helpers import BASE, with_force
 
 import hybrid
 from hybrid.demo import membrane_demo
-from hybrid.errors import SimulationDiverged
+from hybrid.errors import SceneError, SimulationDiverged
 from hybrid.model import compile_scene
 from hybrid.scene import Muscle
 from hybrid.schedule import Function
@@ -185,11 +185,17 @@ def test_a_python_schedule_returning_a_wrong_size_is_named():
     def contraction(t):
         return [1.0, 2.0]  # neither a number nor a 3-vector
 
-    sim = Simulation(compile_scene(with_force(Muscle("top", Function(contraction), toward_m=(0, 0, 0.12)))))
+    # issue 31: a function of the wrong size at t = 0 is refused with the scene, before a step
+    with pytest.raises(SceneError, match=r"stiffness: expected a function returning a number, received 'contraction'"):
+        compile_scene(with_force(Muscle("top", Function(contraction), toward_m=(0, 0, 0.12))))
+
+    def later(t):
+        return 1.0 if t == 0 else [1.0, 2.0]  # right at t = 0 s only: caught when called
+
+    sim = Simulation(compile_scene(with_force(Muscle("top", Function(later), toward_m=(0, 0, 0.12)))))
     with pytest.raises(
         SimulationDiverged,
-        match=r"schedule function 'contraction' returned \[1\.0, 2\.0\] at "
-        r"t = 0 s; expected 1 or 3 finite numbers",
+        match=r"schedule function 'later' returned \[1\.0, 2\.0\] at t = 0.001 s; expected 1 or 3 finite numbers",
     ):
         sim.step(1)
 

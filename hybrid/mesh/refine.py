@@ -25,8 +25,18 @@ def split_faces(
 
     With `center` (3,) m and `radius_m`, each new point is moved along the ray
     from the centre onto that sphere."""
+    from ..checks import mesh_points
+    from ..errors import MeshError
+
     pos = np.asarray(vert_pos, dtype=np.float64)
     face = np.asarray(face_vert, dtype=np.int64)
+    # a closed surface has 3F/2 edges, each a new point a level, the faces times 4: before any array
+    mesh_points(
+        "split_faces",
+        len(pos) + (4 ** int(times) - 1) * len(face) // 2,
+        f"{int(times)} levels of splitting {len(face)} faces give about ",
+        error=MeshError,
+    )
     ctr = None if center is None else np.asarray(center, dtype=np.float64)
     for _ in range(int(times)):
         n = len(pos)

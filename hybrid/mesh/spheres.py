@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from hybrid.checks import MAX_POINTS
+from hybrid.checks import MAX_POINTS, mesh_points
 from hybrid.errors import MeshError
 
 from .refine import split_faces
@@ -124,12 +124,10 @@ def uv_sphere(
     segments, rings = int(segments), int(rings)
     conform_m = np.asarray(conform_z, float).reshape(-1)
     conform_z = tuple(conform_m / radius)
-    if segments * (rings - 1) + 2 > MAX_POINTS:  # before any array is allocated
-        raise MeshError(
-            f"uv_sphere: segments = {segments} x rings = {rings} gives {segments * (rings - 1) + 2} "
-            f"points; expected at most {MAX_POINTS}"
-        )
-
+    # before any array is allocated
+    mesh_points(
+        "uv_sphere", segments * (rings - 1) + 2, f"segments = {segments} x rings = {rings} gives ", error=MeshError
+    )
     theta = _polar_angles(rings, conform_z, "uv_sphere")  # polar angle of each circle
     phi = _segment_azimuths(segments, _conform_azimuths(conform_azimuth_deg, "uv_sphere"), "uv_sphere")
     st, ct = np.sin(theta)[:, None], np.cos(theta)[:, None]
@@ -219,6 +217,7 @@ def icosphere(subdivisions: int, radius: float = 1.0, center=(0.0, 0.0, 0.0)) ->
             f"received {subdivisions!r}"
         )
     ctr = _check_sphere_args(radius, center, "icosphere")
+    mesh_points("icosphere", 10 * 4 ** int(subdivisions) + 2, f"subdivisions = {subdivisions} gives ", error=MeshError)
     # edge midpoints pushed out to the unit sphere at each level
     unit, face = split_faces(_ICO_VERT, _ICO_FACE, int(subdivisions), center=np.zeros(3), radius_m=1.0)
     return Mesh(ctr + radius * unit, face, name=f"icosphere{int(subdivisions)}")
@@ -249,7 +248,7 @@ def _hull_mesh(p: np.ndarray, radius: float, ctr: np.ndarray, name: str) -> Mesh
 def _check_npoint(npoint, who: str) -> int:
     if isinstance(npoint, bool) or int(npoint) != npoint or not 12 <= npoint <= MAX_POINTS:
         raise MeshError(f"{who}: npoint must be an integer in [12, {MAX_POINTS}]; received {npoint!r}")
-    return int(npoint)
+    return mesh_points(who, int(npoint), "npoint = ", error=MeshError)
 
 
 def fibonacci_sphere(npoint: int, radius: float = 1.0, center=(0.0, 0.0, 0.0)) -> Mesh:

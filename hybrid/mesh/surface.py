@@ -50,6 +50,40 @@ __all__ = ["Mesh", "LOAD_SUFFIXES"]
 LOAD_SUFFIXES = (".stl", ".obj", ".ply", ".off")
 
 
+#: bytes of a binary STL's header and of each of its triangles
+_STL_HEAD, _STL_TRIANGLE = 84, 50
+#: the fewest bytes a point takes in a text mesh file: "v 0 0 0" and its two triangles ("f 1 2 3")
+_TEXT_BYTES_PER_POINT = 24
+
+
+def _check_file_size(path: Path, suffix: str) -> None:
+    """The points a mesh file can hold, checked before it is read (`checks.mesh_points`):
+    a binary STL by the triangle count in its header, which must match its size; a
+    text file by its size."""
+    from ..checks import mesh_points
+
+    size = path.stat().st_size
+    if suffix == ".stl":
+        with open(path, "rb") as f:
+            head = f.read(_STL_HEAD)
+        count = int.from_bytes(head[80:84], "little") if len(head) == _STL_HEAD else -1
+        if count >= 0 and not head.lstrip().lower().startswith(b"solid"):  # binary
+            if size != _STL_HEAD + _STL_TRIANGLE * count:
+                raise MeshError(
+                    f"mesh file {str(path)!r}: a binary STL whose header claims {count:,} triangles "
+                    f"({_STL_HEAD + _STL_TRIANGLE * count:,} bytes); expected that size, received {size:,} bytes"
+                )
+            # a closed surface of F triangles has F / 2 + 2 points (shared after merging)
+            mesh_points(f"mesh file {str(path)!r}", count // 2 + 2, f"{count:,} triangles give about ", error=MeshError)
+            return
+    mesh_points(
+        f"mesh file {str(path)!r}",
+        size // _TEXT_BYTES_PER_POINT,
+        f"{size:,} bytes may hold up to ",
+        error=MeshError,
+    )
+
+
 class Mesh:
     """An immutable, validated triangle surface with its one-ring fans.
 
@@ -158,6 +192,7 @@ class Mesh:
             )
         if not path.is_file():
             raise MeshError(f"mesh file {str(path)!r} does not exist or is not a file")
+        _check_file_size(path, suffix)
         if suffix == ".obj":
             vert_pos, face_vert = read_obj(str(path))
         else:

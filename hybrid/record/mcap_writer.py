@@ -33,7 +33,9 @@ class _McapWriter:
         self.chunk = bytearray()
         self.index: dict[int, list] = {}
         self.t_lo = self.t_hi = None
-        self.chunk_indexes: list = []
+        # the summary's ChunkIndex records, written as each chunk is (bytes, about 100 + 10
+        # a channel per chunk): memory per chunk, not a Python object per chunk
+        self.chunk_indexes = bytearray()
         self.meta_indexes: list = []
         self.counts: dict[int, int] = {}
         self.nmsg = 0
@@ -120,6 +122,7 @@ class _McapWriter:
         import zlib
 
         import zstandard
+        from mcap.data_stream import RecordBuilder
         from mcap.opcode import Opcode
         from mcap.records import Chunk, ChunkIndex
 
@@ -149,19 +152,19 @@ class _McapWriter:
             parts.append(rec)
             count += len(rec)
         self.f.write(b"".join(parts))
-        self.chunk_indexes.append(
-            ChunkIndex(
-                message_start_time=t_lo,
-                message_end_time=t_hi,
-                chunk_start_offset=start,
-                chunk_length=length,
-                message_index_offsets=offsets,
-                message_index_length=count,
-                compression="zstd",
-                compressed_size=len(data),
-                uncompressed_size=len(raw),
-            )
-        )
+        cb = RecordBuilder()
+        ChunkIndex(
+            message_start_time=t_lo,
+            message_end_time=t_hi,
+            chunk_start_offset=start,
+            chunk_length=length,
+            message_index_offsets=offsets,
+            message_index_length=count,
+            compression="zstd",
+            compressed_size=len(data),
+            uncompressed_size=len(raw),
+        ).write(cb)
+        self.chunk_indexes += cb.end()
         self.nmsg += sum(len(r) for r in index.values())
         self.t_first = t_lo if self.t_first is None else min(self.t_first, t_lo)
         self.t_last = t_hi if self.t_last is None else max(self.t_last, t_hi)
@@ -199,7 +202,7 @@ class _McapWriter:
             (Opcode.SCHEMA, self.schemas),
             (Opcode.CHANNEL, self.channels),
             (Opcode.STATISTICS, [stats]),
-            (Opcode.CHUNK_INDEX, self.chunk_indexes),
+            (Opcode.CHUNK_INDEX, [_Raw(self.chunk_indexes)] if self.chunk_indexes else []),
             (Opcode.METADATA_INDEX, self.meta_indexes),
         ):
             if not records:
@@ -219,3 +222,13 @@ class _McapWriter:
         self._out()
         self.f.write(MCAP0_MAGIC)
         self.f.flush()
+
+
+class _Raw:
+    """Records already serialized, written as they are."""
+
+    def __init__(self, data: bytes):
+        self.data = data
+
+    def write(self, b) -> None:
+        b.write(self.data)

@@ -14,6 +14,7 @@ import numpy as np
 
 from ..errors import HybridError
 from ..loads import Loads, LoadsObserver
+from ..outputs import create_new
 from ..provenance import run_provenance
 from ..run import TRACE_KEYS, scene_parts
 from ..step import F_PRESSURE, F_TIME, F_VOLUME
@@ -73,6 +74,15 @@ class _Frames:
 
 # the trace's columns the scalar channels take, in the channels' order
 _SCALAR_COLS = [TRACE_KEYS.index(key) for key in SCALAR_CHANNELS.values()]
+
+
+def _named(exc: BaseException, path) -> BaseException:
+    """A file system error of the recording (a full disk) as one naming its file."""
+    if isinstance(exc, OSError) and not isinstance(exc, HybridError):
+        from ..outputs import OutputError
+
+        return OutputError(str(path), exc.strerror or str(exc), exc.errno or 0)
+    return exc
 
 
 class Recorder:
@@ -135,7 +145,9 @@ class Recorder:
         self._closed = False
         mesh_every = int(mesh_every) if mesh_every else (1 if n <= MESH_EVERY_FRAME_MAX else 10)
         _load_encoder()
-        self._file = open(self.path, "wb")  # a path that cannot be written fails here, at once
+        # a path that cannot be written fails here, at once; a file or link of that name is
+        # replaced, a link never followed
+        self._file = create_new(self.path, "wb")
         self._fw: _FrameWriter | None = None
 
         def make_writer() -> _FrameWriter:  # the file's head, and the encoder loaded
@@ -264,7 +276,7 @@ class Recorder:
                 number = buf.numbers(nframe)
                 self._fw.write(number[:, 0], number, buf.pos[:nframe], first)
         except BaseException as exc:  # raised again in the run's thread
-            self._error = exc
+            self._error = _named(exc, self.path)
         finally:
             if self._todo is not None:
                 self._free.put(item[0])
@@ -280,7 +292,7 @@ class Recorder:
                 try:
                     self._fw = make_writer()
                 except BaseException as exc:  # raised again in the run's thread
-                    self._error = exc
+                    self._error = _named(exc, self.path)
             try:
                 if item is None:
                     return
@@ -310,10 +322,14 @@ class Recorder:
                     self._todo.put(None)
                     self._thread.join()
         finally:
-            if self._fw is not None:
-                self._fw.close()
-            else:
-                self._file.close()
+            try:
+                if self._fw is not None:
+                    self._fw.close()
+                else:
+                    self._file.close()
+            except OSError as exc:  # the last bytes refused (a full disk): named, after any earlier error
+                if self._error is None:
+                    raise _named(exc, self.path) from None
         if self._error is not None:
             raise self._error
 

@@ -50,6 +50,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import HybridError
+from ..outputs import save_figure as _save_figure
+from ..outputs import write_text as _write_text
 from ..sweep import sweep
 from .stability.report import write_json
 
@@ -100,6 +102,25 @@ def base_step(scene, overrides, level) -> tuple[float, int]:
     if m.scene.integrator == "implicit_euler":  # not bounded by stability: its own step ("auto": 4x symplectic's)
         return m.dt_s, m.nvert
     return min(m.dt_s, auto_dt(m.dt_stable_s)), m.nvert
+
+
+def _check_metrics(scene, overrides, level, metrics) -> None:
+    """The metrics are series the scene reports (`hybrid.run.scene_parts`), checked on
+    one step of the coarsest level, so that a wrong --metric is refused at once."""
+    from ..run import METRIC_KEYS
+    from ..run import run as run_scene
+    from ..simulation import Simulation
+
+    unknown = [k for k in metrics if k not in METRIC_KEYS]
+    if unknown:
+        raise HybridError(f"--metric: expected series among {list(METRIC_KEYS)}, received {unknown}")
+    model = _model(scene, overrides, level, None)
+    table = run_scene(Simulation(model), model.dt_s)["summary"]["metrics"]
+    missing = [k for k in metrics if k not in table]
+    if missing:
+        raise HybridError(
+            f"--metric: scene {model.scene.name!r} has no series {missing}; expected some of {sorted(table)}"
+        )
 
 
 def simulate(scene, overrides, level, dt, duration_s, metrics) -> dict:
@@ -345,6 +366,7 @@ def run(
         )
     duration = float(size["duration_s"] or sc.duration_s) if duration_s is None else float(duration_s)
     metrics = tuple(metrics)
+    _check_metrics(scene, overrides, levels[0], metrics)  # before any run of the study
     grid = []
     for level in levels:
         dt0, _ = base_step(scene, overrides, level)
@@ -415,7 +437,7 @@ def write(out, res: dict) -> dict:
         "finest_change": _finest_change(runs, metrics, levels),
     }
     write_json(out / "convergence.json", res)
-    (out / "convergence.md").write_text(_markdown(res))
+    _write_text(out / "convergence.md", _markdown(res))
     _plot(out / "convergence.png", res)
     return res
 
@@ -583,5 +605,5 @@ def _plot(path: Path, res: dict) -> None:
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    _save_figure(fig, path, dpi=110)
     plt.close(fig)

@@ -44,6 +44,7 @@ from ..demo import membrane_demo
 from ..errors import ConstraintError, HybridError, SimulationDiverged
 from ..mesh import Mesh, uv_sphere
 from ..model import Model, compile_scene
+from ..outputs import write_text as _write_text
 from ..regions import HalfSpace
 from ..resolve import resolve_scene
 from ..rigid import resolve_mjcf
@@ -560,5 +561,5 @@ def run(out_dir, *, small: bool = False, scheduler: str | None = None, workers: 
         "runtime_s": time.perf_counter() - t0,
     }
     write_json(out / "extremes.json", res)
-    (out / "extremes.md").write_text(_markdown(finite(res)))
+    _write_text(out / "extremes.md", _markdown(finite(res)))
     return finite(res)

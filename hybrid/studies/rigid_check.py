@@ -27,6 +27,7 @@ import numpy as np
 
 from ..errors import SceneError
 from ..model import compile_scene
+from ..outputs import write_text as _write_text
 from ..resolve import resolve_scene
 from ..simulation import Simulation
 from . import rigid_reference as ref
@@ -112,7 +113,7 @@ def run(out_dir, source=None, *, small: bool = False) -> dict:
     paper = paper_order()
     res.update(paper_algorithm_order=paper["paper_algorithm_order"], paper=paper, runtime_s=time.perf_counter() - t0)
     write_json(out / "rigid.json", res)
-    (out / "rigid.md").write_text(markdown(res))
+    _write_text(out / "rigid.md", markdown(res))
     return res
 
 

@@ -40,6 +40,8 @@ import numpy as np
 
 from ..mesh import Mesh, icosphere, irregular_sphere, uv_sphere
 from ..model import compile_scene
+from ..outputs import save_figure as _save_figure
+from ..outputs import write_text as _write_text
 from ..readouts import internal_forces, net_internal
 from ..regions import HalfSpace
 from ..scene import Damping, Gravity, Masses, Membrane, Nailed, Pressure, Scene, Volume
@@ -436,7 +438,7 @@ def run(out_dir, small: bool = False) -> dict:
         "small": small,
     }
     write_json(out / "verification.json", res)
-    (out / "verification.md").write_text(markdown(res))
+    _write_text(out / "verification.md", markdown(res))
     plot(out / "verification.png", res)
     return res
 
@@ -516,5 +518,5 @@ def plot(path: Path, res: dict) -> None:
         ax.grid(True, which="both", alpha=0.3)
         ax.legend()
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    _save_figure(fig, path, dpi=110)
     plt.close(fig)

@@ -46,6 +46,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import HybridError
+from ..outputs import save_figure as _save_figure
+from ..outputs import write_text as _write_text
 from ..sweep import sweep
 from .stability.report import write_json
 
@@ -284,7 +286,7 @@ def run(
     }
     write_json(out / "work_precision.json", data)
     _plot(out / "work_precision.png", rows)
-    (out / "work_precision.md").write_text(_markdown(data))
+    _write_text(out / "work_precision.md", _markdown(data))
     data["runtime_s"] = time.perf_counter() - t_start
     write_json(out / "work_precision.json", data)
     return data
@@ -371,5 +373,5 @@ def _plot(path: Path, rows: list) -> None:
     axes[0].set_title("error against run time")
     axes[1].set_title("error against time step")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    _save_figure(fig, path, dpi=110)
     plt.close(fig)

@@ -37,6 +37,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
+from ...outputs import write_text as _write_text
 from .membrane import membrane_spectrum, self_excitation
 from .numerics import single_thread_blas, step_jacobian
 from .relaxation import stability_map, table3
@@ -107,5 +108,5 @@ def run(out_dir, *, small: bool = False, scheduler: str | None = None, workers: 
     res["timings_s"] = timings
     res["runtime_s"] = time.perf_counter() - t0
     write_json(out / "stability.json", res)
-    (out / "stability.md").write_text(markdown(res))
+    _write_text(out / "stability.md", markdown(res))
     return finite(res)

@@ -10,6 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ...outputs import save_figure as _save_figure
+from ...outputs import write_text as _write_text
 from .tables import KV_UNIT, M_UNIT, MODELS, rho_table1
 
 __all__ = ["finite", "write_json", "plots", "markdown"]
@@ -33,7 +35,7 @@ def finite(x):
 
 
 def write_json(path: Path, data) -> None:
-    path.write_text(json.dumps(finite(data), indent=2, allow_nan=False))
+    _write_text(path, json.dumps(finite(data), indent=2, allow_nan=False))
 
 
 def plots(out: Path, res: dict) -> list[str]:
@@ -53,7 +55,7 @@ def plots(out: Path, res: dict) -> list[str]:
         if res.get(section):
             fig = draw(plt, res[section])
             fig.tight_layout()
-            fig.savefig(out / f"{section}.png", dpi=110)
+            _save_figure(fig, out / f"{section}.png", dpi=110)
             plt.close(fig)
             files.append(f"{section}.png")
     return files
