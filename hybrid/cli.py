@@ -278,6 +278,9 @@ def _cmd_study(args) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="hybrid", description="Breathing trunk: MuJoCo ribs coupled to a volume-preserving membrane.")
+    from . import __version__
+
+    p.add_argument("--version", action="version", version=f"hybrid {__version__}")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
     r = sub.add_parser("run", help="run a scene (default: the built-in breathing trunk)")
     r.add_argument("scene", nargs="?", help="a scene TOML file, or a built-in name: breathing, membrane_demo")

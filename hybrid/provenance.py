@@ -23,15 +23,11 @@ __all__ = ["run_provenance", "package_version", "git_commit"]
 _PACKAGE_ROOT = Path(__file__).resolve().parent
 
 
-@functools.lru_cache(maxsize=1)
-def package_version() -> str | None:
-    """The installed distribution's version (None when the source is not installed)."""
-    from importlib import metadata
+def package_version() -> str:
+    """The package's version, from its one place (`hybrid.__version__`)."""
+    from . import __version__
 
-    try:
-        return metadata.version("hybrid")
-    except metadata.PackageNotFoundError:
-        return None
+    return __version__
 
 
 @functools.lru_cache(maxsize=1)
