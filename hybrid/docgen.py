@@ -113,7 +113,7 @@ _RIGID = {
         "-",
         "[]",
         "[joint, ...]: the membrane's loads and the intra-abdominal pressure's moment "
-        'are also given about each joint\'s anchor (hybrid.loads; README, "Loads")',
+        'are also given about each joint\'s anchor (hybrid.loads; docs/outputs.md, "Loads on the skeleton")',
     ),
     "ctrl": (
         "-",

@@ -1,5 +1,5 @@
 """How a run was made, as plain data: the "provenance" table of `summary.json` and
-of the recording's metadata (README, "Outputs").
+of the recording's metadata (docs/outputs.md).
 
 `run_provenance(sim, command=..., overrides=..., without=...)` gives the package
 version and git commit, the command line, the fully resolved scene as TOML text,
