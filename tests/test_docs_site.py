@@ -28,12 +28,14 @@ def test_each_generated_page_is_the_one_its_sources_make(page):
 
 
 def _numbers_changed(obj):
-    """obj with every number (not bool) changed: x -> 1.37 x + 0.11."""
+    """obj with every number changed, keeping its type (a count stays a whole number)."""
     if isinstance(obj, dict):
         return {k: _numbers_changed(v) for k, v in obj.items()}
     if isinstance(obj, list):
         return [_numbers_changed(v) for v in obj]
-    if isinstance(obj, (int, float)) and not isinstance(obj, bool):
+    if isinstance(obj, int) and not isinstance(obj, bool):
+        return 2 * obj + 1
+    if isinstance(obj, float):
         return 1.37 * obj + 0.11
     return obj
 
