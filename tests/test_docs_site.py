@@ -151,3 +151,16 @@ def test_every_page_is_in_the_sites_navigation():
     nav = (REPO / "mkdocs.yml").read_text(encoding="utf-8")
     missing = [p.name for p in DOCS.glob("*.md") if f": {p.name}\n" not in nav]
     assert not missing, missing
+
+
+def test_the_citation_names_this_package_and_the_paper():
+    import tomllib
+
+    import yaml
+
+    cff = yaml.safe_load((REPO / "CITATION.cff").read_text(encoding="utf-8"))
+    name = tomllib.loads((REPO / "pyproject.toml").read_text(encoding="utf-8"))["project"]["name"]
+    assert cff["title"].startswith(name) and cff["license"] == "MIT" and "version" not in cff  # the version: one place
+    (paper,) = cff["references"]
+    assert [a["family-names"] for a in paper["authors"]] == ["Promayon", "Baconnier", "Puech"]
+    assert paper["year"] == 1997
