@@ -23,11 +23,17 @@ __all__ = ["run_provenance", "package_version", "git_commit"]
 _PACKAGE_ROOT = Path(__file__).resolve().parent
 
 
-def package_version() -> str:
-    """The package's version, from its one place (`hybrid.__version__`)."""
-    from . import __version__
+@functools.lru_cache(maxsize=1)
+def package_version() -> str | None:
+    """The installed distribution's version, read from hybrid.__version__ when it was
+    installed (None when the source is not installed). Not imported from the package
+    itself: the observers sit below the public API."""
+    from importlib import metadata
 
-    return __version__
+    try:
+        return metadata.version("hybrid-trunk")
+    except metadata.PackageNotFoundError:
+        return None
 
 
 @functools.lru_cache(maxsize=1)

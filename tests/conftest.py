@@ -41,6 +41,15 @@ SLOW = (
     "test_render.py",  # renders, the MP4 and the viewer on a virtual display
     "test_bench.py",
     "rigid/test_myotorso.py",  # MyoSuite's torso: 210 muscles
+    # the slowest of the rest (a quick-tier run's --durations under a load of 12 on 2 cores: 24-183 s each)
+    "terms/test_volume.py::test_volume_exact_every_step_icosphere_10242",
+    "test_kernel.py::test_a_kernel_compiled_beside_cached_parallel_twins_loads_in_a_new_process",
+    "test_architecture.py::test_adding_a_term_takes_the_three_edits_the_architecture_page_shows",
+    "test_implicit_matrix.py::test_the_assembled_matrix_is_the_same_compiled_or_loaded_from_the_cache",
+    "test_inputs_volume.py::test_projected_step_keeps_the_volume_of_a_small_flat_body_far_away",
+    "test_cli.py::test_bench_quick_writes_json",
+    "test_runs_safe.py::test_a_second_run_into_a_busy_folder_is_refused_and_sigterm_finishes_the_first",
+    "test_runs_safe.py::test_the_runners_memory_does_not_grow_with_the_runs_length",
 )
 
 
