@@ -19,6 +19,11 @@ observers' side. Everything else lives in the submodules, which may change.
 
 from __future__ import annotations
 
+#: the package's version, its one place: pyproject.toml reads it (setuptools' dynamic
+#: version), `hybrid --version` prints it, every run's provenance records it
+#: (the policy: CHANGELOG.md, "Versions")
+__version__ = "0.5.0"
+
 from collections.abc import Sequence
 from pathlib import Path
 

@@ -160,7 +160,7 @@ def implicit_rows(meshes=(None, 5), *, repeats: int = 7, work: float = 4e6) -> l
     return rows
 
 
-#: the realtime rows' runs (integrator, step s, overrides), chosen by measurement (README,
+#: the realtime rows' runs (integrator, step s, overrides), chosen by measurement (CHANGELOG.md,
 #: "Performance"): at mesh level 4 symplectic Euler at 1 ms (0.77 of its bound) gives the breath's
 #: metrics within 0.14% of a 0.1 ms run and is faster than implicit Euler; at levels 6-7 implicit
 #: Euler at 10 ms solved to 1e-3 of the forces: at level 7 the 12 s run's metrics within 0.09% of
@@ -175,7 +175,7 @@ REALTIME_RUNS = {
     ("breathing", 8): ("implicit_euler", 3e-2, ("implicit_tol=1e-2",)),
     ("breathing_paper", None): ("symplectic_euler", 1e-3, ()),
 }
-#: the fraction of the stable-step estimate `realtime_step` takes (README: keep h below 0.8 of it)
+#: the fraction of the stable-step estimate `realtime_step` takes (CHANGELOG.md: keep h below 0.8 of it)
 REALTIME_BOUND_FRACTION = 0.7
 
 
@@ -387,7 +387,7 @@ SECTIONS = ("membrane", "formulations", "implicit", "realtime", "coupled", "reco
 #: the mesh level `hybrid study convergence` recommends for 1% on all four of the breathing
 #: scene's metrics (levels 3-9 with implicit Euler: the rib lift's 1% at level 4, the peak
 #: pressure's at 3, the apex descent's at 7 and the swept volume's at 8, 0.96% from its
-#: limit; README, "Error against run time"); the realtime row's by default
+#: limit; CHANGELOG.md, "Error against run time"); the realtime row's by default
 RECOMMENDED_LEVEL = 8
 
 

@@ -330,6 +330,9 @@ def build_parser() -> argparse.ArgumentParser:
     # the scenes a name stands for, read off the package (as the unknown-name error lists them)
     named = f"a scene TOML file, or a built-in name: {', '.join(scene_names())} (default: {DEFAULT_SCENE})"
     p = _Parser(prog="hybrid", description="Breathing trunk: MuJoCo ribs coupled to a volume-preserving membrane.")
+    from . import __version__
+
+    p.add_argument("--version", action="version", version=f"hybrid {__version__}")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
     r = sub.add_parser("run", help="run a scene (default: the built-in breathing trunk)")
     r.add_argument("scene", nargs="?", help=named)

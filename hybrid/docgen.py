@@ -1,7 +1,13 @@
-"""The scene-file reference, docs/scene-file.md, written from the dataclasses.
+"""The generated documentation pages: the scene-file reference, written from the
+dataclasses; the validation, convergence and performance pages, written from the
+studies' and the benchmark's JSON kept in docs/data/; the API reference, from
+`hybrid.__all__`; the gallery of the scripts.
 
-    python -m hybrid.docgen            # (re)write docs/scene-file.md
-    python -m hybrid.docgen --check    # exit status 1 if it is out of date
+    python -m hybrid.docgen            # (re)write every generated page
+    python -m hybrid.docgen --check    # exit status 1 if one is out of date
+    python -m hybrid.docgen --rerun    # run the studies and the benchmark again (small
+                                       # versions; --full for the full ones), store their
+                                       # JSON and figures in docs/, then write the pages
 
 Every term's keys, kinds, defaults and bounds come from its fields (`param(kind,
 default, **meta)`) through the registry (`hybrid.terms.base.TERM_CLASSES`), the
@@ -17,6 +23,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import inspect
+import json
 import re
 import sys
 import typing
@@ -28,10 +35,13 @@ from . import schedule as S
 from .scene import Masses, MeshSpec, RibPair, Ribs, Rigid, RigidLink, Scene
 from .terms.base import CONSTRAINT_TYPES, FORCE_TYPES, FORMULATIONS
 
-__all__ = ["render", "DOC_PATH", "main"]
+__all__ = ["render", "render_pages", "render_study_page", "rerun", "DOC_PATH", "STUDIES", "PAGES", "main"]
 
 #: where the reference lives in the repository
 DOC_PATH = Path(__file__).resolve().parents[1] / "docs" / "scene-file.md"
+#: the documentation folder, and where the studies' JSON is kept
+DOCS = DOC_PATH.parent
+DATA = DOCS / "data"
 
 # a field's unit from its name's suffix (the project's naming rule), longest first
 _SUFFIX_UNITS = (
@@ -103,7 +113,7 @@ _RIGID = {
         "-",
         "[]",
         "[joint, ...]: the membrane's loads and the intra-abdominal pressure's moment "
-        'are also given about each joint\'s anchor (hybrid.loads; README, "Loads")',
+        'are also given about each joint\'s anchor (hybrid.loads; docs/outputs.md, "Loads on the skeleton")',
     ),
     "ctrl": (
         "-",
@@ -512,22 +522,367 @@ def render() -> str:
     return "\n".join(lines)
 
 
+# ---------------------------------------------------------------- the pages made from JSON
+
+
+@dataclasses.dataclass(frozen=True)
+class Study:
+    """A study whose JSON a page shows: its `hybrid ...` command (the output folder's
+    option last), the JSON file it writes there, its figures, and its markdown from
+    that JSON (`markdown`: "module:function", the study's own report)."""
+
+    name: str
+    command: tuple[str, ...]
+    json_name: str
+    markdown: str
+    figures: tuple[str, ...] = ()
+    title: str = ""
+    how_to_read: str = ""
+
+
+#: every study the pages show; `--rerun` runs each command (small unless --full)
+STUDIES = {
+    s.name: s
+    for s in (
+        Study(
+            "stability",
+            ("study", "stability", "--out"),
+            "stability.json",
+            "hybrid.studies.stability.report:markdown",
+            ("stability_map.png", "membrane_spectrum.png", "self_excitation.png"),
+            "Stability: the paper's section 6.1 and beyond",
+            "The paper's tables of the largest stable step of a shape-memory and a mass-spring body, measured "
+            "again; the stable step of the breathing membrane from its linearized step, from runs and from the "
+            'per-point estimate `Model.dt_stable_s` (which `dt_s = "auto"` takes a share of); and the damping '
+            "below which the non-conservative shape memory excites itself. A row reads: the case, the largest "
+            "step that reached equilibrium, and the paper's value where it gives one.",
+        ),
+        Study(
+            "verification",
+            ("study", "verification", "--out"),
+            "verification.json",
+            "hybrid.studies.verification:markdown",
+            ("verification.png",),
+            "Verification of the continuum formulation",
+            "The continuum terms against closed forms and conservation laws on three mesh families (UV sphere, "
+            "icosphere, an irregular sphere read from STL): a pressurised sphere against the membrane's "
+            "closed-form inflation, a hanging sphere, the patch test, and a free body's momenta and energy. "
+            "Each row gives the measured and the predicted value and their relative error; the observed order "
+            "is how fast that error falls as the mesh is refined.",
+        ),
+        Study(
+            "rigid",
+            ("study", "rigid", "--out"),
+            "rigid.json",
+            "hybrid.studies.rigid_check:markdown",
+            (),
+            "The rigid part against MuJoCo",
+            "The coupled step's rigid part replayed through `mujoco.mj_step` driven by the same wrenches (the "
+            "difference should be zero to the bit), and the paper's own rigid algorithm against MuJoCo's.",
+        ),
+        Study(
+            "extremes",
+            ("study", "extremes", "--out"),
+            "extremes.json",
+            "hybrid.studies.extremes:_markdown",
+            (),
+            "Stiff and extreme cases",
+            "A catalogue of stiff, light, thin and badly scaled cases, each run at its stable step: it either "
+            "runs, diverges with an error that says what would help, or is refused before it runs. None may "
+            "run on with NaN.",
+        ),
+        Study(
+            "convergence",
+            ("study", "convergence", "--out"),
+            "convergence.json",
+            "hybrid.studies.convergence:_markdown",
+            ("convergence.png",),
+            "Convergence of the breathing scene",
+            "The breathing scene's metrics on a grid of mesh levels and time steps. Richardson extrapolation "
+            "gives each metric's limit and its observed orders in space and time; the error of a run is its "
+            "distance from that limit. The last table is the cheapest run (mesh level and step) whose "
+            "predicted error is below each target: choose your level and step there.",
+        ),
+        Study(
+            "work-precision",
+            ("study", "work-precision", "--out"),
+            "work_precision.json",
+            "hybrid.studies.work_precision:_markdown",
+            ("work_precision.png",),
+            "Work against precision: explicit and implicit Euler",
+            "Both integrators on the breathing and membrane-only scenes at a range of steps: each run's error "
+            "against a reference run and its run time. A point lower and further left is better; the observed "
+            "order is the slope of error against step. Where the implicit step's larger step pays for its "
+            "Newton iterations, its curve crosses below the explicit one.",
+        ),
+        Study(
+            "bench",
+            ("bench", "--json"),
+            "bench.json",
+            "hybrid.bench:format_table",
+            (),
+            "The benchmark",
+            "`hybrid bench`: the membrane step's cost per point and step (serial and parallel builds), the two "
+            "formulations at the same step, explicit against implicit Euler, each packaged scene's realtime "
+            "factor (simulated over wall time), the coupled step against MuJoCo's bare step, and what recording "
+            "costs. Medians of repeated runs; timings are of the machine named above, under its load then.",
+        ),
+    )
+}
+
+#: the generated pages: (title, opening text, the studies shown, in order)
+PAGES = {
+    "validation.md": (
+        "Validation",
+        "What the model reproduces of the paper and what it gets right against closed forms. Every number "
+        "below is generated from the JSON file named above its table (`docs/data/`), which says the command, "
+        "date, machine and version that made it; `python -m hybrid.docgen --rerun` makes them again and a test "
+        "fails when this page no longer matches its JSON. Physiological ranges for the breathing scenes are on "
+        "[the model](model.md) page; the history of these measurements is in the changelog.",
+        ("stability", "verification", "rigid", "extremes"),
+    ),
+    "convergence.md": (
+        "Error against run time",
+        "How accurate a run is and what a given accuracy costs. Run the studies on your own scene "
+        "(`hybrid study convergence SCENE --out DIR`, `hybrid study work-precision --out DIR`) before trusting "
+        "a figure to a given number of digits. Every number below is generated from the JSON file named "
+        "above its table (`docs/data/`), with the command, date, machine and version that made it.",
+        ("convergence", "work-precision"),
+    ),
+    "performance.md": (
+        "Performance",
+        "What a step costs, and how close to realtime each packaged scene runs. Timings depend on the machine "
+        "and its load: run `hybrid bench` on yours. Every number below is generated from the JSON file named "
+        "above its table (`docs/data/`), with the command, date, machine and version that made it.",
+        ("bench",),
+    ),
+}
+
+
+def _study_markdown(study: Study, result) -> str:
+    import importlib
+
+    module, _, function = study.markdown.partition(":")
+    return getattr(importlib.import_module(module), function)(result).rstrip("\n")
+
+
+def _made_by(made: dict) -> str:
+    machine = made.get("machine", {})
+    where = ", ".join(f"{k} {v}" for k, v in machine.items())
+    commit = made.get("git_commit") or "unknown"
+    return (
+        f"Made by `{made['command']}` on {made['date_utc']}, hybrid {made['version']} (commit {commit[:12]}), "
+        f"{made['size']} version; machine: {where}."
+    )
+
+
+def render_study_page(page: str, data: Path = DATA) -> str:
+    """A generated page (`PAGES`) from the JSON files in `data`."""
+    title, opening, names = PAGES[page]
+    lines = [f"# {title}", "", "<!-- generated by python -m hybrid.docgen from docs/data/: do not edit -->", ""]
+    lines += [opening, ""]
+    for name in names:
+        study = STUDIES[name]
+        stored = json.loads((data / study.json_name).read_text(encoding="utf-8"))
+        lines += [f"## {study.title}", "", study.how_to_read, ""]
+        lines += [f"From [`data/{study.json_name}`](data/{study.json_name}). {_made_by(stored['made_by'])}", ""]
+        text = _study_markdown(study, stored["result"])
+        if name == "bench":  # a plain-text table
+            text = "```\n" + text + "\n```"
+        else:  # the study's own headings one level below the page's
+            text = re.sub(r"^(#+) ", lambda m: "#" + m.group(1) + " ", text, flags=re.M)
+        lines += [text, ""]
+        for fig in study.figures:
+            lines += [f"![{name}: {fig}](figures/studies/{fig})", ""]
+    return "\n".join(lines)
+
+
+# ---------------------------------------------------------------- the API reference and the gallery
+
+REFERENCE_PATH = DOCS / "reference.md"
+GALLERY_PATH = DOCS / "gallery.md"
+SCRIPTS = DOCS.parent / "scripts"
+#: where the gallery's figures are, one per script: figures/gallery/NAME.png
+GALLERY_FIGURES = DOCS / "figures" / "gallery"
+
+
+def _qualified(name: str) -> str:
+    """Where a public name is defined (the path mkdocstrings reads): 'hybrid.scene.Scene'."""
+    import hybrid
+
+    obj = getattr(hybrid, name)
+    return f"{obj.__module__}.{obj.__qualname__}"
+
+
+def render_reference() -> str:
+    """docs/reference.md: a mkdocstrings entry for every name of `hybrid.__all__`."""
+    import hybrid
+
+    lines = [
+        "# API reference",
+        "",
+        "<!-- generated by python -m hybrid.docgen from hybrid.__all__: do not edit -->",
+        "",
+        "Every name of `hybrid.__all__`, from its docstring: its parameters, their shapes and units. "
+        "[The Python API](api.md) says how they fit together.",
+        "",
+    ]
+    for name in hybrid.__all__:
+        lines += [f"## `hybrid.{name}`", "", f"::: {_qualified(name)}", ""]
+    return "\n".join(lines)
+
+
+def _script_doc(path: Path) -> str:
+    import ast
+
+    doc = ast.get_docstring(ast.parse(path.read_text(encoding="utf-8"))) or ""
+    return " ".join(doc.split("\n\n")[0].split())
+
+
+def script_names() -> list[str]:
+    return sorted(p.stem for p in SCRIPTS.glob("*.py") if not p.name.startswith("_"))
+
+
+def render_gallery() -> str:
+    """docs/gallery.md: each script of scripts/, what it does and its figure."""
+    made = json.loads((GALLERY_FIGURES / "made_by.json").read_text(encoding="utf-8"))
+    lines = [
+        "# Gallery",
+        "",
+        "<!-- generated by python -m hybrid.docgen from scripts/: do not edit -->",
+        "",
+        "The scripts in `scripts/` use only the public API (`import hybrid`); each has `--out DIR` and "
+        "`--quick` (a fraction of a second of simulated time: a smoke test, whose figure is not the science). "
+        "Each figure below says the command that made it.",
+        "",
+    ]
+    for name in script_names():
+        how = made.get(name, {})
+        lines += [f"## `scripts/{name}.py`", "", _script_doc(SCRIPTS / f"{name}.py"), ""]
+        if how:
+            lines += [f"Made by `{how['command']}` ({how['date_utc']}, hybrid {how['version']}).", ""]
+        lines += [f"![{name}](figures/gallery/{name}.png)", ""]
+    return "\n".join(lines)
+
+
+def render_pages() -> dict[Path, str]:
+    """{path: text} of every generated page."""
+    pages = {DOC_PATH: render(), REFERENCE_PATH: render_reference(), GALLERY_PATH: render_gallery()}
+    pages.update({DOCS / page: render_study_page(page) for page in PAGES})
+    return pages
+
+
+# ---------------------------------------------------------------- running the studies again
+
+
+def _machine() -> dict:
+    import os
+    import platform
+
+    return {
+        "platform": platform.platform(terse=True),
+        "cpu_count": os.cpu_count(),
+        "load_1min": round(os.getloadavg()[0], 2),
+        "python": platform.python_version(),
+    }
+
+
+def _made(command: list[str], size: str) -> dict:
+    from datetime import UTC, datetime
+
+    from . import __version__
+    from .provenance import git_commit
+
+    return {
+        "command": " ".join(command),
+        "date_utc": datetime.now(UTC).strftime("%Y-%m-%d %H:%M"),
+        "version": __version__,
+        "git_commit": git_commit()["commit"],
+        "size": size,
+        "machine": _machine(),
+    }
+
+
+def rerun(names=None, *, full: bool = False, data: Path = DATA) -> None:
+    """Run the studies (`names`, by default all) and store {"made_by", "result"} in
+    data/NAME.json, their figures in docs/figures/studies/."""
+    import shutil
+    import subprocess
+    import tempfile
+
+    figures = DOCS / "figures" / "studies"
+    figures.mkdir(parents=True, exist_ok=True)
+    data.mkdir(parents=True, exist_ok=True)
+    for name in names or STUDIES:
+        study = STUDIES[name]
+        with tempfile.TemporaryDirectory() as tmp:
+            target = Path(tmp) / (study.json_name if study.command[0] == "bench" else "out")
+            size_flag = [] if full else (["--quick"] if study.command[0] == "bench" else ["--small"])
+            args = [*study.command[:-1], *size_flag, study.command[-1]]
+            shown = ["hybrid", *args, "DIR" if study.command[0] != "bench" else study.json_name]
+            print("running", " ".join(shown), flush=True)
+            subprocess.run([sys.executable, "-m", "hybrid", *args, str(target)], check=True)
+            folder = target if target.is_dir() else target.parent
+            result = json.loads((folder / study.json_name).read_text(encoding="utf-8"))
+            stored = {"made_by": _made(shown, "full" if full else "small"), "result": result}
+            (data / study.json_name).write_text(json.dumps(stored, indent=1) + "\n", encoding="utf-8")
+            for fig in study.figures:
+                shutil.copy2(folder / fig, figures / fig)
+
+
+def rerun_gallery(names=None, *, quick: bool = False) -> None:
+    """Run the scripts (`names`, by default all) and keep each one's figure in
+    docs/figures/gallery/NAME.png, with the command in made_by.json."""
+    import shutil
+    import subprocess
+    import tempfile
+
+    GALLERY_FIGURES.mkdir(parents=True, exist_ok=True)
+    record = GALLERY_FIGURES / "made_by.json"
+    made = json.loads(record.read_text(encoding="utf-8")) if record.is_file() else {}
+    for name in names or script_names():
+        with tempfile.TemporaryDirectory() as tmp:
+            args = [str(SCRIPTS / f"{name}.py"), *(["--quick"] if quick else []), "--out", tmp]
+            print("running", name, flush=True)
+            subprocess.run([sys.executable, *args], check=True, cwd=tmp)
+            pngs = sorted(Path(tmp).glob("*.png"))
+            if len(pngs) != 1:
+                raise RuntimeError(f"scripts/{name}.py wrote {len(pngs)} figures, expected one")
+            shutil.copy2(pngs[0], GALLERY_FIGURES / f"{name}.png")
+            shown = f"python scripts/{name}.py{' --quick' if quick else ''} --out DIR"
+            made[name] = {k: v for k, v in _made(shown.split(), "quick" if quick else "full").items()}
+    record.write_text(json.dumps(made, indent=1, sort_keys=True) + "\n", encoding="utf-8")
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m hybrid.docgen", description=__doc__.splitlines()[0])
-    p.add_argument("--out", type=Path, default=DOC_PATH, help=f"the file to write (default {DOC_PATH})")
-    p.add_argument("--check", action="store_true", help="only compare; exit status 1 if it differs")
+    p.add_argument("--out", type=Path, default=None, help=f"write only the scene-file reference, here ({DOC_PATH})")
+    p.add_argument("--check", action="store_true", help="only compare; exit status 1 if a page differs")
+    p.add_argument("--rerun", nargs="*", metavar="STUDY", help=f"run these studies again first (all: {list(STUDIES)})")
+    p.add_argument("--full", action="store_true", help="with --rerun: the full studies, not the small ones")
+    p.add_argument("--gallery", nargs="*", metavar="SCRIPT", help="run these scripts again for the gallery (all)")
+    p.add_argument("--quick", action="store_true", help="with --gallery: the scripts' --quick runs")
     args = p.parse_args(argv)
-    text = render()
+    if args.rerun is not None:
+        unknown = sorted(set(args.rerun) - set(STUDIES))
+        if unknown:
+            sys.stderr.write(f"--rerun: no study {unknown}; expected some of {list(STUDIES)}\n")
+            return 2
+        rerun(args.rerun or None, full=args.full)
+    if args.gallery is not None:
+        rerun_gallery(args.gallery or None, quick=args.quick)
+    pages = {args.out: render()} if args.out is not None else render_pages()
     if args.check:
-        same = args.out.is_file() and args.out.read_text(encoding="utf-8") == text
-        if not same:
-            sys.stderr.write(f"{args.out}: out of date with the dataclasses; run python -m hybrid.docgen\n")
-        return 0 if same else 1
-    if not args.out.parent.is_dir():
-        sys.stderr.write(f"--out: no folder {str(args.out.parent)!r}; give --out a file in an existing folder\n")
-        return 2
-    args.out.write_text(text, encoding="utf-8")
-    print(f"wrote {args.out}")
+        stale = [str(path) for path, text in pages.items() if not (path.is_file() and path.read_text("utf-8") == text)]
+        for path in stale:
+            sys.stderr.write(f"{path}: out of date; run python -m hybrid.docgen\n")
+        return 1 if stale else 0
+    for path, text in pages.items():
+        if not path.parent.is_dir():
+            sys.stderr.write(f"--out: no folder {str(path.parent)!r}; give --out a file in an existing folder\n")
+            return 2
+        path.write_text(text, encoding="utf-8")
+        print(f"wrote {path}")
     return 0
 
 

@@ -1,4 +1,4 @@
-"""The loads the membrane puts on the skeleton (README, "Loads"; docs/metrics.md).
+"""The loads the membrane puts on the skeleton (docs/outputs.md, "Loads on the skeleton"; docs/metrics.md).
 
 For each body the membrane is linked to, and each nailed region, the net force (N)
 and moment (N m) the membrane applies to it, and the moment of the intra-abdominal

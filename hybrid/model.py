@@ -367,7 +367,7 @@ def _region(sel, mesh, regions, what):
 
 
 #: the share of the stable-step estimate that dt_s = "auto" takes (the estimate is
-#: per point and 16-18% optimistic on the breathing membrane: FINDINGS)
+#: per point and 16-18% optimistic on the breathing membrane: the stability study, docs/validation.md)
 AUTO_DT_SHARE = 0.5
 
 

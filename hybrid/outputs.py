@@ -2,7 +2,7 @@
 overwritten unless asked, locked while the run writes), `summary.json` and the
 time-series plot named after the scene, with a panel for each part it has.
 
-The folder rule (README, "Outputs"): without --out, a run goes to runs/NAME, or
+The folder rule (docs/getting-started.md, "Using it"): without --out, a run goes to runs/NAME, or
 to the first of runs/NAME-2, runs/NAME-3, ... that holds no run when runs/NAME
 holds one; an explicit --out that holds a run is refused. `overwrite=True`
 (--overwrite) writes into the folder named whatever it holds.

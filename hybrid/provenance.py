@@ -1,5 +1,5 @@
 """How a run was made, as plain data: the "provenance" table of `summary.json` and
-of the recording's metadata (README, "Outputs").
+of the recording's metadata (docs/outputs.md).
 
 `run_provenance(sim, command=..., overrides=..., without=...)` gives the package
 version and git commit, the command line, the fully resolved scene as TOML text,
@@ -25,11 +25,13 @@ _PACKAGE_ROOT = Path(__file__).resolve().parent
 
 @functools.lru_cache(maxsize=1)
 def package_version() -> str | None:
-    """The installed distribution's version (None when the source is not installed)."""
+    """The installed distribution's version, read from hybrid.__version__ when it was
+    installed (None when the source is not installed). Not imported from the package
+    itself: the observers sit below the public API."""
     from importlib import metadata
 
     try:
-        return metadata.version("hybrid")
+        return metadata.version("hybrid-trunk")
     except metadata.PackageNotFoundError:
         return None
 

@@ -64,7 +64,7 @@ __all__ = [
 
 
 #: the trace's series, one column each (SI units unless the name says mm); a series
-#: of a part the scene lacks is NaN throughout (README, "Metrics")
+#: of a part the scene lacks is NaN throughout (docs/metrics.md)
 TRACE_KEYS = (
     "t_s",
     "volume_m3",  # enclosed volume (closed surfaces)
@@ -233,7 +233,7 @@ def metric_table(trace: Trace) -> dict:
 
 
 def _headline(trace: Trace) -> dict:
-    """The summary's top-level metrics (kept for earlier scripts; README "Metrics"):
+    """The summary's top-level metrics (kept for earlier scripts; docs/metrics.md):
     only those of the parts the scene has, but `volume_rel_error_max`, null without
     the exact volume constraint."""
     table = metric_table(trace)
@@ -390,7 +390,7 @@ def run(
     (a `Recorder(..., loads=True)`: the same figures fill both); False never; or a
     `hybrid.loads.LoadsObserver` to fill.
 
-    The summary (README, "Outputs and metrics"): scene, status, steps, times; the
+    The summary (docs/outputs.md): scene, status, steps, times; the
     top-level metrics of earlier versions; "metrics", {series: {"min", "max",
     "t_min_s", "t_max_s"}} for each series of the parts the scene has; and
     "provenance". On a HybridError the summary holds "status": "failed" and "error", and the

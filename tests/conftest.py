@@ -24,3 +24,37 @@ def dask_cluster():
     distributed = pytest.importorskip("dask.distributed")
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
         yield cluster
+
+
+#: the slow tier (test files relative to tests/, or single tests "file::name"), marked
+#: `slow` here so that `python -m pytest -m "not slow"` is the quick loop of one who edits a
+#: module; chosen from one full run's --durations (they compile many kernel sets, run the
+#: studies, long scenes, the scripts or other processes). The full run takes them all.
+SLOW = (
+    "studies/",  # every study, each on its grid of meshes and steps
+    "test_breathing_levels.py",  # the breathing scene at mesh levels up to 5
+    "test_breathing_continuum.py",
+    "test_implicit_coupled.py",  # implicit Euler on the coupled breathing scene
+    "test_run_first.py",  # a first run into an empty compile cache, in its own process
+    "test_scripts.py",  # each script in its own process
+    "test_sweep.py",  # process pools and a Dask cluster
+    "test_render.py",  # renders, the MP4 and the viewer on a virtual display
+    "test_bench.py",
+    "rigid/test_myotorso.py",  # MyoSuite's torso: 210 muscles
+    # the slowest of the rest (a quick-tier run's --durations under a load of 12 on 2 cores: 24-183 s each)
+    "terms/test_volume.py::test_volume_exact_every_step_icosphere_10242",
+    "test_kernel.py::test_a_kernel_compiled_beside_cached_parallel_twins_loads_in_a_new_process",
+    "test_architecture.py::test_adding_a_term_takes_the_three_edits_the_architecture_page_shows",
+    "test_implicit_matrix.py::test_the_assembled_matrix_is_the_same_compiled_or_loaded_from_the_cache",
+    "test_inputs_volume.py::test_projected_step_keeps_the_volume_of_a_small_flat_body_far_away",
+    "test_cli.py::test_bench_quick_writes_json",
+    "test_runs_safe.py::test_a_second_run_into_a_busy_folder_is_refused_and_sigterm_finishes_the_first",
+    "test_runs_safe.py::test_the_runners_memory_does_not_grow_with_the_runs_length",
+)
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        path = item.path.relative_to(config.rootpath / "tests").as_posix()
+        if any(path.startswith(s) if s.endswith("/") else f"{path}::{item.name}".startswith(s) for s in SLOW):
+            item.add_marker(pytest.mark.slow)

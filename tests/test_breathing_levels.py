@@ -185,7 +185,7 @@ def test_the_uv_and_ring_families_close_in_on_each_other():
     """The same anatomy on the UV family and on the pole-free ring family through the
     first inspiration: refined from level 2 to level 5 (8 times the points), the two
     families' metrics come closer, by at least half for every metric, and at level 5
-    they are within 2% (the size of level 5's own error, README). Measured: 3.8, 4.6,
+    they are within 2% (the size of level 5's own error, CHANGELOG.md). Measured: 3.8, 4.6,
     4.7 and 9.1% apart at level 2; 1.1, 0.7, 0.9 and 1.6% at level 5."""
     keys = ("rib_lift_mm", "apex_descent_mm", "pressure_pa", "swept_volume_ml")
 

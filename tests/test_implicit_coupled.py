@@ -1,7 +1,7 @@
 """Implicit Euler coupled with MuJoCo: the packaged breathing scene (continuum, mesh
 level 2, 318 points, its ribs in MuJoCo) breathes at several times the explicit
 bound with the volume exact, and its metrics agree with symplectic Euler at a small
-step within the first-order error measured (README, "Implicit Euler")."""
+step within the first-order error measured (CHANGELOG.md, "Implicit Euler")."""
 
 from __future__ import annotations
 

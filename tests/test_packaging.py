@@ -75,3 +75,25 @@ def test_builtin_scenes_and_trunk_resolve_inside_the_installed_package(tmp_path)
     for line, expected in zip(out[1:], ("scenes/breathing.toml", "scenes/myotorso_breathing.toml", "trunk.xml")):
         assert Path(line) == models / expected and Path(line).is_file()
         assert Path(line).read_bytes() == (REPO / "models" / expected).read_bytes()
+
+
+def test_the_version_has_one_place_and_the_command_prints_it():
+    import hybrid
+
+    project = tomllib.loads((REPO / "pyproject.toml").read_text())["project"]
+    assert "version" not in project and "version" in project["dynamic"]  # not typed a second time
+    assert SETUPTOOLS["dynamic"]["version"] == {"attr": "hybrid.__version__"}
+    from importlib import metadata
+
+    # what pip installed read the same place (after a bump, `pip install -e .` again)
+    assert metadata.version(project["name"]) == hybrid.__version__
+    out = subprocess.run([sys.executable, "-m", "hybrid", "--version"], capture_output=True, text=True, cwd=REPO)
+    assert (out.returncode, out.stdout.strip()) == (0, f"hybrid {hybrid.__version__}")
+
+
+def test_the_distribution_and_its_commands():
+    project = tomllib.loads((REPO / "pyproject.toml").read_text())["project"]
+    # "hybrid" on the package registry is another project (a web tool set, 1.2.3)
+    assert project["name"] == "hybrid-trunk"
+    # the command named after the distribution (`pipx run hybrid-trunk`) and the import package's
+    assert project["scripts"] == {"hybrid": "hybrid.cli:main", "hybrid-trunk": "hybrid.cli:main"}

@@ -49,7 +49,7 @@ def test_myotorso_breathing_stands_and_breathes_on_its_added_ribs_through_its_fi
     at 1.6 s): the thorax stands (its pitch within 1 degree of its start), the band rises
     2-8 mm and so do the ribs' anterior ends, the apex descends 10-25 mm, the linked
     points stay on their sites, the volume is exact, and myo-sim's files are unchanged.
-    (The full 12 s run's figures are in the README: the same peaks each breath.)"""
+    (The full 12 s run's figures are in docs/composing.md: the same peaks each breath.)"""
     import hybrid
 
     before = _package_hash()
