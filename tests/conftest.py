@@ -44,7 +44,7 @@ SLOW = (
     # the slowest of the rest (a quick-tier run's --durations under a load of 12 on 2 cores: 24-183 s each)
     "terms/test_volume.py::test_volume_exact_every_step_icosphere_10242",
     "test_kernel.py::test_a_kernel_compiled_beside_cached_parallel_twins_loads_in_a_new_process",
-    "test_architecture.py::test_adding_a_term_takes_the_three_edits_the_architecture_page_shows",
+    "test_architecture.py::test_adding_a_term_takes_the_two_edits_the_architecture_page_shows",
     "test_implicit_matrix.py::test_the_assembled_matrix_is_the_same_compiled_or_loaded_from_the_cache",
     "test_inputs_volume.py::test_projected_step_keeps_the_volume_of_a_small_flat_body_far_away",
     "test_cli.py::test_bench_quick_writes_json",

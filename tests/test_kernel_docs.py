@@ -30,13 +30,15 @@ def step_kernels() -> dict:
     for info in pkgutil.walk_packages(hybrid.__path__, "hybrid."):
         if info.name != "hybrid.__main__":  # runs the command line
             importlib.import_module(info.name)
-    return {
-        f"{d.py_func.__module__}.{d.py_func.__qualname__}": d
-        for d in gc.get_objects()
-        if isinstance(d, CPUDispatcher)
-        and d.py_func.__module__.startswith("hybrid.")
-        and d.targetoptions.get("_nrt") is False
-    }
+    found = {}
+    for d in gc.get_objects():
+        try:  # a weak proxy whose object is gone raises on any look
+            is_kernel = isinstance(d, CPUDispatcher)
+        except ReferenceError:
+            continue
+        if is_kernel and d.py_func.__module__.startswith("hybrid.") and d.targetoptions.get("_nrt") is False:
+            found[f"{d.py_func.__module__}.{d.py_func.__qualname__}"] = d
+    return found
 
 
 def test_every_kernel_says_what_it_reads_and_writes():
