@@ -123,7 +123,7 @@ def _check_metrics(scene, overrides, level, metrics) -> None:
         )
 
 
-def simulate(scene, overrides, level, dt, duration_s, metrics) -> dict:
+def simulate(scene, overrides, level, dt, duration_s, metrics, repeats=REPEATS) -> dict:
     """One run of the grid (a sweep task): {"values": {metric: its max}, "wall_s",
     "cpu_s" (the least over "repeats" runs), "cpu_s_spread", "nvert", "status"}."""
     from ..run import RunFailed
@@ -146,7 +146,7 @@ def simulate(scene, overrides, level, dt, duration_s, metrics) -> dict:
     one(min(duration_s, 2 * WARM_UP_FRAME_S))
     summary, cpu = one(duration_s)  # the values: the same in every repeat
     cpus = [cpu]
-    while summary["status"] == "ok" and cpus[0] < REPEAT_BELOW_S and len(cpus) < REPEATS:
+    while summary["status"] == "ok" and cpus[0] < REPEAT_BELOW_S and len(cpus) < repeats:
         cpus.append(one(duration_s)[1])
     table = summary["metrics"]
     missing = [k for k in metrics if k not in table]
@@ -345,8 +345,10 @@ def run(
     duration_s: float | None = None,
     overrides=(),
     scheduler: str | None = None,
+    repeats: int = REPEATS,
 ) -> dict:
-    """The study (module docstring); returns what convergence.json holds."""
+    """The study (module docstring); returns what convergence.json holds. `repeats`: the
+    most runs of a short run whose least CPU time is kept (1: its cost timed once)."""
     from ..resolve import resolve_scene
 
     t0 = time.perf_counter()
@@ -359,6 +361,8 @@ def run(
         levels = FILE_LEVELS[bool(small)] if from_file else size["levels"]
     levels = tuple(levels)
     nstep = size["nstep"] if nstep is None else int(nstep)
+    if not (isinstance(repeats, int) and repeats >= 1):
+        raise HybridError(f"--repeats: expected an integer >= 1, received {repeats!r}")
     if nstep < 1 or len(levels) < 2:
         raise HybridError(
             f"convergence: expected at least two mesh levels and one step per level, "
@@ -378,6 +382,7 @@ def run(
                 dt=dt0 / 2**j,
                 duration_s=duration,
                 metrics=metrics,
+                repeats=int(repeats),
             )
             for j in range(nstep)
         ]

@@ -285,6 +285,8 @@ def test_convergence_with_implicit_euler_steps_from_its_own_step(tmp_path):
                 "2",
                 "--duration",
                 "0.2",
+                "--repeats",
+                "1",  # the steps are checked here, not the costs
             ]
         )
         == 0
