@@ -192,6 +192,7 @@ def test_small_convergence_study_of_the_breathing_scene(tmp_path, capsys):
     # the points and the steps is checked by the command on a busy machine, not here (no timed
     # assertion: a clean-clone run once found level 1 no dearer than level 0 at these sizes)
     assert all(r["cpu_s_per_sim_s"] > 0 and r["repeats"] >= 1 for r in data["runs"])
+    by = {(r["level"], r["dt"]) for r in data["runs"]}
     rows = data["recommendation"]
     assert {(r["metric"], r["target_rel_error"]) for r in rows} == {(k, t) for k in DEFAULT_METRICS for t in TARGETS}
     for r in rows:
