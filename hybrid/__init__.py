@@ -43,6 +43,7 @@ from .scene import (
     Damping,
     Gravity,
     KeepIn,
+    Lungs,
     Masses,
     MassSpring,
     Membrane,
@@ -104,6 +105,7 @@ __all__ = [
     "Pressure",
     "MuscleFibres",
     "PassiveFibres",
+    "Lungs",
     # region selectors
     "All",
     "Border",

@@ -31,7 +31,11 @@ from .kernel import kernel
 from .schedule import schedule_eval
 from .sites import point_wrench_kernel, site_vel_kernel
 from .step import (
+    F_ALVEOLAR,
+    F_FLOW,
     F_KE,
+    F_LUNG_VOLUME,
+    F_PLEURAL,
     F_PRESSURE,
     F_TIME,
     F_VOLUME,
@@ -39,9 +43,12 @@ from .step import (
     S_ORIGIN,
     S_PRESSURE,
     S_TIME,
+    FrameColumn,
     membrane_advance,
     membrane_forces,
 )
+from .terms import Lungs
+from .terms.lungs import L_ALVEOLAR, L_PLEURAL, L_VOLUME, P_REF, cavity_volume_rate
 from .terms.volume import face_volume
 
 __all__ = [
@@ -62,6 +69,7 @@ _SIG = types.void(types.intp, types.intp)
 _mj_step = types.ExternalFunction("hybrid_mj_step", _SIG)
 _mj_step1 = types.ExternalFunction("hybrid_mj_step1", _SIG)
 _mj_step2 = types.ExternalFunction("hybrid_mj_step2", _SIG)
+LUNGS_ID = Lungs.id
 
 
 class LinkArrays(NamedTuple):
@@ -156,7 +164,7 @@ def kinetic_energy_of(m, s):
 @kernel(inline="always")
 def capture_frame(m, s, pos_out, scal_out):
     """The state's positions and numbers (F_* columns) into one frame's rows.
-    # Model: m.face_vert, m.vert_free, m.vert_mass   # Data in: s.vert_pos, s.vert_vel, s.scal
+    # Model: m.face_vert, m.vert_free, m.vert_mass, m.lung_*   # Data in: s.vert_pos, s.vert_vel, s.scal, s.lung
     # Data out: pos_out (nvert, 3) m, scal_out (`FrameColumn`)
     """
     pos = s.vert_pos
@@ -167,6 +175,12 @@ def capture_frame(m, s, pos_out, scal_out):
     scal_out[F_VOLUME] = face_volume(m.face_vert, pos)
     scal_out[F_PRESSURE] = s.scal[S_PRESSURE]
     scal_out[F_KE] = kinetic_energy_of(m, s)
+    if m.term_on[LUNGS_ID]:  # the cavity now; its flow over the last step; its pressures at that step's start
+        vol, _ = cavity_volume_rate(m.lung_face, m.lung_wall, m.lung_par[P_REF:], pos, s.vert_vel)
+        scal_out[F_LUNG_VOLUME] = vol
+        scal_out[F_FLOW] = (vol - s.lung[L_VOLUME]) / m.dt
+        scal_out[F_PLEURAL] = s.lung[L_PLEURAL]
+        scal_out[F_ALVEOLAR] = s.lung[L_ALVEOLAR]
 
 
 class FrameArrays(NamedTuple):
@@ -183,7 +197,8 @@ class FrameArrays(NamedTuple):
 
 class Frames:
     """Frames captured in one compiled call (`Simulation.step_frames`): per frame,
-    pos (nvert, 3) m, scal (F_TIME s, F_VOLUME m^3, F_PRESSURE Pa, F_KE J), and the
+    pos (nvert, 3) m, scal (`hybrid.step.FrameColumn`: time, volume, pressure, kinetic energy,
+    the lungs' volume, flow and pressures), and the
     rigid bodies' poses body_pos (nbody, 3) m, body_quat (nbody, 4) (w, x, y, z),
     world excluded. `count`: the frames of the last call, also when it raised."""
 
@@ -193,7 +208,7 @@ class Frames:
 
     def __init__(self, capacity: int, nvert: int, nbody: int = 0):
         self.pos = np.zeros((capacity, nvert, 3))
-        self.scal = np.zeros((capacity, 4))
+        self.scal = np.zeros((capacity, len(FrameColumn)))
         self.body_pos = np.zeros((capacity, nbody, 3))
         self.body_quat = np.zeros((capacity, nbody, 4))
         self.count = 0

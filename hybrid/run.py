@@ -39,7 +39,9 @@ from .readouts import pitch_deg, quat_rot, swept_volumes
 from .scene import Muscle, MuscleFibres, SoftVolume, Volume
 from .schedule import Breathing, schedule_eval, stack_schedules
 from .simulation import Simulation
-from .step import F_KE, F_PRESSURE, F_TIME, F_VOLUME
+from .step import F_ALVEOLAR, F_FLOW, F_KE, F_LUNG_VOLUME, F_PLEURAL, F_PRESSURE, F_TIME, F_VOLUME
+from .terms import Lungs
+from .terms.lungs import CMH2O_PA, P_RECOIL, P_V0
 from .terms.volume import face_volume
 
 __all__ = [
@@ -77,6 +79,12 @@ TRACE_KEYS = (
     "volume_rel_change",  # |V - V0| / V0 whatever keeps the volume (closed surfaces)
     "swept_volume_ml",  # volume the region named "diaphragm" swept inward from rest (scenes with one)
     "thorax_pitch_deg",  # the thoracic body's pitch change from its start (scenes with rigid.ribs)
+    # scenes with lungs (hybrid.terms.lungs), in the respiratory physiologist's units:
+    "lung_volume_change_l",  # the thoracic cavity's volume above rest
+    "flow_l_per_s",  # into the lungs (inspiration positive): each step's volume change over h
+    "pleural_pressure_cmh2o",  # absolute (the oesophageal pressure's model), at the last step's start
+    "alveolar_pressure_cmh2o",
+    "transdiaphragmatic_pressure_change_cmh2o",  # abdominal minus pleural, change from rest
 )
 #: the series a summary gives min, max and their times of (all but the time)
 METRIC_KEYS = TRACE_KEYS[1:]
@@ -203,7 +211,7 @@ class Trace:
 def scene_parts(model: Model) -> frozenset:
     """What the scene has that some metrics need: "ribs" (points linked to rigid
     bodies), "closed surface", "volume constraint" (the exact one), "pressure" (a
-    volume term, exact or soft), "muscle" and "diaphragm" (a region of that name)."""
+    volume term, exact or soft), "muscle", "diaphragm" (a region of that name) and "lungs"."""
     on = model.arrays.term_on
     parts = {
         "ribs": model.link_vert.size > 0,
@@ -212,6 +220,7 @@ def scene_parts(model: Model) -> frozenset:
         "pressure": bool(on[Volume.id] or on[SoftVolume.id]),
         "muscle": _breathing(model)[0] is not None,
         "diaphragm": SWEPT_REGION in model.regions,
+        "lungs": bool(on[Lungs.id]),
     }
     return frozenset(name for name, has in parts.items() if has)
 
@@ -248,6 +257,11 @@ def _headline(trace: Trace) -> dict:
     if "thorax_pitch_deg" in table:
         pitch = table["thorax_pitch_deg"]
         head["thorax_pitch_change_deg_max"] = max(abs(pitch["min"]), abs(pitch["max"]))
+    if "lung_volume_change_l" in table:  # the swing over the run: a run of steady breaths' tidal volume
+        vol = table["lung_volume_change_l"]
+        head["tidal_volume_l"] = vol["max"] - vol["min"]
+        pdi = table["transdiaphragmatic_pressure_change_cmh2o"]
+        head["transdiaphragmatic_pressure_swing_cmh2o"] = pdi["max"] - pdi["min"]
     return head
 
 
@@ -379,7 +393,7 @@ def run(
     frame at every multiple of that many steps, besides those `frame_dt_s` apart.
     `trace_spill`: a binary file to stream the trace to (`Trace`), so that the
     run's memory does not grow with its length; by default the trace is held in
-    memory (64 bytes a frame). `stop`: a function of no argument, asked after each
+    memory (8 bytes a series a frame). `stop`: a function of no argument, asked after each
     compiled call; when it returns true the run stops there as on Ctrl-C (a signal
     handler can set it without breaking a call in the middle). `provenance`: the
     summary's "provenance" table (`hybrid.provenance.run_provenance`; by default
@@ -449,6 +463,25 @@ def run(
     per_call = max(1, min(FRAMES_PER_CALL, int(2e6 // (24 * model.nvert))))  # frames of at most ~2 MB
     frames = sim.frames_buffer(per_call if batched else 1)
 
+    lung_par = model.arrays.lung_par
+
+    def lung_rows(rows, scal):
+        """The lungs' series of the frames scal, NaN without lungs."""
+        keys = [k for k in TRACE_KEYS[_COL["lung_volume_change_l"] :]]
+        if "lungs" not in parts:
+            for key in keys:
+                rows[:, _COL[key]] = np.nan
+            return
+        pleural = scal[:, F_PLEURAL]
+        rows[:, _COL["lung_volume_change_l"]] = (scal[:, F_LUNG_VOLUME] - lung_par[P_V0]) * 1e3
+        rows[:, _COL["flow_l_per_s"]] = scal[:, F_FLOW] * 1e3
+        rows[:, _COL["pleural_pressure_cmh2o"]] = pleural / CMH2O_PA
+        rows[:, _COL["alveolar_pressure_cmh2o"]] = scal[:, F_ALVEOLAR] / CMH2O_PA
+        abdominal = scal[:, F_PRESSURE] if "pressure" in parts else 0.0
+        rows[:, _COL["transdiaphragmatic_pressure_change_cmh2o"]] = (
+            abdominal - (pleural + lung_par[P_RECOIL])
+        ) / CMH2O_PA
+
     def take(frames):
         """The trace's rows of the frames captured, then the observers."""
         k = frames.count
@@ -477,6 +510,7 @@ def run(
             rows[:, _COL["thorax_pitch_deg"]] = pitch_deg(bq, thorax_axis, thorax[1], thorax[2])
         else:
             rows[:, _COL["thorax_pitch_deg"]] = np.nan
+        lung_rows(rows, scal)
         if "muscle" in parts:
             for j, t in enumerate(scal[:, F_TIME].tolist()):
                 rows[j, _COL["muscle_n_per_m"]] = muscle_at(t)

@@ -23,6 +23,7 @@ from .terms import (
     Damping,
     Gravity,
     KeepIn,
+    Lungs,
     MassSpring,
     Membrane,
     Muscle,
@@ -63,6 +64,7 @@ __all__ = [
     "Pressure",
     "MuscleFibres",
     "PassiveFibres",
+    "Lungs",
 ]
 
 INTEGRATORS = ("explicit_euler", "symplectic_euler", "implicit_euler")

@@ -328,6 +328,7 @@ class Simulation:
             scal=s.scal.copy(),
             vert_grad=s.grad.copy(),
             term_calls=s.term_calls.copy(),
+            lung=s.lung.copy(),
             implicit_dv=None if imp is None else imp.dv.copy(),
             implicit_info=None if imp is None else imp.info.copy(),
             mj_state=None if self.rigid is None else self.rigid.mj_state(),
@@ -353,6 +354,8 @@ class Simulation:
         s.scal[:] = state.scal
         s.grad[:] = state.vert_grad
         s.term_calls[:] = state.term_calls
+        if state.lung is not None:
+            s.lung[:] = state.lung
         if s.implicit is not None:
             s.implicit.dv[:] = state.implicit_dv
             s.implicit.info[:] = state.implicit_info

@@ -26,6 +26,8 @@ class State:
     vert_grad (nvert, 3) m^2: the last projection's volume gradient (with a rigid part
     the next step sends its pressure force p grad_i V to the ribs);
     term_calls (nterm,): how many times each term's kernel ran;
+    lung (`hybrid.terms.lungs.NLUNG`,): the lungs' compartment at the last step's start
+    (the next frame's flow is the volume's change since);
     implicit_dv (nvert, 3) m/s and implicit_info (`hybrid.implicit.Info`): implicit
     Euler's warm start, carried pressure and run averages (None for other integrators);
     mj_state: MuJoCo's integration state (`mjSTATE_INTEGRATION`: time, qpos, qvel, act,
@@ -38,6 +40,7 @@ class State:
     scal: np.ndarray
     vert_grad: np.ndarray
     term_calls: np.ndarray
+    lung: np.ndarray | None = None
     implicit_dv: np.ndarray | None = None
     implicit_info: np.ndarray | None = None
     mj_state: np.ndarray | None = field(default=None)

@@ -55,6 +55,7 @@ from .terms import (
 )
 from .terms.fibres import MuscleFibres, add_muscle_fibres
 from .terms.local import apply_keep_in, apply_prescribed
+from .terms.lungs import NLUNG, P_RECOIL, P_V0, LungSlot
 from .terms.membrane import add_membrane_serial, membrane_faces_parallel, membrane_gather_parallel
 from .terms.muscle import add_muscle
 from .terms.passive_fibres import PassiveFibres, add_passive_fibres
@@ -153,6 +154,7 @@ class MembraneState(NamedTuple):
     scal: time s, pressure Pa, phi, kinetic energy J, largest step displacement m;
     status: code, failing step, worst vertex, projection status;
     term_calls (nterm,): how many times each term's kernel ran;
+    lung (NLUNG,): the lungs' compartment at the last step's start (`hybrid.terms.lungs.LungSlot`);
     implicit: implicit Euler's work arrays (hybrid.implicit), None for the other integrators."""
 
     vert_pos: np.ndarray
@@ -167,6 +169,7 @@ class MembraneState(NamedTuple):
     scal: np.ndarray
     status: np.ndarray
     term_calls: np.ndarray
+    lung: np.ndarray
     implicit: ImplicitWork | None = None
 
 
@@ -185,8 +188,17 @@ def new_state(arrays: MembraneArrays) -> MembraneState:
         scal=np.zeros(8),
         status=np.zeros(4, np.int64),
         term_calls=np.zeros(len(TERMS), np.int64),
+        lung=_lung_start(arrays),
         implicit=implicit_work(arrays),
     )
+
+
+def _lung_start(arrays: MembraneArrays) -> np.ndarray:
+    """The lungs' slots before a first step: at rest (the first frame's flow is then 0)."""
+    lung = np.zeros(NLUNG)
+    lung[LungSlot.VOLUME] = arrays.lung_par[P_V0]
+    lung[LungSlot.PLEURAL] = -arrays.lung_par[P_RECOIL]
+    return lung
 
 
 class ControlArrays(NamedTuple):
@@ -596,6 +608,10 @@ class FrameColumn(IntEnum):
     VOLUME = 1  # m^3
     PRESSURE = 2  # Pa
     KE = 3  # J
+    LUNG_VOLUME = 4  # m^3, the thoracic cavity's (scenes with lungs, else 0)
+    FLOW = 5  # m^3/s, into the lungs: the last step's volume change over h
+    PLEURAL = 6  # Pa, at the last step's start
+    ALVEOLAR = 7  # Pa, at the last step's start
 
 
-F_TIME, F_VOLUME, F_PRESSURE, F_KE = FrameColumn
+F_TIME, F_VOLUME, F_PRESSURE, F_KE, F_LUNG_VOLUME, F_FLOW, F_PLEURAL, F_ALVEOLAR = FrameColumn

@@ -5,7 +5,7 @@ compiled kernel (`hybrid.terms.base` says how they fit together).
 Families: `pointwise` (gravity, damping and the step's fused per-point pass),
 `shape_memory`, `springs` (mass-spring, applied forces, attractive points),
 `muscle`, `fibres` (muscle fibres that pull both ends), `passive_fibres` (a sheet stiffer along its fibres),
-`volume` (exact and soft volume, pressure load), `local` (nailed, prescribed,
+`volume` (exact and soft volume, pressure load), `lungs` (the thoracic cavity, lungs and airway), `local` (nailed, prescribed,
 keep-in); `tangents` holds the continuum forces' Jacobians for implicit Euler (no term of its own).
 `order_terms` below registers them: a new term is its module and
 one entry there.
@@ -14,6 +14,7 @@ one entry there.
 from .base import CONSTRAINT_TYPES, FLAGGED, FORCE_TYPES, TERM_CLASSES, Build, Term, order_terms, registered_forces
 from .fibres import MuscleFibres
 from .local import KeepIn, Nailed, Prescribed
+from .lungs import Lungs
 from .membrane import Membrane
 from .muscle import Muscle
 from .passive_fibres import PassiveFibres
@@ -47,6 +48,7 @@ __all__ = [
     "Pressure",
     "MuscleFibres",
     "PassiveFibres",
+    "Lungs",
 ]
 
 order_terms(
@@ -67,6 +69,7 @@ order_terms(
         Prescribed,
         KeepIn,
         Volume,
+        Lungs,
     )
 )
 

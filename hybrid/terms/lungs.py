@@ -1,0 +1,334 @@
+"""The fourth structure: the lungs in the thoracic cavity, and the airway (paper 1 and 2).
+
+**The cavity.** A closed surface made of the membrane's `floor` region (the dome's
+thoracic face: its faces reversed) and a wall over the floor's border: the border
+points raised along the floor's mean normal to a top plane `wall_height_m` above the
+border's centre, in rings about one border edge apart, closed by a fan to the top's
+centre. The wall shares the border points with the membrane, so the cavity stays
+closed however the membrane and the ribs that hold the border move; its other points
+are fixed in the world (a rigid rib cage above the border: the ribs that carry the
+border are the cavity's moving wall). Its volume is exact (the divergence theorem
+over the closed surface, as the abdomen's); a floor whose faces do not have one
+border loop, or a cavity with open edges, is refused when the scene compiles.
+
+**The lungs fill the cavity** (the pleural space is a film of liquid): the lung
+volume V is the cavity's, and its change is the air that flowed in through the airway.
+A lumped law (a single compartment: the equation of motion of the respiratory system,
+P = E V + R dV/dt, with Rohrer's flow-dependent resistance):
+
+    P_alv = P_ao - (K1 + K2 |Q|) Q          (airway: Rohrer's resistance; Q = dV/dt, into the lungs)
+    P_pl  = P_alv - P_L0 - E (V - V_rest)   (the lungs' elastic recoil, linear)
+
+with P_ao the airway-opening pressure (a schedule: 0 for spontaneous breathing,
+positive for a ventilator), P_L0 the recoil at the resting volume (P_pl = -P_L0 at
+rest), E the lungs' elastance. Pleural pressure acts on the cavity's whole surface:
+the dome's points and the border's points (which carry it to their ribs) take
+(P_pl + P_L0) grad_i V, the virtual work of the pleural pressure's departure from rest.
+The resting recoil itself is balanced in the rest shape (the chest wall's and the
+diaphragm's resting stress, which the rest geometry holds): at rest nothing moves.
+Zero elastance, resistance and opening pressure add exactly nothing.
+
+Q in the law is the rate g . v at the step's start (g = dV/dx); the flow a run
+reports is each step's volume change over h, whose sum is the volume change exactly.
+Units: the scene's keys in the respiratory physiologist's units (cmH2O, L, s; names
+say which); SI inside (Pa, m^3, s).
+"""
+
+from __future__ import annotations
+
+import math
+from enum import IntEnum
+
+import numpy as np
+
+from ..errors import SceneError
+from ..kernel import kernel
+from ..mesh.validate import few
+from .base import Term, force, param
+
+__all__ = [
+    "Lungs",
+    "CMH2O_PA",
+    "LungSlot",
+    "NLUNG",
+    "cavity_volume_rate",
+    "add_cavity_pressure",
+    "thoracic_cavity",
+    "open_edges",
+]
+
+#: one centimetre of water (Pa)
+CMH2O_PA = 98.0665
+#: cmH2O/L -> Pa/m^3 (an elastance, or a resistance per second)
+CMH2O_PER_L = CMH2O_PA / 1e-3
+
+
+class LungSlot(IntEnum):
+    """The slots of `MembraneState.lung`: the compartment at the start of the last step."""
+
+    VOLUME = 0  # m^3, the cavity's volume
+    RATE = 1  # m^3/s, g . v: the volume's rate, into the lungs
+    PLEURAL = 2  # Pa, pleural pressure
+    ALVEOLAR = 3  # Pa, alveolar pressure
+    AIRWAY = 4  # Pa, airway-opening pressure
+
+
+NLUNG = len(LungSlot)
+L_VOLUME, L_RATE, L_PLEURAL, L_ALVEOLAR, L_AIRWAY = LungSlot
+
+# lung_par: elastance Pa/m^3, K1 Pa s/m^3, K2 Pa s^2/m^6, resting recoil Pa, resting volume m^3,
+# the volume sums' origin (3, m: the cavity's rest centroid)
+P_E, P_K1, P_K2, P_RECOIL, P_V0, P_REF = 0, 1, 2, 3, 4, 5
+NPAR = 8
+
+
+@kernel(inline="always")
+def _corner(i, nvert, pos, wall, ref):
+    """Point i of the cavity relative to ref: a membrane point (i < nvert) or a wall point.
+    # Model: wall (nwall, 3) m, ref (3,) m   # Data in: pos (nvert, 3) m   # Data out: returns (x, y, z) m
+    """
+    if i < nvert:
+        return pos[i, 0] - ref[0], pos[i, 1] - ref[1], pos[i, 2] - ref[2]
+    j = i - nvert
+    return wall[j, 0] - ref[0], wall[j, 1] - ref[1], wall[j, 2] - ref[2]
+
+
+@kernel(inline="always")
+def _speed(i, nvert, vel):
+    """Velocity of cavity point i: the membrane's, zero for the fixed wall.
+    # Model: none   # Data in: vel (nvert, 3) m/s   # Data out: returns (vx, vy, vz) m/s
+    """
+    if i < nvert:
+        return vel[i, 0], vel[i, 1], vel[i, 2]
+    return 0.0, 0.0, 0.0
+
+
+@kernel
+def cavity_volume_rate(face, wall, ref, pos, vel):
+    """The cavity's volume (m^3) and its rate sum_i g_i . v_i (m^3/s), g = dV/dx.
+    # Model: face (nf, 3) int64 (a point i >= nvert is wall point i - nvert), wall (nwall, 3) m, ref (3,) m
+    # Data in: pos (nvert, 3) m, vel (nvert, 3) m/s   # Data out: returns (V, dV/dt)
+    """
+    nvert = pos.shape[0]
+    vol = rate = 0.0
+    for f in range(face.shape[0]):
+        a, b, c = face[f, 0], face[f, 1], face[f, 2]
+        ax, ay, az = _corner(a, nvert, pos, wall, ref)
+        bx, by, bz = _corner(b, nvert, pos, wall, ref)
+        cx, cy, cz = _corner(c, nvert, pos, wall, ref)
+        # b x c, c x a, a x b: 6 g at a, b, c
+        gax, gay, gaz = by * cz - bz * cy, bz * cx - bx * cz, bx * cy - by * cx
+        vol += ax * gax + ay * gay + az * gaz
+        if a < nvert or b < nvert or c < nvert:
+            gbx, gby, gbz = cy * az - cz * ay, cz * ax - cx * az, cx * ay - cy * ax
+            gcx, gcy, gcz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
+            vax, vay, vaz = _speed(a, nvert, vel)
+            vbx, vby, vbz = _speed(b, nvert, vel)
+            vcx, vcy, vcz = _speed(c, nvert, vel)
+            rate += vax * gax + vay * gay + vaz * gaz + vbx * gbx + vby * gby + vbz * gbz
+            rate += vcx * gcx + vcy * gcy + vcz * gcz
+    return vol / 6.0, rate / 6.0
+
+
+@kernel
+def add_cavity_pressure(face, wall, ref, load_pa, pos, vert_force):
+    """F_i += load grad_i V on the cavity's membrane points: a pressure load_pa (Pa) inside
+    the cavity, positive pushing its surface outward.
+    # Model: face (nf, 3) int64, wall (nwall, 3) m, ref (3,) m   # Data in: load_pa Pa, pos (nvert, 3) m
+    # Data out: vert_force (nvert, 3) N (added to)
+    """
+    nvert = pos.shape[0]
+    k = load_pa / 6.0
+    for f in range(face.shape[0]):
+        a, b, c = face[f, 0], face[f, 1], face[f, 2]
+        ax, ay, az = _corner(a, nvert, pos, wall, ref)
+        bx, by, bz = _corner(b, nvert, pos, wall, ref)
+        cx, cy, cz = _corner(c, nvert, pos, wall, ref)
+        if a < nvert:
+            vert_force[a, 0] += k * (by * cz - bz * cy)
+            vert_force[a, 1] += k * (bz * cx - bx * cz)
+            vert_force[a, 2] += k * (bx * cy - by * cx)
+        if b < nvert:
+            vert_force[b, 0] += k * (cy * az - cz * ay)
+            vert_force[b, 1] += k * (cz * ax - cx * az)
+            vert_force[b, 2] += k * (cx * ay - cy * ax)
+        if c < nvert:
+            vert_force[c, 0] += k * (ay * bz - az * by)
+            vert_force[c, 1] += k * (az * bx - ax * bz)
+            vert_force[c, 2] += k * (ax * by - ay * bx)
+
+
+@kernel(inline="always")
+def lungs_step_force(m, s, c):
+    """The step's call (`Term.step_force`): the lumped law at the step's start (module
+    docstring), its readouts into s.lung, the pleural load on the cavity's points.
+    # Model: m.lung_face, m.lung_wall, m.lung_par, m.lung_sched   # Data in: s.vert_pos, s.vert_vel, c.value
+    # Data out: s.vert_force (added to), s.lung (`LungSlot`)
+    """
+    par = m.lung_par
+    ref = par[P_REF:]
+    vol, rate = cavity_volume_rate(m.lung_face, m.lung_wall, ref, s.vert_pos, s.vert_vel)
+    pao = c.value[m.lung_sched[0], 0] * CMH2O_PA
+    palv = pao - (par[P_K1] + par[P_K2] * abs(rate)) * rate
+    load = palv - par[P_E] * (vol - par[P_V0])  # the pleural pressure's departure from rest
+    s.lung[L_VOLUME] = vol
+    s.lung[L_RATE] = rate
+    s.lung[L_PLEURAL] = load - par[P_RECOIL]
+    s.lung[L_ALVEOLAR] = palv
+    s.lung[L_AIRWAY] = pao
+    add_cavity_pressure(m.lung_face, m.lung_wall, ref, load, s.vert_pos, s.vert_force)
+
+
+def open_edges(face: np.ndarray) -> list:
+    """The directed edges (a, b) of the triangles `face` (n, 3) that no other triangle
+    closes with its edge (b, a) exactly once: empty for a closed, consistently
+    oriented surface."""
+    e = np.concatenate([face[:, [0, 1]], face[:, [1, 2]], face[:, [2, 0]]]).astype(np.int64)
+    n = int(e.max()) + 1 if e.size else 1
+    key, count = np.unique(e[:, 0] * n + e[:, 1], return_counts=True)
+    seen = dict(zip(key.tolist(), count.tolist()))
+    bad = [(int(a), int(b)) for a, b in e if seen.get(int(a) * n + int(b)) != 1 or seen.get(int(b) * n + int(a)) != 1]
+    return sorted(set(bad))
+
+
+def thoracic_cavity(vert_pos: np.ndarray, floor: np.ndarray, height_m: float, what: str):
+    """The cavity over the membrane's faces `floor` (module docstring): returns
+    (face (nf, 3) int64, wall (nwall, 3) m, border (nb,) int64): the floor's faces reversed
+    and the wall's, a point i >= nvert being wall point i - nvert, and the floor's border loop. SceneError (naming `what`) for a
+    floor without exactly one border loop, a dome above the wall's top, or open edges."""
+    nvert = len(vert_pos)
+    floor = np.asarray(floor, np.int64).reshape(-1, 3)
+    if not len(floor):
+        raise SceneError(f"{what}.floor: expected a region with faces (the dome), received none")
+    directed = np.concatenate([floor[:, [0, 1]], floor[:, [1, 2]], floor[:, [2, 0]]])
+    edges = {(int(a), int(b)) for a, b in directed}
+    border = [(a, b) for a, b in edges if (b, a) not in edges]
+    nxt: dict = {}
+    for a, b in border:
+        if a in nxt:
+            raise SceneError(
+                f"{what}.floor: expected faces whose border is one loop, received a border that meets itself "
+                f"at point {a}"
+            )
+        nxt[a] = b
+    if not nxt:
+        raise SceneError(f"{what}.floor: expected an open region of the surface (the dome), received a closed one")
+    loop = [min(nxt)]
+    while nxt[loop[-1]] != loop[0]:
+        loop.append(nxt[loop[-1]])
+    if len(loop) != len(nxt):
+        raise SceneError(
+            f"{what}.floor: expected faces whose border is one loop, received {len(nxt)} border points of which "
+            f"one loop holds {len(loop)} (a region in pieces, or with holes)"
+        )
+    p = vert_pos[floor]
+    normal = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]).sum(axis=0)
+    up = normal / np.linalg.norm(normal)
+    ring = vert_pos[loop]
+    centre = ring.mean(axis=0)
+    top = float(np.max((vert_pos[np.unique(floor)] - centre) @ up))
+    if not height_m > top:
+        raise SceneError(
+            f"{what}.wall_height_m: expected a wall above the dome, higher than {top:.4g} m over its border's "
+            f"centre, received {height_m!r}"
+        )
+    rise = height_m - (ring - centre) @ up  # each border point's way up to the top plane (m)
+    edge = float(np.mean(np.linalg.norm(ring - np.roll(ring, -1, axis=0), axis=1)))
+    nring = max(1, math.ceil(float(rise.mean()) / edge))
+    n = len(loop)
+    wall = [ring + (k / nring) * rise[:, None] * up for k in range(1, nring + 1)] + [(centre + height_m * up)[None]]
+    wall_pos = np.concatenate(wall)
+
+    def at(k, j):  # point j of ring k (ring 0: the border, membrane points)
+        return loop[j % n] if k == 0 else nvert + (k - 1) * n + j % n
+
+    faces = [floor[:, [0, 2, 1]]]
+    side = []
+    for k in range(nring):
+        for j in range(n):
+            a0, b0, a1, b1 = at(k, j), at(k, j + 1), at(k + 1, j), at(k + 1, j + 1)
+            side += [(a0, b0, b1), (a0, b1, a1)]
+    apex = nvert + nring * n
+    side += [(at(nring, j), at(nring, j + 1), apex) for j in range(n)]
+    faces.append(np.asarray(side, np.int64))
+    face = np.concatenate(faces).astype(np.int64)
+    bad = open_edges(face)
+    if bad:
+        raise SceneError(
+            f"{what}: expected a closed thoracic cavity, received {len(bad)} open edges (point pairs, points "
+            f">= {nvert} on the wall): {few(bad)}"
+        )
+    return face, wall_pos, np.asarray(loop, np.int64)
+
+
+@force("lungs")
+class Lungs(Term):
+    """The lungs and airway in the thoracic cavity over the membrane's dome (module
+    docstring): P_pl = P_ao - (K1 + K2 |Q|) Q - P_L0 - E (V - V_rest), acting on the dome's
+    thoracic face and the border points (and through them on their ribs).
+
+    floor: the dome, the cavity's floor (faces of the region); wall_height_m: the top
+    of the cavity over the floor's border (m); lung_elastance_cmh2o_per_l (or
+    lung_compliance_l_per_cmh2o, its inverse: give one); resting_recoil_cmh2o: the lungs'
+    recoil at rest, minus the resting pleural pressure; airway_resistance_cmh2o_s_per_l
+    (Rohrer's K1) and rohrer_k2_cmh2o_s2_per_l2; airway_opening_pressure_cmh2o: a
+    schedule (0: spontaneous breathing)."""
+
+    # lung_face (nf, 3) int64: the cavity (points >= nvert on the wall); lung_wall (nwall, 3) m;
+    # lung_par (NPAR,): see P_*; lung_sched (1,) int64: the airway-opening pressure's schedule row
+    arrays = {
+        "lung_face": lambda n: np.zeros((0, 3), np.int64),
+        "lung_wall": lambda n: np.zeros((0, 3)),
+        "lung_par": lambda n: np.zeros(NPAR),
+        "lung_sched": lambda n: np.zeros(1, np.int64),
+    }
+    step_force = lungs_step_force
+    wall_height_m: float = param("positive", hi=10.0)
+    floor: object = param("selector", "diaphragm")
+    lung_elastance_cmh2o_per_l: float = param("nonneg", None, hi=1e4)
+    lung_compliance_l_per_cmh2o: float = param("positive", None, hi=1e4)
+    resting_recoil_cmh2o: float = param("nonneg", 5.0, hi=100.0)
+    airway_resistance_cmh2o_s_per_l: float = param("nonneg", 0.0, hi=1e4)
+    rohrer_k2_cmh2o_s2_per_l2: float = param("nonneg", 0.0, hi=1e4)
+    airway_opening_pressure_cmh2o: object = param("schedule", 0.0, ncomp=1)
+
+    def compile(self, b, what):
+        super().compile(b, what)
+        if "lung_face" in b.out:
+            raise SceneError(f"{what}: expected one lungs term, received a second (the scene has one thorax)")
+        ela, comp = self.lung_elastance_cmh2o_per_l, self.lung_compliance_l_per_cmh2o
+        if (ela is None) == (comp is None):
+            raise SceneError(
+                f"{what}: expected exactly one of lung_elastance_cmh2o_per_l or lung_compliance_l_per_cmh2o, "
+                f"received lung_elastance_cmh2o_per_l={ela!r} lung_compliance_l_per_cmh2o={comp!r}"
+            )
+        e = (
+            self.value("lung_elastance_cmh2o_per_l", what)
+            if ela is not None
+            else 1.0 / self.value("lung_compliance_l_per_cmh2o", what)
+        )
+        b.mesh.require_closed(f"{what}: the lungs' floor is the dome of a closed membrane")
+        sel_idx = b.region(self.floor, f"{what}.floor")
+        floor = b.mesh.face_vert[b.face_region(self.floor, f"{what}.floor", sel_idx)]
+        face, wall, _ = thoracic_cavity(b.mesh.vert_pos, floor, self.value("wall_height_m", what), what)
+        pts = np.concatenate([b.mesh.vert_pos, wall])
+        ref = pts[np.unique(face)].mean(axis=0)
+        q = pts[face] - ref
+        vol = float(np.einsum("ij,ij->i", q[:, 0], np.cross(q[:, 1], q[:, 2])).sum() / 6.0)
+        if not vol > 0:
+            raise SceneError(f"{what}: expected a thoracic cavity of positive volume, received {vol:.4g} m^3")
+        par = np.zeros(NPAR)
+        par[P_E] = e * CMH2O_PER_L
+        par[P_K1] = self.value("airway_resistance_cmh2o_s_per_l", what) * CMH2O_PER_L
+        par[P_K2] = self.value("rohrer_k2_cmh2o_s2_per_l2", what) * CMH2O_PA / 1e-6
+        par[P_RECOIL] = self.value("resting_recoil_cmh2o", what) * CMH2O_PA
+        par[P_V0] = vol
+        par[P_REF:] = ref
+        row = b.schedule(self.airway_opening_pressure_cmh2o, f"{what}.airway_opening_pressure_cmh2o", 1)
+        b.out.update(lung_face=face, lung_wall=wall, lung_par=par, lung_sched=np.array([row], np.int64))
+        # (no per-point stiffness for the stability estimate: the compartment moves the dome as one
+        # mode, E sum_i |g_i|^2 / m_i, about 700 s^-2 on the breathing scene, far below the sheet's)
+
+    @classmethod
+    def finish(cls, b):  # the arrays are the one term's, set by compile
+        pass

@@ -1,0 +1,215 @@
+"""The lungs' compartment (hybrid.terms.lungs): the thoracic cavity's exact volume and
+its gradient, a closed form of the lumped law under a prescribed dome, the identities
+of the volumes, the limit without lungs, and the refusals."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+import trimesh
+
+import hybrid
+from hybrid.errors import SceneError
+from hybrid.readouts import swept_volume
+from hybrid.regions import Difference, HalfSpace, Union_
+from hybrid.scene import Lungs, Masses, MeshSpec, Nailed, Prescribed, Scene
+from hybrid.schedule import Table
+from hybrid.terms.lungs import CMH2O_PA, P_REF, add_cavity_pressure, cavity_volume_rate, open_edges, thoracic_cavity
+
+CMH2O_PER_L = CMH2O_PA / 1e-3
+DOME_Z_M = 0.045
+LUNG = dict(wall_height_m=0.2, lung_compliance_l_per_cmh2o=0.2, airway_resistance_cmh2o_s_per_l=2.0)
+
+
+def dome_scene(lungs: Lungs, displacement_m, duration_s: float = 4.0) -> Scene:
+    """A sphere whose cap above z = 0.045 m (the dome, the cavity's floor) follows
+    `displacement_m`, the rest nailed: a rigid rib cage and a prescribed dome."""
+    return Scene(
+        formulation="continuum",
+        name="prescribed_dome",
+        mesh=MeshSpec(generator="ring_sphere", radius_m=0.12, level=1, conform_z_m=(DOME_Z_M,)),
+        masses=Masses(total_kg=4.0),
+        regions={
+            "diaphragm": HalfSpace((0.0, 0.0, DOME_Z_M), (0.0, 0.0, 1.0)),
+            "below": Difference("all", "diaphragm"),
+        },
+        forces=(lungs,),
+        constraints=(Nailed("below"), Prescribed("diaphragm", displacement_m)),
+        dt_s=1e-3,
+        integrator="symplectic_euler",
+        duration_s=duration_s,
+    )
+
+
+def cavity_points(sim) -> np.ndarray:
+    """The cavity's points: the membrane's, then the wall's."""
+    return np.concatenate([sim.state.vert_pos, sim.model.arrays.lung_wall])
+
+
+def test_the_cavity_is_closed_its_volume_is_trimesh_s_and_its_rate_the_derivative():
+    sim = hybrid.load(dome_scene(Lungs(**LUNG), (0.0, 0.0, 0.0)))
+    a = sim.model.arrays
+    assert open_edges(a.lung_face) == []
+    pts = cavity_points(sim)
+    tm = trimesh.Trimesh(pts, a.lung_face, process=False)
+    assert tm.is_watertight and tm.is_winding_consistent
+    rng = np.random.default_rng(7)
+    pos = sim.state.vert_pos + 1e-3 * rng.standard_normal(sim.state.vert_pos.shape)
+    vel = rng.standard_normal(pos.shape)
+    ref = a.lung_par[P_REF:]
+    vol, rate = cavity_volume_rate(a.lung_face, a.lung_wall, ref, pos, vel)
+    tm.vertices = np.concatenate([pos, a.lung_wall])
+    # both sum the same tetrahedra about different origins: round-off of the volume's size
+    assert vol == pytest.approx(tm.volume, rel=1e-13)
+    # V is a cubic along a line: the central difference's error eps^2 V'''/6 is ~1e-14 of V'
+    eps = 1e-6
+    vp, _ = cavity_volume_rate(a.lung_face, a.lung_wall, ref, pos + eps * vel, vel)
+    vm, _ = cavity_volume_rate(a.lung_face, a.lung_wall, ref, pos - eps * vel, vel)
+    assert rate == pytest.approx((vp - vm) / (2 * eps), rel=1e-7)  # round-off: 1e-16 V / 1e-6 / V'
+    # the pressure force is the load times that gradient: its power is load * rate exactly
+    f = np.zeros_like(pos)
+    add_cavity_pressure(a.lung_face, a.lung_wall, ref, 250.0, pos, f)
+    assert np.sum(f * vel) == pytest.approx(250.0 * rate, rel=1e-12)
+    below = pos[:, 2] < DOME_Z_M - 1e-2  # points off the cavity take nothing
+    assert np.all(f[below] == 0.0)
+
+
+def test_a_sinusoidal_dome_gives_the_first_order_law_s_gain_and_phase():
+    """A rigid cage and the dome translated by d(t) = A sin(w t) along the axis: the wall
+    rises from the border along the axis, so the cavity loses exactly A_border d(t) (a prism
+    on the border's projected area) and P_pl + P_L0 = -E dV - R dV/dt has the gain
+    E sqrt(1 + (w tau)^2) and the phase lead atan(w tau) on -dV, tau = R / E."""
+    amp, period, dt = 5e-3, 2.0, 1e-3
+    w = 2 * math.pi / period
+    t = np.arange(0, 4.0 + dt / 2, dt)
+    disp = Table(tuple(t.tolist()), tuple((0.0, 0.0, amp * math.sin(w * s)) for s in t))
+    sim = hybrid.load(dome_scene(Lungs(**LUNG), disp))
+    res = hybrid.run(sim, 4.0, frame_dt_s=dt)
+    tr = res["trace"].arrays()
+    _, _, loop = thoracic_cavity(sim.model.mesh.vert_pos, _floor(sim), 0.2, "x")
+    xy = sim.model.mesh.vert_pos[loop, :2]
+    area = 0.5 * abs(np.sum(xy[:, 0] * np.roll(xy[:, 1], -1) - np.roll(xy[:, 0], -1) * xy[:, 1]))
+    dv_l = tr["lung_volume_change_l"]
+    d = amp * np.sin(w * tr["t_s"])
+    # the prism: exact up to round-off of the cavity's 6 L volume (1e-16 x 6e-3 m^3 per sum)
+    assert np.max(np.abs(dv_l * 1e-3 + area * d)) < 1e-13
+    # every step's flow is its volume change over h: their sum is the change, to round-off
+    flow = tr["flow_l_per_s"][1:] * 1e-3
+    assert np.sum(flow * dt) == pytest.approx(dv_l[-1] * 1e-3 - dv_l[0] * 1e-3, abs=1e-15)
+    # the step's mean flow against the exact one at mid-step: (w h)^2 / 24 = 4e-7 relative
+    q_mid = -area * amp * w * np.cos(w * (tr["t_s"][1:] - dt / 2))
+    assert np.max(np.abs(flow - q_mid)) < 1e-5 * area * amp * w
+    # gain and phase over the last period, pressures stamped at their step's start (t - h)
+    e = 1 / 0.2 * CMH2O_PER_L
+    r = 2.0 * CMH2O_PER_L
+    tau = r / e
+    last = tr["t_s"] >= 4.0 - period - 1e-9
+    ts = tr["t_s"][last] - dt
+    p = (tr["pleural_pressure_cmh2o"][last] + 5.0) * CMH2O_PA
+    basis = np.stack([np.sin(w * ts), np.cos(w * ts)], axis=1)
+    (s_, c_), *_ = np.linalg.lstsq(basis, p, rcond=None)
+    gain = math.hypot(s_, c_) / (area * amp)
+    phase = math.atan2(c_, s_)
+    # the resistive term reads the backward-difference velocity: a lag of h/2, w h / 2 = 3e-3 rad
+    assert gain == pytest.approx(e * math.sqrt(1 + (w * tau) ** 2), rel=0.01)
+    assert phase == pytest.approx(math.atan(w * tau), abs=0.01)
+
+
+def _floor(sim):
+    """The membrane faces of the dome (the region's faces, as the term selects them)."""
+    m = sim.model
+    return m.mesh.face_vert[m.region_faces("diaphragm")]
+
+
+def test_the_lung_volume_change_is_the_sum_of_what_its_walls_swept():
+    """The closed cavity: its volume change equals the swept volumes of its floor (the
+    dome's thoracic face) and its wall, to round-off (Mead & Loring's bookkeeping); and the
+    dome's swept volume is what the incompressible abdomen's wall gave up."""
+    scene = hybrid.load_scene("breathing", overrides=["mesh.level=0", "duration_s=2.0"])
+    scene = dataclasses.replace(scene, forces=(*scene.forces, Lungs(**LUNG)))
+    sim = hybrid.load(scene)
+    sim.step(1500)  # mid-inspiration
+    a = sim.model.arrays
+    nvert = sim.model.nvert
+    rest = np.concatenate([sim.model.mesh.vert_pos, a.lung_wall])
+    now = cavity_points(sim)
+    face = a.lung_face
+    ref = a.lung_par[P_REF:]
+    v_now, _ = cavity_volume_rate(face, a.lung_wall, ref, sim.state.vert_pos, sim.state.vert_vel)
+    dv = v_now - a.lung_par[4]
+    assert dv > 1e-5  # the dome went down: the lungs filled
+    on_floor = np.all(face < nvert, axis=1)
+    parts = swept_volume(face[on_floor], rest, now) + swept_volume(face[~on_floor], rest, now)
+    assert parts == pytest.approx(dv, abs=1e-15)
+    dome = sim.model.region_faces("diaphragm")
+    abdomen = np.setdiff1d(np.arange(len(sim.model.mesh.face_vert)), dome)
+    fv = sim.model.mesh.face_vert
+    swept_dome = swept_volume(fv[dome], sim.model.mesh.vert_pos, sim.state.vert_pos)
+    swept_abdomen = swept_volume(fv[abdomen], sim.model.mesh.vert_pos, sim.state.vert_pos)
+    # the exact volume constraint holds the abdomen to round-off of its 7 L
+    assert swept_dome == pytest.approx(-swept_abdomen, abs=1e-15)
+    assert -swept_dome == pytest.approx(swept_volume(face[on_floor], rest, now), abs=1e-15)
+
+
+def test_lungs_without_elastance_resistance_or_airway_pressure_add_nothing():
+    """One breath of the breathing trunk with lungs whose law is zero is the trunk without
+    lungs, to the bit (the load is 0 x grad V): the compartment changes nothing else."""
+    scene = hybrid.load_scene("breathing", overrides=["mesh.level=0", "duration_s=4.0"])
+    zero = Lungs(wall_height_m=0.2, lung_elastance_cmh2o_per_l=0.0)
+    with_lungs = hybrid.load(dataclasses.replace(scene, forces=(*scene.forces, zero)))
+    without = hybrid.load(scene)
+    for sim in (with_lungs, without):
+        sim.step(4000)
+    assert np.array_equal(with_lungs.state.vert_pos, without.state.vert_pos)
+    assert np.array_equal(with_lungs.mj_data.qpos, without.mj_data.qpos)
+    assert with_lungs.state.lung[2] == pytest.approx(-5.0 * CMH2O_PA, abs=1e-12)  # the resting recoil
+
+
+def test_the_lungs_pull_the_dome_up_and_breathe_air():
+    """The breathing trunk with lungs: the pleural pressure falls as the dome descends, the
+    dome descends less than without lungs (their recoil resists it), air flows in and out."""
+    scene = hybrid.load_scene("breathing", overrides=["mesh.level=0", "duration_s=4.0"])
+    with_lungs = hybrid.run(hybrid.load(dataclasses.replace(scene, forces=(*scene.forces, Lungs(**LUNG)))), 4.0)
+    without = hybrid.run(hybrid.load(scene), 4.0)
+    s = with_lungs["summary"]
+    m = s["metrics"]
+    assert s["apex_descent_mm"] < without["summary"]["apex_descent_mm"]
+    assert with_lungs["trace"].arrays()["pleural_pressure_cmh2o"][0] == -5.0  # at rest: minus the resting recoil
+    # at the largest volume the flow stops: the pleural pressure there is the recoil, -5 - dV / C
+    # (stamped one step earlier than the volume: 1e-3 cmH2O covers a step's change)
+    assert m["pleural_pressure_cmh2o"]["min"] <= -5.0 - m["lung_volume_change_l"]["max"] / 0.2 + 1e-3
+    assert m["flow_l_per_s"]["max"] > 0 > m["flow_l_per_s"]["min"]
+    assert s["tidal_volume_l"] > 0.01
+    assert s["transdiaphragmatic_pressure_swing_cmh2o"] > 0
+
+
+@pytest.mark.parametrize(
+    "change, words",
+    [
+        (dict(lung_compliance_l_per_cmh2o=-0.2), "lung_compliance_l_per_cmh2o"),
+        (dict(lung_elastance_cmh2o_per_l=5.0), "exactly one of"),
+        (dict(wall_height_m=0.05), "wall_height_m: expected a wall above the dome"),
+        (dict(airway_resistance_cmh2o_s_per_l=float("nan")), "airway_resistance_cmh2o_s_per_l"),
+    ],
+)
+def test_bad_lung_values_are_refused_in_one_line(change, words):
+    with pytest.raises(SceneError) as err:
+        hybrid.load(dome_scene(Lungs(**{**LUNG, **change}), (0.0, 0.0, 0.0)))
+    assert words in str(err.value) and "\n" not in str(err.value)
+
+
+def test_a_floor_in_two_pieces_and_implicit_euler_are_refused():
+    scene = dome_scene(Lungs(**LUNG), (0.0, 0.0, 0.0))
+    two_caps = Union_(["diaphragm", HalfSpace((0.0, 0.0, -0.1), (0.0, 0.0, -1.0))])
+    split = dataclasses.replace(scene.forces[0], floor=two_caps)
+    with pytest.raises(SceneError, match="one loop|border"):
+        hybrid.load(dataclasses.replace(scene, forces=(split,)))
+    with pytest.raises(SceneError, match="implicit Euler does not yet"):
+        hybrid.load(dataclasses.replace(scene, integrator="implicit_euler"))
+    # a cavity missing one face has the three edges around the hole open
+    face = np.array([[0, 1, 2], [0, 2, 3], [0, 3, 1], [1, 3, 2]])
+    assert open_edges(face) == []
+    assert len(open_edges(face[1:])) == 3
