@@ -30,8 +30,9 @@ import mujoco
 import numpy as np
 
 from .errors import RigidError, SimulationDiverged
-from .loop import CtrlArrays, LinkArrays, MjViews, RigidPack, WrenchHistory
+from .loop import CtrlArrays, LinkArrays, MjViews, RigidPack, WallArrays, WrenchHistory, carry_wall
 from .rigid import CoupledRigid, mj_step_ctypes
+from .sites import site_vel_kernel
 from .step import S_TIME, T_GRAVITY, MembraneState
 
 __all__ = ["Coupling"]
@@ -124,6 +125,17 @@ class Coupling:
             self.link_vert, sys.site_id, sys.site_body, sys.site_root, self.link_extra_force(), self._force, self._vel
         )
         self._ctrls = CtrlArrays(sys.ctrl_act, sys.ctrl_sched, self.ctrl_user, np.zeros(3))
+        nc = sys.wall_point.size
+        self._wall = WallArrays(
+            sys.wall_point,
+            sys.wall_weight,
+            sys.wall_rest,
+            sys.wall_site_id,
+            sys.wall_site_body,
+            sys.wall_site_root,
+            np.zeros((nc, 3)),
+            np.zeros((nc, 3)),
+        )
         d = sys.data
         self._mj = MjViews(
             *sys.pointers(),
@@ -142,6 +154,16 @@ class Coupling:
         self._qpos_hist.clear()
         state.vert_pos[self.link_vert] = sys.site_pos()
         state.vert_vel[self.link_vert] = sys.site_vel()
+        self._place_wall(state)
+        self._place_wall(state)
+
+    def _place_wall(self, state: MembraneState) -> None:
+        """The lungs' carried wall points onto their bodies (as the step loop places them)."""
+        sys, wall = self.system, self._wall
+        if wall.point.size:
+            d = sys.data
+            site_vel_kernel(d.site_xpos, d.cvel, d.subtree_com, wall.site_id, wall.site_body, wall.site_root, wall.vel)
+            carry_wall(wall, d.site_xpos, state.lung_wall_pos, state.lung_wall_vel)
 
     def _rk4(self) -> bool:
         """Whether MuJoCo integrates with RK4 (read at every call: `mj_model` may change)."""
@@ -154,7 +176,7 @@ class Coupling:
         record = bool(self.record_wrenches)
         hist = WrenchHistory(np.empty((nstep, mjm.nbody, 6)), np.empty((nstep, mjm.nq))) if record else self._no_hist
         self._mj_time = self.system.data.time
-        return RigidPack(self._links, self._ctrls, self._mj, self._rk4(), record, hist)
+        return RigidPack(self._links, self._ctrls, self._mj, self._wall, self._rk4(), record, hist)
 
     def finish(self, rig: RigidPack, state: MembraneState, step0: int, done: int) -> None:
         """After the loop ran `done` steps from step0 with `rig`: keep the recorded wrenches,
@@ -231,3 +253,4 @@ class Coupling:
         self._qpos_hist.clear()
         state.vert_pos[self.link_vert] = sys.site_pos()
         state.vert_vel[self.link_vert] = sys.site_vel()
+        self._place_wall(state)

@@ -29,7 +29,7 @@ from numba import types
 
 from .kernel import kernel
 from .schedule import schedule_eval
-from .sites import point_wrench_kernel, site_vel_kernel
+from .sites import add_point_wrench_kernel, point_wrench_kernel, site_vel_kernel
 from .step import (
     F_ALVEOLAR,
     F_FLOW,
@@ -53,6 +53,7 @@ from .terms.volume import face_volume
 
 __all__ = [
     "LinkArrays",
+    "WallArrays",
     "CtrlArrays",
     "MjViews",
     "WrenchHistory",
@@ -88,6 +89,25 @@ class LinkArrays(NamedTuple):
     site_body: np.ndarray
     site_root: np.ndarray
     extra_force: np.ndarray
+    force: np.ndarray
+    vel: np.ndarray
+
+
+class WallArrays(NamedTuple):
+    """The lungs' wall points the rigid bodies carry (`hybrid.terms.lungs`), nc of them:
+    point (nc,) int64, their index in the wall (`MembraneState.lung_wall_pos`); weight (nc,),
+    the share of their body's motion each follows (the rest stays at rest: a point between
+    its rib and the cage's fixed top); rest (nc, 3) m; site_id, site_body, site_root (nc,)
+    int64, their sites on their bodies. The wall's pleural load reaches each body as
+    weight x force at the site: the transpose of how the point follows it (virtual work).
+    Scratch: force (nc, 3) N, their loads; vel (nc, 3) m/s, the sites' velocities."""
+
+    point: np.ndarray
+    weight: np.ndarray
+    rest: np.ndarray
+    site_id: np.ndarray
+    site_body: np.ndarray
+    site_root: np.ndarray
     force: np.ndarray
     vel: np.ndarray
 
@@ -137,12 +157,13 @@ class WrenchHistory(NamedTuple):
 
 class RigidPack(NamedTuple):
     """The rigid half of a coupled loop (`hybrid.coupling.Coupling` makes it): links,
-    ctrls, mj (above); rk4: bool, MuJoCo integrates with RK4 (step with `mj_step`);
+    ctrls, mj, wall (above); rk4: bool, MuJoCo integrates with RK4 (step with `mj_step`);
     record: bool, keep each step's wrenches and qpos in hist."""
 
     links: LinkArrays
     ctrls: CtrlArrays
     mj: MjViews
+    wall: WallArrays
     rk4: bool
     record: bool
     hist: WrenchHistory
@@ -176,7 +197,7 @@ def capture_frame(m, s, pos_out, scal_out):
     scal_out[F_PRESSURE] = s.scal[S_PRESSURE]
     scal_out[F_KE] = kinetic_energy_of(m, s)
     if m.term_on[LUNGS_ID]:  # the cavity now; its flow over the last step; its pressures at that step's start
-        vol, _ = cavity_volume_rate(m.lung_face, m.lung_wall, m.lung_par[P_REF:], pos, s.vert_vel)
+        vol, _ = cavity_volume_rate(m.lung_face, m.lung_par[P_REF:], pos, s.vert_vel, s.lung_wall_pos, s.lung_wall_vel)
         scal_out[F_LUNG_VOLUME] = vol
         scal_out[F_FLOW] = (vol - s.lung[L_VOLUME]) / m.dt
         scal_out[F_PLEURAL] = s.lung[L_PLEURAL]
@@ -223,13 +244,14 @@ def rigid_phase(m, s, t, row, rig):
     """Step phase 2 (module docstring): forces to the sites, controls, MuJoCo's step,
     the linked points onto their sites.
     # Model:    m (MembraneArrays); rig.links.vert, .site_id, .site_body, .site_root,
-    #           .extra_force; rig.ctrls.act, .sched, .user; rig.rk4
-    # Data in:  s.vert_force, s.grad, s.scal[S_PRESSURE] (the last projection's);
+    #           .extra_force; rig.ctrls.act, .sched, .user; rig.rk4; rig.wall (the lungs' carried wall)
+    # Data in:  s.vert_force, s.grad, s.scal[S_PRESSURE] (the last projection's), s.lung_wall_force;
     #           rig.mj: MuJoCo's state; t (s), the step's time; row: the step's row of rig.hist
     # Data out: MuJoCo's state (through rig.mj.data_ptr), rig.mj.xfrc_applied,
     #           rig.mj.ctrl[rig.ctrls.act] (the rows the user does not set); the linked
-    #           points' s.vert_pos, s.vert_vel; rig.hist.xfrc[row], .qpos[row] when rig.record
-    # Scratch:  rig.links.force, .vel, rig.ctrls.val
+    #           points' s.vert_pos, s.vert_vel; the carried wall's s.lung_wall_pos, s.lung_wall_vel;
+    #           rig.hist.xfrc[row], .qpos[row] when rig.record
+    # Scratch:  rig.links.force, .vel, rig.ctrls.val, rig.wall.force, .vel
     """
     links, ctrls, mj, hist = rig.links, rig.ctrls, rig.mj, rig.hist
     pos, vel, frc, grad = s.vert_pos, s.vert_vel, s.vert_force, s.grad
@@ -241,6 +263,10 @@ def rigid_phase(m, s, t, row, rig):
         for a in range(3):
             link_force[j, a] = frc[i, a] + p * grad[i, a] + links.extra_force[j, a]
     point_wrench_kernel(mj.site_xpos, mj.xipos, site_id, links.site_body, link_force, xfrc)
+    wall = rig.wall
+    if wall.point.shape[0]:  # the lungs' wall: its load to the bodies that carry it (their rows set above)
+        _gather_rows(wall.point, s.lung_wall_force, wall.force)
+        add_point_wrench_kernel(mj.site_xpos, mj.xipos, wall.site_id, wall.site_body, wall.weight, wall.force, xfrc)
     for j in range(ctrls.act.shape[0]):
         if not ctrls.user[j]:
             schedule_eval(ctrls.sched, j, t, ctrls.val)
@@ -264,6 +290,35 @@ def rigid_phase(m, s, t, row, rig):
         for a in range(3):
             pos[i, a] = mj.site_xpos[sid, a]
             vel[i, a] = link_vel[j, a]
+    if wall.point.shape[0]:
+        site_vel_kernel(mj.site_xpos, mj.cvel, mj.subtree_com, wall.site_id, wall.site_body, wall.site_root, wall.vel)
+        carry_wall(wall, mj.site_xpos, s.lung_wall_pos, s.lung_wall_vel)
+
+
+@kernel
+def _gather_rows(rows, src, out):
+    """out[j] = src[rows[j]].
+    # Model: rows (n,) int64   # Data in: src (m, 3)   # Data out: out (n, 3)
+    """
+    for j in range(rows.shape[0]):
+        for a in range(3):
+            out[j, a] = src[rows[j], a]
+
+
+@kernel
+def carry_wall(wall, site_xpos, wall_pos, wall_vel):
+    """The carried wall points where their bodies put them: p = w x_site + (1 - w) p_rest,
+    v = w v_site (wall.vel holds the sites' velocities).
+    # Model: wall (WallArrays)   # Data in: site_xpos (nsite, 3) m, wall.vel (nc, 3) m/s
+    # Data out: wall_pos (nwall, 3) m, wall_vel (nwall, 3) m/s (the carried rows)
+    """
+    for j in range(wall.point.shape[0]):
+        p = wall.point[j]
+        w = wall.weight[j]
+        sid = wall.site_id[j]
+        for a in range(3):
+            wall_pos[p, a] = w * site_xpos[sid, a] + (1.0 - w) * wall.rest[j, a]
+            wall_vel[p, a] = w * wall.vel[j, a]
 
 
 @kernel

@@ -485,7 +485,7 @@ def _compile(scene: Scene) -> Model:
     if scene.rigid is not None:
         from .rigid import build_rigid  # imports mujoco, only for scenes that have rigid parts
 
-        rigid, b.link_vert = build_rigid(scene, mesh, regions, vert_mass)
+        rigid, b.link_vert = build_rigid(scene, mesh, regions, vert_mass, carried=b.carried)
         b.vert_free[b.link_vert] = 0
     # the step: the scene's, else the MJCF's own (a rigid part), else the default
     dt = scene.dt_s if scene.dt_s is not None else rigid.model.opt.timestep if rigid is not None else DEFAULT_DT_S

@@ -329,6 +329,8 @@ class Simulation:
             vert_grad=s.grad.copy(),
             term_calls=s.term_calls.copy(),
             lung=s.lung.copy(),
+            lung_wall_pos=s.lung_wall_pos.copy(),
+            lung_wall_vel=s.lung_wall_vel.copy(),
             implicit_dv=None if imp is None else imp.dv.copy(),
             implicit_info=None if imp is None else imp.info.copy(),
             mj_state=None if self.rigid is None else self.rigid.mj_state(),
@@ -356,6 +358,9 @@ class Simulation:
         s.term_calls[:] = state.term_calls
         if state.lung is not None:
             s.lung[:] = state.lung
+        if state.lung_wall_pos is not None and state.lung_wall_vel is not None:
+            s.lung_wall_pos[:] = state.lung_wall_pos
+            s.lung_wall_vel[:] = state.lung_wall_vel
         if s.implicit is not None:
             s.implicit.dv[:] = state.implicit_dv
             s.implicit.info[:] = state.implicit_info

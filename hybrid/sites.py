@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from .kernel import jit
 
-__all__ = ["point_wrench_kernel", "site_vel_kernel"]
+__all__ = ["point_wrench_kernel", "add_point_wrench_kernel", "site_vel_kernel"]
 
 
 @jit(_nrt=False, inline="always")
@@ -40,6 +40,27 @@ def point_wrench_kernel(site_xpos, xipos, site_id, site_body, forces, xfrc):  # 
         b = site_body[i]
         rx, ry, rz = _site_offset(site_xpos, s, xipos, b)
         fx, fy, fz = forces[i, 0], forces[i, 1], forces[i, 2]
+        xfrc[b, 0] += fx
+        xfrc[b, 1] += fy
+        xfrc[b, 2] += fz
+        xfrc[b, 3] += ry * fz - rz * fy
+        xfrc[b, 4] += rz * fx - rx * fz
+        xfrc[b, 5] += rx * fy - ry * fx
+
+
+@jit(_nrt=False)
+def add_point_wrench_kernel(site_xpos, xipos, site_id, site_body, scale, forces, xfrc):  # pragma: no cover
+    """Add the wrench of the point forces scale_i F_i at their sites to their bodies (compiled).
+
+    # Data in:  site_xpos (nsite, 3) m, xipos (nbody, 3) m, scale (n,), forces (n, 3) N
+    # Model:    site_id (n,) int, site_body (n,) int
+    # Data out: xfrc (nbody, 6) [N, N m]: rows site_body added sum_i s_i [F_i, (site_xpos_i - xipos_b) x F_i]
+    """
+    for i in range(site_id.shape[0]):
+        s = site_id[i]
+        b = site_body[i]
+        rx, ry, rz = _site_offset(site_xpos, s, xipos, b)
+        fx, fy, fz = scale[i] * forces[i, 0], scale[i] * forces[i, 1], scale[i] * forces[i, 2]
         xfrc[b, 0] += fx
         xfrc[b, 1] += fy
         xfrc[b, 2] += fz

@@ -27,7 +27,8 @@ class State:
     the next step sends its pressure force p grad_i V to the ribs);
     term_calls (nterm,): how many times each term's kernel ran;
     lung (`hybrid.terms.lungs.NLUNG`,): the lungs' compartment at the last step's start
-    (the next frame's flow is the volume's change since);
+    (the next frame's flow is the volume's change since); lung_wall_pos (nwall, 3) m and
+    lung_wall_vel (nwall, 3) m/s: the cavity's wall, carried by the rigid bodies;
     implicit_dv (nvert, 3) m/s and implicit_info (`hybrid.implicit.Info`): implicit
     Euler's warm start, carried pressure and run averages (None for other integrators);
     mj_state: MuJoCo's integration state (`mjSTATE_INTEGRATION`: time, qpos, qvel, act,
@@ -41,6 +42,8 @@ class State:
     vert_grad: np.ndarray
     term_calls: np.ndarray
     lung: np.ndarray | None = None
+    lung_wall_pos: np.ndarray | None = None
+    lung_wall_vel: np.ndarray | None = None
     implicit_dv: np.ndarray | None = None
     implicit_info: np.ndarray | None = None
     mj_state: np.ndarray | None = field(default=None)

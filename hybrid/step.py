@@ -155,6 +155,8 @@ class MembraneState(NamedTuple):
     status: code, failing step, worst vertex, projection status;
     term_calls (nterm,): how many times each term's kernel ran;
     lung (NLUNG,): the lungs' compartment at the last step's start (`hybrid.terms.lungs.LungSlot`);
+    lung_wall_pos (nwall, 3) m, lung_wall_vel (nwall, 3) m/s: the cavity wall's points, which
+    the rigid bodies carry; lung_wall_force (nwall, 3) N: the pleural load on them (to their bodies);
     implicit: implicit Euler's work arrays (hybrid.implicit), None for the other integrators."""
 
     vert_pos: np.ndarray
@@ -170,6 +172,9 @@ class MembraneState(NamedTuple):
     status: np.ndarray
     term_calls: np.ndarray
     lung: np.ndarray
+    lung_wall_pos: np.ndarray
+    lung_wall_vel: np.ndarray
+    lung_wall_force: np.ndarray
     implicit: ImplicitWork | None = None
 
 
@@ -189,6 +194,9 @@ def new_state(arrays: MembraneArrays) -> MembraneState:
         status=np.zeros(4, np.int64),
         term_calls=np.zeros(len(TERMS), np.int64),
         lung=_lung_start(arrays),
+        lung_wall_pos=arrays.lung_wall.copy(),
+        lung_wall_vel=np.zeros_like(arrays.lung_wall),
+        lung_wall_force=np.zeros_like(arrays.lung_wall),
         implicit=implicit_work(arrays),
     )
 

@@ -46,7 +46,7 @@ def dome_scene(lungs: Lungs, displacement_m, duration_s: float = 4.0) -> Scene:
 
 def cavity_points(sim) -> np.ndarray:
     """The cavity's points: the membrane's, then the wall's."""
-    return np.concatenate([sim.state.vert_pos, sim.model.arrays.lung_wall])
+    return np.concatenate([sim.state.vert_pos, sim.state.lung_wall_pos])
 
 
 def test_the_cavity_is_closed_its_volume_is_trimesh_s_and_its_rate_the_derivative():
@@ -58,21 +58,22 @@ def test_the_cavity_is_closed_its_volume_is_trimesh_s_and_its_rate_the_derivativ
     assert tm.is_watertight and tm.is_winding_consistent
     rng = np.random.default_rng(7)
     pos = sim.state.vert_pos + 1e-3 * rng.standard_normal(sim.state.vert_pos.shape)
-    vel = rng.standard_normal(pos.shape)
+    wall = a.lung_wall + 1e-3 * rng.standard_normal(a.lung_wall.shape)
+    vel, wall_vel = rng.standard_normal(pos.shape), rng.standard_normal(wall.shape)
     ref = a.lung_par[P_REF:]
-    vol, rate = cavity_volume_rate(a.lung_face, a.lung_wall, ref, pos, vel)
-    tm.vertices = np.concatenate([pos, a.lung_wall])
+    vol, rate = cavity_volume_rate(a.lung_face, ref, pos, vel, wall, wall_vel)
+    tm.vertices = np.concatenate([pos, wall])
     # both sum the same tetrahedra about different origins: round-off of the volume's size
     assert vol == pytest.approx(tm.volume, rel=1e-13)
     # V is a cubic along a line: the central difference's error eps^2 V'''/6 is ~1e-14 of V'
     eps = 1e-6
-    vp, _ = cavity_volume_rate(a.lung_face, a.lung_wall, ref, pos + eps * vel, vel)
-    vm, _ = cavity_volume_rate(a.lung_face, a.lung_wall, ref, pos - eps * vel, vel)
+    vp, _ = cavity_volume_rate(a.lung_face, ref, pos + eps * vel, vel, wall + eps * wall_vel, wall_vel)
+    vm, _ = cavity_volume_rate(a.lung_face, ref, pos - eps * vel, vel, wall - eps * wall_vel, wall_vel)
     assert rate == pytest.approx((vp - vm) / (2 * eps), rel=1e-7)  # round-off: 1e-16 V / 1e-6 / V'
     # the pressure force is the load times that gradient: its power is load * rate exactly
-    f = np.zeros_like(pos)
-    add_cavity_pressure(a.lung_face, a.lung_wall, ref, 250.0, pos, f)
-    assert np.sum(f * vel) == pytest.approx(250.0 * rate, rel=1e-12)
+    f, f_wall = np.zeros_like(pos), np.zeros_like(wall)
+    add_cavity_pressure(a.lung_face, ref, 250.0, pos, wall, f, f_wall)
+    assert np.sum(f * vel) + np.sum(f_wall * wall_vel) == pytest.approx(250.0 * rate, rel=1e-12)
     below = pos[:, 2] < DOME_Z_M - 1e-2  # points off the cavity take nothing
     assert np.all(f[below] == 0.0)
 
@@ -89,7 +90,7 @@ def test_a_sinusoidal_dome_gives_the_first_order_law_s_gain_and_phase():
     sim = hybrid.load(dome_scene(Lungs(**LUNG), disp))
     res = hybrid.run(sim, 4.0, frame_dt_s=dt)
     tr = res["trace"].arrays()
-    _, _, loop = thoracic_cavity(sim.model.mesh.vert_pos, _floor(sim), 0.2, "x")
+    loop = thoracic_cavity(sim.model.mesh.vert_pos, _floor(sim), 0.2, "x")[2]
     xy = sim.model.mesh.vert_pos[loop, :2]
     area = 0.5 * abs(np.sum(xy[:, 0] * np.roll(xy[:, 1], -1) - np.roll(xy[:, 0], -1) * xy[:, 1]))
     dv_l = tr["lung_volume_change_l"]
@@ -138,7 +139,8 @@ def test_the_lung_volume_change_is_the_sum_of_what_its_walls_swept():
     now = cavity_points(sim)
     face = a.lung_face
     ref = a.lung_par[P_REF:]
-    v_now, _ = cavity_volume_rate(face, a.lung_wall, ref, sim.state.vert_pos, sim.state.vert_vel)
+    st = sim.state
+    v_now, _ = cavity_volume_rate(face, ref, st.vert_pos, st.vert_vel, st.lung_wall_pos, st.lung_wall_vel)
     dv = v_now - a.lung_par[4]
     assert dv > 1e-5  # the dome went down: the lungs filled
     on_floor = np.all(face < nvert, axis=1)
@@ -213,3 +215,40 @@ def test_a_floor_in_two_pieces_and_implicit_euler_are_refused():
     face = np.array([[0, 1, 2], [0, 2, 3], [0, 3, 1], [1, 3, 2]])
     assert open_edges(face) == []
     assert len(open_edges(face[1:])) == 3
+
+
+def test_the_wall_follows_its_ribs_and_hands_them_its_load_through_the_blend():
+    """A wall point over a rib follows w of the rib's motion, p = w x_site + (1 - w) p_rest;
+    its pleural load reaches the rib as w F at its site (the transpose: virtual work
+    balances), beside the linked points' forces, in MuJoCo's applied wrenches."""
+    scene = hybrid.load_scene("breathing", overrides=["mesh.level=0", "duration_s=2.0"])
+    sim = hybrid.load(dataclasses.replace(scene, forces=(*scene.forces, Lungs(**LUNG))))
+    sim.step(1200)
+    cpl = sim.rigid
+    sys_, d = cpl.system, sim.mj_data
+    assert sys_.wall_point.size > 0 and np.all((sys_.wall_weight > 0) & (sys_.wall_weight < 1))
+    rib = sys_.wall_site_body
+    # the carriage: each carried point where its rib puts the rest point's share
+    expect = sys_.wall_weight[:, None] * d.site_xpos[sys_.wall_site_id] + (1 - sys_.wall_weight[:, None]) * (
+        sys_.wall_rest
+    )
+    assert np.max(np.abs(sim.state.lung_wall_pos[sys_.wall_point] - expect)) < 1e-15  # compiled: fused multiply-adds
+    assert np.max(np.abs(sim.state.lung_wall_pos - sim.model.arrays.lung_wall)) > 1e-4  # the ribs moved it
+    # the next step's wrenches, rebuilt from its forces and the sites where they acted
+    site_xpos, xipos = d.site_xpos.copy(), d.xipos.copy()
+    cpl.record_wrenches = True
+    sim.step(1)
+    xfrc = cpl.wrench_history()[-1]
+    want = np.zeros_like(xfrc)
+
+    def add(sites, bodies, forces):
+        for s, b, f in zip(sites, bodies, forces):
+            want[b, :3] += f
+            want[b, 3:] += np.cross(site_xpos[s] - xipos[b], f)
+
+    add(sys_.site_id, sys_.site_body, cpl.link_forces())
+    wall_f = sys_.wall_weight[:, None] * sim.state.lung_wall_force[sys_.wall_point]
+    add(sys_.wall_site_id, rib, wall_f)
+    scale = np.abs(want).max()
+    assert np.max(np.abs(xfrc - want)) <= 1e-12 * scale  # the same sums in another order
+    assert np.abs(wall_f).sum() > 1e-3 * np.abs(cpl.link_forces()).sum()  # the wall's share is there

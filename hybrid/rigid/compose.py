@@ -114,7 +114,9 @@ def attach_points(
     return site_names
 
 
-def build_rigid(scene: Scene, mesh, regions: dict, vert_mass: np.ndarray) -> tuple[CoupledRigid, np.ndarray]:
+def build_rigid(
+    scene: Scene, mesh, regions: dict, vert_mass: np.ndarray, carried: tuple | None = None
+) -> tuple[CoupledRigid, np.ndarray]:
     """Load and compile the rigid part of `scene`; returns (CoupledRigid, link_vert).
 
     mesh: the membrane (`hybrid.mesh.Mesh`, rest positions in m); regions: evaluated
@@ -125,6 +127,9 @@ def build_rigid(scene: Scene, mesh, regions: dict, vert_mass: np.ndarray) -> tup
     taken site name, a model MuJoCo cannot compile; a body, joint, actuator or keyframe
     the control keys name that the model lacks: `hybrid.rigid.controls`), each a
     one-line message. The sites are placed where the bodies start (`rigid.keyframe`).
+    carried: (pos (n, 3) m, under (n,), weight (n,)), points off the membrane (the lungs'
+    wall) each carried by `weight` of the motion of the body that holds membrane point
+    `under`: those over a linked point get a site `f"{prefix}hybrid_wall_{j}"` on its body.
     """
     rig = scene.rigid
     if not isinstance(rig, Rigid):
@@ -185,6 +190,8 @@ def build_rigid(scene: Scene, mesh, regions: dict, vert_mass: np.ndarray) -> tup
         )
     local = add_sites(spec, model0, body_names, mesh.vert_pos[link_vert], site_names, controls.key_id)
 
+    wall = _carried_sites(spec, model0, rig.prefix, carried, link_body_of, controls.key_id)
+
     link_mass = np.asarray(vert_mass, float)[link_vert]
     mass_added = np.zeros(link_vert.size, bool)
     if rig.add_link_mass:
@@ -203,8 +210,23 @@ def build_rigid(scene: Scene, mesh, regions: dict, vert_mass: np.ndarray) -> tup
         mjcf_path=source,
         controls=controls,
         ribs=ribs,
+        wall=wall,
     )
     return system, link_vert
+
+
+def _carried_sites(spec, model0, prefix: str, carried, link_body_of: dict, key_id: int) -> dict | None:
+    """Sites for the carried points over linked membrane points (`build_rigid`): returns
+    {"site_names", "point" (nc,) the carried points' indices, "weight" (nc,), "rest" (nc, 3) m},
+    or None without carried points."""
+    if carried is None:
+        return None
+    pos, under, weight = carried
+    point = np.array([j for j, i in enumerate(under) if int(i) in link_body_of and weight[j] > 0], np.int64)
+    names = [f"{prefix}hybrid_wall_{int(j)}" for j in point]
+    bodies = [link_body_of[int(under[j])] for j in point]
+    add_sites(spec, model0, bodies, np.asarray(pos)[point], names, key_id)
+    return {"site_names": names, "point": point, "weight": np.asarray(weight, float)[point], "rest": pos[point]}
 
 
 def _link_body(spec: mujoco.MjSpec, name) -> str | None:

@@ -350,6 +350,9 @@ class Build:
         self.link_vert = np.zeros(0, np.int32)
         self.moving: np.ndarray | None = None
         self.claims: list = []  # (kind, what, points) of the point constraints (claim_points)
+        # points off the membrane that the rigid bodies carry (the lungs' wall): (pos (n, 3) m,
+        # under (n,) the membrane point whose body carries each (-1: none), weight (n,)), or None
+        self.carried: tuple | None = None
 
     def face_region(self, sel, what: str, idx: np.ndarray) -> np.ndarray:
         """The faces of region `sel` (its points `idx`): those whose centroid it holds when

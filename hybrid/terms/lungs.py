@@ -94,20 +94,22 @@ def _corner(i, nvert, pos, wall, ref):
 
 
 @kernel(inline="always")
-def _speed(i, nvert, vel):
-    """Velocity of cavity point i: the membrane's, zero for the fixed wall.
-    # Model: none   # Data in: vel (nvert, 3) m/s   # Data out: returns (vx, vy, vz) m/s
+def _speed(i, nvert, vel, wall_vel):
+    """Velocity of cavity point i: the membrane's or the wall's.
+    # Model: none   # Data in: vel (nvert, 3) m/s, wall_vel (nwall, 3) m/s   # Data out: returns (vx, vy, vz) m/s
     """
     if i < nvert:
         return vel[i, 0], vel[i, 1], vel[i, 2]
-    return 0.0, 0.0, 0.0
+    j = i - nvert
+    return wall_vel[j, 0], wall_vel[j, 1], wall_vel[j, 2]
 
 
 @kernel
-def cavity_volume_rate(face, wall, ref, pos, vel):
+def cavity_volume_rate(face, ref, pos, vel, wall, wall_vel):
     """The cavity's volume (m^3) and its rate sum_i g_i . v_i (m^3/s), g = dV/dx.
-    # Model: face (nf, 3) int64 (a point i >= nvert is wall point i - nvert), wall (nwall, 3) m, ref (3,) m
-    # Data in: pos (nvert, 3) m, vel (nvert, 3) m/s   # Data out: returns (V, dV/dt)
+    # Model: face (nf, 3) int64 (a point i >= nvert is wall point i - nvert), ref (3,) m
+    # Data in: pos (nvert, 3) m, vel (nvert, 3) m/s, wall (nwall, 3) m, wall_vel (nwall, 3) m/s
+    # Data out: returns (V, dV/dt)
     """
     nvert = pos.shape[0]
     vol = rate = 0.0
@@ -119,55 +121,64 @@ def cavity_volume_rate(face, wall, ref, pos, vel):
         # b x c, c x a, a x b: 6 g at a, b, c
         gax, gay, gaz = by * cz - bz * cy, bz * cx - bx * cz, bx * cy - by * cx
         vol += ax * gax + ay * gay + az * gaz
-        if a < nvert or b < nvert or c < nvert:
-            gbx, gby, gbz = cy * az - cz * ay, cz * ax - cx * az, cx * ay - cy * ax
-            gcx, gcy, gcz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
-            vax, vay, vaz = _speed(a, nvert, vel)
-            vbx, vby, vbz = _speed(b, nvert, vel)
-            vcx, vcy, vcz = _speed(c, nvert, vel)
-            rate += vax * gax + vay * gay + vaz * gaz + vbx * gbx + vby * gby + vbz * gbz
-            rate += vcx * gcx + vcy * gcy + vcz * gcz
+        gbx, gby, gbz = cy * az - cz * ay, cz * ax - cx * az, cx * ay - cy * ax
+        gcx, gcy, gcz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
+        vax, vay, vaz = _speed(a, nvert, vel, wall_vel)
+        vbx, vby, vbz = _speed(b, nvert, vel, wall_vel)
+        vcx, vcy, vcz = _speed(c, nvert, vel, wall_vel)
+        rate += vax * gax + vay * gay + vaz * gaz + vbx * gbx + vby * gby + vbz * gbz
+        rate += vcx * gcx + vcy * gcy + vcz * gcz
     return vol / 6.0, rate / 6.0
 
 
+@kernel(inline="always")
+def _push(i, nvert, k, gx, gy, gz, vert_force, wall_force):
+    """Add k g to cavity point i's force: the membrane's (added to) or the wall's.
+    # Model: none   # Data in: i, k, g   # Data out: vert_force (nvert, 3) N, wall_force (nwall, 3) N
+    """
+    if i < nvert:
+        vert_force[i, 0] += k * gx
+        vert_force[i, 1] += k * gy
+        vert_force[i, 2] += k * gz
+    else:
+        j = i - nvert
+        wall_force[j, 0] += k * gx
+        wall_force[j, 1] += k * gy
+        wall_force[j, 2] += k * gz
+
+
 @kernel
-def add_cavity_pressure(face, wall, ref, load_pa, pos, vert_force):
-    """F_i += load grad_i V on the cavity's membrane points: a pressure load_pa (Pa) inside
-    the cavity, positive pushing its surface outward.
-    # Model: face (nf, 3) int64, wall (nwall, 3) m, ref (3,) m   # Data in: load_pa Pa, pos (nvert, 3) m
-    # Data out: vert_force (nvert, 3) N (added to)
+def add_cavity_pressure(face, ref, load_pa, pos, wall, vert_force, wall_force):
+    """F_i += load grad_i V on the cavity's points: a pressure load_pa (Pa) inside the
+    cavity, positive pushing its surface outward; the wall's forces are set, not added to.
+    # Model: face (nf, 3) int64, ref (3,) m   # Data in: load_pa Pa, pos (nvert, 3) m, wall (nwall, 3) m
+    # Data out: vert_force (nvert, 3) N (added to), wall_force (nwall, 3) N
     """
     nvert = pos.shape[0]
+    wall_force[:] = 0.0
     k = load_pa / 6.0
     for f in range(face.shape[0]):
         a, b, c = face[f, 0], face[f, 1], face[f, 2]
         ax, ay, az = _corner(a, nvert, pos, wall, ref)
         bx, by, bz = _corner(b, nvert, pos, wall, ref)
         cx, cy, cz = _corner(c, nvert, pos, wall, ref)
-        if a < nvert:
-            vert_force[a, 0] += k * (by * cz - bz * cy)
-            vert_force[a, 1] += k * (bz * cx - bx * cz)
-            vert_force[a, 2] += k * (bx * cy - by * cx)
-        if b < nvert:
-            vert_force[b, 0] += k * (cy * az - cz * ay)
-            vert_force[b, 1] += k * (cz * ax - cx * az)
-            vert_force[b, 2] += k * (cx * ay - cy * ax)
-        if c < nvert:
-            vert_force[c, 0] += k * (ay * bz - az * by)
-            vert_force[c, 1] += k * (az * bx - ax * bz)
-            vert_force[c, 2] += k * (ax * by - ay * bx)
+        _push(a, nvert, k, by * cz - bz * cy, bz * cx - bx * cz, bx * cy - by * cx, vert_force, wall_force)
+        _push(b, nvert, k, cy * az - cz * ay, cz * ax - cx * az, cx * ay - cy * ax, vert_force, wall_force)
+        _push(c, nvert, k, ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx, vert_force, wall_force)
 
 
 @kernel(inline="always")
 def lungs_step_force(m, s, c):
     """The step's call (`Term.step_force`): the lumped law at the step's start (module
     docstring), its readouts into s.lung, the pleural load on the cavity's points.
-    # Model: m.lung_face, m.lung_wall, m.lung_par, m.lung_sched   # Data in: s.vert_pos, s.vert_vel, c.value
-    # Data out: s.vert_force (added to), s.lung (`LungSlot`)
+    # Model: m.lung_face, m.lung_par, m.lung_sched
+    # Data in: s.vert_pos, s.vert_vel, s.lung_wall_pos, s.lung_wall_vel, c.value
+    # Data out: s.vert_force (added to), s.lung_wall_force (the wall's, to its bodies), s.lung (`LungSlot`)
     """
     par = m.lung_par
     ref = par[P_REF:]
-    vol, rate = cavity_volume_rate(m.lung_face, m.lung_wall, ref, s.vert_pos, s.vert_vel)
+    wall = s.lung_wall_pos
+    vol, rate = cavity_volume_rate(m.lung_face, ref, s.vert_pos, s.vert_vel, wall, s.lung_wall_vel)
     pao = c.value[m.lung_sched[0], 0] * CMH2O_PA
     palv = pao - (par[P_K1] + par[P_K2] * abs(rate)) * rate
     load = palv - par[P_E] * (vol - par[P_V0])  # the pleural pressure's departure from rest
@@ -176,7 +187,7 @@ def lungs_step_force(m, s, c):
     s.lung[L_PLEURAL] = load - par[P_RECOIL]
     s.lung[L_ALVEOLAR] = palv
     s.lung[L_AIRWAY] = pao
-    add_cavity_pressure(m.lung_face, m.lung_wall, ref, load, s.vert_pos, s.vert_force)
+    add_cavity_pressure(m.lung_face, ref, load, s.vert_pos, wall, s.vert_force, s.lung_wall_force)
 
 
 def open_edges(face: np.ndarray) -> list:
@@ -193,8 +204,10 @@ def open_edges(face: np.ndarray) -> list:
 
 def thoracic_cavity(vert_pos: np.ndarray, floor: np.ndarray, height_m: float, what: str):
     """The cavity over the membrane's faces `floor` (module docstring): returns
-    (face (nf, 3) int64, wall (nwall, 3) m, border (nb,) int64): the floor's faces reversed
-    and the wall's, a point i >= nvert being wall point i - nvert, and the floor's border loop. SceneError (naming `what`) for a
+    (face (nf, 3) int64, wall (nwall, 3) m, border (nb,) int64, under (nwall,) int64, weight
+    (nwall,)): the floor's faces reversed and the wall's, a point i >= nvert being wall point
+    i - nvert; the floor's border loop; and each wall point's carriage: the border point below
+    it (-1 for the top's centre) whose rigid body moves it by `weight` of that body's motion. SceneError (naming `what`) for a
     floor without exactly one border loop, a dome above the wall's top, or open edges."""
     nvert = len(vert_pos)
     floor = np.asarray(floor, np.int64).reshape(-1, 3)
@@ -258,7 +271,11 @@ def thoracic_cavity(vert_pos: np.ndarray, floor: np.ndarray, height_m: float, wh
             f"{what}: expected a closed thoracic cavity, received {len(bad)} open edges (point pairs, points "
             f">= {nvert} on the wall): {few(bad)}"
         )
-    return face, wall_pos, np.asarray(loop, np.int64)
+    # the wall's carriage: ring k over border point j moves with what holds j by 1 - k / nring
+    # (the border's rib at its foot, nothing at the fixed top)
+    under = np.concatenate([np.asarray(loop, np.int64)] * nring + [np.array([-1], np.int64)])
+    weight = np.concatenate([np.full(n, 1.0 - k / nring) for k in range(1, nring + 1)] + [np.zeros(1)])
+    return face, wall_pos, np.asarray(loop, np.int64), under, weight
 
 
 @force("lungs")
@@ -310,7 +327,7 @@ class Lungs(Term):
         b.mesh.require_closed(f"{what}: the lungs' floor is the dome of a closed membrane")
         sel_idx = b.region(self.floor, f"{what}.floor")
         floor = b.mesh.face_vert[b.face_region(self.floor, f"{what}.floor", sel_idx)]
-        face, wall, _ = thoracic_cavity(b.mesh.vert_pos, floor, self.value("wall_height_m", what), what)
+        face, wall, _, under, weight = thoracic_cavity(b.mesh.vert_pos, floor, self.value("wall_height_m", what), what)
         pts = np.concatenate([b.mesh.vert_pos, wall])
         ref = pts[np.unique(face)].mean(axis=0)
         q = pts[face] - ref
@@ -326,6 +343,7 @@ class Lungs(Term):
         par[P_REF:] = ref
         row = b.schedule(self.airway_opening_pressure_cmh2o, f"{what}.airway_opening_pressure_cmh2o", 1)
         b.out.update(lung_face=face, lung_wall=wall, lung_par=par, lung_sched=np.array([row], np.int64))
+        b.carried = (wall, under, weight)  # the wall's points that rigid bodies carry (`hybrid.rigid.build_rigid`)
         # (no per-point stiffness for the stability estimate: the compartment moves the dome as one
         # mode, E sum_i |g_i|^2 / m_i, about 700 s^-2 on the breathing scene, far below the sheet's)
 
