@@ -64,7 +64,8 @@ import numpy as np
 
 from .implicit_matrix import NewtonMatrix, assemble, cg_update, dot, matrix_product, newton_matrix, sgs_sweep, split_cg
 from .kernel import CHUNK_VERTS, kernel
-from .terms import Damping, Membrane, MuscleFibres, PassiveFibres, Volume
+from .terms import Damping, Lungs, Membrane, MuscleFibres, PassiveFibres, Volume
+from .terms.lungs import CMH2O_PA, IMPLICIT_EULER, P_E, P_K1, P_K2, P_REF, P_V0, add_cavity_pressure, cavity_volume_rate, lung_load
 from .terms.fibres import add_muscle_fibres
 from .terms.membrane import add_membrane_serial, membrane_energy
 from .terms.passive_fibres import add_passive_fibres
@@ -101,12 +102,14 @@ __all__ = [
 
 #: `MembraneArrays.integrator` of implicit Euler
 IMPLICIT_ID = 2
+assert IMPLICIT_ID == IMPLICIT_EULER
 #: the step status of a Newton solve that did not converge (beside hybrid.step.StepStatus)
 IMPLICIT_NOT_CONVERGED = 4
 EXPLICIT = -1  # implicit_step's answer for the other integrators
 
 T_MEMBRANE, T_FIBRES, T_DAMPING, T_VOLUME = Membrane.id, MuscleFibres.id, Damping.id, Volume.id
 T_PASSIVE = PassiveFibres.id
+T_LUNGS = Lungs.id
 CG_MIN_ITER = 50  # the conjugate gradients' cap: 3 x the free coordinates, at least this
 HALVINGS = 12
 ARMIJO = 1e-4  # the fraction of the predicted decrease a step must achieve
@@ -192,7 +195,10 @@ class ImplicitWork(NamedTuple):
     triangles the Newton matrix reads (`newton_rows`); face (NCACHE), fib (NFIB_CACHE),
     pf (NPF_CACHE) per row of rows: the membrane's, muscle fibres' and passive fibres'
     tangent caches (`newton_caches`); mat: the assembled Newton matrix
-    (`hybrid.implicit_matrix`); info (len(Info),): the `Info` slots."""
+    (`hybrid.implicit_matrix`); info (len(Info),): the `Info` slots; the lungs' (empty
+    without them): lung_wall_pos, lung_wall_vel, the state's own wall arrays (not copies),
+    which the solve holds fixed; lung_wall_f (nwall, 3), lung_g (nvert, 3), lung_gf, lung_y
+    (nfree, 3): scratch of the compartment's rank-one term (`_lung_rank_one`)."""
 
     dv: np.ndarray
     x_try: np.ndarray
@@ -218,10 +224,18 @@ class ImplicitWork(NamedTuple):
     pf: np.ndarray
     mat: NewtonMatrix
     info: np.ndarray
+    lung_wall_pos: np.ndarray
+    lung_wall_vel: np.ndarray
+    lung_wall_f: np.ndarray
+    lung_g: np.ndarray
+    lung_gf: np.ndarray
+    lung_y: np.ndarray
 
 
-def implicit_work(arrays) -> ImplicitWork | None:
-    """The work arrays of a model that steps with implicit Euler, else None."""
+def implicit_work(arrays, wall_pos=None, wall_vel=None) -> ImplicitWork | None:
+    """The work arrays of a model that steps with implicit Euler, else None. wall_pos,
+    wall_vel: the state's lungs' wall (`MembraneState.lung_wall_pos`, `lung_wall_vel`), the
+    same arrays (the solve reads the wall where the rigid phase put it)."""
     if arrays.integrator != IMPLICIT_ID:
         return None
     n = arrays.vert_rest.shape[0]
@@ -236,15 +250,23 @@ def implicit_work(arrays) -> ImplicitWork | None:
         pf=np.zeros((rows.pf_vert.shape[0], NPF_CACHE)),
         mat=newton_matrix(n, arrays.vert_free, rows.mem_vert, rows.fib_vert, rows.pf_vert),
         info=np.zeros(len(Info)),
+        lung_wall_pos=arrays.lung_wall.copy() if wall_pos is None else wall_pos,
+        lung_wall_vel=np.zeros_like(arrays.lung_wall) if wall_vel is None else wall_vel,
+        lung_wall_f=np.zeros_like(arrays.lung_wall),
+        lung_g=np.zeros((n, 3)),
+        lung_gf=np.zeros((nfree, 3)),
+        lung_y=np.zeros((nfree, 3)),
     )
 
 
 @kernel
-def implicit_forces(m, tri, sched_val, x, v, out):
+def implicit_forces(m, tri, sched_val, x, v, out, w):
     """out = the forces implicit Euler treats implicitly at (x, v): membrane (with its
-    viscosity), muscle fibres, passive fibres, drag; of the triangles `tri` (m itself: all
-    of them; `NewtonRows`: those with a free corner, whole on the free points).
-    # Model: m, tri   # Data in: sched_val (schedules at t), x (m), v (m/s)   # Data out: out (N)
+    viscosity), muscle fibres, passive fibres, drag, the lungs' pleural load; of the
+    triangles `tri` (m itself: all of them; `NewtonRows`: those with a free corner, whole on
+    the free points).
+    # Model: m, tri   # Data in: sched_val (schedules at t), x (m), v (m/s), w.lung_wall_pos, w.lung_wall_vel
+    # Data out: out (N)   # Scratch: w.lung_wall_f
     """
     for i in range(out.shape[0]):
         for a in range(3):
@@ -261,6 +283,11 @@ def implicit_forces(m, tri, sched_val, x, v, out):
             c = m.damp_coef[i]
             for a in range(3):
                 out[i, a] -= c * v[i, a]
+    if on[T_LUNGS]:
+        ref = m.lung_par[P_REF:]
+        vol, rate = cavity_volume_rate(m.lung_face, ref, x, v, w.lung_wall_pos, w.lung_wall_vel)
+        _, load = lung_load(m.lung_par, sched_val[m.lung_sched[0], 0] * CMH2O_PA, vol, rate)
+        add_cavity_pressure(m.lung_face, ref, load, x, w.lung_wall_pos, out, w.lung_wall_f, True)
 
 
 @kernel
@@ -275,7 +302,7 @@ def implicit_start_forces(m, sched_val, x, v, imp, vert_force):
     """
     if imp is None:
         return False
-    implicit_forces(m, m, sched_val, x, v, imp.f)
+    implicit_forces(m, m, sched_val, x, v, imp.f, imp)
     for i in range(vert_force.shape[0]):
         for a in range(3):
             imp.f_expl[i, a] = vert_force[i, a]  # the explicit forces, kept exact for the solve
@@ -439,7 +466,7 @@ def _residual(m, sched_val, pos, vel, h, w):
     dv, xt, vt, res = w.dv, w.x_try, w.v_try, w.res
     free = m.vert_free
     _trial(m, pos, vel, h, dv, w)
-    implicit_forces(m, w.rows, sched_val, xt, vt, w.f)
+    implicit_forces(m, w.rows, sched_val, xt, vt, w.f, w)
     rr = ff = ee = mm = 0.0
     worst, big = 0, -1.0
     for i in range(pos.shape[0]):
@@ -491,6 +518,12 @@ def _merit(m, sched_val, h, dv, w):
         total += fibre_energy(tri.fib_vert, tri.fib_par, tri.fib_sched, sched_val, w.x_try)
     if on[T_PASSIVE]:
         total += passive_fibres_energy_kernel(tri.pf_vert, tri.pf_par, w.x_try)
+    if on[T_LUNGS]:  # E (V - V0)^2 / 2 - P_ao V, and h times the airway's dissipation K1 Q^2 / 2 + K2 |Q|^3 / 3
+        par = m.lung_par
+        vol, rate = cavity_volume_rate(m.lung_face, par[P_REF:], w.x_try, w.v_try, w.lung_wall_pos, w.lung_wall_vel)
+        pao = sched_val[m.lung_sched[0], 0] * CMH2O_PA
+        total += 0.5 * par[P_E] * (vol - par[P_V0]) ** 2 - pao * vol
+        total += h * (0.5 * par[P_K1] * rate * rate + par[P_K2] * abs(rate) ** 3 / 3.0)
     return total
 
 
@@ -509,6 +542,52 @@ def _volume_gradient(face_vert, pos, grad):
             grad[i, 0] += sixth * (pos[j, 1] * pos[l, 2] - pos[j, 2] * pos[l, 1])
             grad[i, 1] += sixth * (pos[j, 2] * pos[l, 0] - pos[j, 0] * pos[l, 2])
             grad[i, 2] += sixth * (pos[j, 0] * pos[l, 1] - pos[j, 1] * pos[l, 0])
+
+
+@kernel
+def _lung_rank_one(m, w, h, project, eta, cg_max):
+    """The lungs' stiffness in the Newton solve: the matrix A + c g g^T, c = h^2 E + h dR/dQ
+    (R(Q) Q the airway's pressure drop) and g the cavity's volume gradient on the free
+    points, both at the iteration's start; w.cg_x = A^-1 r turned into (A + c g g^T)^-1 r by
+    Sherman-Morrison, with A^-1 g from a second solve (a rank-one term the sparse matrix cannot
+    hold; staggered a step behind, an enclosed compartment is the unstable case of
+    partitioned coupling). Returns the second solve's iterations.
+    # Model: m.lung_face, m.lung_par, w.mat's pattern   # Data in: w.x_try, w.v_try (the iteration's start), w.cg_x
+    # Data out: w.cg_x   # Scratch: w.lung_g, w.lung_gf, w.lung_y, w.lung_wall_f, w.cg_r and the solve's
+    """
+    par = m.lung_par
+    ref = par[P_REF:]
+    _, rate = cavity_volume_rate(m.lung_face, ref, w.x_try, w.v_try, w.lung_wall_pos, w.lung_wall_vel)
+    c = h * h * par[P_E] + h * (par[P_K1] + 2.0 * par[P_K2] * abs(rate))
+    if c == 0.0:
+        return 0
+    g = w.lung_g
+    for i in range(g.shape[0]):
+        g[i, 0] = g[i, 1] = g[i, 2] = 0.0
+    add_cavity_pressure(m.lung_face, ref, 1.0, w.x_try, w.lung_wall_pos, g, w.lung_wall_f, True)
+    rows_of = w.mat.free
+    _gather(rows_of, 1.0, g, w.lung_gf)
+    y = w.lung_y
+    for f in range(rows_of.shape[0]):
+        for a in range(3):
+            y[f, a] = w.cg_x[f, a]  # A^-1 r
+            w.cg_r[f, a] = w.lung_gf[f, a]
+    target = FORCING * eta * math.sqrt(dot(w.lung_gf, w.lung_gf))
+    if project:
+        k = _solve(m, w, h, True, target, cg_max)
+    else:
+        k = split_cg(w.mat, w.cg_r, w.cg_x, w.cg_z, w.cg_p, w.cg_q, w.cg_t, w.cg_b, target, cg_max)
+        if k < 0:  # negative curvature at once: g along it; keep A^-1 r alone
+            for f in range(rows_of.shape[0]):
+                for a in range(3):
+                    w.cg_x[f, a] = y[f, a]
+            return 1
+    gy, gz = dot(w.lung_gf, y), dot(w.lung_gf, w.cg_x)  # g . A^-1 r, g . A^-1 g
+    beta = c * gy / (1.0 + c * gz)
+    for f in range(rows_of.shape[0]):
+        for a in range(3):
+            w.cg_x[f, a] = y[f, a] - beta * w.cg_x[f, a]
+    return k
 
 
 @kernel
@@ -568,10 +647,13 @@ def implicit_step(m, s, sched_val, step, imp):
         # solve just accurately enough: FORCING of what convergence asks, at most FORCING of the residual
         eta = min(FORCING, FORCING * tol * max(scale, scale_mean) / rn)
         k = split_cg(w.mat, w.cg_r, w.cg_x, w.cg_z, w.cg_p, w.cg_q, w.cg_t, w.cg_b, eta * h * rn, cg_max)
-        if k < 0:
+        project = k < 0
+        if project:
             _gather(rows_of, h, w.res, w.cg_r)
             k = 1 + _solve(m, w, h, True, eta * h * rn, cg_max)
             info[I_PROJECTED_TOTAL] += 1
+        if m.term_on[T_LUNGS]:
+            k += _lung_rank_one(m, w, h, project, eta, cg_max)
         cg_total += k
         it += 1
         # a correction below the positions' rounding (ULPS units in the last place of the

@@ -24,7 +24,7 @@ from .kernel import use_parallel
 from .mesh import Mesh, vertex_area
 from .scene import DEFAULT_DT_S, FORMULATIONS, INTEGRATORS, MESH_GENERATORS, Masses, MeshSpec, Scene
 from .stability import max_stable_dt
-from .terms import CONSTRAINT_TYPES, FORCE_TYPES, TERM_CLASSES, TERMS, Build, Lungs, Volume
+from .terms import CONSTRAINT_TYPES, FORCE_TYPES, TERM_CLASSES, TERMS, Build, Volume
 from .terms.base import check_value
 
 __all__ = ["TERMS", "MembraneArrays", "Model", "compile_scene", "build_mesh"]
@@ -137,7 +137,6 @@ class Model:
         _check_dt(dt_s)
         integ = self.arrays.integrator if integrator is None else _integrator_id(integrator, self.scene.formulation)
         arrays = self.arrays._replace(dt=float(dt_s), integrator=integ)
-        _check_lungs_integrator(arrays)
         scene = dataclasses.replace(self.scene, dt_s=float(dt_s), integrator=INTEGRATORS[integ])
         dt_stable = _stable_dt(arrays, self.vert_stiffness, self.vert_viscosity)
         return Model(
@@ -185,17 +184,6 @@ def _check_duration(duration, dt):
     checks.positive("duration_s", duration, checks.MAX_DURATION_S, " s")
     if duration < dt:
         raise SceneError(f"duration_s: expected at least one step of dt_s = {dt:g} s, received {duration:g} s")
-
-
-def _check_lungs_integrator(arrays: MembraneArrays) -> None:
-    """Refuse the lungs with implicit Euler, whose Newton solve does not yet hold their
-    rank-one stiffness (E + R / h) g g^T: staggered one step behind, an enclosed
-    compartment is the known unstable case of partitioned coupling."""
-    if arrays.term_on[Lungs.id] and arrays.integrator == INTEGRATOR_ID["implicit_euler"]:
-        raise SceneError(
-            "integrator: a scene with lungs runs with 'symplectic_euler' or 'explicit_euler' (implicit Euler "
-            "does not yet solve the lungs' compartment in its Newton step), received 'implicit_euler'"
-        )
 
 
 def _integrator_id(name, formulation):
@@ -523,7 +511,6 @@ def _compile(scene: Scene) -> Model:
         volume_shake=scene.formulation == "continuum",
         parallel=use_parallel(nvert),
     )
-    _check_lungs_integrator(arrays)
     for arr in arrays:
         if isinstance(arr, np.ndarray):
             arr.flags.writeable = False

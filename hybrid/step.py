@@ -180,6 +180,7 @@ class MembraneState(NamedTuple):
 
 def new_state(arrays: MembraneArrays) -> MembraneState:
     n = arrays.vert_rest.shape[0]
+    wall_pos, wall_vel = arrays.lung_wall.copy(), np.zeros_like(arrays.lung_wall)
     return MembraneState(
         vert_pos=arrays.vert_rest.copy(),
         vert_vel=np.zeros((n, 3)),
@@ -194,10 +195,10 @@ def new_state(arrays: MembraneArrays) -> MembraneState:
         status=np.zeros(4, np.int64),
         term_calls=np.zeros(len(TERMS), np.int64),
         lung=_lung_start(arrays),
-        lung_wall_pos=arrays.lung_wall.copy(),
-        lung_wall_vel=np.zeros_like(arrays.lung_wall),
+        lung_wall_pos=wall_pos,
+        lung_wall_vel=wall_vel,
         lung_wall_force=np.zeros_like(arrays.lung_wall),
-        implicit=implicit_work(arrays),
+        implicit=implicit_work(arrays, wall_pos, wall_vel),
     )
 
 

@@ -53,6 +53,7 @@ __all__ = [
     "NLUNG",
     "cavity_volume_rate",
     "add_cavity_pressure",
+    "lung_load",
     "thoracic_cavity",
     "open_edges",
 ]
@@ -80,6 +81,8 @@ L_VOLUME, L_RATE, L_PLEURAL, L_ALVEOLAR, L_AIRWAY = LungSlot
 # the volume sums' origin (3, m: the cavity's rest centroid)
 P_E, P_K1, P_K2, P_RECOIL, P_V0, P_REF = 0, 1, 2, 3, 4, 5
 NPAR = 8
+#: `MembraneArrays.integrator` of implicit Euler (`hybrid.implicit.IMPLICIT_ID`, which checks it)
+IMPLICIT_EULER = 2
 
 
 @kernel(inline="always")
@@ -132,11 +135,13 @@ def cavity_volume_rate(face, ref, pos, vel, wall, wall_vel):
 
 
 @kernel(inline="always")
-def _push(i, nvert, k, gx, gy, gz, vert_force, wall_force):
-    """Add k g to cavity point i's force: the membrane's (added to) or the wall's.
+def _push(i, nvert, k, gx, gy, gz, vert_force, wall_force, to_points):
+    """Add k g to cavity point i's force: the membrane's (added to, if to_points) or the wall's.
     # Model: none   # Data in: i, k, g   # Data out: vert_force (nvert, 3) N, wall_force (nwall, 3) N
     """
     if i < nvert:
+        if not to_points:
+            return
         vert_force[i, 0] += k * gx
         vert_force[i, 1] += k * gy
         vert_force[i, 2] += k * gz
@@ -148,9 +153,10 @@ def _push(i, nvert, k, gx, gy, gz, vert_force, wall_force):
 
 
 @kernel
-def add_cavity_pressure(face, ref, load_pa, pos, wall, vert_force, wall_force):
+def add_cavity_pressure(face, ref, load_pa, pos, wall, vert_force, wall_force, to_points=True):
     """F_i += load grad_i V on the cavity's points: a pressure load_pa (Pa) inside the
-    cavity, positive pushing its surface outward; the wall's forces are set, not added to.
+    cavity, positive pushing its surface outward; the wall's forces are set, not added to;
+    the membrane's points' only if to_points (implicit Euler adds theirs in its solve).
     # Model: face (nf, 3) int64, ref (3,) m   # Data in: load_pa Pa, pos (nvert, 3) m, wall (nwall, 3) m
     # Data out: vert_force (nvert, 3) N (added to), wall_force (nwall, 3) N
     """
@@ -162,9 +168,20 @@ def add_cavity_pressure(face, ref, load_pa, pos, wall, vert_force, wall_force):
         ax, ay, az = _corner(a, nvert, pos, wall, ref)
         bx, by, bz = _corner(b, nvert, pos, wall, ref)
         cx, cy, cz = _corner(c, nvert, pos, wall, ref)
-        _push(a, nvert, k, by * cz - bz * cy, bz * cx - bx * cz, bx * cy - by * cx, vert_force, wall_force)
-        _push(b, nvert, k, cy * az - cz * ay, cz * ax - cx * az, cx * ay - cy * ax, vert_force, wall_force)
-        _push(c, nvert, k, ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx, vert_force, wall_force)
+        _push(a, nvert, k, by * cz - bz * cy, bz * cx - bx * cz, bx * cy - by * cx, vert_force, wall_force, to_points)
+        _push(b, nvert, k, cy * az - cz * ay, cz * ax - cx * az, cx * ay - cy * ax, vert_force, wall_force, to_points)
+        _push(c, nvert, k, ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx, vert_force, wall_force, to_points)
+
+
+@kernel(inline="always")
+def lung_load(par, pao, vol, rate):
+    """The lumped law (module docstring): (P_alv, P_pl + P_L0), the alveolar pressure and the
+    pleural pressure's departure from rest (Pa), at the cavity's volume vol (m^3) and rate
+    (m^3/s), the airway opening at pao (Pa).
+    # Model: par (`lung_par`)   # Data in: pao Pa, vol m^3, rate m^3/s   # Data out: returns (Pa, Pa)
+    """
+    palv = pao - (par[P_K1] + par[P_K2] * abs(rate)) * rate
+    return palv, palv - par[P_E] * (vol - par[P_V0])
 
 
 @kernel(inline="always")
@@ -180,14 +197,14 @@ def lungs_step_force(m, s, c):
     wall = s.lung_wall_pos
     vol, rate = cavity_volume_rate(m.lung_face, ref, s.vert_pos, s.vert_vel, wall, s.lung_wall_vel)
     pao = c.value[m.lung_sched[0], 0] * CMH2O_PA
-    palv = pao - (par[P_K1] + par[P_K2] * abs(rate)) * rate
-    load = palv - par[P_E] * (vol - par[P_V0])  # the pleural pressure's departure from rest
+    palv, load = lung_load(par, pao, vol, rate)  # load: the pleural pressure's departure from rest
     s.lung[L_VOLUME] = vol
     s.lung[L_RATE] = rate
     s.lung[L_PLEURAL] = load - par[P_RECOIL]
     s.lung[L_ALVEOLAR] = palv
     s.lung[L_AIRWAY] = pao
-    add_cavity_pressure(m.lung_face, ref, load, s.vert_pos, wall, s.vert_force, s.lung_wall_force)
+    # implicit Euler adds the membrane points' share in its solve (`hybrid.implicit.implicit_forces`)
+    add_cavity_pressure(m.lung_face, ref, load, s.vert_pos, wall, s.vert_force, s.lung_wall_force, m.integrator != IMPLICIT_EULER)
 
 
 def open_edges(face: np.ndarray) -> list:
