@@ -212,15 +212,11 @@ def _positive(value, name):
 LEVEL_GENERATORS = ("uv_sphere", "ring_sphere", "fibonacci_sphere")
 
 
-#: how far (of the radius) a file mesh's points may be off a sphere for it to refine by
-#: level (a sphere written with 17 digits is on it to about 1e-16; single-precision STL to 1e-7)
-SPHERE_FIT_REL_TOL = 1e-6
-
-
 def _refine_file_mesh(pos, face, level):
-    """A file mesh's faces split into four `level` times, the new points projected onto
-    the sphere through its points (`MeshSpec`)."""
-    from .mesh.refine import fit_sphere, split_faces
+    """A file mesh's faces split into four `level` times, the new points on the surface
+    the file samples: its sphere, or the smooth surface through its points
+    (`hybrid.mesh.refine.refine_file_mesh`, `MeshSpec`)."""
+    from .mesh.refine import refine_file_mesh
 
     npoint = len(pos) + (4**level - 1) * len(face) // 2  # closed: E = 3F/2, F x 4 a level
     if npoint > checks.MAX_POINTS:  # before any array is allocated
@@ -229,14 +225,10 @@ def _refine_file_mesh(pos, face, level):
             f"{len(face) * 4**level} (about {npoint} points); expected at most {checks.MAX_POINTS} points"
         )
     try:
-        ctr, radius = fit_sphere(
-            pos,
-            SPHERE_FIT_REL_TOL,
-            "mesh.level on a file mesh (new points go onto the surface it samples, known for a sphere)",
-        )
+        pos, face, _ = refine_file_mesh(pos, face, level, "mesh.level on a file mesh")
     except MeshError as exc:
-        raise SceneError(f"{exc}; or no mesh.level") from None
-    return split_faces(pos, face, level, center=ctr, radius_m=radius)
+        raise SceneError(str(exc)) from None
+    return pos, face
 
 
 def build_mesh(scene: Scene) -> Mesh:
