@@ -231,8 +231,52 @@ def _refine_file_mesh(pos, face, level):
     return pos, face
 
 
+#: the largest body a scene's membrane may be, across (m): a trunk is about 0.3 m, so a body
+#: larger than this is a mesh drawn in millimetres or centimetres (300 m, 30 m across), or a
+#: radius meant in millimetres, which would run and diverge at once
+MAX_BODY_M = 10.0
+#: a trunk's size across (m), what a refused size is compared with
+TRUNK_M = 0.3
+
+
 def build_mesh(scene: Scene) -> Mesh:
-    """The scene's surface: a given Mesh, a mesh file, or a generator."""
+    """The scene's surface: a given Mesh, a mesh file, or a generator; refused in one line
+    when it is more than MAX_BODY_M across (`_check_body_size`)."""
+    mesh = _build_mesh(scene)
+    _check_body_size(mesh, scene.mesh)
+    return mesh
+
+
+def _check_body_size(mesh: Mesh, spec) -> None:
+    """SceneError naming the culprit (the file and its unit_scale, radius_m, or the Mesh
+    given) and a scale that would make the body a trunk's size, when the body is more
+    than MAX_BODY_M across (the largest side of its bounding box)."""
+    across = float(np.ptp(mesh.vert_pos, axis=0).max())
+    if across <= MAX_BODY_M:
+        return
+    # the unit the numbers were likely meant in: the one that makes the body closest to a trunk
+    unit, per_m = min(
+        (("millimetres", 1e-3), ("centimetres", 1e-2)), key=lambda u: abs(math.log(across * u[1] / TRUNK_M))
+    )
+    plausible = f"expected a body at most {MAX_BODY_M:g} m across (a trunk is about {TRUNK_M:g} m)"
+    if isinstance(spec, MeshSpec) and spec.path is not None:
+        scale = spec.unit_scale
+        raise SceneError(
+            f"mesh file {str(spec.path)!r}: a body {across:.4g} m across at mesh.unit_scale = {scale:g} m per file "
+            f"unit; {plausible}; a file in {unit}? set mesh.unit_scale = {scale * per_m:g} ({across * per_m:.3g} m)"
+        )
+    if isinstance(spec, MeshSpec):
+        raise SceneError(
+            f"mesh.radius_m: a body {across:.4g} m across (radius_m = {spec.radius_m:g}); {plausible}; a radius in "
+            f"{unit}? set mesh.radius_m = {spec.radius_m * per_m:g}"
+        )
+    raise SceneError(
+        f"mesh: the Mesh {mesh.name!r} is a body {across:.4g} m across; {plausible}; positions in {unit}? "
+        f"scale its vert_pos by {per_m:g}"
+    )
+
+
+def _build_mesh(scene: Scene) -> Mesh:
     from . import mesh as _mesh
 
     spec = scene.mesh

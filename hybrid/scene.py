@@ -107,7 +107,9 @@ class MeshSpec:
     Loop limit surface that interpolates them, `hybrid.mesh.refine`), so that
     the file's points keep their places and numbers at every level and the
     levels sample one surface ever more finely. A level of an open surface off
-    a sphere is refused.
+    a sphere is refused. A body more than 10 m across (`hybrid.model.MAX_BODY_M`:
+    a file drawn in millimetres, a radius meant in them) is refused, naming the
+    scale that would make it a trunk's.
     """
 
     generator: str | None = param("choice", "uv_sphere", choices=MESH_GENERATORS)
