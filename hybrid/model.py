@@ -212,15 +212,11 @@ def _positive(value, name):
 LEVEL_GENERATORS = ("uv_sphere", "ring_sphere", "fibonacci_sphere")
 
 
-#: how far (of the radius) a file mesh's points may be off a sphere for it to refine by
-#: level (a sphere written with 17 digits is on it to about 1e-16; single-precision STL to 1e-7)
-SPHERE_FIT_REL_TOL = 1e-6
-
-
 def _refine_file_mesh(pos, face, level):
-    """A file mesh's faces split into four `level` times, the new points projected onto
-    the sphere through its points (`MeshSpec`)."""
-    from .mesh.refine import fit_sphere, split_faces
+    """A file mesh's faces split into four `level` times, the new points on the surface
+    the file samples: its sphere, or the smooth surface through its points
+    (`hybrid.mesh.refine.refine_file_mesh`, `MeshSpec`)."""
+    from .mesh.refine import refine_file_mesh
 
     npoint = len(pos) + (4**level - 1) * len(face) // 2  # closed: E = 3F/2, F x 4 a level
     if npoint > checks.MAX_POINTS:  # before any array is allocated
@@ -229,18 +225,58 @@ def _refine_file_mesh(pos, face, level):
             f"{len(face) * 4**level} (about {npoint} points); expected at most {checks.MAX_POINTS} points"
         )
     try:
-        ctr, radius = fit_sphere(
-            pos,
-            SPHERE_FIT_REL_TOL,
-            "mesh.level on a file mesh (new points go onto the surface it samples, known for a sphere)",
-        )
+        pos, face, _ = refine_file_mesh(pos, face, level, "mesh.level on a file mesh")
     except MeshError as exc:
-        raise SceneError(f"{exc}; or no mesh.level") from None
-    return split_faces(pos, face, level, center=ctr, radius_m=radius)
+        raise SceneError(str(exc)) from None
+    return pos, face
+
+
+#: the largest body a scene's membrane may be, across (m): a trunk is about 0.3 m, so a body
+#: larger than this is a mesh drawn in millimetres or centimetres (300 m, 30 m across), or a
+#: radius meant in millimetres, which would run and diverge at once
+MAX_BODY_M = 10.0
+#: a trunk's size across (m), what a refused size is compared with
+TRUNK_M = 0.3
 
 
 def build_mesh(scene: Scene) -> Mesh:
-    """The scene's surface: a given Mesh, a mesh file, or a generator."""
+    """The scene's surface: a given Mesh, a mesh file, or a generator; refused in one line
+    when it is more than MAX_BODY_M across (`_check_body_size`)."""
+    mesh = _build_mesh(scene)
+    _check_body_size(mesh, scene.mesh)
+    return mesh
+
+
+def _check_body_size(mesh: Mesh, spec) -> None:
+    """SceneError naming the culprit (the file and its unit_scale, radius_m, or the Mesh
+    given) and a scale that would make the body a trunk's size, when the body is more
+    than MAX_BODY_M across (the largest side of its bounding box)."""
+    across = float(np.ptp(mesh.vert_pos, axis=0).max())
+    if across <= MAX_BODY_M:
+        return
+    # the unit the numbers were likely meant in: the one that makes the body closest to a trunk
+    unit, per_m = min(
+        (("millimetres", 1e-3), ("centimetres", 1e-2)), key=lambda u: abs(math.log(across * u[1] / TRUNK_M))
+    )
+    plausible = f"expected a body at most {MAX_BODY_M:g} m across (a trunk is about {TRUNK_M:g} m)"
+    if isinstance(spec, MeshSpec) and spec.path is not None:
+        scale = spec.unit_scale
+        raise SceneError(
+            f"mesh file {str(spec.path)!r}: a body {across:.4g} m across at mesh.unit_scale = {scale:g} m per file "
+            f"unit; {plausible}; a file in {unit}? set mesh.unit_scale = {scale * per_m:g} ({across * per_m:.3g} m)"
+        )
+    if isinstance(spec, MeshSpec):
+        raise SceneError(
+            f"mesh.radius_m: a body {across:.4g} m across (radius_m = {spec.radius_m:g}); {plausible}; a radius in "
+            f"{unit}? set mesh.radius_m = {spec.radius_m * per_m:g}"
+        )
+    raise SceneError(
+        f"mesh: the Mesh {mesh.name!r} is a body {across:.4g} m across; {plausible}; positions in {unit}? "
+        f"scale its vert_pos by {per_m:g}"
+    )
+
+
+def _build_mesh(scene: Scene) -> Mesh:
     from . import mesh as _mesh
 
     spec = scene.mesh

@@ -103,10 +103,15 @@ class MeshSpec:
     x-z plane. A ring sphere's circles too small to hold them (near the poles,
     and every circle of the coarsest levels) keep their own points.
     On a file mesh, `level` K splits every face into four K times (about 4^K
-    times the points, the spacing halved a level), the new points projected
-    onto the surface the file samples; that surface is known for a sphere (the
-    one through the file's points), so a level is refused for a file whose
-    points are off a sphere.
+    times the points, the spacing halved a level), the new points on the
+    surface the file samples: the sphere through the file's points when they
+    are on one; else, for a closed surface, the smooth surface through them (the
+    Loop limit surface that interpolates them, `hybrid.mesh.refine`), so that
+    the file's points keep their places and numbers at every level and the
+    levels sample one surface ever more finely. A level of an open surface off
+    a sphere is refused. A body more than 10 m across (`hybrid.model.MAX_BODY_M`:
+    a file drawn in millimetres, a radius meant in them) is refused, naming the
+    scale that would make it a trunk's.
     """
 
     generator: str | None = param("choice", "uv_sphere", choices=MESH_GENERATORS)

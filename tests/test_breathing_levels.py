@@ -169,16 +169,27 @@ def test_a_sphere_read_from_a_file_refines_onto_its_sphere(tmp_path):
     assert hybrid.mesh.volume(pos, face) == pytest.approx(coarse.volume(), rel=1e-12)
 
 
-def test_a_level_of_a_file_mesh_off_a_sphere_is_refused(tmp_path):
+def test_a_level_of_a_closed_file_mesh_off_a_sphere_refines_through_its_points(tmp_path):
+    """An ellipsoid (closed, off any sphere) refines by level toward the smooth surface
+    through its points (`hybrid.mesh.refine.refine_smooth`): the file's points stay, numbered
+    as in the file; an open surface off a sphere is refused in one line."""
     path = tmp_path / "ellipsoid.obj"
     ico = hybrid.mesh.icosphere(2, 0.1)
     hybrid.mesh.Mesh.from_arrays(ico.vert_pos * [1.0, 1.0, 1.3], ico.face_vert).save(path)
     sc = hybrid.Scene(
         mesh=hybrid.MeshSpec(path=str(path), level=1), forces=(hybrid.Membrane(youngs_modulus_n_per_m=100.0),)
     )
-    with pytest.raises(SceneError, match=r"mesh.level on a file mesh.*off the best-fitting sphere.*or no mesh.level"):
-        compile_scene(sc)
+    m = compile_scene(sc)
+    assert m.nvert == ico.nvert + 3 * ico.nface // 2 and m.mesh.name == "ellipsoid_level1"
+    np.testing.assert_array_equal(m.mesh.vert_pos[: ico.nvert], ico.vert_pos * [1.0, 1.0, 1.3])
     assert compile_scene(dataclasses.replace(sc, mesh=hybrid.MeshSpec(path=str(path)))).nvert == ico.nvert
+    lower = ico.vert_pos[ico.face_vert].mean(axis=1)[:, 2] < 0.05  # the ellipsoid without its top
+    used = np.unique(ico.face_vert[lower])
+    index = np.full(ico.nvert, -1)
+    index[used] = np.arange(len(used))
+    hybrid.mesh.Mesh.from_arrays(ico.vert_pos[used] * [1.0, 1.0, 1.3], index[ico.face_vert[lower]]).save(path)
+    with pytest.raises(SceneError, match=r"mesh.level on a file mesh: expected a closed surface.*open surface"):
+        compile_scene(sc)
 
 
 def test_the_uv_and_ring_families_close_in_on_each_other():

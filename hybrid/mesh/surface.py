@@ -302,6 +302,39 @@ class Mesh:
             f"(used by one face only), e.g. {listed}; expected every edge shared by two faces"
         )
 
+    def components(self) -> list[np.ndarray]:
+        """The surface's connected pieces (points joined by edges), each as its sorted
+        point indices, the piece of point 0 first (then by their first point)."""
+        from scipy.sparse import coo_matrix
+        from scipy.sparse.csgraph import connected_components
+
+        e = self.edge_vert
+        graph = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(self.nvert, self.nvert))
+        count, label = connected_components(graph, directed=False)
+        if count == 1:
+            return [np.arange(self.nvert)]
+        order = np.argsort(label, kind="stable")
+        return sorted(np.split(order, np.cumsum(np.bincount(label))[:-1]), key=lambda part: part[0])
+
+    def require_one_piece(self, why: str) -> None:
+        """Raise `MeshError` if the surface is several disjoint pieces, naming each (its
+        points, where it is and, closed, its volume) and `why`."""
+        parts = self.components()
+        if len(parts) == 1:
+            return
+
+        def describe(part):
+            face = self.face_vert[np.all(np.isin(self.face_vert, part), axis=1)]
+            c = self.vert_pos[part].mean(axis=0)
+            c[np.abs(c) < 1e-9 * np.ptp(self.vert_pos[part], axis=0).max()] = 0.0  # round-off of a zero
+            centre = ", ".join(f"{x:.3g}" for x in c)
+            return f"{len(part)} points about ({centre}) m enclosing {volume(self.vert_pos, face) * 1e3:.3g} L"
+
+        raise MeshError(
+            f"{why}; mesh {self.name!r} is {len(parts)} disjoint surfaces: {few(parts, describe)}; expected one "
+            f"connected surface (give each body its own mesh and scene)"
+        )
+
     def require_no_self_crossing(self, why: str) -> None:
         """Raise `MeshError` if faces of the surface pass through (or touch) each
         other, naming the first pairs of faces, their count and `why`."""

@@ -51,7 +51,10 @@ def build_study_parser() -> argparse.ArgumentParser:
         s = sub.add_parser(name, help=help_)
         if name == "convergence":
             s.add_argument(
-                "scene", nargs="?", default="breathing", help="a scene whose mesh refines by level (default: breathing)"
+                "scene",
+                nargs="?",
+                default="breathing",
+                help="a scene whose mesh refines by level: a generated sphere or a mesh file (default: breathing)",
             )
         s.add_argument("--out", required=True, metavar="DIR", help="output folder (created)")
         s.add_argument("--small", action="store_true", help="a small version (seconds; for tests)")
@@ -79,8 +82,8 @@ def build_study_parser() -> argparse.ArgumentParser:
                 "--metric",
                 action="append",
                 metavar="NAME",
-                help="a trace series whose largest value is studied (repeatable; default: "
-                "rib_lift_mm, apex_descent_mm, pressure_pa, swept_volume_ml)",
+                help="a trace series whose largest value is studied (repeatable; default: those of "
+                "rib_lift_mm, apex_descent_mm, pressure_pa, swept_volume_ml the scene has)",
             )
             s.add_argument(
                 "--levels",
@@ -133,12 +136,11 @@ def _levels(text):
 
 def _convergence(args) -> None:
     from . import convergence
-    from .convergence import DEFAULT_METRICS
 
     r = convergence.run(
         args.out,
         scene=args.scene,
-        metrics=tuple(args.metric or DEFAULT_METRICS),
+        metrics=tuple(args.metric) if args.metric else None,
         small=args.small,
         levels=_levels(args.levels),
         nstep=args.steps,

@@ -6,7 +6,9 @@ levels x time steps, their limits, and the cheapest run for a target accuracy.
 
 Grid       mesh levels K (`mesh.level`: about 80 x 2^K points of a generator, the
            spacing divided by sqrt(2) a level; on a mesh read from a file, its faces
-           split into four K times, the spacing halved a level) x time steps dt0(K) / 2^j, j = 0..NSTEP-1, where
+           split into four K times, the spacing halved a level, the new points on the
+           sphere or the smooth closed surface the file's points sample,
+           `hybrid.mesh.refine`) x time steps dt0(K) / 2^j, j = 0..NSTEP-1, where
            dt0(K) is the scene's own step at that level (`dt_s = "auto"`: half
            the stable-step estimate, rounded down; a numeric dt_s is kept where
            it is below that; with `--integrator implicit_euler`, its own step:
@@ -14,8 +16,9 @@ Grid       mesh levels K (`mesh.level`: about 80 x 2^K points of a generator, th
            independent (`hybrid.sweep`: the local cores or a Dask cluster) and
            simulates `duration_s` (default 4 s, one breath of the packaged scenes).
 Metrics    each the largest value of a trace series over the run (`hybrid.run`,
-           docs/metrics.md): for the breathing scene the rib lift, apex descent,
-           peak pressure and the diaphragm's swept volume.
+           docs/metrics.md): by default those of the rib lift, apex descent, peak
+           pressure and the diaphragm's swept volume that the scene has (all four on
+           the breathing trunk, on any mesh).
 Time       at each level, Richardson extrapolation of the three steps (two when
            NSTEP = 2: first order, the order of both integrators) gives the
            level's value at dt -> 0 and the observed order in time.
@@ -104,23 +107,27 @@ def base_step(scene, overrides, level) -> tuple[float, int]:
     return min(m.dt_s, auto_dt(m.dt_stable_s)), m.nvert
 
 
-def _check_metrics(scene, overrides, level, metrics) -> None:
+def _check_metrics(scene, overrides, level, metrics) -> tuple:
     """The metrics are series the scene reports (`hybrid.run.scene_parts`), checked on
-    one step of the coarsest level, so that a wrong --metric is refused at once."""
+    one step of the coarsest level, so that a wrong --metric is refused at once;
+    `metrics` None: those of DEFAULT_METRICS the scene has. Returns the metrics."""
     from ..run import METRIC_KEYS
     from ..run import run as run_scene
     from ..simulation import Simulation
 
-    unknown = [k for k in metrics if k not in METRIC_KEYS]
+    unknown = [k for k in metrics or () if k not in METRIC_KEYS]
     if unknown:
         raise HybridError(f"--metric: expected series among {list(METRIC_KEYS)}, received {unknown}")
     model = _model(scene, overrides, level, None)
     table = run_scene(Simulation(model), model.dt_s)["summary"]["metrics"]
+    if metrics is None:  # apex_descent_mm: every membrane has a highest point
+        return tuple(k for k in DEFAULT_METRICS if k in table)
     missing = [k for k in metrics if k not in table]
     if missing:
         raise HybridError(
             f"--metric: scene {model.scene.name!r} has no series {missing}; expected some of {sorted(table)}"
         )
+    return tuple(metrics)
 
 
 def simulate(scene, overrides, level, dt, duration_s, metrics, repeats=REPEATS) -> dict:
@@ -338,7 +345,7 @@ def run(
     out_dir,
     *,
     scene: str = "breathing",
-    metrics=DEFAULT_METRICS,
+    metrics=None,
     small: bool = False,
     levels=None,
     nstep: int | None = None,
@@ -347,8 +354,9 @@ def run(
     scheduler: str | None = None,
     repeats: int = REPEATS,
 ) -> dict:
-    """The study (module docstring); returns what convergence.json holds. `repeats`: the
-    most runs of a short run whose least CPU time is kept (1: its cost timed once)."""
+    """The study (module docstring); returns what convergence.json holds. `metrics`: trace
+    series (None: those of DEFAULT_METRICS the scene has). `repeats`: the most runs of a
+    short run whose least CPU time is kept (1: its cost timed once)."""
     from ..resolve import resolve_scene
 
     t0 = time.perf_counter()
@@ -369,8 +377,8 @@ def run(
             f"received levels {list(levels)} and {nstep} step(s)"
         )
     duration = float(size["duration_s"] or sc.duration_s) if duration_s is None else float(duration_s)
-    metrics = tuple(metrics)
-    _check_metrics(scene, overrides, levels[0], metrics)  # before any run of the study
+    # before any run of the study
+    metrics = _check_metrics(scene, overrides, levels[0], None if metrics is None else tuple(metrics))
     grid = []
     for level in levels:
         dt0, _ = base_step(scene, overrides, level)

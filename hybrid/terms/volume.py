@@ -82,6 +82,7 @@ class SoftVolume(Term):
         else:
             b.out["soft_bulk"] = self.value("bulk_modulus_pa", what)
         b.mesh.require_closed(f"{what} (compressible volume) needs a closed surface")
+        b.mesh.require_one_piece(f"{what} (compressible volume) needs a surface bounding one region")
         b.mesh.require_no_self_crossing(f"{what} (compressible volume) needs a surface bounding one region")
         b.out["vol0"] = float(b.mesh.volume())
         if self.bulk_modulus_pa is not None:
@@ -113,11 +114,12 @@ class Pressure(Term):
 
 @constraint("volume")
 class Volume(Term):
-    """The exact constant-volume constraint (paper 4.3); needs a closed surface."""
+    """The exact constant-volume constraint (paper 4.3); needs a closed surface in one piece."""
 
     def compile(self, b, what):
         super().compile(b, what)
         b.mesh.require_closed(f"{what}: a constant-volume constraint needs a closed surface")
+        b.mesh.require_one_piece(f"{what}: a constant-volume constraint needs a surface bounding one region")
         b.mesh.require_no_self_crossing(f"{what}: a constant-volume constraint needs a surface bounding one region")
         b.out["vol0"] = float(b.mesh.volume())
         b.rows["volume"].append(what)
