@@ -65,8 +65,19 @@ import numpy as np
 from .implicit_matrix import NewtonMatrix, assemble, cg_update, dot, matrix_product, newton_matrix, sgs_sweep, split_cg
 from .kernel import CHUNK_VERTS, kernel
 from .terms import Damping, Lungs, Membrane, MuscleFibres, PassiveFibres, Volume
-from .terms.lungs import CMH2O_PA, IMPLICIT_EULER, P_E, P_K1, P_K2, P_REF, P_V0, add_cavity_pressure, cavity_volume_rate, lung_load
 from .terms.fibres import add_muscle_fibres
+from .terms.lungs import (
+    CMH2O_PA,
+    IMPLICIT_EULER,
+    P_E,
+    P_K1,
+    P_K2,
+    P_REF,
+    P_V0,
+    add_cavity_pressure,
+    cavity_volume_rate,
+    lung_load,
+)
 from .terms.membrane import add_membrane_serial, membrane_energy
 from .terms.passive_fibres import add_passive_fibres
 from .terms.tangents import (

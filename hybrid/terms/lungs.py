@@ -204,7 +204,9 @@ def lungs_step_force(m, s, c):
     s.lung[L_ALVEOLAR] = palv
     s.lung[L_AIRWAY] = pao
     # implicit Euler adds the membrane points' share in its solve (`hybrid.implicit.implicit_forces`)
-    add_cavity_pressure(m.lung_face, ref, load, s.vert_pos, wall, s.vert_force, s.lung_wall_force, m.integrator != IMPLICIT_EULER)
+    add_cavity_pressure(
+        m.lung_face, ref, load, s.vert_pos, wall, s.vert_force, s.lung_wall_force, m.integrator != IMPLICIT_EULER
+    )
 
 
 def open_edges(face: np.ndarray) -> list:
