@@ -75,7 +75,7 @@ TRACE_KEYS = (
     "apex_descent_mm",  # caudal (-z) displacement of the apex
     "volume_rel_error",  # |V - V0| / V0 under the exact volume constraint
     "pressure_pa",  # gauge pressure (scenes with a volume term)
-    "muscle_n_per_m",  # the first muscle's stiffness (scenes with a muscle)
+    "muscle_n_per_m",  # the first muscle term's stiffness or fibre tension (scenes with a muscle)
     "kinetic_energy_j",
     "volume_rel_change",  # |V - V0| / V0 whatever keeps the volume (closed surfaces)
     "swept_volume_ml",  # volume the region named "diaphragm" swept inward from rest (scenes with one)

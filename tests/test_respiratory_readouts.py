@@ -170,3 +170,60 @@ def test_the_metrics_page_defines_every_key_of_a_run_with_lungs(sinusoidal_run):
     _, res = sinusoidal_run
     missing = sorted(k for k in set(res["summary"]) | set(res["summary"]["metrics"]) if f"`{k}`" not in text)
     assert not missing, f"docs/metrics.md does not define {missing}"
+
+
+def _labels(fig) -> list[str]:
+    return [ax.get_ylabel() for ax in fig.axes] + [ax.get_title() for ax in fig.axes]
+
+
+def test_the_figure_of_a_run_with_lungs_has_its_series_and_both_diagrams(sinusoidal_run):
+    """The lungs' panels (volume, flow, Poes, the pressure changes) and, under them, the
+    Campbell diagram (Poes against volume, the frames' own pairs) and the Konno-Mead
+    diagram, whose rib cage (lung change minus the dome's swept volume) is 0 where the
+    cage is rigid: the dome's swept volume is all the lungs got (to round-off of the
+    volumes, 1e-16 of the 6 L cavity per sum)."""
+    import matplotlib.pyplot as plt
+
+    from hybrid.outputs import trace_figure
+
+    _, res = sinusoidal_run
+    fig = trace_figure(res["trace"], title="prescribed dome")
+    try:
+        labels = _labels(fig)
+        for words in ("lung volume\nabove rest (L)", "flow in (L/s)", "pleural pressure,\nPoes (cmH2O)"):
+            assert words in labels
+        assert "Campbell diagram" in labels and "Konno-Mead diagram" in labels
+        assert not any("muscle" in lab for lab in labels)  # no muscle in this scene
+        tr = res["trace"].arrays()
+        campbell = next(ax for ax in fig.axes if ax.get_title() == "Campbell diagram")
+        x, y = campbell.lines[0].get_data()
+        assert np.array_equal(x, tr["pleural_pressure_cmh2o"]) and np.array_equal(y, tr["lung_volume_change_l"])
+        # the static recoil line: P_pl = -P_L0 - E x, through the rest point
+        line = campbell.lines[1].get_data()
+        assert np.allclose(line[0], -5.0 - 5.0 * np.asarray(line[1]), rtol=0, atol=1e-12)
+        konno = next(ax for ax in fig.axes if ax.get_title() == "Konno-Mead diagram")
+        abdomen, rib = konno.lines[0].get_data()
+        assert np.array_equal(abdomen, tr["swept_volume_ml"] * 1e-3)
+        assert np.ptp(abdomen) > 0.1 and np.max(np.abs(rib)) < 1e-12
+    finally:
+        plt.close(fig)
+
+
+@pytest.mark.parametrize(
+    "scene, label", [("breathing", "muscle fibre tension (N/m)"), ("breathing_paper", "muscle stiffness (N/m)")]
+)
+def test_a_scene_without_lungs_draws_none_and_its_muscle_panel_says_what_it_plots(scene, label):
+    import matplotlib.pyplot as plt
+
+    from hybrid.outputs import trace_figure
+
+    sim = hybrid.load(hybrid.load_scene(scene, overrides=["mesh.level=0"]))
+    res = hybrid.run(sim, 0.05)
+    fig = trace_figure(res["trace"])
+    try:
+        labels = _labels(fig)
+        assert label in labels
+        assert not any(w in lab for lab in labels for w in ("lung", "flow", "Poes", "Campbell", "Konno", "cmH2O"))
+        assert len(fig.axes) == 5  # rib lift, apex descent, volume error, pressure, muscle
+    finally:
+        plt.close(fig)
