@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import HybridError
+from .terms import Lungs
 from .terms.lungs import CMH2O_PA, P_E, P_K1, P_K2
 
 __all__ = [
@@ -25,6 +26,7 @@ __all__ = [
     "LAB_CSV_NAME",
     "LAB_COLUMNS",
     "lab_rate",
+    "lab_export_rate",
     "lab_table",
     "write_lab_csv",
 ]
@@ -133,20 +135,38 @@ LAB_COLUMNS = ("time", "flow", "volume", "poes", "pgas", "pdi")
 LAB_SERIES = ("t_s", "flow_l_per_s", "lung_volume_change_l", "pleural_pressure_cmh2o", "pressure_pa")
 
 
-def lab_rate(rate_hz, frame_dt_s: float, name: str = "--respiratory-csv") -> float:
+def lab_rate(rate_hz, frame_dt_s: float, name: str = "--respiratory-csv", shown=None) -> float:
     """The lab export's sampling rate (Hz), checked: a finite number > 0, at most the
     run's frame rate 1 / frame_dt_s (linear interpolation between frames makes no
-    finer signal); a HybridError in one line otherwise, naming `name`."""
+    finer signal); a HybridError in one line otherwise, naming `name` and what was
+    received (`shown`, the text it came from, else the value)."""
     ok = isinstance(rate_hz, (int, float, np.integer, np.floating)) and not isinstance(rate_hz, bool)
     frame_hz = 1.0 / frame_dt_s
+    got = repr(rate_hz) if shown is None else repr(shown)
     if not (ok and math.isfinite(rate_hz) and rate_hz > 0):
-        raise HybridError(f"{name}: expected a sampling rate > 0 Hz, received {rate_hz!r}")
+        raise HybridError(f"{name}: expected a sampling rate > 0 Hz, received {got}")
     if rate_hz > frame_hz * (1 + 1e-9):
         raise HybridError(
             f"{name}: expected a sampling rate of at most the run's frame rate, {frame_hz:.6g} Hz "
-            f"(a frame every {frame_dt_s:.6g} s), received {rate_hz:g} Hz"
+            f"(a frame every {frame_dt_s:.6g} s), received {got} Hz"
         )
     return float(rate_hz)
+
+
+def lab_export_rate(text, model, frame_dt_s: float, name: str = "--respiratory-csv") -> float:
+    """The lab export's rate for a run of `model` whose regular frames are frame_dt_s
+    apart (`hybrid.run.frame_interval_s`), from the command line's text: a scene without
+    lungs is refused, then the rate as `lab_rate` checks it; one line each."""
+    if not model.arrays.term_on[Lungs.id]:
+        raise HybridError(
+            f'{name}: expected a scene with lungs (a force term of type "lungs"), received scene '
+            f"{model.scene.name!r}, which has none"
+        )
+    try:
+        rate = float(text)
+    except (TypeError, ValueError):
+        raise HybridError(f"{name}: expected a sampling rate > 0 Hz, received {text!r}") from None
+    return lab_rate(rate, frame_dt_s, name, shown=text)
 
 
 def lab_table(series: dict, rate_hz: float) -> np.ndarray:
@@ -177,7 +197,7 @@ def lab_table(series: dict, rate_hz: float) -> np.ndarray:
 def write_lab_csv(trace, folder: Path, rate_hz: float) -> Path:
     """`LAB_CSV_NAME` in `folder` (replaced whole, never through a link) from the run's
     `hybrid.run.Trace` at `rate_hz` (`lab_table`): a header row of `LAB_COLUMNS`, then a
-    row per sample, 9 significant digits (respmech reads it with its columns time 1,
+    row per sample, the time to 12 significant digits, the rest to 9 (respmech reads it with its columns time 1,
     flow 2, volume 3, poes 4, pgas 5, pdi 6, emg [], sampling frequency rate_hz)."""
     from .outputs import replaced
 
@@ -186,5 +206,5 @@ def write_lab_csv(trace, folder: Path, rate_hz: float) -> Path:
     with replaced(path, "w", encoding="utf-8", newline="") as f:
         f.write(",".join(LAB_COLUMNS) + "\n")
         for lo in range(0, len(table), 65536):
-            np.savetxt(f, table[lo : lo + 65536], fmt="%.9g", delimiter=",")
+            np.savetxt(f, table[lo : lo + 65536], fmt=["%.12g"] + ["%.9g"] * 5, delimiter=",")
     return path

@@ -57,6 +57,7 @@ __all__ = [
     "FolderLock",
     "default_out",
     "run_steps",
+    "frame_interval_s",
     "out_folder",
     "claim_folder",
     "holds_run",
@@ -391,6 +392,23 @@ FRAMES_PER_CALL = 100
 MAX_STEPS_PER_CALL = 100_000
 
 
+#: the runner's frame interval (s) unless asked otherwise (`run`'s `frame_dt_s`)
+FRAME_DT_S = 0.01
+
+
+def _frame_steps(frame_dt_s: float, dt_s: float) -> int:
+    """Steps between two of the runner's regular frames: the whole number nearest
+    frame_dt_s / dt_s, at least 1."""
+    return max(1, int(round(frame_dt_s / dt_s)))
+
+
+def frame_interval_s(dt_s: float, frame_dt_s: float = FRAME_DT_S) -> float:
+    """The interval (s) of a run's regular frames at the step dt_s: a whole number of
+    steps nearest frame_dt_s, at most `MAX_STEPS_PER_CALL` (an observer's `every_steps`
+    and the run's end add frames between them)."""
+    return min(_frame_steps(frame_dt_s, dt_s), MAX_STEPS_PER_CALL) * dt_s
+
+
 def _stop_batches(nstep: int, periods, extra, size: int):
     """The step indices where frames are taken, in increasing batches of at most
     `size`: every multiple of each of `periods` (steps) up to `nstep`, and `extra`
@@ -418,7 +436,7 @@ def run(
     sim: Simulation,
     duration_s: float,
     *,
-    frame_dt_s: float = 0.01,
+    frame_dt_s: float = FRAME_DT_S,
     progress: bool = False,
     observers=(),
     trace_spill=None,
@@ -461,7 +479,7 @@ def run(
     model = sim.model
     h = model.dt_s
     nstep = run_steps(duration_s, h, name="duration_s")
-    frame_steps = max(1, int(round(frame_dt_s / h)))
+    frame_steps = _frame_steps(frame_dt_s, h)
     periods = sorted(
         {min(frame_steps, MAX_STEPS_PER_CALL)}
         | {int(o.every_steps) for o in observers if getattr(o, "every_steps", None)}

@@ -227,3 +227,96 @@ def test_a_scene_without_lungs_draws_none_and_its_muscle_panel_says_what_it_plot
         assert len(fig.axes) == 5  # rib lift, apex descent, volume error, pressure, muscle
     finally:
         plt.close(fig)
+
+
+LUNGS_TOML = """
+[[forces]]
+type = "lungs"
+wall_height_m = 0.2
+lung_compliance_l_per_cmh2o = 0.2
+airway_resistance_cmh2o_s_per_l = 2.0
+"""
+
+
+@pytest.fixture(scope="module")
+def lungs_toml(tmp_path_factory):
+    """The breathing trunk with lungs as a scene file (the packaged one, a lungs term added)."""
+    from hybrid.resolve import resolve_scene
+    from hybrid.scenefile import scene_to_toml
+
+    path = tmp_path_factory.mktemp("scene") / "breathing_lungs.toml"
+    path.write_text(scene_to_toml(resolve_scene("breathing")) + LUNGS_TOML, encoding="utf-8")
+    return path
+
+
+def test_the_lab_export_reads_back_as_the_trace_resampled(lungs_toml, tmp_path):
+    """`hybrid run --respiratory-csv 30` writes respiratory.csv beside the summary: respmech's
+    columns, a row every 1/30 s from 0 to the end, each the trace linearly interpolated
+    (the same run from Python: frame by frame with the loads, as the command line steps,
+    gives the trace to the bit), to the file's 9 significant digits (12 for the time)."""
+    from hybrid.cli import main
+    from hybrid.respiratory import LAB_COLUMNS
+
+    out = tmp_path / "run"
+    argv = [str(lungs_toml), "--set", "mesh.level=0", "--duration", "1.5", "--out", str(out), "--no-record"]
+    assert main(["run", *argv, "--respiratory-csv", "30"]) == 0
+    with open(out / "respiratory.csv", encoding="utf-8") as f:
+        assert f.readline().strip() == ",".join(LAB_COLUMNS) == "time,flow,volume,poes,pgas,pdi"
+    got = np.loadtxt(out / "respiratory.csv", delimiter=",", skiprows=1)
+    assert got.shape == (46, 6)  # 0 to 1.5 s at 30 Hz
+    assert np.allclose(got[:, 0], np.arange(46) / 30, rtol=0, atol=1e-11)  # %.12g of at most 1.5 s
+    sim = hybrid.load(hybrid.load_scene(str(lungs_toml), overrides=["mesh.level=0"]))
+    tr = hybrid.run(sim, 1.5, loads=True)["trace"].arrays()
+    t = got[:, 0]
+
+    def at(key):
+        return np.interp(t, tr["t_s"], tr[key])
+
+    pgas = at("pressure_pa") / CMH2O_PA
+    want = {
+        "flow": -at("flow_l_per_s"),  # inspiration negative (respmech's default)
+        "volume": at("lung_volume_change_l"),
+        "poes": at("pleural_pressure_cmh2o"),
+        "pgas": pgas,
+        "pdi": pgas - at("pleural_pressure_cmh2o"),
+    }
+    for j, key in enumerate(LAB_COLUMNS[1:], start=1):
+        scale = np.abs(want[key]).max()
+        assert np.allclose(got[:, j], want[key], rtol=1e-8, atol=1e-9 * scale), key  # %.9g
+    assert np.max(got[:, 2]) > 0.03 and np.min(got[:, 1]) < -0.03  # it breathed in: volume up, flow negative
+    # Pdi's change from its resting value (the lungs' recoil, 5 cmH2O) is the trace's Pdi change
+    pdi_change = at("transdiaphragmatic_pressure_change_cmh2o")
+    assert np.allclose(got[:, 5] - 5.0, pdi_change, rtol=0, atol=1e-8 * np.abs(got[:, 5]).max())
+
+
+@pytest.mark.parametrize(
+    "rate, words",
+    [
+        ("0", "expected a sampling rate > 0 Hz, received '0'"),
+        ("-2", "expected a sampling rate > 0 Hz, received '-2'"),
+        ("nan", "expected a sampling rate > 0 Hz, received 'nan'"),
+        ("fast", "expected a sampling rate > 0 Hz, received 'fast'"),
+        (
+            "100.5",
+            "expected a sampling rate of at most the run's frame rate, 100 Hz (a frame every 0.01 s), received '100.5' Hz",
+        ),
+    ],
+)
+def test_a_bad_lab_export_rate_is_refused_in_one_line_before_the_run(lungs_toml, tmp_path, capsys, rate, words):
+    from hybrid.cli import main
+
+    out = tmp_path / "run"
+    assert main(["run", str(lungs_toml), "--set", "mesh.level=0", "--out", str(out), "--respiratory-csv", rate]) == 2
+    err = capsys.readouterr().err
+    assert f"--respiratory-csv: {words}" in err and err.count("\n") == 1 and "Traceback" not in err
+    assert not out.exists()  # refused before the run's folder was made
+
+
+def test_the_lab_export_of_a_scene_without_lungs_is_refused_in_one_line(tmp_path, capsys):
+    from hybrid.cli import main
+
+    out = tmp_path / "run"
+    assert main(["run", "breathing", "--set", "mesh.level=0", "--out", str(out), "--respiratory-csv", "50"]) == 2
+    err = capsys.readouterr().err
+    assert "--respiratory-csv: expected a scene with lungs" in err and "'breathing', which has none" in err
+    assert err.count("\n") == 1 and not out.exists()
