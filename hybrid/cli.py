@@ -207,6 +207,10 @@ def _metrics_line(s: dict) -> str:
     words.append(f"apex descent {a['min']:.2f} to {a['max']:.2f} mm")
     if "pressure_pa" in m:
         words.append(f"pressure {m['pressure_pa']['min']:.0f} to {m['pressure_pa']['max']:.0f} Pa")
+    if "tidal_volume_l" in s:
+        words.append(f"tidal volume {s['tidal_volume_l']:.3f} L")
+    if s.get("work_of_breathing_j_per_l") is not None:
+        words.append(f"work of breathing {s['work_of_breathing_j_per_l']:.3g} J/L")
     return "; ".join(words)
 
 

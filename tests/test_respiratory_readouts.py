@@ -249,7 +249,7 @@ def lungs_toml(tmp_path_factory):
     return path
 
 
-def test_the_lab_export_reads_back_as_the_trace_resampled(lungs_toml, tmp_path):
+def test_the_lab_export_reads_back_as_the_trace_resampled(lungs_toml, tmp_path, capsys):
     """`hybrid run --respiratory-csv 30` writes respiratory.csv beside the summary: respmech's
     columns, a row every 1/30 s from 0 to the end, each the trace linearly interpolated
     (the same run from Python: frame by frame with the loads, as the command line steps,
@@ -260,6 +260,9 @@ def test_the_lab_export_reads_back_as_the_trace_resampled(lungs_toml, tmp_path):
     out = tmp_path / "run"
     argv = [str(lungs_toml), "--set", "mesh.level=0", "--duration", "1.5", "--out", str(out), "--no-record"]
     assert main(["run", *argv, "--respiratory-csv", "30"]) == 0
+    line = capsys.readouterr().out
+    # the lungs' words; in 1.5 s the first inspiration's peak (1.75 s) is not reached: no work yet
+    assert float(line.split("tidal volume ")[1].split(" L")[0]) > 0.03 and "work of breathing" not in line
     with open(out / "respiratory.csv", encoding="utf-8") as f:
         assert f.readline().strip() == ",".join(LAB_COLUMNS) == "time,flow,volume,poes,pgas,pdi"
     got = np.loadtxt(out / "respiratory.csv", delimiter=",", skiprows=1)
