@@ -73,6 +73,11 @@ def _load_and_run(args, scene) -> int:
                 raise HybridError("--duration" + text[len("duration_s") :]) from None
             raise
     run_steps(duration, sim.model.dt_s, confirmed=args.yes)
+    if getattr(args, "respiratory_csv", None) is not None:
+        from .respiratory import lab_export_rate
+        from .run import frame_interval_s
+
+        args.respiratory_rate_hz = lab_export_rate(args.respiratory_csv, sim.model, frame_interval_s(sim.model.dt_s))
     if not args.no_record:
         from .record import record_steps
 
@@ -147,6 +152,10 @@ def _run_into(args, sim, duration: float, out: Path, provenance: dict) -> int:
                 if recorder is not None:
                     recorder.close()
             write_outputs(result, out)
+            if getattr(args, "respiratory_rate_hz", None) is not None:  # the trace's spill is still open here
+                from .respiratory import write_lab_csv
+
+                write_lab_csv(result["trace"], out, args.respiratory_rate_hz)
     except KeyboardInterrupt:  # before the run's loop, or in its last lines
         write_summary({**base, "status": "interrupted", "steps": sim.steps_done, "duration_s": sim.time}, out)
         return _interrupted(caught, sim, out)
@@ -198,6 +207,10 @@ def _metrics_line(s: dict) -> str:
     words.append(f"apex descent {a['min']:.2f} to {a['max']:.2f} mm")
     if "pressure_pa" in m:
         words.append(f"pressure {m['pressure_pa']['min']:.0f} to {m['pressure_pa']['max']:.0f} Pa")
+    if "tidal_volume_l" in s:
+        words.append(f"tidal volume {s['tidal_volume_l']:.3f} L")
+    if s.get("work_of_breathing_j_per_l") is not None:
+        words.append(f"work of breathing {s['work_of_breathing_j_per_l']:.3g} J/L")
     return "; ".join(words)
 
 
@@ -351,6 +364,13 @@ def build_parser() -> argparse.ArgumentParser:
         type=_positive_float,
         metavar="SECONDS",
         help="recording interval in simulated time, a whole number of steps (default: the steps nearest 0.01 s)",
+    )
+    r.add_argument(
+        "--respiratory-csv",
+        metavar="HZ",
+        help="also write OUT/respiratory.csv (a scene with lungs): time (s), flow (L/s, inspiration "
+        "negative), volume (L), poes, pgas, pdi (cmH2O) at HZ samples a second, at most the frame rate "
+        "(100 Hz), the columns respiratory mechanics software such as respmech loads",
     )
     r.set_defaults(func=_cmd_run)
     d = sub.add_parser("render", help="draw rest, peak inspiration and end of expiration (figure 4) headless")

@@ -41,6 +41,7 @@ __all__ = [
     "write_outputs",
     "plot_name",
     "plot_trace",
+    "trace_figure",
     "PLOT_BINS",
 ]
 
@@ -412,53 +413,145 @@ def write_outputs(result: dict, out_dir: Path, *, plot: bool = True) -> None:
 #: a plot draws each series' lowest and highest value in this many runs of frames
 PLOT_BINS = 2000
 
-# the panels a plot may have, in order: (series, label, log scale)
+# the panels a plot may have, in order: (series, label, log scale); `muscle_n_per_m`'s
+# label is the trace's own (`Trace.about["muscle"]`: a stiffness or a fibre tension)
 _PANELS = (
     ("rib_lift_mm", "rib lift (mm)", False),
     ("apex_descent_mm", "apex descent (mm)", False),
     ("volume_rel_error", "volume error |V - V0| / V0", True),
     ("volume_rel_change", "volume change |V - V0| / V0", False),
     ("pressure_pa", "pressure (Pa)", False),
-    ("muscle_n_per_m", "muscle stiffness (N/m)", False),
+    ("muscle_n_per_m", "muscle (N/m)", False),
+    ("lung_volume_change_l", "lung volume\nabove rest (L)", False),
+    ("flow_l_per_s", "flow in (L/s)", False),
+    ("pleural_pressure_cmh2o", "pleural pressure,\nPoes (cmH2O)", False),
 )
+# the lungs' pressures that are 0 at rest, one panel (cmH2O): (series, legend)
+_LUNG_PRESSURES = (
+    ("alveolar_pressure_cmh2o", "alveolar"),
+    ("transdiaphragmatic_pressure_change_cmh2o", "Pdi - Pdi(rest)"),
+)
+#: points at most of a diagram's loop (every k-th frame: x and y of the same frames)
+DIAGRAM_POINTS = 4000
+
+
+def _diagrams(trace) -> dict | None:
+    """The Campbell and Konno-Mead diagrams' series (every k-th frame, the same frames
+    for x and y), or None for a trace without lungs."""
+    keys = ("lung_volume_change_l", "pleural_pressure_cmh2o", "swept_volume_ml")
+    n = len(trace)
+    if not n or "resting_recoil_cmh2o" not in getattr(trace, "about", {}):
+        return None
+    d = trace.columns(keys, every=-(-n // DIAGRAM_POINTS))
+    return d if np.isfinite(d["lung_volume_change_l"]).any() else None
+
+
+def _campbell(ax, d: dict, about: dict) -> None:
+    """Pleural pressure against lung volume, with the lungs' static recoil line (no
+    flow, airway open): the loop's width off the line is the airway's resistance."""
+    vol, ppl = d["lung_volume_change_l"], d["pleural_pressure_cmh2o"]
+    ax.plot(ppl, vol, lw=1)
+    e, recoil = about["lung_elastance_cmh2o_per_l"], about["resting_recoil_cmh2o"]
+    span = np.array([min(0.0, np.nanmin(vol)), max(0.0, np.nanmax(vol))])
+    ax.plot(-recoil - e * span, span, "k--", lw=0.8, label=f"static recoil, E = {e:.3g} cmH2O/L")
+    ax.set_xlabel("pleural pressure, Poes (cmH2O)", fontsize=8)
+    ax.set_ylabel("lung volume above rest (L)", fontsize=8)
+    ax.set_title("Campbell diagram", fontsize=9)
+    ax.legend(fontsize=7, loc="best")
+
+
+def _konno_mead(ax, d: dict) -> None:
+    """Rib cage against abdominal displacement (L): the abdomen's the volume the region
+    "diaphragm" swept (`swept_volume_ml`: what the dome gave the lungs, which the
+    incompressible abdomen's wall gave up), the rib cage's the lung volume change minus
+    it (what the cavity's wall over the ribs gave); isovolume lines at 45 degrees."""
+    vol = d["lung_volume_change_l"]
+    abdomen = d["swept_volume_ml"] * 1e-3
+    rib = vol - abdomen
+    ax.plot(abdomen, rib, lw=1)
+    top = float(np.nanmax(np.abs(np.concatenate([abdomen, rib, vol]))))
+    for level in np.linspace(0.0, float(np.nanmax(vol)), 3)[1:]:
+        ax.plot([level - top, level + top], [top, -top], color="0.7", lw=0.6)
+    ax.set_xlim(min(0.0, np.nanmin(abdomen)) - 0.1 * top, max(0.0, np.nanmax(abdomen)) + 0.1 * top)
+    ax.set_ylim(min(0.0, np.nanmin(rib)) - 0.1 * top, max(0.0, np.nanmax(rib)) + 0.1 * top)
+    ax.set_xlabel('abdomen: swept by "diaphragm" (L)', fontsize=8)
+    ax.set_ylabel("rib cage: lung change - abdomen (L)", fontsize=8)
+    ax.set_title("Konno-Mead diagram", fontsize=9)
 
 
 def plot_trace(trace, path: Path, *, title: str = "") -> None:
-    """The time series of a run (`hybrid.run.Trace`), a panel each for what the scene
-    has: rib lift, apex descent, the volume (its error under the exact constraint,
-    on a log scale, else its change), pressure and muscle stiffness."""
+    """`trace_figure(trace, title)` into `path` as PNG, replaced whole."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig = trace_figure(trace, title=title)
+    try:
+        with replaced(path, "wb") as f:
+            fig.savefig(f, dpi=100, format="png")
+    finally:
+        plt.close(fig)
+
+
+def trace_figure(trace, *, title: str = ""):
+    """The run's figure (a matplotlib figure; the caller closes it): the time series
+    of a run (`hybrid.run.Trace`), a panel each for what the scene has: rib lift, apex
+    descent, the volume (its error under the exact constraint, on a log scale, else its
+    change), the pressure inside and the muscle's schedule
+    (stiffness or fibre tension, as `trace.about["muscle"]` says); with lungs, the lung
+    volume, the flow, the pleural pressure and, in one panel, the alveolar pressure and
+    the transdiaphragmatic pressure's change, and under them a Campbell diagram and, with a region named "diaphragm", a
+    Konno-Mead diagram (docs/outputs.md)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     a = trace.envelope(PLOT_BINS)
-    panels = [(key, label, log) for key, label, log in _PANELS if np.isfinite(a[key]).any()]
+    about = getattr(trace, "about", {})
+    panels: list = [(key, label, log) for key, label, log in _PANELS if np.isfinite(a[key]).any()]
     if any(key == "volume_rel_error" for key, _, _ in panels):  # the change is the error then
         panels = [p for p in panels if p[0] != "volume_rel_change"]
+    panels = [
+        (k, about.get("muscle") or lab, log) if k == "muscle_n_per_m" else (k, lab, log) for k, lab, log in panels
+    ]
+    if np.isfinite(a[_LUNG_PRESSURES[0][0]]).any():
+        panels.append((_LUNG_PRESSURES, "pressure change\n(cmH2O)", False))
+    diagrams = _diagrams(trace)
+    konno = diagrams is not None and np.isfinite(diagrams["swept_volume_ml"]).any()
     # fixed margins: tight_layout took half a second of every run
-    height = 1.2 + 1.6 * len(panels)
-    fig, axes = plt.subplots(
-        len(panels),
-        1,
-        figsize=(7, height),
-        sharex=True,
-        squeeze=False,
-        gridspec_kw=dict(left=0.13, right=0.97, top=1 - 0.45 / height, bottom=0.55 / height, hspace=0.15),
+    below = 3.6 if diagrams is not None else 0.0  # the diagrams' row (inches)
+    height = 1.2 + 1.6 * len(panels) + below
+    fig = plt.figure(figsize=(7, height))
+    grid = fig.add_gridspec(
+        len(panels), 1, left=0.13, right=0.97, top=1 - 0.45 / height, bottom=(0.55 + below) / height, hspace=0.15
     )
-    axes = axes[:, 0]
-    for ax, (key, label, log) in zip(axes, panels):
-        y = a[key]
-        if log:
-            ax.semilogy(a["t_s"], np.maximum(y, 1e-17))
+    axes = []
+    for i, (key, label, log) in enumerate(panels):
+        ax = fig.add_subplot(grid[i, 0], sharex=axes[0] if axes else None)
+        axes.append(ax)
+        if isinstance(key, tuple):  # several series, one unit
+            for series, legend in key:
+                ax.plot(a["t_s"], a[series], label=legend)
+            ax.legend(fontsize=7, loc="best", ncol=len(key))
+        elif log:
+            ax.semilogy(a["t_s"], np.maximum(a[key], 1e-17))
         else:
-            ax.plot(a["t_s"], y)
+            ax.plot(a["t_s"], a[key])
         ax.set_ylabel(label, fontsize=8)
         ax.grid(alpha=0.3)
+        if i < len(panels) - 1:
+            ax.tick_params(labelbottom=False)
     axes[-1].set_xlabel("time (s)")
     axes[0].set_title(title)
-    try:
-        with replaced(path, "wb") as f:
-            fig.savefig(f, dpi=100, format="png")
-    finally:
-        plt.close(fig)
+    if diagrams is not None:
+        row = fig.add_gridspec(1, 2, left=0.13, right=0.97, top=(below - 0.5) / height, bottom=0.5 / height, wspace=0.4)
+        ax = fig.add_subplot(row[0, 0])
+        _campbell(ax, diagrams, about)
+        ax.grid(alpha=0.3)
+        if konno:
+            ax = fig.add_subplot(row[0, 1])
+            _konno_mead(ax, diagrams)
+            ax.grid(alpha=0.3)
+    return fig

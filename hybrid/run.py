@@ -36,12 +36,13 @@ from .outputs import (
 )
 from .provenance import run_provenance
 from .readouts import pitch_deg, quat_rot, swept_volumes
+from .respiratory import work_of_breathing
 from .scene import Muscle, MuscleFibres, SoftVolume, Volume
 from .schedule import Breathing, schedule_eval, stack_schedules
 from .simulation import Simulation
 from .step import F_ALVEOLAR, F_FLOW, F_KE, F_LUNG_VOLUME, F_PLEURAL, F_PRESSURE, F_TIME, F_VOLUME
 from .terms import Lungs
-from .terms.lungs import CMH2O_PA, P_RECOIL, P_V0
+from .terms.lungs import CMH2O_PA, CMH2O_PER_L, P_E, P_RECOIL, P_V0
 from .terms.volume import face_volume
 
 __all__ = [
@@ -56,6 +57,7 @@ __all__ = [
     "FolderLock",
     "default_out",
     "run_steps",
+    "frame_interval_s",
     "out_folder",
     "claim_folder",
     "holds_run",
@@ -74,7 +76,7 @@ TRACE_KEYS = (
     "apex_descent_mm",  # caudal (-z) displacement of the apex
     "volume_rel_error",  # |V - V0| / V0 under the exact volume constraint
     "pressure_pa",  # gauge pressure (scenes with a volume term)
-    "muscle_n_per_m",  # the first muscle's stiffness (scenes with a muscle)
+    "muscle_n_per_m",  # the first muscle term's stiffness or fibre tension (scenes with a muscle)
     "kinetic_energy_j",
     "volume_rel_change",  # |V - V0| / V0 whatever keeps the volume (closed surfaces)
     "swept_volume_ml",  # volume the region named "diaphragm" swept inward from rest (scenes with one)
@@ -114,6 +116,10 @@ class Trace:
         self.highest = np.full(len(TRACE_KEYS), -np.inf)
         self.t_lowest = np.full(len(TRACE_KEYS), np.nan)
         self.t_highest = np.full(len(TRACE_KEYS), np.nan)
+        #: what the figure needs besides the series (`run` fills it): "muscle", the label
+        #: of `muscle_n_per_m`; "lung_elastance_cmh2o_per_l" and "resting_recoil_cmh2o"
+        #: (scenes with lungs), for the Campbell diagram's static recoil line
+        self.about: dict = {}
 
     def __len__(self) -> int:
         return self._written + self._held
@@ -163,6 +169,29 @@ class Trace:
         """Every series as a float array of len(self) values: copies."""
         table = self._table()
         return {key: table[:, i].copy() for i, key in enumerate(TRACE_KEYS)}
+
+    def columns(self, keys, every: int = 1) -> dict:
+        """The series `keys` (of `TRACE_KEYS`) as float arrays, every `every`-th row from
+        the first: read from the spill file a run of rows at a time, so that only those
+        columns are held (the work of breathing, the lab export, the figure's diagrams)."""
+        cols = [_COL[k] for k in keys]
+        every = max(int(every), 1)
+        parts = []
+        start = 0  # the run's row index of the next row read
+        if self._spill is not None and self._written:
+            self._spill.seek(0)
+            left = self._written
+            while left:
+                count = min(left, SPILL_ROWS)
+                rows = np.fromfile(self._spill, dtype=float, count=count * len(TRACE_KEYS))
+                rows = rows.reshape(-1, len(TRACE_KEYS))
+                parts.append(rows[(-start) % every :: every][:, cols])
+                start += count
+                left -= count
+            self._spill.seek(0, 2)
+        parts.append(self._buf[(-start) % every : self._held : every][:, cols])
+        table = np.concatenate(parts) if parts else np.empty((0, len(cols)))
+        return {key: table[:, i].copy() for i, key in enumerate(keys)}
 
     def __getattr__(self, key):
         if key in _COL:
@@ -265,6 +294,13 @@ def _headline(trace: Trace) -> dict:
     return head
 
 
+def _work(trace: Trace, model: Model) -> dict:
+    """The work of breathing's summary keys (`hybrid.respiratory.work_of_breathing`),
+    from the trace's lung volume."""
+    cols = trace.columns(("t_s", "lung_volume_change_l"))
+    return work_of_breathing(cols["t_s"], cols["lung_volume_change_l"], model.arrays.lung_par)
+
+
 def _thorax(model: Model):
     """(body index among the frames' bodies, anterior, cranial: unit vectors of the scene's
     frame) of the thoracic body the scene's ribs hang on (`rigid.ribs.body`), or None."""
@@ -288,6 +324,17 @@ def _mean_z(pos: np.ndarray, vert: np.ndarray) -> np.ndarray:
     vert's order (a cumulative sum adds one point after the other): the same figure
     whatever the number of frames."""
     return np.cumsum(pos[:, vert, 2], axis=1)[:, -1] / len(vert)
+
+
+def muscle_label(model: Model) -> str | None:
+    """What `muscle_n_per_m` is for this scene's first muscle term, with its unit (the
+    figure's label), or None without a muscle."""
+    for term in model.scene.forces:
+        if isinstance(term, Muscle):
+            return "muscle stiffness (N/m)"
+        if isinstance(term, MuscleFibres):
+            return "muscle fibre tension (N/m)"
+    return None
 
 
 def _breathing(model: Model):
@@ -345,6 +392,23 @@ FRAMES_PER_CALL = 100
 MAX_STEPS_PER_CALL = 100_000
 
 
+#: the runner's frame interval (s) unless asked otherwise (`run`'s `frame_dt_s`)
+FRAME_DT_S = 0.01
+
+
+def _frame_steps(frame_dt_s: float, dt_s: float) -> int:
+    """Steps between two of the runner's regular frames: the whole number nearest
+    frame_dt_s / dt_s, at least 1."""
+    return max(1, int(round(frame_dt_s / dt_s)))
+
+
+def frame_interval_s(dt_s: float, frame_dt_s: float = FRAME_DT_S) -> float:
+    """The interval (s) of a run's regular frames at the step dt_s: a whole number of
+    steps nearest frame_dt_s, at most `MAX_STEPS_PER_CALL` (an observer's `every_steps`
+    and the run's end add frames between them)."""
+    return min(_frame_steps(frame_dt_s, dt_s), MAX_STEPS_PER_CALL) * dt_s
+
+
 def _stop_batches(nstep: int, periods, extra, size: int):
     """The step indices where frames are taken, in increasing batches of at most
     `size`: every multiple of each of `periods` (steps) up to `nstep`, and `extra`
@@ -372,7 +436,7 @@ def run(
     sim: Simulation,
     duration_s: float,
     *,
-    frame_dt_s: float = 0.01,
+    frame_dt_s: float = FRAME_DT_S,
     progress: bool = False,
     observers=(),
     trace_spill=None,
@@ -415,7 +479,7 @@ def run(
     model = sim.model
     h = model.dt_s
     nstep = run_steps(duration_s, h, name="duration_s")
-    frame_steps = max(1, int(round(frame_dt_s / h)))
+    frame_steps = _frame_steps(frame_dt_s, h)
     periods = sorted(
         {min(frame_steps, MAX_STEPS_PER_CALL)}
         | {int(o.every_steps) for o in observers if getattr(o, "every_steps", None)}
@@ -452,6 +516,10 @@ def run(
             cycle_end_step = int(round((breath.onset_s + ncycle * breath.period_s) / h))
     extra = [nstep] + ([cycle_end_step] if cycle_end_step else [])
     trace = Trace(1 + _count_stops(nstep, periods, extra), spill=trace_spill)
+    trace.about["muscle"] = muscle_label(model)
+    if "lungs" in parts:
+        trace.about["lung_elastance_cmh2o_per_l"] = float(model.arrays.lung_par[P_E]) / CMH2O_PER_L
+        trace.about["resting_recoil_cmh2o"] = float(model.arrays.lung_par[P_RECOIL]) / CMH2O_PA
     rest_return_mm = None
     error = interrupted = None
     batch_observers = [o for o in observers if hasattr(o, "frames")]
@@ -581,6 +649,7 @@ def run(
         "wall_s": wall,
         "us_per_step": wall / max(sim.steps_done, 1) * 1e6,
         **_headline(trace),
+        **(_work(trace, model) if "lungs" in parts else {}),
         "rest_return_mm": rest_return_mm,
         "metrics": metric_table(trace),
     }

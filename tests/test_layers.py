@@ -26,7 +26,10 @@ LAYERS = (
     ("step loop", ("loop",)),
     ("coupled step", ("coupling",)),
     ("simulation", ("simulation", "builds", "control", "state", "diagnosis")),
-    ("observers", ("run", "loads", "record", "record.*", "render", "sweep", "grid", "outputs", "provenance")),
+    (
+        "observers",
+        ("run", "loads", "record", "record.*", "render", "sweep", "grid", "outputs", "provenance", "respiratory"),
+    ),
     ("public API", ("",)),  # hybrid/__init__.py
     (
         "bench, command line, studies",
