@@ -45,6 +45,7 @@ from .terms import (
     Damping,
     Gravity,
     KeepIn,
+    Lungs,
     MassSpring,
     Membrane,
     Muscle,
@@ -55,7 +56,7 @@ from .terms import (
 )
 from .terms.fibres import MuscleFibres, add_muscle_fibres
 from .terms.local import apply_keep_in, apply_prescribed
-from .terms.lungs import NLUNG, P_RECOIL, P_V0, LungSlot
+from .terms.lungs import L_ALVEOLAR, L_HOLD, L_OCCLUDED, L_PLEURAL, NLUNG, P_RECOIL, P_V0, LungSlot, project_occluded
 from .terms.membrane import add_membrane_serial, membrane_faces_parallel, membrane_gather_parallel
 from .terms.muscle import add_muscle
 from .terms.passive_fibres import PassiveFibres, add_passive_fibres
@@ -63,6 +64,7 @@ from .terms.pointwise import point_forces_parallel, point_forces_serial
 from .terms.shape_memory import shape_memory_frames, shape_memory_frames_parallel
 from .terms.springs import add_applied, add_attraction, add_mass_spring
 from .terms.volume import (
+    PROJ_NO_ROOT,
     PROJ_OK,
     Pressure,
     add_pressure,
@@ -118,6 +120,7 @@ __all__ = [
 )
 T_MEMBRANE = Membrane.id
 T_PRESSURE, T_MUSCLE_FIBRES, T_PASSIVE_FIBRES = Pressure.id, MuscleFibres.id, PassiveFibres.id
+T_LUNGS = Lungs.id
 
 
 class Scal(IntEnum):
@@ -157,6 +160,7 @@ class MembraneState(NamedTuple):
     lung (NLUNG,): the lungs' compartment at the last step's start (`hybrid.terms.lungs.LungSlot`);
     lung_wall_pos (nwall, 3) m, lung_wall_vel (nwall, 3) m/s: the cavity wall's points, which
     the rigid bodies carry; lung_wall_force (nwall, 3) N: the pleural load on them (to their bodies);
+    lung_scratch (5, nvert, 3): the occluded airway's projection (empty rows without lungs);
     implicit: implicit Euler's work arrays (hybrid.implicit), None for the other integrators."""
 
     vert_pos: np.ndarray
@@ -175,6 +179,7 @@ class MembraneState(NamedTuple):
     lung_wall_pos: np.ndarray
     lung_wall_vel: np.ndarray
     lung_wall_force: np.ndarray
+    lung_scratch: np.ndarray
     implicit: ImplicitWork | None = None
 
 
@@ -198,6 +203,7 @@ def new_state(arrays: MembraneArrays) -> MembraneState:
         lung_wall_pos=wall_pos,
         lung_wall_vel=wall_vel,
         lung_wall_force=np.zeros_like(arrays.lung_wall),
+        lung_scratch=np.zeros((5, n if arrays.lung_face.shape[0] else 0, 3)),
         implicit=implicit_work(arrays, wall_pos, wall_vel),
     )
 
@@ -542,7 +548,21 @@ def _after_integration(m, s, c, t, step, par, prescribed, keep_in, volume):
     if keep_in is not None and on[T_KEEP_IN]:
         apply_keep_in(m.kin_vert, m.kin_shape, m.shape_kind, m.shape_par, pos, vel)
         s.term_calls[T_KEEP_IN] += 1
-    if volume is not None and on[T_VOLUME]:
+    if on[T_LUNGS] and s.lung[L_OCCLUDED] > 0.0:  # the occluded airway: both volumes held together
+        abdomen = volume is not None and on[T_VOLUME] != 0
+        phi, phi_hold, held = project_occluded(m, s, h, abdomen)
+        s.term_calls[T_VOLUME] += abdomen
+        if not held:
+            s.status[3] = PROJ_NO_ROOT
+            return _fail(s, VOLUME_FAILED, step, 0)
+        hold = phi_hold / (h * h)  # the step's readouts: the law at its start, this projection's hold
+        s.lung[L_PLEURAL] += hold - s.lung[L_HOLD]
+        s.lung[L_ALVEOLAR] += hold - s.lung[L_HOLD]
+        s.lung[L_HOLD] = hold
+        if abdomen:
+            s.scal[S_PHI] = phi
+            s.scal[S_PRESSURE] = phi / (h * h)
+    elif volume is not None and on[T_VOLUME]:
         if par is None:  # a None argument: the multi-core build is not compiled
             phi, st = project_volume(
                 m.ring_ptr,

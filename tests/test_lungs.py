@@ -263,3 +263,24 @@ def test_implicit_euler_holds_the_lungs_in_its_solve():
     imp = hybrid.run(hybrid.load(dataclasses.replace(scene, integrator="implicit_euler", dt_s=1e-2)), 4.0)["summary"]
     for key in ("tidal_volume_l", "apex_descent_mm", "rib_lift_mm"):
         assert imp[key] == pytest.approx(ref[key], rel=0.01), key
+
+
+def test_an_occluded_airway_holds_the_lung_volume_exactly_and_the_law_adds_nothing():
+    """The airway closed from the start: the projection holds the cavity's volume and the
+    abdomen's together (Newton on both, to their rounding) while the diaphragm contracts;
+    the pleural pressure falls. With the volume held, E (V - V0) and R Q vanish, so a lung
+    without elastance or resistance gives the same run within round-off."""
+    scene = hybrid.load_scene("breathing", overrides=["mesh.level=0", "duration_s=1.0"])
+    runs = []
+    for law in (LUNG, dict(wall_height_m=0.2, lung_elastance_cmh2o_per_l=0.0)):
+        sim = hybrid.load(dataclasses.replace(scene, forces=(*scene.forces, Lungs(**law, airway_occluded=1.0))))
+        res = hybrid.run(sim, 1.0, frame_dt_s=1e-3)
+        tr = res["trace"].arrays()
+        v0 = sim.model.arrays.lung_par[4] * 1e3  # L
+        # 16 units in the last place of each volume: the Newton's stopping rule
+        assert np.max(np.abs(tr["lung_volume_change_l"])) <= 16 * 2.0**-52 * v0 * 2
+        assert np.nanmax(tr["volume_rel_error"]) <= 32 * 2.0**-52
+        assert tr["pleural_pressure_cmh2o"].min() < -5.5  # the diaphragm pulls on a closed airway
+        runs.append(sim.state.vert_pos.copy())
+    scale = np.abs(runs[0]).max()
+    assert np.max(np.abs(runs[0] - runs[1])) <= 1e-10 * scale

@@ -54,6 +54,8 @@ __all__ = [
     "cavity_volume_rate",
     "add_cavity_pressure",
     "lung_load",
+    "project_occluded",
+    "add_hold_pressure",
     "thoracic_cavity",
     "open_edges",
 ]
@@ -72,10 +74,13 @@ class LungSlot(IntEnum):
     PLEURAL = 2  # Pa, pleural pressure
     ALVEOLAR = 3  # Pa, alveolar pressure
     AIRWAY = 4  # Pa, airway-opening pressure
+    OCCLUDED = 5  # 1 while the airway is occluded, else 0
+    HELD_VOLUME = 6  # m^3, the cavity's volume when the airway closed (held exactly while occluded)
+    HOLD_PRESSURE = 7  # Pa, the occlusion's constraint pressure in the last step (0 when open)
 
 
 NLUNG = len(LungSlot)
-L_VOLUME, L_RATE, L_PLEURAL, L_ALVEOLAR, L_AIRWAY = LungSlot
+L_VOLUME, L_RATE, L_PLEURAL, L_ALVEOLAR, L_AIRWAY, L_OCCLUDED, L_HELD, L_HOLD = LungSlot
 
 # lung_par: elastance Pa/m^3, K1 Pa s/m^3, K2 Pa s^2/m^6, resting recoil Pa, resting volume m^3,
 # the volume sums' origin (3, m: the cavity's rest centroid)
@@ -173,6 +178,130 @@ def add_cavity_pressure(face, ref, load_pa, pos, wall, vert_force, wall_force, t
         _push(c, nvert, k, ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx, vert_force, wall_force, to_points)
 
 
+@kernel
+def add_hold_pressure(face, ref, hold_pa, pos, wall, vert_free, vert_force, wall_force):
+    """The occlusion's constraint pressure hold_pa (Pa, its last projection's) on the cavity's
+    points that the projection does not move: the wall and the membrane's fixed and linked
+    points (so that their bodies feel it), added to their forces.
+    # Model: face (nf, 3) int64, ref (3,) m, vert_free (nvert,) uint8   # Data in: hold_pa, pos, wall
+    # Data out: vert_force (nvert, 3) N, wall_force (nwall, 3) N (added to)
+    """
+    nvert = pos.shape[0]
+    k = hold_pa / 6.0
+    for f in range(face.shape[0]):
+        for r in range(3):
+            i = face[f, r]
+            if i < nvert and vert_free[i]:
+                continue
+            ax, ay, az = _corner(face[f, (r + 1) % 3], nvert, pos, wall, ref)
+            bx, by, bz = _corner(face[f, (r + 2) % 3], nvert, pos, wall, ref)
+            _push(i, nvert, k, ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx, vert_force, wall_force, True)
+
+
+@kernel
+def _two_volumes(face_vert, lung_face, ref, pos, wall, g1, g2, abdomen):
+    """The abdomen's volume (faces face_vert; 0 unless abdomen) and the cavity's (lung_face)
+    at pos (m^3), their gradients on the membrane's points into g1, g2 (m^2).
+    # Model: face_vert (nface, 3), lung_face (nf, 3), ref (3,) m   # Data in: pos (nvert, 3) m, wall (nwall, 3) m
+    # Data out: g1, g2 (nvert, 3) m^2; returns (m^3, m^3)
+    """
+    nvert = pos.shape[0]
+    for i in range(nvert):
+        for a in range(3):
+            g1[i, a] = g2[i, a] = 0.0
+    v1 = v2 = 0.0
+    if abdomen:
+        for f in range(face_vert.shape[0]):
+            for r in range(3):
+                i, j, k = face_vert[f, r], face_vert[f, (r + 1) % 3], face_vert[f, (r + 2) % 3]
+                ax, ay, az = pos[j, 0] - ref[0], pos[j, 1] - ref[1], pos[j, 2] - ref[2]
+                bx, by, bz = pos[k, 0] - ref[0], pos[k, 1] - ref[1], pos[k, 2] - ref[2]
+                cx, cy, cz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
+                g1[i, 0] += cx / 6.0
+                g1[i, 1] += cy / 6.0
+                g1[i, 2] += cz / 6.0
+                if r == 0:
+                    v1 += (pos[i, 0] - ref[0]) * cx + (pos[i, 1] - ref[1]) * cy + (pos[i, 2] - ref[2]) * cz
+    for f in range(lung_face.shape[0]):
+        for r in range(3):
+            i = lung_face[f, r]
+            ax, ay, az = _corner(lung_face[f, (r + 1) % 3], nvert, pos, wall, ref)
+            bx, by, bz = _corner(lung_face[f, (r + 2) % 3], nvert, pos, wall, ref)
+            cx, cy, cz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
+            if i < nvert:
+                g2[i, 0] += cx / 6.0
+                g2[i, 1] += cy / 6.0
+                g2[i, 2] += cz / 6.0
+            if r == 0:
+                px, py, pz = _corner(i, nvert, pos, wall, ref)
+                v2 += px * cx + py * cy + pz * cz
+    return v1 / 6.0, v2 / 6.0
+
+
+@kernel
+def project_occluded(m, s, h, abdomen):
+    """The occluded airway: the cavity's volume held at s.lung[HELD_VOLUME] exactly, with the
+    abdomen's at m.vol0 when `abdomen` (both constraints share the dome's points). After free
+    integration to X*, X = X* + phi1 d1 + phi2 d2, d_k = w_i grad_i V_k(X*) (w = 1/m on the
+    free points), the two volumes solved for by Newton's method with exact gradients to their
+    rounding; v += (phi1 d1 + phi2 d2) / h. Returns (phi1, phi2, ok): phi / h^2 the abdomen's
+    pressure and the occlusion's pleural pressure (Pa).
+    # Model: m.face_vert, m.lung_face, m.lung_par, m.vol0, m.vert_weight   # Data in: s.lung[HELD_VOLUME], wall
+    # Data in/out: s.vert_pos, s.vert_vel   # Data out: s.grad (the abdomen's gradient at X*)
+    # Scratch: s.lung_scratch (5, nvert, 3)
+    """
+    sc = s.lung_scratch
+    x0, d1, d2, g1, g2 = sc[0], sc[1], sc[2], sc[3], sc[4]
+    pos, vel, w = s.vert_pos, s.vert_vel, m.vert_weight
+    ref = m.lung_par[P_REF:]
+    wall = s.lung_wall_pos
+    n = pos.shape[0]
+    v1, v2 = _two_volumes(m.face_vert, m.lung_face, ref, pos, wall, g1, g2, abdomen)
+    for i in range(n):
+        for a in range(3):
+            x0[i, a] = pos[i, a]
+            d1[i, a] = w[i] * g1[i, a]
+            d2[i, a] = w[i] * g2[i, a]
+            s.grad[i, a] = g1[i, a]
+    t1, t2 = m.vol0, s.lung[L_HELD]
+    tol1, tol2 = 16 * 2.0**-52 * abs(t1), 16 * 2.0**-52 * abs(t2)
+    p1 = p2 = 0.0
+    ok = False
+    for _ in range(40):
+        f1 = v1 - t1 if abdomen else 0.0
+        f2 = v2 - t2
+        if abs(f1) <= tol1 and abs(f2) <= tol2:
+            ok = True
+            break
+        j11 = j12 = j21 = j22 = 0.0
+        for i in range(n):
+            for a in range(3):
+                j11 += g1[i, a] * d1[i, a]
+                j12 += g1[i, a] * d2[i, a]
+                j21 += g2[i, a] * d1[i, a]
+                j22 += g2[i, a] * d2[i, a]
+        if abdomen:
+            det = j11 * j22 - j12 * j21
+            if not abs(det) > 0.0:
+                break
+            p1 -= (f1 * j22 - f2 * j12) / det
+            p2 -= (j11 * f2 - j21 * f1) / det
+        else:
+            if not abs(j22) > 0.0:
+                break
+            p2 -= f2 / j22
+        for i in range(n):
+            for a in range(3):
+                pos[i, a] = x0[i, a] + p1 * d1[i, a] + p2 * d2[i, a]
+        v1, v2 = _two_volumes(m.face_vert, m.lung_face, ref, pos, wall, g1, g2, abdomen)
+    if not ok:
+        return p1, p2, False
+    for i in range(n):
+        for a in range(3):
+            vel[i, a] += (p1 * d1[i, a] + p2 * d2[i, a]) / h
+    return p1, p2, True
+
+
 @kernel(inline="always")
 def lung_load(par, pao, vol, rate):
     """The lumped law (module docstring): (P_alv, P_pl + P_L0), the alveolar pressure and the
@@ -188,8 +317,8 @@ def lung_load(par, pao, vol, rate):
 def lungs_step_force(m, s, c):
     """The step's call (`Term.step_force`): the lumped law at the step's start (module
     docstring), its readouts into s.lung, the pleural load on the cavity's points.
-    # Model: m.lung_face, m.lung_par, m.lung_sched
-    # Data in: s.vert_pos, s.vert_vel, s.lung_wall_pos, s.lung_wall_vel, c.value
+    # Model: m.lung_face, m.lung_par, m.lung_sched, m.vert_free
+    # Data in: s.vert_pos, s.vert_vel, s.lung_wall_pos, s.lung_wall_vel, c.value, s.lung[HOLD_PRESSURE]
     # Data out: s.vert_force (added to), s.lung_wall_force (the wall's, to its bodies), s.lung (`LungSlot`)
     """
     par = m.lung_par
@@ -197,6 +326,12 @@ def lungs_step_force(m, s, c):
     wall = s.lung_wall_pos
     vol, rate = cavity_volume_rate(m.lung_face, ref, s.vert_pos, s.vert_vel, wall, s.lung_wall_vel)
     pao = c.value[m.lung_sched[0], 0] * CMH2O_PA
+    occluded = c.value[m.lung_sched[1], 0] >= 0.5
+    if occluded and s.lung[L_OCCLUDED] == 0.0:  # the airway closes: its volume is held from here
+        s.lung[L_HELD] = vol
+    s.lung[L_OCCLUDED] = 1.0 if occluded else 0.0
+    if occluded:  # no air through a closed airway (g . v is the projection's O(h) residue, not a flow)
+        rate = 0.0
     palv, load = lung_load(par, pao, vol, rate)  # load: the pleural pressure's departure from rest
     s.lung[L_VOLUME] = vol
     s.lung[L_RATE] = rate
@@ -207,6 +342,12 @@ def lungs_step_force(m, s, c):
     add_cavity_pressure(
         m.lung_face, ref, load, s.vert_pos, wall, s.vert_force, s.lung_wall_force, m.integrator != IMPLICIT_EULER
     )
+    hold = s.lung[L_HOLD] if occluded else 0.0  # the occlusion's last pressure, to the bodies (as the abdomen's)
+    if hold != 0.0:
+        add_hold_pressure(m.lung_face, ref, hold, s.vert_pos, wall, m.vert_free, s.vert_force, s.lung_wall_force)
+    s.lung[L_HOLD] = hold
+    s.lung[L_PLEURAL] += hold
+    s.lung[L_ALVEOLAR] += hold
 
 
 def open_edges(face: np.ndarray) -> list:
@@ -308,15 +449,18 @@ class Lungs(Term):
     lung_compliance_l_per_cmh2o, its inverse: give one); resting_recoil_cmh2o: the lungs'
     recoil at rest, minus the resting pleural pressure; airway_resistance_cmh2o_s_per_l
     (Rohrer's K1) and rohrer_k2_cmh2o_s2_per_l2; airway_opening_pressure_cmh2o: a
-    schedule (0: spontaneous breathing)."""
+    schedule (0: spontaneous breathing); airway_occluded: a schedule, the airway closed where
+    it is 1 (>= 0.5), open where 0: the lung volume when it closes is then held exactly
+    (`project_occluded`), as in the occlusion and twitch manoeuvres."""
 
     # lung_face (nf, 3) int64: the cavity (points >= nvert on the wall); lung_wall (nwall, 3) m;
-    # lung_par (NPAR,): see P_*; lung_sched (1,) int64: the airway-opening pressure's schedule row
+    # lung_par (NPAR,): see P_*; lung_sched (2,) int64: the schedule rows of the airway-opening
+    # pressure and of the occlusion
     arrays = {
         "lung_face": lambda n: np.zeros((0, 3), np.int64),
         "lung_wall": lambda n: np.zeros((0, 3)),
         "lung_par": lambda n: np.zeros(NPAR),
-        "lung_sched": lambda n: np.zeros(1, np.int64),
+        "lung_sched": lambda n: np.zeros(2, np.int64),
     }
     step_force = lungs_step_force
     wall_height_m: float = param("positive", hi=10.0)
@@ -327,6 +471,7 @@ class Lungs(Term):
     airway_resistance_cmh2o_s_per_l: float = param("nonneg", 0.0, hi=1e4)
     rohrer_k2_cmh2o_s2_per_l2: float = param("nonneg", 0.0, hi=1e4)
     airway_opening_pressure_cmh2o: object = param("schedule", 0.0, ncomp=1)
+    airway_occluded: object = param("schedule", 0.0, ncomp=1)
 
     def compile(self, b, what):
         super().compile(b, what)
@@ -361,7 +506,8 @@ class Lungs(Term):
         par[P_V0] = vol
         par[P_REF:] = ref
         row = b.schedule(self.airway_opening_pressure_cmh2o, f"{what}.airway_opening_pressure_cmh2o", 1)
-        b.out.update(lung_face=face, lung_wall=wall, lung_par=par, lung_sched=np.array([row], np.int64))
+        shut = b.schedule(self.airway_occluded, f"{what}.airway_occluded", 1)
+        b.out.update(lung_face=face, lung_wall=wall, lung_par=par, lung_sched=np.array([row, shut], np.int64))
         b.carried = (wall, under, weight)  # the wall's points that rigid bodies carry (`hybrid.rigid.build_rigid`)
         # (no per-point stiffness for the stability estimate: the compartment moves the dome as one
         # mode, E sum_i |g_i|^2 / m_i, about 700 s^-2 on the breathing scene, far below the sheet's)
