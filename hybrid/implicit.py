@@ -69,14 +69,13 @@ from .terms.fibres import add_muscle_fibres
 from .terms.lungs import (
     CMH2O_PA,
     IMPLICIT_EULER,
-    P_E,
     P_K1,
     P_K2,
     P_REF,
-    P_V0,
     add_cavity_pressure,
     cavity_volume_rate,
     lung_load,
+    lung_recoil,
 )
 from .terms.membrane import add_membrane_serial, membrane_energy
 from .terms.passive_fibres import add_passive_fibres
@@ -533,7 +532,7 @@ def _merit(m, sched_val, h, dv, w):
         par = m.lung_par
         vol, rate = cavity_volume_rate(m.lung_face, par[P_REF:], w.x_try, w.v_try, w.lung_wall_pos, w.lung_wall_vel)
         pao = sched_val[m.lung_sched[0], 0] * CMH2O_PA
-        total += 0.5 * par[P_E] * (vol - par[P_V0]) ** 2 - pao * vol
+        total += lung_recoil(par, vol)[2] - pao * vol
         total += h * (0.5 * par[P_K1] * rate * rate + par[P_K2] * abs(rate) ** 3 / 3.0)
     return total
 
@@ -558,7 +557,7 @@ def _volume_gradient(face_vert, pos, grad):
 @kernel
 def _lung_rank_one(m, w, h, project, eta, cg_max):
     """The lungs' stiffness in the Newton solve: the matrix A + c g g^T, c = h^2 E + h dR/dQ
-    (R(Q) Q the airway's pressure drop) and g the cavity's volume gradient on the free
+    (E = dP_L/dV, the recoil's slope; R(Q) Q the airway's pressure drop) and g the cavity's volume gradient on the free
     points, both at the iteration's start; w.cg_x = A^-1 r turned into (A + c g g^T)^-1 r by
     Sherman-Morrison, with A^-1 g from a second solve (a rank-one term the sparse matrix cannot
     hold; staggered a step behind, an enclosed compartment is the unstable case of
@@ -568,8 +567,8 @@ def _lung_rank_one(m, w, h, project, eta, cg_max):
     """
     par = m.lung_par
     ref = par[P_REF:]
-    _, rate = cavity_volume_rate(m.lung_face, ref, w.x_try, w.v_try, w.lung_wall_pos, w.lung_wall_vel)
-    c = h * h * par[P_E] + h * (par[P_K1] + 2.0 * par[P_K2] * abs(rate))
+    vol, rate = cavity_volume_rate(m.lung_face, ref, w.x_try, w.v_try, w.lung_wall_pos, w.lung_wall_vel)
+    c = h * h * lung_recoil(par, vol)[1] + h * (par[P_K1] + 2.0 * par[P_K2] * abs(rate))
     if c == 0.0:
         return 0
     g = w.lung_g

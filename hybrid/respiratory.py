@@ -15,7 +15,7 @@ import numpy as np
 
 from .errors import HybridError
 from .terms import Lungs
-from .terms.lungs import CMH2O_PA, P_E, P_K1, P_K2
+from .terms.lungs import CMH2O_PA, P_K1, P_K2, recoil_energy_j
 
 __all__ = [
     "INSPIRATION_FRACTION",
@@ -79,13 +79,13 @@ def inspirations(volume: np.ndarray, fraction: float = INSPIRATION_FRACTION) -> 
     return found
 
 
-def inspiration_work(t_s, volume_m3, elastance, k1, k2) -> tuple[float, float]:
+def inspiration_work(t_s, volume_m3, lung_par) -> tuple[float, float]:
     """(elastic, resistive) work (J) done on the lungs over the frames given (one
-    inspiration: times (s) and the lungs' volume above rest x (m^3)), by the lumped law
-    P = E x + (K1 + K2 |Q|) Q (SI: Pa/m^3, Pa s/m^3, Pa s^2/m^6):
+    inspiration: times (s) and the lungs' volume above rest x (m^3)), by the model's lumped
+    law (`lung_par`) P = P_L(x) - P_L0 + (K1 + K2 |Q|) Q (SI: Pa, Pa s/m^3, Pa s^2/m^6):
 
-    W_el = integral of E x dx, the trapezoid over the frames, which is exact for the
-    linear law: E (x_end^2 - x_start^2) / 2;
+    W_el = integral of (P_L - P_L0) dx, exact from the recoil's energy at both ends
+    (`hybrid.terms.lungs.recoil_energy_j`; E (x_end^2 - x_start^2) / 2 for the linear law);
     W_res = integral of (K1 + K2 |Q|) Q dx, each frame interval's mean flow
     q = dx / dt in the law: sum (K1 + K2 |q|) q^2 dt, low by sum K1 integral (Q - q)^2
     dt, about K1 dt^2 / 12 integral Q'^2 (relative (w dt)^2 / 12 for a sinusoid of
@@ -94,7 +94,8 @@ def inspiration_work(t_s, volume_m3, elastance, k1, k2) -> tuple[float, float]:
     x = np.asarray(volume_m3, float)
     dx, dt = np.diff(x), np.diff(t)
     q = dx / dt
-    w_el = 0.5 * elastance * (x[-1] ** 2 - x[0] ** 2)
+    k1, k2 = float(lung_par[P_K1]), float(lung_par[P_K2])
+    w_el = recoil_energy_j(lung_par, x[-1]) - recoil_energy_j(lung_par, x[0])
     w_res = float(np.sum((k1 + k2 * np.abs(q)) * q * dx))
     return float(w_el), w_res
 
@@ -112,8 +113,7 @@ def work_of_breathing(t_s, volume_change_l, lung_par) -> dict:
     out["inspirations"] = len(breaths)
     if not breaths:
         return out
-    e, k1, k2 = float(lung_par[P_E]), float(lung_par[P_K1]), float(lung_par[P_K2])
-    w = np.array([inspiration_work(t[a : b + 1], x[a : b + 1], e, k1, k2) for a, b in breaths])
+    w = np.array([inspiration_work(t[a : b + 1], x[a : b + 1], lung_par) for a, b in breaths])
     litres = sum((x[b] - x[a]) * 1e3 for a, b in breaths)
     el, res = w.sum(axis=0)
     out["work_of_breathing_elastic_j"] = float(el / len(breaths))

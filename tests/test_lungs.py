@@ -195,6 +195,9 @@ def test_the_lungs_pull_the_dome_up_and_breathe_air():
         (dict(lung_elastance_cmh2o_per_l=5.0), "exactly one of"),
         (dict(wall_height_m=0.05), "wall_height_m: expected a wall above the dome"),
         (dict(airway_resistance_cmh2o_s_per_l=float("nan")), "airway_resistance_cmh2o_s_per_l"),
+        (dict(sigmoid_width_cmh2o=4.0), "a parameter of recoil_curve = 'sigmoid'"),
+        (dict(recoil_curve="sigmoid"), "expects sigmoid_lower_volume_l"),
+        (dict(recoil_curve="exponential"), "recoil_curve"),
     ],
 )
 def test_bad_lung_values_are_refused_in_one_line(change, words):
@@ -284,3 +287,31 @@ def test_an_occluded_airway_holds_the_lung_volume_exactly_and_the_law_adds_nothi
         runs.append(sim.state.vert_pos.copy())
     scale = np.abs(runs[0]).max()
     assert np.max(np.abs(runs[0] - runs[1])) <= 1e-10 * scale
+
+
+def test_a_sigmoid_lung_s_pleural_pressure_is_its_inverted_curve():
+    """The sigmoid recoil (Venegas 1998) under the prescribed dome: where the flow stops
+    (the sinusoid's extremes) P_pl = -P_L(V) exactly by the curve inverted, with V the lungs'
+    resting volume on the curve plus the cavity's change; the resting recoil sits on it."""
+    amp, period, dt = 5e-3, 2.0, 1e-3
+    w = 2 * math.pi / period
+    t = np.arange(0, 2.0 + dt / 2, dt)
+    disp = Table(tuple(t.tolist()), tuple((0.0, 0.0, amp * math.sin(w * s)) for s in t))
+    a, b, c, d = 1.0, 5.0, 10.0, 4.0  # L, L, cmH2O, cmH2O
+    lungs = Lungs(
+        wall_height_m=0.2,
+        recoil_curve="sigmoid",
+        sigmoid_lower_volume_l=a,
+        sigmoid_volume_range_l=b,
+        sigmoid_inflection_cmh2o=c,
+        sigmoid_width_cmh2o=d,
+    )
+    sim = hybrid.load(dome_scene(lungs, disp, duration_s=2.0))
+    tr = hybrid.run(sim, 2.0, frame_dt_s=dt)["trace"].arrays()
+    v_rest = a + b / (1 + math.exp(-(5.0 - c) / d))
+    # no resistance: the law is the curve at every step; the pleural pressure is stamped at the
+    # step's start, its volume one step before the frame's
+    vol = v_rest + tr["lung_volume_change_l"][:-1]
+    want = -(c - d * np.log((a + b - vol) / (vol - a)))
+    assert np.max(np.abs(tr["pleural_pressure_cmh2o"][1:] - want)) < 1e-9
+    assert tr["pleural_pressure_cmh2o"][0] == -5.0

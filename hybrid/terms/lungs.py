@@ -54,6 +54,9 @@ __all__ = [
     "cavity_volume_rate",
     "add_cavity_pressure",
     "lung_load",
+    "lung_recoil",
+    "recoil_energy_j",
+    "RECOIL_CURVES",
     "project_occluded",
     "add_hold_pressure",
     "thoracic_cavity",
@@ -82,10 +85,15 @@ class LungSlot(IntEnum):
 NLUNG = len(LungSlot)
 L_VOLUME, L_RATE, L_PLEURAL, L_ALVEOLAR, L_AIRWAY, L_OCCLUDED, L_HELD, L_HOLD = LungSlot
 
-# lung_par: elastance Pa/m^3, K1 Pa s/m^3, K2 Pa s^2/m^6, resting recoil Pa, resting volume m^3,
-# the volume sums' origin (3, m: the cavity's rest centroid)
-P_E, P_K1, P_K2, P_RECOIL, P_V0, P_REF = 0, 1, 2, 3, 4, 5
-NPAR = 8
+# lung_par: elastance Pa/m^3, K1 Pa s/m^3, K2 Pa s^2/m^6, resting recoil Pa, the cavity's resting
+# volume m^3; the recoil curve: 0 linear, 1 sigmoid, whose a, b (m^3), c, d (Pa) and the lungs'
+# resting volume on it (m^3); the volume sums' origin (3, m: the cavity's rest centroid)
+P_E, P_K1, P_K2, P_RECOIL, P_V0 = 0, 1, 2, 3, 4
+P_CURVE, P_SA, P_SB, P_SC, P_SD, P_VREST = 5, 6, 7, 8, 9, 10
+P_REF = 11
+NPAR = 14
+#: the lungs' recoil curves (`Lungs.recoil_curve`)
+RECOIL_CURVES = ("linear", "sigmoid")
 #: `MembraneArrays.integrator` of implicit Euler (`hybrid.implicit.IMPLICIT_ID`, which checks it)
 IMPLICIT_EULER = 2
 
@@ -303,6 +311,42 @@ def project_occluded(m, s, h, abdomen):
 
 
 @kernel(inline="always")
+def lung_recoil(par, vol):
+    """The lungs' elastic recoil at the cavity's volume vol (m^3): (P_L(V) - P_L0 (Pa), dP_L/dV
+    (Pa/m^3), the elastic energy above rest, the integral of P_L - P_L0 from rest (J)).
+    Linear: E (V - V_rest). Sigmoid (Venegas, Harris & Simon 1998, J Appl Physiol 84:389, whose
+    V = a + b / (1 + exp(-(P - c) / d)) inverted): P_L = c - d ln((a + b - V) / (V - a)), V the
+    lungs' volume, their resting volume (where P_L = P_L0) plus the cavity's change; outside
+    (a, a + b) it is not finite, which the step's check stops.
+    # Model: par (`lung_par`)   # Data in: vol m^3   # Data out: returns (Pa, Pa/m^3, J)
+    """
+    dv = vol - par[P_V0]
+    if par[P_CURVE] == 0.0:
+        e = par[P_E]
+        return e * dv, e, 0.5 * e * dv * dv
+    a, b, c, d = par[P_SA], par[P_SB], par[P_SC], par[P_SD]
+    v0 = par[P_VREST]
+    v = v0 + dv
+    x, u = v - a, a + b - v
+    x0, u0 = v0 - a, a + b - v0
+    p = c - d * math.log(u / x)
+    energy = c * dv + d * (u * math.log(u) + x * math.log(x) - u0 * math.log(u0) - x0 * math.log(x0))
+    return p - par[P_RECOIL], d * b / (x * u), energy - par[P_RECOIL] * dv
+
+
+def recoil_energy_j(par, dv_m3):
+    """`lung_recoil`'s elastic energy (J) at cavity volume changes dv_m3 (an array, m^3)."""
+    dv = np.asarray(dv_m3, float)
+    if par[P_CURVE] == 0.0:
+        return 0.5 * par[P_E] * dv * dv
+    a, b, c, d, v0 = par[P_SA], par[P_SB], par[P_SC], par[P_SD], par[P_VREST]
+    x, u = v0 + dv - a, a + b - v0 - dv
+    x0, u0 = v0 - a, a + b - v0
+    energy = c * dv + d * (u * np.log(u) + x * np.log(x) - u0 * np.log(u0) - x0 * np.log(x0))
+    return energy - par[P_RECOIL] * dv
+
+
+@kernel(inline="always")
 def lung_load(par, pao, vol, rate):
     """The lumped law (module docstring): (P_alv, P_pl + P_L0), the alveolar pressure and the
     pleural pressure's departure from rest (Pa), at the cavity's volume vol (m^3) and rate
@@ -310,7 +354,7 @@ def lung_load(par, pao, vol, rate):
     # Model: par (`lung_par`)   # Data in: pao Pa, vol m^3, rate m^3/s   # Data out: returns (Pa, Pa)
     """
     palv = pao - (par[P_K1] + par[P_K2] * abs(rate)) * rate
-    return palv, palv - par[P_E] * (vol - par[P_V0])
+    return palv, palv - lung_recoil(par, vol)[0]
 
 
 @kernel(inline="always")
@@ -449,7 +493,10 @@ class Lungs(Term):
     lung_compliance_l_per_cmh2o, its inverse: give one); resting_recoil_cmh2o: the lungs'
     recoil at rest, minus the resting pleural pressure; airway_resistance_cmh2o_s_per_l
     (Rohrer's K1) and rohrer_k2_cmh2o_s2_per_l2; airway_opening_pressure_cmh2o: a
-    schedule (0: spontaneous breathing); airway_occluded: a schedule, the airway closed where
+    schedule (0: spontaneous breathing); recoil_curve: "linear" (by the elastance or compliance)
+    or "sigmoid" (`lung_recoil`: sigmoid_lower_volume_l a, sigmoid_volume_range_l b,
+    sigmoid_inflection_cmh2o c, sigmoid_width_cmh2o d of V = a + b / (1 + exp(-(P - c) / d)),
+    P the transpulmonary pressure); airway_occluded: a schedule, the airway closed where
     it is 1 (>= 0.5), open where 0: the lung volume when it closes is then held exactly
     (`project_occluded`), as in the occlusion and twitch manoeuvres."""
 
@@ -472,22 +519,49 @@ class Lungs(Term):
     rohrer_k2_cmh2o_s2_per_l2: float = param("nonneg", 0.0, hi=1e4)
     airway_opening_pressure_cmh2o: object = param("schedule", 0.0, ncomp=1)
     airway_occluded: object = param("schedule", 0.0, ncomp=1)
+    recoil_curve: str = param("choice", "linear", choices=RECOIL_CURVES)
+    sigmoid_lower_volume_l: float = param("nonneg", None, hi=100.0)
+    sigmoid_volume_range_l: float = param("positive", None, hi=100.0)
+    sigmoid_inflection_cmh2o: float = param("nonneg", None, hi=100.0)
+    sigmoid_width_cmh2o: float = param("positive", None, hi=1e3)
 
     def compile(self, b, what):
         super().compile(b, what)
         if "lung_face" in b.out:
             raise SceneError(f"{what}: expected one lungs term, received a second (the scene has one thorax)")
         ela, comp = self.lung_elastance_cmh2o_per_l, self.lung_compliance_l_per_cmh2o
-        if (ela is None) == (comp is None):
+        curve = self.value("recoil_curve", what)
+        sig_names = (
+            "sigmoid_lower_volume_l",
+            "sigmoid_volume_range_l",
+            "sigmoid_inflection_cmh2o",
+            "sigmoid_width_cmh2o",
+        )
+        sig = [getattr(self, k) for k in sig_names]
+        if curve == "linear" and (ela is None) == (comp is None):
             raise SceneError(
                 f"{what}: expected exactly one of lung_elastance_cmh2o_per_l or lung_compliance_l_per_cmh2o, "
                 f"received lung_elastance_cmh2o_per_l={ela!r} lung_compliance_l_per_cmh2o={comp!r}"
             )
-        e = (
-            self.value("lung_elastance_cmh2o_per_l", what)
-            if ela is not None
-            else 1.0 / self.value("lung_compliance_l_per_cmh2o", what)
-        )
+        given = [k for k, v in zip(sig_names, sig) if v is not None]
+        if curve == "linear" and given:
+            raise SceneError(
+                f"{what}.{given[0]}: a parameter of recoil_curve = 'sigmoid', received recoil_curve = 'linear'"
+            )
+        if curve == "sigmoid":
+            missing = [k for k, v in zip(sig_names, sig) if v is None]
+            if missing or ela is not None or comp is not None:
+                raise SceneError(
+                    f"{what}: recoil_curve = 'sigmoid' expects {', '.join(sig_names)} and no elastance or "
+                    f"compliance, received {'no ' + missing[0] if missing else 'an elastance or compliance'}"
+                )
+        e = 0.0
+        if curve == "linear":
+            e = (
+                self.value("lung_elastance_cmh2o_per_l", what)
+                if ela is not None
+                else 1.0 / self.value("lung_compliance_l_per_cmh2o", what)
+            )
         b.mesh.require_closed(f"{what}: the lungs' floor is the dome of a closed membrane")
         sel_idx = b.region(self.floor, f"{what}.floor")
         floor = b.mesh.face_vert[b.face_region(self.floor, f"{what}.floor", sel_idx)]
@@ -504,6 +578,13 @@ class Lungs(Term):
         par[P_K2] = self.value("rohrer_k2_cmh2o_s2_per_l2", what) * CMH2O_PA / 1e-6
         par[P_RECOIL] = self.value("resting_recoil_cmh2o", what) * CMH2O_PA
         par[P_V0] = vol
+        if curve == "sigmoid":
+            lower, span, inflection, width = (self.value(k, what) for k in sig_names)
+            par[P_CURVE] = 1.0
+            par[P_SA], par[P_SB] = lower * 1e-3, span * 1e-3
+            par[P_SC], par[P_SD] = inflection * CMH2O_PA, width * CMH2O_PA
+            # the lungs' resting volume: where the curve gives the resting recoil
+            par[P_VREST] = par[P_SA] + par[P_SB] / (1.0 + math.exp(-(par[P_RECOIL] - par[P_SC]) / par[P_SD]))
         par[P_REF:] = ref
         row = b.schedule(self.airway_opening_pressure_cmh2o, f"{what}.airway_opening_pressure_cmh2o", 1)
         shut = b.schedule(self.airway_occluded, f"{what}.airway_occluded", 1)
