@@ -27,6 +27,7 @@ from .mesh import icosphere, uv_sphere
 from .model import compile_scene
 from .record import Recorder
 from .regions import HalfSpace
+from .resolve import resolve_scene
 from .run import run as run_scene
 from .scene import Damping, Gravity, Masses, Membrane, MeshSpec, Nailed, Scene, ShapeMemory, Volume
 from .scenefile import apply_overrides, builtin_scene, load_scene
@@ -317,6 +318,34 @@ def coupled_row(*, nstep: int = 4000, repeats: int = 9) -> dict:
     }
 
 
+def lungs_row(level: int = 4, *, duration_s: float = 4.0, repeats: int = 5) -> dict:
+    """The breathing trunk with lungs (`breathing_lungs`) against the same trunk without
+    (`breathing`), mesh `level`, symplectic Euler at 1 ms, `duration_s` each (`hybrid.run.run`),
+    timed in turn repeat by repeat after a warm-up; medians of the times and of the ratios."""
+    models = {
+        name: compile_scene(apply_overrides(resolve_scene(name), [f"mesh.level={level}", "dt_s=0.001"]))
+        for name in ("breathing", "breathing_lungs")
+    }
+    times: dict[str, list] = {name: [] for name in models}
+    for rep in range(repeats + 1):
+        for name, model in models.items():
+            sim = Simulation(model)
+            sim.step(0)
+            t0 = time.perf_counter()
+            run_scene(sim, duration_s)
+            if rep:  # the first round loads the compiled loops
+                times[name].append(time.perf_counter() - t0)
+    base, lungs = times["breathing"], times["breathing_lungs"]
+    return {
+        "level": level,
+        "nvert": models["breathing"].nvert,
+        "duration_s": duration_s,
+        "without_s": statistics.median(base),
+        "with_s": statistics.median(lungs),
+        "ratio": statistics.median([a / b for a, b in zip(lungs, base)]),
+    }
+
+
 def recording_row(*, duration_s: float = 12.0, repeats: int = 9) -> dict:
     """The breathing run (`hybrid.run.run`, frames every 10 ms) without a recording,
     with the default one (`Recorder`, encoding on its own thread), and with the
@@ -381,7 +410,7 @@ def _our_volume_change(nvert: int, duration_s: float) -> float:
 
 
 #: the benchmark's sections, in the order they run (`run_bench(only=...)`)
-SECTIONS = ("membrane", "formulations", "implicit", "realtime", "coupled", "recording", "flex")
+SECTIONS = ("membrane", "formulations", "implicit", "realtime", "coupled", "lungs", "recording", "flex")
 
 
 #: the mesh level `hybrid study convergence` recommends for 1% on all four of the breathing
@@ -428,6 +457,8 @@ def run_bench(
         )
     if "coupled" in want:
         result["coupled"] = coupled_row(nstep=500, repeats=3) if quick else coupled_row()
+    if "lungs" in want:
+        result["lungs"] = lungs_row(0, duration_s=0.5, repeats=2) if quick else lungs_row()
     if "recording" in want:
         result["recording"] = recording_row(duration_s=1.0, repeats=2) if quick else recording_row()
     if "flex" in want and not quick:
@@ -492,6 +523,14 @@ def format_table(result: dict) -> str:
             "",
             "coupled breathing step vs bare mj_step of the trunk model; medians",
             f"  coupled {c['us_per_step']:.2f} us   mj_step {c['mj_step_us']:.2f} us   ratio {c['ratio']:.2f}",
+        ]
+    if "lungs" in result:
+        g = result["lungs"]
+        lines += [
+            "",
+            f"breathing trunk with and without lungs, level {g['level']} ({g['nvert']} points), "
+            f"{g['duration_s']:g} s at 1 ms; medians",
+            f"  without {g['without_s']:.3f} s   with {g['with_s']:.3f} s   ratio {g['ratio']:.3f}",
         ]
     if "recording" in result:
         r = result["recording"]

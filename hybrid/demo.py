@@ -1,14 +1,18 @@
-"""The built-in scene written in Python: the membrane-only breathing demo. (The
+"""The built-in scenes written in Python: the membrane-only breathing demo, and the
+breathing trunk with lungs (the packaged `breathing` scene file and one term more). (The
 coupled breathing trunk is a TOML file in `models/scenes/`; the benchmark's
 membranes are in `hybrid.bench`.)"""
 
 from __future__ import annotations
 
+import dataclasses
+
+from . import scenefile
 from .regions import HalfSpace
-from .scene import Damping, Gravity, Masses, MeshSpec, Muscle, Nailed, Scene, ShapeMemory, Volume
+from .scene import Damping, Gravity, Lungs, Masses, MeshSpec, Muscle, Nailed, Scene, ShapeMemory, Volume
 from .schedule import Breathing
 
-__all__ = ["membrane_demo"]
+__all__ = ["membrane_demo", "breathing_lungs"]
 
 RADIUS_M = 0.12
 
@@ -39,3 +43,23 @@ def membrane_demo(duration_s: float = 12.0) -> Scene:
         integrator="symplectic_euler",
         duration_s=duration_s,
     )
+
+
+def breathing_lungs() -> Scene:
+    """The breathing trunk (`breathing`, models/scenes/breathing.toml) with lungs in its
+    thorax (`hybrid.terms.lungs`), every lung parameter from a source, none fitted:
+    lung compliance 0.2 L/cmH2O (Guyton, Textbook of Medical Physiology), resting recoil
+    5 cmH2O (pleural pressure -5 cmH2O at rest, physiology textbooks), airway resistance
+    1.5 cmH2O s/L (DuBois et al. 1956, J Clin Invest 35:327), spontaneous breathing (the
+    airway open at 0 cmH2O); a thoracic cavity 0.12 m high over the dome's border, about 3 L
+    at rest (a functional residual capacity of about 3 L, textbooks; the linear law does not
+    depend on it). The trunk's geometry and drive are the `breathing` scene's: it is small for
+    an adult (a tidal volume near 0.09 L, not 0.5 L; docs/lungs.md)."""
+    base = scenefile.load_scene(scenefile.builtin_scene("breathing"))
+    lungs = Lungs(
+        wall_height_m=0.12,
+        lung_compliance_l_per_cmh2o=0.2,
+        resting_recoil_cmh2o=5.0,
+        airway_resistance_cmh2o_s_per_l=1.5,
+    )
+    return dataclasses.replace(base, name="breathing_lungs", forces=(*base.forces, lungs))

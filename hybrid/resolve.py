@@ -14,7 +14,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from . import scenefile
-from .demo import membrane_demo
+from .demo import breathing_lungs, membrane_demo
 from .errors import SceneError
 from .scene import Scene
 
@@ -23,7 +23,7 @@ __all__ = ["DEFAULT_SCENE", "PYTHON_SCENES", "scene_names", "resolve_scene"]
 DEFAULT_SCENE = "breathing"
 
 #: the scenes written in Python, by name: each a function returning a `Scene`
-PYTHON_SCENES: dict[str, Callable[[], Scene]] = {"membrane_demo": membrane_demo}
+PYTHON_SCENES: dict[str, Callable[[], Scene]] = {"membrane_demo": membrane_demo, "breathing_lungs": breathing_lungs}
 
 
 def scene_names() -> list[str]:

@@ -49,7 +49,9 @@ def test_load_scene_takes_every_name_the_command_line_takes():
     assert hybrid.load("membrane_demo").mj_model is None
     scene = hybrid.load_scene("membrane_demo", overrides=["dt_s=5e-4"], without=["muscle"])
     assert scene.dt_s == 5e-4 and "muscle" not in scene.term_names()
-    with pytest.raises(hybrid.SceneError, match="'snoring'.*breathing, breathing_paper, membrane_demo"):
+    with pytest.raises(
+        hybrid.SceneError, match="'snoring'.*breathing, breathing_lungs, breathing_paper, membrane_demo"
+    ):
         hybrid.load("snoring")
     assert {"breathing", "membrane_demo", "myotorso_breathing"} <= set(hybrid.scene_names())
 

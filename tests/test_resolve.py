@@ -24,7 +24,7 @@ def test_every_kind_of_source_resolves(tmp_path):
 
 
 def test_the_names_are_the_packaged_scenes_and_the_python_ones():
-    assert set(scene_names()) == set(scenefile.builtin_scenes()) | {"membrane_demo"}
+    assert set(scene_names()) == set(scenefile.builtin_scenes()) | {"membrane_demo", "breathing_lungs"}
     assert {"breathing", "myotorso_breathing", "membrane_demo"} <= set(scene_names())
 
 

@@ -3,7 +3,7 @@
 **The cavity.** A closed surface made of the membrane's `floor` region (the dome's
 thoracic face: its faces reversed) and a wall over the floor's border: the border
 points raised along the floor's mean normal to a top plane `wall_height_m` above the
-border's centre, in rings about one border edge apart, closed by a fan to the top's
+border's centre, in `WALL_RINGS` rings (the same wall at every mesh level), closed by a fan to the top's
 centre. The wall shares the border points with the membrane, so the cavity stays
 closed however the membrane and the ribs that hold the border move; its other points
 are fixed in the world (a rigid rib cage above the border: the ribs that carry the
@@ -92,6 +92,8 @@ P_E, P_K1, P_K2, P_RECOIL, P_V0 = 0, 1, 2, 3, 4
 P_CURVE, P_SA, P_SB, P_SC, P_SD, P_VREST = 5, 6, 7, 8, 9, 10
 P_REF = 11
 NPAR = 14
+#: the wall's rings of points between the floor's border and the top (`thoracic_cavity`)
+WALL_RINGS = 4
 #: the lungs' recoil curves (`Lungs.recoil_curve`)
 RECOIL_CURVES = ("linear", "sigmoid")
 #: `MembraneArrays.integrator` of implicit Euler (`hybrid.implicit.IMPLICIT_ID`, which checks it)
@@ -450,8 +452,9 @@ def thoracic_cavity(vert_pos: np.ndarray, floor: np.ndarray, height_m: float, wh
             f"centre, received {height_m!r}"
         )
     rise = height_m - (ring - centre) @ up  # each border point's way up to the top plane (m)
-    edge = float(np.mean(np.linalg.norm(ring - np.roll(ring, -1, axis=0), axis=1)))
-    nring = max(1, math.ceil(float(rise.mean()) / edge))
+    # a fixed number of rings, not the membrane's edge length: the wall is the same surface at
+    # every mesh level (only its border follows the membrane), so that the cavity converges
+    nring = WALL_RINGS
     n = len(loop)
     wall = [ring + (k / nring) * rise[:, None] * up for k in range(1, nring + 1)] + [(centre + height_m * up)[None]]
     wall_pos = np.concatenate(wall)
