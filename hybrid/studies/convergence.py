@@ -58,9 +58,24 @@ from ..outputs import write_text as _write_text
 from ..sweep import sweep
 from .stability.report import write_json
 
-__all__ = ["run", "write", "simulate", "richardson", "fit_space", "estimate", "recommend", "DEFAULT_METRICS", "TARGETS"]
+__all__ = [
+    "run",
+    "write",
+    "simulate",
+    "richardson",
+    "fit_space",
+    "estimate",
+    "recommend",
+    "DEFAULT_METRICS",
+    "LUNG_METRICS",
+    "TARGETS",
+]
 
-DEFAULT_METRICS = ("rib_lift_mm", "apex_descent_mm", "pressure_pa", "swept_volume_ml")
+#: with lungs (`hybrid.terms.lungs`): the largest lung volume above rest (the tidal volume of a run
+#: from rest) and the largest transdiaphragmatic pressure change (its swing)
+LUNG_METRICS = ("lung_volume_change_l", "transdiaphragmatic_pressure_change_cmh2o")
+#: the metrics a study takes by default, those the scene has
+DEFAULT_METRICS = ("rib_lift_mm", "apex_descent_mm", "pressure_pa", "swept_volume_ml", *LUNG_METRICS)
 TARGETS = (0.10, 0.03, 0.01)
 RATIO_SPACE = math.sqrt(2.0)  # the spacing ratio between a generator's mesh levels
 RATIO_SPACE_FILE = 2.0  # between a file mesh's levels: each face split into four

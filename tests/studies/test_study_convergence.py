@@ -12,6 +12,7 @@ from helpers import strict_load
 from hybrid.studies.cli import main_study
 from hybrid.studies.convergence import (
     DEFAULT_METRICS,
+    LUNG_METRICS,
     MAX_EXTRAPOLATED_LEVELS,
     RATIO_SPACE,
     TARGETS,
@@ -174,7 +175,8 @@ def test_small_convergence_study_of_the_breathing_scene(tmp_path, capsys):
     assert main_study(["convergence", "--out", str(tmp_path), "--small", "--steps", "3"]) == 0
     assert "convergence:" in capsys.readouterr().out
     data = strict_load(tmp_path / "convergence.json")
-    assert data["scene"] == "breathing" and data["metrics"] == list(DEFAULT_METRICS)
+    body_metrics = [k for k in DEFAULT_METRICS if k not in LUNG_METRICS]  # the scene has no lungs
+    assert data["scene"] == "breathing" and data["metrics"] == body_metrics
     assert len(data["runs"]) == 3 * 3 and not data["failures"]
     for r in data["runs"]:
         assert set(r) >= {"level", "nvert", "dt", "values", "wall_s", "cpu_s", "cpu_s_spread", "repeats"}
@@ -182,7 +184,7 @@ def test_small_convergence_study_of_the_breathing_scene(tmp_path, capsys):
     # each level about doubles the points; each level's steps halve
     nv = sorted({r["nvert"] for r in data["runs"]})
     assert nv[0] == 80 and all(1.6 < b / a < 2.4 for a, b in zip(nv, nv[1:]))
-    for k in DEFAULT_METRICS:
+    for k in body_metrics:
         e = data["estimate"][k]
         assert abs(e["observed_order_time"] - 1.0) <= ORDER_TIME_WINDOW, (k, e["observed_order_time"])
         for level in data["levels"]:  # each level's values converge in time: the changes shrink
@@ -194,7 +196,7 @@ def test_small_convergence_study_of_the_breathing_scene(tmp_path, capsys):
     assert all(r["cpu_s_per_sim_s"] > 0 and r["repeats"] >= 1 for r in data["runs"])
     by = {(r["level"], r["dt"]) for r in data["runs"]}
     rows = data["recommendation"]
-    assert {(r["metric"], r["target_rel_error"]) for r in rows} == {(k, t) for k in DEFAULT_METRICS for t in TARGETS}
+    assert {(r["metric"], r["target_rel_error"]) for r in rows} == {(k, t) for k in body_metrics for t in TARGETS}
     for r in rows:
         if r["basis"] == "measured":
             assert (r["level"], r["dt"]) in by
@@ -205,6 +207,20 @@ def test_small_convergence_study_of_the_breathing_scene(tmp_path, capsys):
     md = (tmp_path / "convergence.md").read_text()
     assert md.startswith("# Convergence") and md.count("| measured |") == sum(r["basis"] == "measured" for r in rows)
     assert (tmp_path / "convergence.png").stat().st_size > 10_000
+
+
+def test_small_convergence_study_of_the_breathing_trunk_with_lungs_takes_the_lung_metrics(tmp_path, capsys):
+    """The study on breathing_lungs: the lung volume and Pdi metrics besides the body's, each
+    level's values converging in time (first order: the changes halve with the step)."""
+    args = ["convergence", "breathing_lungs", "--out", str(tmp_path), "--small", "--steps", "3", "--repeats", "1"]
+    assert main_study(args) == 0
+    data = strict_load(tmp_path / "convergence.json")
+    assert data["metrics"] == list(DEFAULT_METRICS) and not data["failures"]
+    for k in LUNG_METRICS:
+        assert abs(data["estimate"][k]["observed_order_time"] - 1.0) <= ORDER_TIME_WINDOW, k
+        for level in data["levels"]:
+            xs = [r["values"][k] for r in sorted(data["runs"], key=lambda r: -r["dt"]) if r["level"] == level]
+            assert xs[0] > 0 and abs(xs[0] - xs[1]) > abs(xs[1] - xs[2]) > 0, (k, level, xs)
 
 
 def test_convergence_refuses_an_unknown_metric_in_one_line(tmp_path, capsys):
