@@ -262,9 +262,12 @@ def rigid_phase(m, s, t, row, rig):
         i = link_vert[j]
         for a in range(3):
             link_force[j, a] = frc[i, a] + p * grad[i, a] + links.extra_force[j, a]
-    point_wrench_kernel(mj.site_xpos, mj.xipos, site_id, links.site_body, link_force, xfrc)
     wall = rig.wall
-    if wall.point.shape[0]:  # the lungs' wall: its load to the bodies that carry it (their rows set above)
+    for j in range(wall.site_body.shape[0]):  # a body the wall alone loads: its row rewritten each step
+        for a in range(6):
+            xfrc[wall.site_body[j], a] = 0.0
+    point_wrench_kernel(mj.site_xpos, mj.xipos, site_id, links.site_body, link_force, xfrc)
+    if wall.point.shape[0]:  # the lungs' wall: its load added to the bodies that carry it
         _gather_rows(wall.point, s.lung_wall_force, wall.force)
         add_point_wrench_kernel(mj.site_xpos, mj.xipos, wall.site_id, wall.site_body, wall.weight, wall.force, xfrc)
     for j in range(ctrls.act.shape[0]):
@@ -307,18 +310,24 @@ def _gather_rows(rows, src, out):
 
 @kernel
 def carry_wall(wall, site_xpos, wall_pos, wall_vel):
-    """The carried wall points where their bodies put them: p = w x_site + (1 - w) p_rest,
-    v = w v_site (wall.vel holds the sites' velocities).
+    """The carried wall points where their bodies put them: p = p_rest + sum_e w_e (x_site_e -
+    p_rest), v = sum_e w_e v_site_e over the point's bodies e (linear blend skinning; wall.vel
+    holds the sites' velocities).
     # Model: wall (WallArrays)   # Data in: site_xpos (nsite, 3) m, wall.vel (nc, 3) m/s
     # Data out: wall_pos (nwall, 3) m, wall_vel (nwall, 3) m/s (the carried rows)
     """
+    for j in range(wall.point.shape[0]):  # a point may have two bodies: from rest, then each one's share
+        p = wall.point[j]
+        for a in range(3):
+            wall_pos[p, a] = wall.rest[j, a]
+            wall_vel[p, a] = 0.0
     for j in range(wall.point.shape[0]):
         p = wall.point[j]
         w = wall.weight[j]
         sid = wall.site_id[j]
         for a in range(3):
-            wall_pos[p, a] = w * site_xpos[sid, a] + (1.0 - w) * wall.rest[j, a]
-            wall_vel[p, a] = w * wall.vel[j, a]
+            wall_pos[p, a] += w * (site_xpos[sid, a] - wall.rest[j, a])
+            wall_vel[p, a] += w * wall.vel[j, a]
 
 
 @kernel

@@ -168,7 +168,10 @@ class RibPair:
     holds the rib's own weight (MuJoCo's gravity) where it is drawn, and rests
     `reference_angle_deg` beyond that. Bodies `NAME_left`, `NAME_right`, joints
     `NAME_left_hinge`, `NAME_right_hinge`, sites `NAME_left_front`, `NAME_right_front`,
-    tendon `NAME_sternum`."""
+    tendon `NAME_sternum`. With `muscle_gear_n_m` > 0, the rib cage's inspiratory muscles
+    on the pair (parasternal intercostals, scalenes): a motor on each hinge,
+    `NAME_left_muscle` and `NAME_right_muscle`, whose control in [0, 1] (an activation, driven
+    by `rigid.ctrl`) times the gear is its torque (N m), lifting the rib."""
 
     name: str = param("name")
     head_m: tuple = param("vec3")
@@ -179,6 +182,7 @@ class RibPair:
     damping_n_m_s_per_rad: float = param("nonneg", 0.05, hi=checks.MAX_STIFFNESS_N_PER_M)
     reference_angle_deg: float = 0.0  # the hinge spring's rest angle beyond the drawn pose, in [-90, 90]
     mass_kg: float = param("positive", 0.2, hi=1e3)
+    muscle_gear_n_m: float = param("nonneg", 0.0, hi=checks.MAX_STIFFNESS_N_PER_M)
 
 
 @dataclass(frozen=True)

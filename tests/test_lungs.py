@@ -15,8 +15,8 @@ import hybrid
 from hybrid.errors import SceneError
 from hybrid.readouts import swept_volume
 from hybrid.regions import Difference, HalfSpace, Union_
-from hybrid.scene import Lungs, Masses, MeshSpec, Nailed, Prescribed, Scene
-from hybrid.schedule import Table
+from hybrid.scene import Lungs, Masses, MeshSpec, Nailed, Prescribed, RibPair, Ribs, Scene
+from hybrid.schedule import Breathing, Table
 from hybrid.terms.lungs import CMH2O_PA, P_REF, add_cavity_pressure, cavity_volume_rate, open_edges, thoracic_cavity
 
 CMH2O_PER_L = CMH2O_PA / 1e-3
@@ -315,3 +315,52 @@ def test_a_sigmoid_lung_s_pleural_pressure_is_its_inverted_curve():
     want = -(c - d * np.log((a + b - vol) / (vol - a)))
     assert np.max(np.abs(tr["pleural_pressure_cmh2o"][1:] - want)) < 1e-9
     assert tr["pleural_pressure_cmh2o"][0] == -5.0
+
+
+def _two_rib_pairs(activation: float):
+    """The breathing trunk with lungs whose wall the lower ribs (at its foot) and an upper rib
+    pair (the pulmonary rib cage, sloping down to the front, with inspiratory muscles) carry;
+    the upper muscles driven to `activation` of their gear at the breath's peak."""
+    scene = hybrid.load_scene("breathing", overrides=["mesh.level=0", "duration_s=2.0"])
+    upper = RibPair(
+        name="upper_ribs",
+        head_m=(-0.13, 0.025, 0.14),
+        front_m=(0.10, 0.012, 0.10),
+        half_width_m=0.12,
+        muscle_gear_n_m=2.0,
+    )
+    ctrl = (
+        {"upper_ribs_*_muscle": Breathing(period_s=4.0, inspiration_fraction=0.4, peak=activation)}
+        if activation
+        else {}
+    )
+    rigid = dataclasses.replace(scene.rigid, ribs=Ribs(body="spine", pairs=(upper,)), ctrl=ctrl)
+    # the wall 0.12 m high: its rings at the upper ribs' own height (0.10-0.14 m), where the pleural
+    # pull on a rib sloping down to the front turns it down about its hinge
+    lungs = Lungs(**{**LUNG, "wall_height_m": 0.12}, wall_bodies="upper_ribs_*")
+    return hybrid.load(dataclasses.replace(scene, rigid=rigid, forces=(*scene.forces, lungs)))
+
+
+def test_the_diaphragm_alone_draws_the_upper_ribs_in_and_with_their_muscles_both_rise():
+    """The paradox of a rib cage without its inspiratory muscles: with the diaphragm alone the
+    falling pleural pressure turns the upper ribs down (in) while the lower ribs, lifted by the
+    diaphragm's insertion and the abdomen's pressure, rise; with the upper ribs' muscles both
+    rise. Hinge angles: body-fixed measures, no mesh point. And the upper ribs, which only the
+    wall loads, take each step's wall load afresh (their applied wrench is not accumulated)."""
+    angles = {}
+    for act in (0.0, 1.0):
+        sim = _two_rib_pairs(act)
+        m, d = sim.mj_model, sim.mj_data
+        lo, up = (m.joint(f"{n}_left_hinge").qposadr[0] for n in ("rib", "upper_ribs"))
+        q0 = d.qpos.copy()
+        sim.step(1600)  # the end of inspiration
+        angles[act] = (d.qpos[lo] - q0[lo], d.qpos[up] - q0[up])
+        body = m.body("upper_ribs_left").id
+        f = d.xfrc_applied[body, :3]
+        sys_ = sim.rigid.system
+        mine = sys_.wall_site_body == body
+        want = (sys_.wall_weight[mine, None] * sim.state.lung_wall_force[sys_.wall_point[mine]]).sum(axis=0)
+        assert np.allclose(f, want, rtol=1e-9, atol=1e-12)
+    (lo0, up0), (lo1, up1) = angles[0.0], angles[1.0]
+    assert lo0 > 0 > up0  # the diaphragm alone: the lower ribs rise, the upper ones are drawn in
+    assert lo1 > 0 and up1 > 0  # with the rib cage's muscles both rise

@@ -14,6 +14,7 @@ f"{Rigid.prefix}hybrid_link_{i}", i the vertex index.
 
 from __future__ import annotations
 
+import fnmatch
 from collections.abc import Sequence
 
 import mujoco
@@ -24,7 +25,7 @@ from hybrid.errors import RigidError, SceneError
 from hybrid.scene import KeepIn, Nailed, Prescribed, Rigid, RigidLink, Scene
 from hybrid.terms.base import claim_points
 
-from .controls import apply_controls, start_data
+from .controls import apply_controls, close_names, start_data
 from .mjcf import compile_spec, load_rigid_spec
 from .ribs import add_ribs
 from .system import CoupledRigid
@@ -216,17 +217,37 @@ def build_rigid(
 
 
 def _carried_sites(spec, model0, prefix: str, carried, link_body_of: dict, key_id: int) -> dict | None:
-    """Sites for the carried points over linked membrane points (`build_rigid`): returns
-    {"site_names", "point" (nc,) the carried points' indices, "weight" (nc,), "rest" (nc, 3) m},
-    or None without carried points."""
+    """Sites for the carried points (`build_rigid`): those over linked membrane points on their
+    body by their weight; with a body pattern, the points strictly between the border and the
+    top (weight in (0, 1)) also on the nearest matching body (by its centre of mass where the
+    model starts) by one minus their weight. Returns {"site_names", "point" (nc,) the carried
+    points' indices (a point may appear twice), "weight" (nc,), "rest" (nc, 3) m}, or None."""
     if carried is None:
         return None
-    pos, under, weight = carried
-    point = np.array([j for j, i in enumerate(under) if int(i) in link_body_of and weight[j] > 0], np.int64)
-    names = [f"{prefix}hybrid_wall_{int(j)}" for j in point]
+    pos, under, weight, pattern = carried
+    pos, weight = np.asarray(pos, float), np.asarray(weight, float)
+    point = [j for j, i in enumerate(under) if int(i) in link_body_of and weight[j] > 0]
+    names = [f"{prefix}hybrid_wall_{j}" for j in point]
     bodies = [link_body_of[int(under[j])] for j in point]
-    add_sites(spec, model0, bodies, np.asarray(pos)[point], names, key_id)
-    return {"site_names": names, "point": point, "weight": np.asarray(weight, float)[point], "rest": pos[point]}
+    shares = [float(weight[j]) for j in point]
+    if pattern is not None:
+        all_bodies = [model0.body(i).name for i in range(1, model0.nbody)]
+        chosen = [b for b in all_bodies if fnmatch.fnmatchcase(b, pattern)]
+        if not chosen:
+            raise RigidError(
+                f"forces['lungs'].wall_bodies: no body of the rigid model matches {pattern!r}; "
+                f"{close_names(pattern, all_bodies, 'body')}"
+            )
+        com = start_data(model0, key_id).xipos[[model0.body(b).id for b in chosen]]
+        for j in np.flatnonzero((weight > 0) & (weight < 1)):
+            near = chosen[int(np.argmin(np.linalg.norm(com - pos[j], axis=1)))]
+            point.append(int(j))
+            names.append(f"{prefix}hybrid_wall_up_{int(j)}")
+            bodies.append(near)
+            shares.append(1.0 - float(weight[j]))
+    add_sites(spec, model0, bodies, pos[point], names, key_id)
+    idx = np.asarray(point, np.int64)
+    return {"site_names": names, "point": idx, "weight": np.asarray(shares, float), "rest": pos[idx]}
 
 
 def _link_body(spec: mujoco.MjSpec, name) -> str | None:

@@ -130,6 +130,18 @@ def _rel_pose(data, parent: int, body: int) -> tuple[np.ndarray, np.ndarray]:
     return rot.T @ (data.xpos[body] - data.xpos[parent]), _quat_inv_mul(data.xquat[parent], data.xquat[body])
 
 
+def _rib_muscles(ribs) -> list:
+    """The actuators `rigid.ribs` will add (`hybrid.rigid.ribs`: a pair's muscles, when its
+    muscle_gear_n_m > 0), which `rigid.ctrl` may drive."""
+    pairs = getattr(ribs, "pairs", ()) or ()
+    return [
+        f"{p.name}_{side}_muscle"
+        for p in pairs
+        if isinstance(getattr(p, "muscle_gear_n_m", None), (int, float)) and p.muscle_gear_n_m > 0
+        for side in ("left", "right")
+    ]
+
+
 def apply_controls(spec: mujoco.MjSpec, rig: Rigid, label: str, timestep_s: float | None) -> Controls:
     """Apply `rig`'s control keys to `spec` in place (module docstring); returns what
     was done. timestep_s: the scene's step (None: the MJCF's own), for the weld and lock
@@ -247,8 +259,8 @@ def apply_controls(spec: mujoco.MjSpec, rig: Rigid, label: str, timestep_s: floa
         eq.data[0:5] = [float(qstart[adr] - model0.qpos0[adr]), 0.0, 0.0, 0.0, 0.0]
         eq.solref, eq.solimp = [2.0 * dt, 1.0], _SOLIMP
 
-    # actuators driven by schedules
-    actuators = _names(model0, "actuator", model0.nu)
+    # actuators driven by schedules: the model's, and the rib muscles `rigid.ribs` adds after this
+    actuators = _names(model0, "actuator", model0.nu) + _rib_muscles(rig.ribs)
     ctrl = rig.ctrl
     if not isinstance(ctrl, dict):
         raise SceneError(

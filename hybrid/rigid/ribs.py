@@ -100,7 +100,13 @@ def rib_arc(
 
 def _names_taken(spec: mujoco.MjSpec, names: dict) -> str | None:
     """The first of names {name: kind} the spec has already (any element kind), or None."""
-    lookup = {"body": spec.body, "joint": spec.joint, "site": spec.site, "tendon": spec.tendon}
+    lookup = {
+        "body": spec.body,
+        "joint": spec.joint,
+        "site": spec.site,
+        "tendon": spec.tendon,
+        "actuator": spec.actuator,
+    }
     for name, kind in names.items():
         if lookup[kind](name) is not None:
             return f"{kind} {name!r}"
@@ -181,6 +187,7 @@ def add_ribs(spec: mujoco.MjSpec, ribs: Ribs, label: str, key_id: int = -1) -> R
         damp = _value(where, pair, "damping_n_m_s_per_rad")
         ref = np.radians(reference_angle(f"{where}.reference_angle_deg", pair.reference_angle_deg))
         mass = _value(where, pair, "mass_kg")
+        gear = _value(where, pair, "muscle_gear_n_m")
         lat_head, lat_front = float((head - origin) @ left), float((front - origin) @ left)
         for key, lat in (("head_m", lat_head), ("front_m", lat_front)):
             if lat < radius:
@@ -204,6 +211,8 @@ def add_ribs(spec: mujoco.MjSpec, ribs: Ribs, label: str, key_id: int = -1) -> R
         names.update({f"{name}_{s}_hinge": "joint" for s in _SIDES})
         names.update({f"{name}_{s}_front": "site" for s in _SIDES})
         names[f"{name}_sternum"] = "tendon"
+        if gear > 0:
+            names.update({f"{name}_{s}_muscle": "actuator" for s in _SIDES})
         taken = _names_taken(spec, names)
         if taken:
             raise RigidError(
@@ -255,6 +264,15 @@ def add_ribs(spec: mujoco.MjSpec, ribs: Ribs, label: str, key_id: int = -1) -> R
             rib.add_site(
                 name=f"{name}_{side}_front", pos=local[-1].tolist(), size=[radius, radius, radius], group=_GROUP
             )
+            if gear > 0:  # the rib cage's inspiratory muscles: torque = activation x gear, lifting the rib
+                act = spec.add_actuator(
+                    name=f"{name}_{side}_muscle",
+                    target=f"{name}_{side}_hinge",
+                    trntype=mujoco.mjtTrn.mjTRN_JOINT,
+                    gear=[gear, 0.0, 0.0, 0.0, 0.0, 0.0],
+                )
+                act.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
+                act.ctrlrange = [0.0, 1.0]
             out.bodies.append(f"{name}_{side}")
             out.joints.append(f"{name}_{side}_hinge")
             out.fronts.append(f"{name}_{side}_front")

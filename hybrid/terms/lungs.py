@@ -499,7 +499,10 @@ class Lungs(Term):
     schedule (0: spontaneous breathing); recoil_curve: "linear" (by the elastance or compliance)
     or "sigmoid" (`lung_recoil`: sigmoid_lower_volume_l a, sigmoid_volume_range_l b,
     sigmoid_inflection_cmh2o c, sigmoid_width_cmh2o d of V = a + b / (1 + exp(-(P - c) / d)),
-    P the transpulmonary pressure); airway_occluded: a schedule, the airway closed where
+    P the transpulmonary pressure); wall_bodies: a body name or pattern of the rigid model (the
+    upper ribs, `rigid.ribs`), None for none: the wall's rings between the border and the top
+    follow the nearest such body by the share the border's rib leaves (the pulmonary rib cage);
+    airway_occluded: a schedule, the airway closed where
     it is 1 (>= 0.5), open where 0: the lung volume when it closes is then held exactly
     (`project_occluded`), as in the occlusion and twitch manoeuvres."""
 
@@ -522,6 +525,7 @@ class Lungs(Term):
     rohrer_k2_cmh2o_s2_per_l2: float = param("nonneg", 0.0, hi=1e4)
     airway_opening_pressure_cmh2o: object = param("schedule", 0.0, ncomp=1)
     airway_occluded: object = param("schedule", 0.0, ncomp=1)
+    wall_bodies: str = param("text", None)
     recoil_curve: str = param("choice", "linear", choices=RECOIL_CURVES)
     sigmoid_lower_volume_l: float = param("nonneg", None, hi=100.0)
     sigmoid_volume_range_l: float = param("positive", None, hi=100.0)
@@ -592,7 +596,8 @@ class Lungs(Term):
         row = b.schedule(self.airway_opening_pressure_cmh2o, f"{what}.airway_opening_pressure_cmh2o", 1)
         shut = b.schedule(self.airway_occluded, f"{what}.airway_occluded", 1)
         b.out.update(lung_face=face, lung_wall=wall, lung_par=par, lung_sched=np.array([row, shut], np.int64))
-        b.carried = (wall, under, weight)  # the wall's points that rigid bodies carry (`hybrid.rigid.build_rigid`)
+        # the wall's points that rigid bodies carry (`hybrid.rigid.build_rigid`)
+        b.carried = (wall, under, weight, self.value("wall_bodies", what))
         # (no per-point stiffness for the stability estimate: the compartment moves the dome as one
         # mode, E sum_i |g_i|^2 / m_i, about 700 s^-2 on the breathing scene, far below the sheet's)
 
