@@ -163,16 +163,17 @@ def frames_from_scene(
     the terms named in `without` removed) and keep its frames in memory. Without
     `duration_s`: the scene's duration if `full`, else up to the end of the first breath."""
     from .model import compile_scene
+    from .observers.metrics import first_muscle
     from .record import body_geoms, region_colours
     from .resolve import resolve_scene
-    from .run import RunFailed, _breathing, run
+    from .run import RunFailed, run
     from .simulation import Simulation
 
     scene = resolve_scene(scene_arg, overrides=overrides, without=without)
     sim = Simulation(compile_scene(scene))
     if duration_s is None:
         duration_s = scene.duration_s
-        _, breath = _breathing(sim.model)
+        _, breath = first_muscle(sim.model)
         if breath is not None and not full:
             duration_s = min(duration_s, breath.onset_s + breath.period_s + 0.1)
     keep: dict = {"t": [], "pos": [], "bpos": [], "bquat": []}

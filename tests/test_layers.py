@@ -28,7 +28,20 @@ LAYERS = (
     ("simulation", ("simulation", "builds", "control", "state", "diagnosis")),
     (
         "observers",
-        ("run", "loads", "record", "record.*", "render", "sweep", "grid", "outputs", "provenance", "respiratory"),
+        (
+            "run",
+            "observers",
+            "observers.*",
+            "loads",
+            "record",
+            "record.*",
+            "render",
+            "sweep",
+            "grid",
+            "outputs",
+            "provenance",
+            "respiratory",
+        ),
     ),
     ("public API", ("",)),  # hybrid/__init__.py
     (
