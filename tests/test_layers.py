@@ -46,7 +46,18 @@ LAYERS = (
     ("public API", ("",)),  # hybrid/__init__.py
     (
         "bench, command line, studies",
-        ("bench", "bench.*", "bench_rigid", "cli", "__main__", "docgen", "inspection", "studies", "studies.*"),
+        (
+            "bench",
+            "bench.*",
+            "bench_rigid",
+            "cli",
+            "__main__",
+            "docgen",
+            "docgen.*",
+            "inspection",
+            "studies",
+            "studies.*",
+        ),
     ),
 )
 # the door to MuJoCo: model time (rigid) and step time (coupling)
