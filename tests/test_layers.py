@@ -36,6 +36,8 @@ LAYERS = (
             "record",
             "record.*",
             "render",
+            "pictures",
+            "pictures.*",
             "sweep",
             "grid",
             "outputs",
