@@ -20,7 +20,7 @@ LAYERS = (
     ("errors, kernel", ("errors", "kernel", "checks")),
     ("geometry, regions, schedules", ("mesh", "mesh.*", "regions", "schedule", "stability", "sites")),
     ("terms", ("terms", "terms.*")),
-    ("scene", ("scene", "scenefile", "rigidfile", "demo", "resolve")),
+    ("scene", ("scene", "scenefile", "scenefile.*", "rigidfile", "demo", "resolve")),
     ("model, rigid", ("model", "rigid", "rigid.*")),
     ("step", ("step", "readouts", "implicit", "implicit_matrix")),
     ("step loop", ("loop",)),
