@@ -21,7 +21,7 @@ LAYERS = (
     ("geometry, regions, schedules", ("mesh", "mesh.*", "regions", "schedule", "stability", "sites")),
     ("terms", ("terms", "terms.*")),
     ("scene", ("scene", "scenefile", "scenefile.*", "rigidfile", "demo", "resolve")),
-    ("model, rigid", ("model", "rigid", "rigid.*")),
+    ("model, rigid", ("model", "body", "rigid", "rigid.*")),
     ("step", ("step", "readouts", "implicit", "implicit_matrix")),
     ("step loop", ("loop",)),
     ("coupled step", ("coupling",)),
