@@ -364,3 +364,20 @@ def test_the_diaphragm_alone_draws_the_upper_ribs_in_and_with_their_muscles_both
     (lo0, up0), (lo1, up1) = angles[0.0], angles[1.0]
     assert lo0 > 0 > up0  # the diaphragm alone: the lower ribs rise, the upper ones are drawn in
     assert lo1 > 0 and up1 > 0  # with the rib cage's muscles both rise
+
+
+def test_the_recording_carries_the_lung_series_of_the_trace(tmp_path):
+    """The MCAP recording's /lungs/... channels are the trace's series at the recorded frames."""
+    from hybrid.record import Recorder
+    from hybrid.record.schemas import SCALAR_CHANNELS
+
+    sim = hybrid.load("breathing_lungs", overrides=["mesh.level=0"])
+    with Recorder(tmp_path / "run.mcap", sim) as rec:
+        tr = hybrid.run(sim, 0.5, observers=[rec])["trace"].arrays()
+    data = hybrid.read(tmp_path / "run.mcap")
+    lung_topics = [t for t in SCALAR_CHANNELS if t.startswith("/lungs/")]
+    assert len(lung_topics) == 5
+    for topic in lung_topics:
+        ch, key = data[topic], SCALAR_CHANNELS[topic]
+        assert np.allclose(ch["t"], tr["t_s"], rtol=0, atol=1e-9)  # stamps in whole nanoseconds
+        assert np.array_equal(ch["value"], tr[key]), topic

@@ -18,6 +18,12 @@ SCALAR_CHANNELS = {
     "/apex_descent": "apex_descent_mm",
     "/muscle_stiffness": "muscle_n_per_m",
     "/kinetic_energy": "kinetic_energy_j",
+    # scenes with lungs (no message otherwise): in the trace's units, L, L/s, cmH2O
+    "/lungs/volume_change": "lung_volume_change_l",
+    "/lungs/flow": "flow_l_per_s",
+    "/lungs/pleural_pressure": "pleural_pressure_cmh2o",
+    "/lungs/alveolar_pressure": "alveolar_pressure_cmh2o",
+    "/lungs/transdiaphragmatic_pressure_change": "transdiaphragmatic_pressure_change_cmh2o",
 }
 
 #: meshes with at most this many points get the triangle list every frame
