@@ -350,10 +350,12 @@ def run_steps(
     pressure=True,
     fibres=True,
     passive=True,
+    lungs=True,
     prescribed=True,
     keep_in=True,
     volume=True,
     shake=True,
+    lungs_held=True,
 ):
     """Steps (module docstring) to each step index of stops, capturing a frame at each
     (a stop at the current step captures it without stepping). Returns the frames
@@ -390,10 +392,11 @@ def run_steps(
                 pressure,
                 fibres,
                 passive,
+                lungs,
             )
             if rig is not None:
                 rigid_phase(m, s, t, done - step0 + k, rig)
-            if membrane_advance(m, s, c, t, done + k, par, prescribed, keep_in, volume, shake) != OK:
+            if membrane_advance(m, s, c, t, done + k, par, prescribed, keep_in, volume, shake, lungs_held) != OK:
                 return f
             s.scal[S_TIME] = origin + (done + k + 1) * h
         done = stops[f]

@@ -56,7 +56,18 @@ from .terms import (
 )
 from .terms.fibres import MuscleFibres, add_muscle_fibres
 from .terms.local import apply_keep_in, apply_prescribed
-from .terms.lungs import L_ALVEOLAR, L_HOLD, L_OCCLUDED, L_PLEURAL, NLUNG, P_RECOIL, P_V0, LungSlot, project_occluded
+from .terms.lungs import (
+    L_ALVEOLAR,
+    L_HOLD,
+    L_OCCLUDED,
+    L_PLEURAL,
+    NLUNG,
+    P_RECOIL,
+    P_V0,
+    LungSlot,
+    lungs_step_force,
+    project_occluded,
+)
 from .terms.membrane import add_membrane_serial, membrane_faces_parallel, membrane_gather_parallel
 from .terms.muscle import add_muscle
 from .terms.passive_fibres import PassiveFibres, add_passive_fibres
@@ -260,9 +271,17 @@ FORCE_SWITCHES = {
     "pressure": T_PRESSURE,
     "fibres": T_MUSCLE_FIBRES,
     "passive": T_PASSIVE_FIBRES,
+    "lungs": T_LUNGS,
 }
 # shake: the volume projection's direction where the step starts (`volume_shake`)
-ADVANCE_SWITCHES = {"prescribed": T_PRESCRIBED, "keep_in": T_KEEP_IN, "volume": T_VOLUME, "shake": T_VOLUME}
+# lungs_held: the occluded airway's projection (the lungs' `project_occluded`)
+ADVANCE_SWITCHES = {
+    "prescribed": T_PRESCRIBED,
+    "keep_in": T_KEEP_IN,
+    "volume": T_VOLUME,
+    "shake": T_VOLUME,
+    "lungs_held": T_LUNGS,
+}
 
 
 def _switches(arrays: MembraneArrays, names: dict) -> tuple:
@@ -319,6 +338,7 @@ def membrane_forces(
     pressure=True,
     fibres=True,
     passive=True,
+    lungs=True,
 ):
     """Step phase 1: the force of every term the model has, at time t. `par`: None
     when the model never runs the multi-core build (`serial_only`), which is then
@@ -375,6 +395,9 @@ def membrane_forces(
     if passive is not None and on[T_PASSIVE_FIBRES] and not implicit:
         add_passive_fibres(m.pf_vert, m.pf_par, s.vert_pos, s.vert_force)
         s.term_calls[T_PASSIVE_FIBRES] += 1
+    if lungs is not None and on[T_LUNGS]:
+        lungs_step_force(m, s, c)
+        s.term_calls[T_LUNGS] += 1
     for term in literal_unroll(STEP_FORCES):  # the terms that bring their own kernel (`Term.step_force`)
         tid = term[0]
         if tid >= 0 and on[tid]:
@@ -483,7 +506,9 @@ def _pointwise_forces(m, s, par, shape_memory, implicit=False):
 
 
 @kernel(inline="always")
-def membrane_advance(m, s, c, t, step, par=True, prescribed=True, keep_in=True, volume=True, shake=True):
+def membrane_advance(
+    m, s, c, t, step, par=True, prescribed=True, keep_in=True, volume=True, shake=True, lungs_held=True
+):
     """Step phases 2-5: integrate, project, check. Returns a status code. `par` and
     the switches after it (`advance_switches`): as `membrane_forces`.
     # Model: m   # Data in: s.vert_force   # Data out: s.vert_pos, s.vert_vel, s.scal, s.status
@@ -503,14 +528,14 @@ def membrane_advance(m, s, c, t, step, par=True, prescribed=True, keep_in=True, 
             _integrate_serial(m.vert_free, m.vert_mass, m.integrator == 0, m.dt, s.vert_force, pos, vel, s.vert_acc)
     elif code != OK:
         return code
-    code = _after_integration(m, s, c, t, step, par, prescribed, keep_in, volume)
+    code = _after_integration(m, s, c, t, step, par, prescribed, keep_in, volume, lungs_held)
     if code == OK and volume is not None and m.term_on[T_VOLUME]:  # implicit Euler's solve carried part of the pressure
         s.scal[S_PRESSURE] = implicit_pressure(s.implicit, s.scal[S_PRESSURE])
     return code
 
 
 @kernel(inline="always")
-def _after_integration(m, s, c, t, step, par, prescribed, keep_in, volume):
+def _after_integration(m, s, c, t, step, par, prescribed, keep_in, volume, lungs_held):
     """Step phases 3-5 after `_integrate`: check, local constraints, volume. Returns a status code.
     # Model: m   # Data in: s.vert_acc (the integration's sums per chunk), c.user
     # Data in/out: s.vert_pos, s.vert_vel   # Data out: s.scal, s.status on failure, s.grad, c.value_next
@@ -548,7 +573,7 @@ def _after_integration(m, s, c, t, step, par, prescribed, keep_in, volume):
     if keep_in is not None and on[T_KEEP_IN]:
         apply_keep_in(m.kin_vert, m.kin_shape, m.shape_kind, m.shape_par, pos, vel)
         s.term_calls[T_KEEP_IN] += 1
-    if on[T_LUNGS] and s.lung[L_OCCLUDED] > 0.0:  # the occluded airway: both volumes held together
+    if lungs_held is not None and on[T_LUNGS] and s.lung[L_OCCLUDED] > 0.0:  # the occluded airway: both volumes
         abdomen = volume is not None and on[T_VOLUME] != 0
         phi, phi_hold, held = project_occluded(m, s, h, abdomen)
         s.term_calls[T_VOLUME] += abdomen
