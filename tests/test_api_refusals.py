@@ -148,10 +148,11 @@ def test_a_mesh_in_millimetres_is_named_in_the_advice_and_following_it_runs():
         mesh = dataclasses.replace(sc.mesh, radius_m=0.12 * k)
         return dataclasses.replace(sc, mesh=mesh, regions=regions, forces=forces)
 
-    sim = hybrid.Simulation(hybrid.compile_scene(scaled(1000.0)))  # radius 120: millimetres taken for metres
-    with pytest.raises(hybrid.SimulationDiverged) as info:
-        sim.step(1000)
-    assert "unit_scale = 0.001" in str(info.value) and "spans 240 m" in str(info.value)
+    # radius 120: millimetres taken for metres, refused when the scene compiles, the advice in its line
+    with pytest.raises(hybrid.SceneError) as info:
+        hybrid.compile_scene(scaled(1000.0))
+    msg = str(info.value)
+    assert "240 m across" in msg and "radius_m = 0.12" in msg and "\n" not in msg
     followed = hybrid.Simulation(hybrid.compile_scene(scaled(1.0)))
     followed.step(1000)  # in metres, the same step runs
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from hybrid import Damping, HalfSpace, Masses, Membrane, MuscleFibres, Scene
-from hybrid.implicit import implicit_forces, newton_caches, newton_product, newton_rows
+from hybrid.implicit import IMPLICIT_ID, implicit_forces, implicit_work, newton_caches, newton_product, newton_rows
 from hybrid.mesh import irregular_sphere
 from hybrid.model import compile_scene
 from hybrid.terms.fibres import MIN_STRETCH, add_muscle_fibres
@@ -220,9 +220,11 @@ def test_the_newton_matrix_against_finite_differences_of_the_implicit_forces(mod
         newton_product(a, a, face, fib, pf, h, False, u, y)
         return y
 
+    work = implicit_work(a._replace(integrator=IMPLICIT_ID))  # the lungs' arrays it reads (none here)
+
     def forces(y, w):
         f = np.zeros_like(y)
-        implicit_forces(a, a, sv, y, w, f)
+        implicit_forces(a, a, sv, y, w, f, work)
         return f
 
     newton = columns(x.shape[0], product)
