@@ -18,9 +18,11 @@ def closed_mesh(request):
     return CLOSED[request.param]((0.0, 0.0, 0.0))
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="module")
 def dask_cluster():
-    """A local Dask cluster of two worker processes, one thread each."""
+    """A local Dask cluster of two worker processes, one thread each, for the tests of one
+    module: an idle cluster's heartbeats take about 7 s of CPU a minute (its two workers
+    and its scheduler), which a session-long one spent until the suite ended."""
     distributed = pytest.importorskip("dask.distributed")
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
         yield cluster
