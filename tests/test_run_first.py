@@ -12,6 +12,8 @@ import sys
 import time
 from pathlib import Path
 
+import pytest
+
 from hybrid.sweep import sweep
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -39,39 +41,19 @@ def _run(cache: Path, out: Path) -> subprocess.CompletedProcess:
     )
 
 
-def test_a_first_run_says_it_compiles_and_a_second_does_not(tmp_path):
-    cache = tmp_path / "cache"
-    cache.mkdir()
-    cold = _run(cache, tmp_path / "a")
-    assert cold.returncode == 0, cold.stderr
-    lines = cold.stderr.splitlines()
-    assert re.fullmatch(r"hybrid: compiling kernels for this scene, first run only, about \d+ s", lines[0]), cold.stderr
-    assert lines[-1].startswith("hybrid: compiled in ") and str(cache) in lines[-1]
-    assert "Traceback" not in cold.stderr
-    warm = _run(cache, tmp_path / "b")
-    assert warm.returncode == 0 and warm.stderr == ""
-
-
-def _stamped(i):
-    start = time.time()
-    time.sleep(0.2)
-    return i, start, time.time(), os.getpid()
-
-
-def test_a_sweeps_first_task_ends_before_the_others_start():
-    res = sweep(_stamped, range(5), workers=2)
-    assert [r[0] for r in res] == list(range(5))
-    assert res[0][2] <= min(r[1] for r in res[1:])
-    assert os.getpid() not in {r[3] for r in res}  # every task in a worker
-
-
+# `python -m hybrid run membrane_demo ...` (runpy, as -m runs it) into an empty compile
+# cache, then, in the same process, a census of what it compiled: on stdout, after
+# the command's own output, so that its stderr is the command's
 _COMPILED = """
-import json, sys
+import json, runpy, sys
+sys.argv = ["hybrid", "run", "membrane_demo", "--duration", "0.01", "--no-record", "--out", sys.argv[1]]
+try:
+    runpy.run_module("hybrid", run_name="__main__", alter_sys=True)
+except SystemExit as stop:
+    code = stop.code
 import hybrid
 from hybrid import loop, step
-from hybrid.cli import main
 from hybrid.terms import fibres, local, membrane, muscle, passive_fibres, shape_memory, springs, volume
-code = main(["run", "membrane_demo", "--duration", "0.01", "--no-record", "--out", sys.argv[1]])
 kernels = {  # each switch of the step: the kernels it guards
     "shape_memory": [shape_memory.shape_memory_frames, shape_memory.shape_memory_frames_parallel],
     "membrane": [membrane.add_membrane_serial, membrane.membrane_faces_parallel, membrane.membrane_gather_parallel],
@@ -90,14 +72,37 @@ print(json.dumps({"code": code, "loops": {k.py_func.__name__: len(k.signatures) 
 """
 
 
-def test_a_first_run_compiles_only_the_kernels_its_scene_uses(tmp_path):
+@pytest.fixture(scope="module")
+def first_run(tmp_path_factory):
+    """The first run of membrane_demo, into an empty compile cache, in a process of its own
+    (`_COMPILED`): compiling is most of a test's time here, so both tests of a first run
+    read this one."""
+    tmp = tmp_path_factory.mktemp("first_run")
+    cache = tmp / "cache"
+    cache.mkdir()
+    env = dict(os.environ, PYTHONPATH=str(ROOT), NUMBA_CACHE_DIR=str(cache))
+    proc = subprocess.run(
+        [sys.executable, "-c", _COMPILED, str(tmp / "out")], capture_output=True, text=True, env=env, timeout=900
+    )
+    return {"process": proc, "cache": cache}
+
+
+def test_a_first_run_says_it_compiles_and_a_second_does_not(first_run, tmp_path):
+    cold = first_run["process"]  # `python -m hybrid run` into an empty cache
+    assert cold.returncode == 0, cold.stderr
+    lines = cold.stderr.splitlines()
+    assert re.fullmatch(r"hybrid: compiling kernels for this scene, first run only, about \d+ s", lines[0]), cold.stderr
+    assert lines[-1].startswith("hybrid: compiled in ") and str(first_run["cache"]) in lines[-1]
+    assert "Traceback" not in cold.stderr
+    warm = _run(first_run["cache"], tmp_path / "b")
+    assert warm.returncode == 0 and warm.stderr == ""
+
+
+def test_a_first_run_compiles_only_the_kernels_its_scene_uses(first_run):
     """Issue 15: on an empty compile cache, `hybrid run` compiles the kernels of the
     terms its scene has and no other (their branches are pruned when the step
     compiles: `hybrid.step.step_switches`), and the one step loop once."""
-    env = dict(os.environ, PYTHONPATH=str(ROOT), NUMBA_CACHE_DIR=str(tmp_path / "cache"))
-    proc = subprocess.run(
-        [sys.executable, "-c", _COMPILED, str(tmp_path / "out")], capture_output=True, text=True, env=env, timeout=900
-    )
+    proc = first_run["process"]
     assert proc.returncode == 0, proc.stderr[-2000:]
     got = json.loads(proc.stdout.splitlines()[-1])
     assert got["code"] == 0
@@ -110,3 +115,16 @@ def test_a_first_run_compiles_only_the_kernels_its_scene_uses(tmp_path):
             assert counts[0] == 1 and sum(counts) == 1, (name, counts)
         else:
             assert sum(counts) == 0, (name, counts)
+
+
+def _stamped(i):
+    start = time.time()
+    time.sleep(0.2)
+    return i, start, time.time(), os.getpid()
+
+
+def test_a_sweeps_first_task_ends_before_the_others_start():
+    res = sweep(_stamped, range(5), workers=2)
+    assert [r[0] for r in res] == list(range(5))
+    assert res[0][2] <= min(r[1] for r in res[1:])
+    assert os.getpid() not in {r[3] for r in res}  # every task in a worker
