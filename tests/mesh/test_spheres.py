@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 import pytest
 
@@ -75,9 +73,9 @@ def test_icosahedron_closed_form():
     assert m.volume() == pytest.approx(5 / 12 * (3 + np.sqrt(5)) * edge**3, rel=1e-14)
 
 
-def test_icosphere6_builds_fast():
-    # The brief asks for well under a second; 5 s only catches an accidental O(n^2).
-    start = time.perf_counter()
+def test_icosphere6_is_a_closed_sphere_of_the_expected_counts():
+    # (its build time is the benchmark's to measure: no timed assertion on a shared machine)
     m = icosphere(6)
-    assert time.perf_counter() - start < 5.0
-    assert m.nvert == 40962
+    assert (m.nvert, m.nface) == (40962, 81920)
+    assert m.nvert - len(m.edge_vert) + m.nface == 2  # a closed surface of genus 0
+    assert np.allclose(np.linalg.norm(m.vert_pos, axis=1), 1.0, rtol=0, atol=1e-12)
