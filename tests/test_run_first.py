@@ -53,7 +53,7 @@ except SystemExit as stop:
     code = stop.code
 import hybrid
 from hybrid import loop, step
-from hybrid.terms import fibres, local, membrane, muscle, passive_fibres, shape_memory, springs, volume
+from hybrid.terms import fibres, local, lungs, membrane, muscle, passive_fibres, shape_memory, springs, volume
 kernels = {  # each switch of the step: the kernels it guards
     "shape_memory": [shape_memory.shape_memory_frames, shape_memory.shape_memory_frames_parallel],
     "membrane": [membrane.add_membrane_serial, membrane.membrane_faces_parallel, membrane.membrane_gather_parallel],
@@ -62,6 +62,7 @@ kernels = {  # each switch of the step: the kernels it guards
     "fibres": [fibres.add_muscle_fibres], "passive": [passive_fibres.add_passive_fibres], "prescribed": [local.apply_prescribed], "keep_in": [local.apply_keep_in],
     "volume": [volume.project_volume],
     "shake": [volume.volume_direction_serial, volume.volume_direction_parallel],
+    "lungs": [lungs.add_cavity_pressure], "lungs_held": [lungs.project_occluded],
 }
 names = list(step.FORCE_SWITCHES) + list(step.ADVANCE_SWITCHES)
 switches = step.step_switches(hybrid.load("membrane_demo").model.arrays)[1:]
