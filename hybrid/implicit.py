@@ -57,18 +57,37 @@ whole solver from those scenes' compiled code.
 from __future__ import annotations
 
 import math
-from enum import IntEnum
-from typing import NamedTuple
 
 import numpy as np
 
-from .implicit_matrix import NewtonMatrix, assemble, cg_update, dot, matrix_product, newton_matrix, sgs_sweep, split_cg
+from .implicit_matrix import assemble, cg_update, dot, gather, matrix_product, scatter, scatter_add, sgs_sweep, split_cg
+from .implicit_work import (
+    EXPLICIT,
+    I_CARRIED,
+    I_CG,
+    I_CG_TOTAL,
+    I_FORCE,
+    I_FORCE_SUM,
+    I_NEWTON,
+    I_NEWTON_TOTAL,
+    I_PRESSURE,
+    I_PROJECTED_TOTAL,
+    I_RESIDUAL,
+    I_SOLVED,
+    I_WORST,
+    IMPLICIT_ID,
+    IMPLICIT_NOT_CONVERGED,
+    ImplicitWork,
+    Info,
+    NewtonRows,
+    implicit_work,
+    newton_rows,
+)
 from .kernel import CHUNK_VERTS, kernel
-from .terms import Damping, Lungs, Membrane, MuscleFibres, PassiveFibres, Volume
+from .switches import T_DAMPING, T_LUNGS, T_MEMBRANE, T_MUSCLE_FIBRES, T_PASSIVE_FIBRES, T_VOLUME
 from .terms.fibres import add_muscle_fibres
 from .terms.lungs import (
     CMH2O_PA,
-    IMPLICIT_EULER,
     P_K1,
     P_K2,
     P_REF,
@@ -80,9 +99,6 @@ from .terms.lungs import (
 from .terms.membrane import add_membrane_serial, membrane_energy
 from .terms.passive_fibres import add_passive_fibres
 from .terms.tangents import (
-    NCACHE,
-    NFIB_CACHE,
-    NPF_CACHE,
     fibre_cached_product,
     fibre_energy,
     fibre_tangent_cache,
@@ -110,16 +126,6 @@ __all__ = [
     "newton_product",
 ]
 
-#: `MembraneArrays.integrator` of implicit Euler
-IMPLICIT_ID = 2
-assert IMPLICIT_ID == IMPLICIT_EULER
-#: the step status of a Newton solve that did not converge (beside hybrid.step.StepStatus)
-IMPLICIT_NOT_CONVERGED = 4
-EXPLICIT = -1  # implicit_step's answer for the other integrators
-
-T_MEMBRANE, T_FIBRES, T_DAMPING, T_VOLUME = Membrane.id, MuscleFibres.id, Damping.id, Volume.id
-T_PASSIVE = PassiveFibres.id
-T_LUNGS = Lungs.id
 CG_MIN_ITER = 50  # the conjugate gradients' cap: 3 x the free coordinates, at least this
 HALVINGS = 12
 ARMIJO = 1e-4  # the fraction of the predicted decrease a step must achieve
@@ -127,146 +133,6 @@ EPS = 2.0**-52  # the doubles' relative spacing
 ULPS = 4.0  # a Newton correction at most this many units in the last place of the positions ends the solve
 STALL_ULPS = 256.0  # ... and one at most this many that did not halve the residual
 FORCING = 0.5  # the linear solve: to this fraction of the residual, and of what convergence asks
-
-
-class Info(IntEnum):
-    """The slots of `ImplicitWork.info`."""
-
-    NEWTON = 0  # Newton iterations of the last step
-    RESIDUAL = 1  # its relative residual |r| / max(F, F_mean) (the module's docstring)
-    CG = 2  # conjugate-gradient iterations of the last step
-    CARRIED = 3  # Pa, the pressure the last solve carried
-    PRESSURE = 4  # Pa, the last step's pressure (carried + the projection's)
-    NEWTON_TOTAL = 5  # over the run
-    CG_TOTAL = 6
-    WORST = 7  # the vertex of the largest residual
-    PROJECTED_TOTAL = 8  # Newton iterations over the run solved with the projected Hessian
-    FORCE_SUM = 9  # N, the step-start force scale F summed over the run's solved steps
-    SOLVED = 10  # the run's solved steps
-    FORCE = 11  # N, the last step's step-start force scale F
-
-
-(
-    I_NEWTON,
-    I_RESIDUAL,
-    I_CG,
-    I_CARRIED,
-    I_PRESSURE,
-    I_NEWTON_TOTAL,
-    I_CG_TOTAL,
-    I_WORST,
-    I_PROJECTED_TOTAL,
-    I_FORCE_SUM,
-    I_SOLVED,
-    I_FORCE,
-) = (int(k) for k in Info)
-
-
-class NewtonRows(NamedTuple):
-    """The membrane's, muscle fibres' and passive fibres' rows (`MembraneArrays`) and the
-    surface's faces (face_vert) of the triangles with a free corner: the others add only
-    to fixed points, whose rows the solve leaves out, so its residuals, products, blocks
-    and volume gradient skip them (at level 8 of the breathing scene a fifth of the
-    membrane's triangles and half of the muscle's)."""
-
-    mem_vert: np.ndarray
-    mem_par: np.ndarray
-    fib_vert: np.ndarray
-    fib_par: np.ndarray
-    fib_sched: np.ndarray
-    pf_vert: np.ndarray
-    pf_par: np.ndarray
-    face_vert: np.ndarray
-
-
-def newton_rows(arrays) -> NewtonRows:
-    """The `NewtonRows` of a model's arrays (in their order)."""
-    free = np.asarray(arrays.vert_free) != 0
-    out = []
-    for tri, *more in (
-        (arrays.mem_vert, arrays.mem_par),
-        (arrays.fib_vert, arrays.fib_par, arrays.fib_sched),
-        (arrays.pf_vert, arrays.pf_par),
-    ):
-        keep = free[tri.reshape(-1, 3)].any(axis=1)
-        out += [np.ascontiguousarray(a[keep]) for a in (tri, *more)]
-    faces = np.asarray(arrays.face_vert)
-    out.append(np.ascontiguousarray(faces[free[faces.reshape(-1, 3)].any(axis=1)]))
-    return NewtonRows(*out)
-
-
-class ImplicitWork(NamedTuple):
-    """The implicit step's arrays: dv (nvert, 3) m/s, the last step's velocity change
-    (warm start); x_try, v_try, f, f_expl, res, x_kv (the positions the line search's
-    viscous dissipation is taken at), dv_start (the Newton iteration's dv), full_u,
-    full_y (the projected product's) (nvert, 3) and the conjugate gradients' cg_* (nfree,
-    3, in the Newton matrix's numbering of the free points): scratch; grad (nvert, 3)
-    m^2: the volume gradient at the step's start; rows: the
-    triangles the Newton matrix reads (`newton_rows`); face (NCACHE), fib (NFIB_CACHE),
-    pf (NPF_CACHE) per row of rows: the membrane's, muscle fibres' and passive fibres'
-    tangent caches (`newton_caches`); mat: the assembled Newton matrix
-    (`hybrid.implicit_matrix`); info (len(Info),): the `Info` slots; the lungs' (empty
-    without them): lung_wall_pos, lung_wall_vel, the state's own wall arrays (not copies),
-    which the solve holds fixed; lung_wall_f (nwall, 3), lung_g (nvert, 3), lung_gf, lung_y
-    (nfree, 3): scratch of the compartment's rank-one term (`_lung_rank_one`)."""
-
-    dv: np.ndarray
-    x_try: np.ndarray
-    v_try: np.ndarray
-    f: np.ndarray
-    f_expl: np.ndarray
-    res: np.ndarray
-    x_kv: np.ndarray
-    grad: np.ndarray
-    dv_start: np.ndarray
-    full_u: np.ndarray
-    full_y: np.ndarray
-    cg_x: np.ndarray
-    cg_r: np.ndarray
-    cg_z: np.ndarray
-    cg_p: np.ndarray
-    cg_q: np.ndarray
-    cg_t: np.ndarray
-    cg_b: np.ndarray
-    rows: NewtonRows
-    face: np.ndarray
-    fib: np.ndarray
-    pf: np.ndarray
-    mat: NewtonMatrix
-    info: np.ndarray
-    lung_wall_pos: np.ndarray
-    lung_wall_vel: np.ndarray
-    lung_wall_f: np.ndarray
-    lung_g: np.ndarray
-    lung_gf: np.ndarray
-    lung_y: np.ndarray
-
-
-def implicit_work(arrays, wall_pos=None, wall_vel=None) -> ImplicitWork | None:
-    """The work arrays of a model that steps with implicit Euler, else None. wall_pos,
-    wall_vel: the state's lungs' wall (`MembraneState.lung_wall_pos`, `lung_wall_vel`), the
-    same arrays (the solve reads the wall where the rigid phase put it)."""
-    if arrays.integrator != IMPLICIT_ID:
-        return None
-    n = arrays.vert_rest.shape[0]
-    nfree = int(np.count_nonzero(np.asarray(arrays.vert_free)))
-    vec = [np.zeros((n, 3)) for _ in range(11)] + [np.zeros((nfree, 3)) for _ in range(7)]
-    rows = newton_rows(arrays)
-    return ImplicitWork(
-        *vec,
-        rows=rows,
-        face=np.zeros((rows.mem_vert.shape[0], NCACHE)),
-        fib=np.zeros((rows.fib_vert.shape[0], NFIB_CACHE)),
-        pf=np.zeros((rows.pf_vert.shape[0], NPF_CACHE)),
-        mat=newton_matrix(n, arrays.vert_free, rows.mem_vert, rows.fib_vert, rows.pf_vert),
-        info=np.zeros(len(Info)),
-        lung_wall_pos=arrays.lung_wall.copy() if wall_pos is None else wall_pos,
-        lung_wall_vel=np.zeros_like(arrays.lung_wall) if wall_vel is None else wall_vel,
-        lung_wall_f=np.zeros_like(arrays.lung_wall),
-        lung_g=np.zeros((n, 3)),
-        lung_gf=np.zeros((nfree, 3)),
-        lung_y=np.zeros((nfree, 3)),
-    )
 
 
 @kernel
@@ -284,9 +150,9 @@ def implicit_forces(m, tri, sched_val, x, v, out, w):
     on = m.term_on
     if on[T_MEMBRANE]:
         add_membrane_serial(tri.mem_vert, tri.mem_par, m.kv_on, x, v, out)
-    if on[T_FIBRES]:
+    if on[T_MUSCLE_FIBRES]:
         add_muscle_fibres(tri.fib_vert, tri.fib_par, tri.fib_sched, sched_val, x, out)
-    if on[T_PASSIVE]:
+    if on[T_PASSIVE_FIBRES]:
         add_passive_fibres(tri.pf_vert, tri.pf_par, x, out)
     if on[T_DAMPING]:
         for i in range(out.shape[0]):
@@ -331,9 +197,9 @@ def newton_caches(m, rows, sched_val, x, face, fib, pf):
     on = m.term_on
     if on[T_MEMBRANE]:
         membrane_tangent_cache(rows.mem_vert, rows.mem_par, x, face)
-    if on[T_FIBRES]:
+    if on[T_MUSCLE_FIBRES]:
         fibre_tangent_cache(rows.fib_vert, rows.fib_par, rows.fib_sched, sched_val, x, fib)
-    if on[T_PASSIVE]:
+    if on[T_PASSIVE_FIBRES]:
         passive_fibres_tangent_cache(rows.pf_vert, rows.pf_par, x, pf)
 
 
@@ -354,42 +220,10 @@ def newton_product(m, rows, face, fib, pf, h, project, u, y):
             y[i, a] = c * u[i, a]
     if on[T_MEMBRANE]:
         membrane_tangent_product(rows.mem_vert, rows.mem_par, face, project, h * h, h, u, y)
-    if on[T_FIBRES]:
+    if on[T_MUSCLE_FIBRES]:
         fibre_cached_product(rows.fib_vert, fib, project, h * h, u, y)
-    if on[T_PASSIVE]:
+    if on[T_PASSIVE_FIBRES]:
         passive_fibres_cached_product(rows.pf_vert, pf, project, h * h, u, y)
-
-
-@kernel(inline="always")
-def _gather(rows_of, c, full, out):
-    """out[f] = c full[rows_of[f]]: a vector of every point to the Newton matrix's numbering.
-    # Model: rows_of (nfree,) int64 (NewtonMatrix.free)   # Data in: c, full (nvert, 3)   # Data out: out (nfree, 3)
-    """
-    for f in range(rows_of.shape[0]):
-        for a in range(3):
-            out[f, a] = c * full[rows_of[f], a]
-
-
-@kernel(inline="always")
-def _scatter(rows_of, x, full):
-    """full[rows_of[f]] = x[f]: the Newton matrix's numbering to a vector of every point.
-    # Model: rows_of (nfree,) int64 (NewtonMatrix.free)   # Data in: x (nfree, 3)
-    # Data out: full (nvert, 3), its free points' rows (the others left as they are)
-    """
-    for f in range(rows_of.shape[0]):
-        for a in range(3):
-            full[rows_of[f], a] = x[f, a]
-
-
-@kernel(inline="always")
-def _scatter_add(rows_of, c, x, full):
-    """full[rows_of[f]] += c x[f].
-    # Model: rows_of (nfree,) int64 (NewtonMatrix.free)   # Data in: c, x (nfree, 3)
-    # Data in/out: full (nvert, 3), its free points' rows
-    """
-    for f in range(rows_of.shape[0]):
-        for a in range(3):
-            full[rows_of[f], a] += c * x[f, a]
 
 
 @kernel
@@ -404,9 +238,9 @@ def _product(m, w, h, project, u, y):
     if not project:
         matrix_product(w.mat, u, y)
         return
-    _scatter(w.mat.free, u, w.full_u)
+    scatter(w.mat.free, u, w.full_u)
     newton_product(m, w.rows, w.face, w.fib, w.pf, h, True, w.full_u, w.full_y)
-    _gather(w.mat.free, 1.0, w.full_y, y)
+    gather(w.mat.free, 1.0, w.full_y, y)
 
 
 @kernel
@@ -524,9 +358,9 @@ def _merit(m, sched_val, h, dv, w):
         total += membrane_energy(tri.mem_vert, tri.mem_par, w.x_try)
         if m.kv_on:
             total += h * kelvin_voigt_dissipation(tri.mem_vert, tri.mem_par, w.x_kv, w.v_try)
-    if on[T_FIBRES]:
+    if on[T_MUSCLE_FIBRES]:
         total += fibre_energy(tri.fib_vert, tri.fib_par, tri.fib_sched, sched_val, w.x_try)
-    if on[T_PASSIVE]:
+    if on[T_PASSIVE_FIBRES]:
         total += passive_fibres_energy_kernel(tri.pf_vert, tri.pf_par, w.x_try)
     if on[T_LUNGS]:  # E (V - V0)^2 / 2 - P_ao V, and h times the airway's dissipation K1 Q^2 / 2 + K2 |Q|^3 / 3
         par = m.lung_par
@@ -576,7 +410,7 @@ def _lung_rank_one(m, w, h, project, eta, cg_max):
         g[i, 0] = g[i, 1] = g[i, 2] = 0.0
     add_cavity_pressure(m.lung_face, ref, 1.0, w.x_try, w.lung_wall_pos, g, w.lung_wall_f, True)
     rows_of = w.mat.free
-    _gather(rows_of, 1.0, g, w.lung_gf)
+    gather(rows_of, 1.0, g, w.lung_gf)
     y = w.lung_y
     for f in range(rows_of.shape[0]):
         for a in range(3):
@@ -653,13 +487,13 @@ def implicit_step(m, s, sched_val, step, imp):
         assemble(m, w.rows, w.face, w.fib, w.pf, h, w.mat)
         # the exact Hessian, its negative curvature ending the conjugate gradients early
         # (truncated Newton); when met at once, the Hessian projected per element instead
-        _gather(rows_of, h, w.res, w.cg_r)
+        gather(rows_of, h, w.res, w.cg_r)
         # solve just accurately enough: FORCING of what convergence asks, at most FORCING of the residual
         eta = min(FORCING, FORCING * tol * max(scale, scale_mean) / rn)
         k = split_cg(w.mat, w.cg_r, w.cg_x, w.cg_z, w.cg_p, w.cg_q, w.cg_t, w.cg_b, eta * h * rn, cg_max)
         project = k < 0
         if project:
-            _gather(rows_of, h, w.res, w.cg_r)
+            gather(rows_of, h, w.res, w.cg_r)
             k = 1 + _solve(m, w, h, True, eta * h * rn, cg_max)
             info[I_PROJECTED_TOTAL] += 1
         if m.term_on[T_LUNGS]:
@@ -683,7 +517,7 @@ def implicit_step(m, s, sched_val, step, imp):
         for i in range(n):
             for a in range(3):
                 dv_start[i, a] = w.dv[i, a]
-        _scatter_add(rows_of, 1.0, w.cg_x, w.dv)
+        scatter_add(rows_of, 1.0, w.cg_x, w.dv)
         frac = 1.0  # of the step now applied
         phi = np.nan  # the potential at the start: taken only when a residual does not halve
         for k in range(HALVINGS + 1):
@@ -699,7 +533,7 @@ def implicit_step(m, s, sched_val, step, imp):
             if _merit(m, sched_val, h, w.dv, w) <= phi + ARMIJO * frac * slope:
                 break
             frac *= 0.5
-            _scatter_add(rows_of, -frac, w.cg_x, w.dv)
+            scatter_add(rows_of, -frac, w.cg_x, w.dv)
         # a residual that no longer falls under corrections of a few hundred units in the last
         # place of the positions: its floor is the positions' rounding times the stiffness
         # (about 3e-13 N on the breathing scene at rest at level 6), where no correction helps

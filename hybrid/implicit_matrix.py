@@ -38,6 +38,9 @@ __all__ = [
     "split_cg",
     "dot",
     "cg_update",
+    "gather",
+    "scatter",
+    "scatter_add",
 ]
 
 # the sweep's over-relaxation: conjugate-gradient iterations a step of the breathing scene
@@ -448,3 +451,38 @@ def _gt(g, vx, vy, vz, out, i):
     out[i, 0] = g[0] * vx + g[1] * vy + g[3] * vz
     out[i, 1] = g[2] * vy + g[4] * vz
     out[i, 2] = g[5] * vz
+
+
+# ---------------------------------------------------------------- the matrix's numbering
+
+
+@kernel(inline="always")
+def gather(rows_of, c, full, out):
+    """out[f] = c full[rows_of[f]]: a vector of every point to the Newton matrix's numbering.
+    # Model: rows_of (nfree,) int64 (NewtonMatrix.free)   # Data in: c, full (nvert, 3)   # Data out: out (nfree, 3)
+    """
+    for f in range(rows_of.shape[0]):
+        for a in range(3):
+            out[f, a] = c * full[rows_of[f], a]
+
+
+@kernel(inline="always")
+def scatter(rows_of, x, full):
+    """full[rows_of[f]] = x[f]: the Newton matrix's numbering to a vector of every point.
+    # Model: rows_of (nfree,) int64 (NewtonMatrix.free)   # Data in: x (nfree, 3)
+    # Data out: full (nvert, 3), its free points' rows (the others left as they are)
+    """
+    for f in range(rows_of.shape[0]):
+        for a in range(3):
+            full[rows_of[f], a] = x[f, a]
+
+
+@kernel(inline="always")
+def scatter_add(rows_of, c, x, full):
+    """full[rows_of[f]] += c x[f].
+    # Model: rows_of (nfree,) int64 (NewtonMatrix.free)   # Data in: c, x (nfree, 3)
+    # Data in/out: full (nvert, 3), its free points' rows
+    """
+    for f in range(rows_of.shape[0]):
+        for a in range(3):
+            full[rows_of[f], a] += c * x[f, a]

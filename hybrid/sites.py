@@ -21,6 +21,20 @@ def _site_offset(site_xpos, s, origin, c):  # pragma: no cover
     return site_xpos[s, 0] - origin[c, 0], site_xpos[s, 1] - origin[c, 1], site_xpos[s, 2] - origin[c, 2]
 
 
+@jit(_nrt=False, inline="always")
+def _add_wrench(site_xpos, xipos, s, b, fx, fy, fz, xfrc):  # pragma: no cover
+    """xfrc[b] += [F, (site_xpos_s - xipos_b) x F], F = (fx, fy, fz) N at site s.
+    # Model: none   # Data in: site_xpos (nsite, 3) m, xipos (nbody, 3) m   # Data out: xfrc[b] [N, N m]
+    """
+    rx, ry, rz = _site_offset(site_xpos, s, xipos, b)
+    xfrc[b, 0] += fx
+    xfrc[b, 1] += fy
+    xfrc[b, 2] += fz
+    xfrc[b, 3] += ry * fz - rz * fy
+    xfrc[b, 4] += rz * fx - rx * fz
+    xfrc[b, 5] += rx * fy - ry * fx
+
+
 @jit(_nrt=False)
 def point_wrench_kernel(site_xpos, xipos, site_id, site_body, forces, xfrc):  # pragma: no cover
     """Set the wrench of the point forces on each attachment body (compiled).
@@ -36,16 +50,7 @@ def point_wrench_kernel(site_xpos, xipos, site_id, site_body, forces, xfrc):  # 
         for k in range(6):
             xfrc[b, k] = 0.0
     for i in range(n):
-        s = site_id[i]
-        b = site_body[i]
-        rx, ry, rz = _site_offset(site_xpos, s, xipos, b)
-        fx, fy, fz = forces[i, 0], forces[i, 1], forces[i, 2]
-        xfrc[b, 0] += fx
-        xfrc[b, 1] += fy
-        xfrc[b, 2] += fz
-        xfrc[b, 3] += ry * fz - rz * fy
-        xfrc[b, 4] += rz * fx - rx * fz
-        xfrc[b, 5] += rx * fy - ry * fx
+        _add_wrench(site_xpos, xipos, site_id[i], site_body[i], forces[i, 0], forces[i, 1], forces[i, 2], xfrc)
 
 
 @jit(_nrt=False)
@@ -57,16 +62,10 @@ def add_point_wrench_kernel(site_xpos, xipos, site_id, site_body, scale, forces,
     # Data out: xfrc (nbody, 6) [N, N m]: rows site_body added sum_i s_i [F_i, (site_xpos_i - xipos_b) x F_i]
     """
     for i in range(site_id.shape[0]):
-        s = site_id[i]
-        b = site_body[i]
-        rx, ry, rz = _site_offset(site_xpos, s, xipos, b)
-        fx, fy, fz = scale[i] * forces[i, 0], scale[i] * forces[i, 1], scale[i] * forces[i, 2]
-        xfrc[b, 0] += fx
-        xfrc[b, 1] += fy
-        xfrc[b, 2] += fz
-        xfrc[b, 3] += ry * fz - rz * fy
-        xfrc[b, 4] += rz * fx - rx * fz
-        xfrc[b, 5] += rx * fy - ry * fx
+        k = scale[i]
+        _add_wrench(
+            site_xpos, xipos, site_id[i], site_body[i], k * forces[i, 0], k * forces[i, 1], k * forces[i, 2], xfrc
+        )
 
 
 @jit(_nrt=False)

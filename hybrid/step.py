@@ -37,24 +37,35 @@ from .implicit import (
 from .kernel import CHUNK_VERTS, chunk_count, kernel, kernel_twin
 from .model import MembraneArrays
 from .schedule import KIND_PYTHON, schedule_eval
+from .switches import (  # each term's flag in MembraneArrays.term_on and its call counter, and the switches
+    ADVANCE_SWITCHES,
+    FORCE_SWITCHES,
+    T_APPLIED,
+    T_ATTRACTION,
+    T_DAMPING,
+    T_GRAVITY,
+    T_KEEP_IN,
+    T_LUNGS,
+    T_MASS_SPRING,
+    T_MEMBRANE,
+    T_MUSCLE,
+    T_MUSCLE_FIBRES,
+    T_PASSIVE_FIBRES,
+    T_PRESCRIBED,
+    T_PRESSURE,
+    T_SHAPE_MEMORY,
+    T_SOFT_VOLUME,
+    T_VOLUME,
+    advance_switches,
+    force_switches,
+    step_par,
+    step_switches,
+)
 from .terms import (
     STEP_FORCES,
     TERMS,
-    AppliedForce,
-    Attraction,
-    Damping,
-    Gravity,
-    KeepIn,
-    Lungs,
-    MassSpring,
-    Membrane,
-    Muscle,
-    Prescribed,
-    ShapeMemory,
-    SoftVolume,
-    Volume,
 )
-from .terms.fibres import MuscleFibres, add_muscle_fibres
+from .terms.fibres import add_muscle_fibres
 from .terms.local import apply_keep_in, apply_prescribed
 from .terms.lungs import (
     L_ALVEOLAR,
@@ -70,14 +81,13 @@ from .terms.lungs import (
 )
 from .terms.membrane import add_membrane_serial, membrane_faces_parallel, membrane_gather_parallel
 from .terms.muscle import add_muscle
-from .terms.passive_fibres import PassiveFibres, add_passive_fibres
+from .terms.passive_fibres import add_passive_fibres
 from .terms.pointwise import point_forces_parallel, point_forces_serial
 from .terms.shape_memory import shape_memory_frames, shape_memory_frames_parallel
 from .terms.springs import add_applied, add_attraction, add_mass_spring
 from .terms.volume import (
     PROJ_NO_ROOT,
     PROJ_OK,
-    Pressure,
     add_pressure,
     project_volume,
     soft_volume_force,
@@ -102,36 +112,6 @@ __all__ = [
     "advance_switches",
     "step_switches",
 ]
-
-# each term's flag in MembraneArrays.term_on and its call counter
-(
-    T_GRAVITY,
-    T_APPLIED,
-    T_ATTRACTION,
-    T_DAMPING,
-    T_SHAPE_MEMORY,
-    T_MASS_SPRING,
-    T_MUSCLE,
-    T_SOFT_VOLUME,
-    T_PRESCRIBED,
-    T_KEEP_IN,
-    T_VOLUME,
-) = (
-    Gravity.id,
-    AppliedForce.id,
-    Attraction.id,
-    Damping.id,
-    ShapeMemory.id,
-    MassSpring.id,
-    Muscle.id,
-    SoftVolume.id,
-    Prescribed.id,
-    KeepIn.id,
-    Volume.id,
-)
-T_MEMBRANE = Membrane.id
-T_PRESSURE, T_MUSCLE_FIBRES, T_PASSIVE_FIBRES = Pressure.id, MuscleFibres.id, PassiveFibres.id
-T_LUNGS = Lungs.id
 
 
 class Scal(IntEnum):
@@ -244,70 +224,6 @@ def new_control(arrays: MembraneArrays) -> ControlArrays:
     """Every input driven by its schedule, the values zero until the first step."""
     ns = arrays.sched.kind.shape[0]
     return ControlArrays(np.zeros((ns, 3)), np.zeros((ns, 3)), np.zeros(ns, np.uint8))
-
-
-def step_par(arrays: MembraneArrays):
-    """The step kernels' `par` argument for a model: None when it never runs the
-    multi-core build (`arrays.parallel` false): a None argument prunes that branch
-    when the kernel compiles, so a first run compiles the serial passes only; else
-    True, both builds compiled and `arrays.parallel` choosing."""
-    return True if arrays.parallel else None
-
-
-# The step kernels' switches, after `par`: one per term kernel (or pass) that a
-# model may lack, in the order of the kernels' parameters. A switch is None when
-# the model lacks it: numba then prunes its branch when the kernel compiles, so
-# that a first run compiles only the kernels its scene uses. True (the default,
-# as when a kernel is called without its switches) compiles the branch and the
-# model's flag (`term_on`) decides at run time: the same arithmetic either way.
-FORCE_SWITCHES = {
-    "shape_memory": T_SHAPE_MEMORY,
-    "membrane": T_MEMBRANE,
-    "applied": T_APPLIED,
-    "attraction": T_ATTRACTION,
-    "mass_spring": T_MASS_SPRING,
-    "muscle": T_MUSCLE,
-    "soft_volume": T_SOFT_VOLUME,
-    "pressure": T_PRESSURE,
-    "fibres": T_MUSCLE_FIBRES,
-    "passive": T_PASSIVE_FIBRES,
-    "lungs": T_LUNGS,
-}
-# shake: the volume projection's direction where the step starts (`volume_shake`)
-# lungs_held: the occluded airway's projection (the lungs' `project_occluded`)
-ADVANCE_SWITCHES = {
-    "prescribed": T_PRESCRIBED,
-    "keep_in": T_KEEP_IN,
-    "volume": T_VOLUME,
-    "shake": T_VOLUME,
-    "lungs_held": T_LUNGS,
-}
-
-
-def _switches(arrays: MembraneArrays, names: dict) -> tuple:
-    """One switch per name: True when the model has the term (and, for shake, projects
-    along the step's start), else None."""
-    on = arrays.term_on.tolist()
-    return tuple(True if on[i] and (name != "shake" or arrays.volume_shake) else None for name, i in names.items())
-
-
-def force_switches(arrays: MembraneArrays) -> tuple:
-    """`membrane_forces`' arguments after (m, s, t) for a model: (par, then one per
-    `FORCE_SWITCHES`, None for a term the model lacks)."""
-    return (step_par(arrays),) + _switches(arrays, FORCE_SWITCHES)
-
-
-def advance_switches(arrays: MembraneArrays) -> tuple:
-    """`membrane_advance`'s arguments after (m, s, t, step) for a model: (par, then
-    one per `ADVANCE_SWITCHES`)."""
-    return (step_par(arrays),) + _switches(arrays, ADVANCE_SWITCHES)
-
-
-def step_switches(arrays: MembraneArrays) -> tuple:
-    """The whole loops' (`run_membrane`, `hybrid.coupling.run_coupled`, their frame
-    versions) last arguments for a model: `force_switches`, then `advance_switches`
-    without its `par`."""
-    return force_switches(arrays) + _switches(arrays, ADVANCE_SWITCHES)
 
 
 @kernel

@@ -173,3 +173,30 @@ def strict_load(path):
         raise ValueError(f"non-finite constant {name} in {path}")
 
     return json.loads(path.read_text(), parse_constant=no_constant)
+
+
+# the lungs' tests (tests/test_lungs.py, tests/test_respiratory_readouts.py): a rigid cage and a prescribed dome
+DOME_Z_M = 0.045
+
+
+def dome_scene(lungs, displacement_m, duration_s: float = 4.0, dt_s: float = 1e-3) -> Scene:
+    """A sphere whose cap above z = 0.045 m (the dome, the lungs' cavity's floor) follows
+    `displacement_m`, the rest nailed: a rigid rib cage and a prescribed dome."""
+    from hybrid.regions import Difference
+    from hybrid.scene import Prescribed
+
+    return Scene(
+        formulation="continuum",
+        name="prescribed_dome",
+        mesh=MeshSpec(generator="ring_sphere", radius_m=0.12, level=1, conform_z_m=(DOME_Z_M,)),
+        masses=Masses(total_kg=4.0),
+        regions={
+            "diaphragm": HalfSpace((0.0, 0.0, DOME_Z_M), (0.0, 0.0, 1.0)),
+            "below": Difference("all", "diaphragm"),
+        },
+        forces=(lungs,),
+        constraints=(Nailed("below"), Prescribed("diaphragm", displacement_m)),
+        dt_s=dt_s,
+        integrator="symplectic_euler",
+        duration_s=duration_s,
+    )

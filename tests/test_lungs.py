@@ -10,38 +10,18 @@ import math
 import numpy as np
 import pytest
 import trimesh
+from helpers import DOME_Z_M, dome_scene
 
 import hybrid
 from hybrid.errors import SceneError
 from hybrid.readouts import swept_volume
-from hybrid.regions import Difference, HalfSpace, Union_
-from hybrid.scene import Lungs, Masses, MeshSpec, Nailed, Prescribed, RibPair, Ribs, Scene
+from hybrid.regions import HalfSpace, Union_
+from hybrid.scene import Lungs, RibPair, Ribs
 from hybrid.schedule import Breathing, Table
 from hybrid.terms.lungs import CMH2O_PA, P_REF, add_cavity_pressure, cavity_volume_rate, open_edges, thoracic_cavity
 
 CMH2O_PER_L = CMH2O_PA / 1e-3
-DOME_Z_M = 0.045
 LUNG = dict(wall_height_m=0.2, lung_compliance_l_per_cmh2o=0.2, airway_resistance_cmh2o_s_per_l=2.0)
-
-
-def dome_scene(lungs: Lungs, displacement_m, duration_s: float = 4.0) -> Scene:
-    """A sphere whose cap above z = 0.045 m (the dome, the cavity's floor) follows
-    `displacement_m`, the rest nailed: a rigid rib cage and a prescribed dome."""
-    return Scene(
-        formulation="continuum",
-        name="prescribed_dome",
-        mesh=MeshSpec(generator="ring_sphere", radius_m=0.12, level=1, conform_z_m=(DOME_Z_M,)),
-        masses=Masses(total_kg=4.0),
-        regions={
-            "diaphragm": HalfSpace((0.0, 0.0, DOME_Z_M), (0.0, 0.0, 1.0)),
-            "below": Difference("all", "diaphragm"),
-        },
-        forces=(lungs,),
-        constraints=(Nailed("below"), Prescribed("diaphragm", displacement_m)),
-        dt_s=1e-3,
-        integrator="symplectic_euler",
-        duration_s=duration_s,
-    )
 
 
 def cavity_points(sim) -> np.ndarray:

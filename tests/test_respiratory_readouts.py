@@ -9,40 +9,18 @@ import math
 
 import numpy as np
 import pytest
+from helpers import dome_scene
 
 import hybrid
-from hybrid.regions import Difference, HalfSpace
 from hybrid.respiratory import WORK_KEYS, inspirations
-from hybrid.scene import Lungs, Masses, MeshSpec, Nailed, Prescribed, Scene
+from hybrid.scene import Lungs
 from hybrid.schedule import Table
 from hybrid.terms.lungs import CMH2O_PA, thoracic_cavity
 
 CMH2O_PER_L = CMH2O_PA / 1e-3
-DOME_Z_M = 0.045
 LUNG = dict(wall_height_m=0.2, lung_compliance_l_per_cmh2o=0.2, airway_resistance_cmh2o_s_per_l=2.0)
 #: the prescribed dome's descent (m) and period (s): the lungs fill by VT = A_border DEPTH
 DEPTH_M, PERIOD_S, DT_S = 5e-3, 2.0, 1e-3
-
-
-def dome_scene(lungs: Lungs, displacement_m, duration_s: float) -> Scene:
-    """A sphere whose cap above z = 0.045 m (the dome, the cavity's floor) follows
-    `displacement_m`, the rest nailed: a rigid rib cage and a prescribed dome
-    (tests/test_lungs.py's)."""
-    return Scene(
-        formulation="continuum",
-        name="prescribed_dome",
-        mesh=MeshSpec(generator="ring_sphere", radius_m=0.12, level=1, conform_z_m=(DOME_Z_M,)),
-        masses=Masses(total_kg=4.0),
-        regions={
-            "diaphragm": HalfSpace((0.0, 0.0, DOME_Z_M), (0.0, 0.0, 1.0)),
-            "below": Difference("all", "diaphragm"),
-        },
-        forces=(lungs,),
-        constraints=(Nailed("below"), Prescribed("diaphragm", displacement_m)),
-        dt_s=DT_S,
-        integrator="symplectic_euler",
-        duration_s=duration_s,
-    )
 
 
 def descending_dome(periods: int = 2):

@@ -83,7 +83,7 @@ STUDIES = {
             "convergence",
             ("study", "convergence", "--out"),
             "convergence.json",
-            "hybrid.studies.convergence:_markdown",
+            "hybrid.studies.convergence_report:markdown",
             ("convergence.png",),
             "Convergence of the breathing scene",
             "The breathing scene's metrics on a grid of mesh levels and time steps. Richardson extrapolation "

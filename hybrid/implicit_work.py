@@ -1,0 +1,171 @@
+"""Implicit Euler's data (`hybrid.implicit`): its integrator id and status codes, the slots
+of its run information, the triangles its Newton matrix reads, and its work arrays."""
+
+from __future__ import annotations
+
+from enum import IntEnum
+from typing import NamedTuple
+
+import numpy as np
+
+from .implicit_matrix import NewtonMatrix, newton_matrix
+from .terms.lungs import IMPLICIT_EULER
+from .terms.tangents import NCACHE, NFIB_CACHE, NPF_CACHE
+
+__all__ = [
+    "IMPLICIT_ID",
+    "IMPLICIT_NOT_CONVERGED",
+    "EXPLICIT",
+    "Info",
+    "NewtonRows",
+    "newton_rows",
+    "ImplicitWork",
+    "implicit_work",
+]
+
+#: `MembraneArrays.integrator` of implicit Euler
+IMPLICIT_ID = 2
+assert IMPLICIT_ID == IMPLICIT_EULER
+#: the step status of a Newton solve that did not converge (beside hybrid.step.StepStatus)
+IMPLICIT_NOT_CONVERGED = 4
+EXPLICIT = -1  # implicit_step's answer for the other integrators
+
+
+class Info(IntEnum):
+    """The slots of `ImplicitWork.info`."""
+
+    NEWTON = 0  # Newton iterations of the last step
+    RESIDUAL = 1  # its relative residual |r| / max(F, F_mean) (the module's docstring)
+    CG = 2  # conjugate-gradient iterations of the last step
+    CARRIED = 3  # Pa, the pressure the last solve carried
+    PRESSURE = 4  # Pa, the last step's pressure (carried + the projection's)
+    NEWTON_TOTAL = 5  # over the run
+    CG_TOTAL = 6
+    WORST = 7  # the vertex of the largest residual
+    PROJECTED_TOTAL = 8  # Newton iterations over the run solved with the projected Hessian
+    FORCE_SUM = 9  # N, the step-start force scale F summed over the run's solved steps
+    SOLVED = 10  # the run's solved steps
+    FORCE = 11  # N, the last step's step-start force scale F
+
+
+(
+    I_NEWTON,
+    I_RESIDUAL,
+    I_CG,
+    I_CARRIED,
+    I_PRESSURE,
+    I_NEWTON_TOTAL,
+    I_CG_TOTAL,
+    I_WORST,
+    I_PROJECTED_TOTAL,
+    I_FORCE_SUM,
+    I_SOLVED,
+    I_FORCE,
+) = (int(k) for k in Info)
+
+
+class NewtonRows(NamedTuple):
+    """The membrane's, muscle fibres' and passive fibres' rows (`MembraneArrays`) and the
+    surface's faces (face_vert) of the triangles with a free corner: the others add only
+    to fixed points, whose rows the solve leaves out, so its residuals, products, blocks
+    and volume gradient skip them (at level 8 of the breathing scene a fifth of the
+    membrane's triangles and half of the muscle's)."""
+
+    mem_vert: np.ndarray
+    mem_par: np.ndarray
+    fib_vert: np.ndarray
+    fib_par: np.ndarray
+    fib_sched: np.ndarray
+    pf_vert: np.ndarray
+    pf_par: np.ndarray
+    face_vert: np.ndarray
+
+
+def newton_rows(arrays) -> NewtonRows:
+    """The `NewtonRows` of a model's arrays (in their order)."""
+    free = np.asarray(arrays.vert_free) != 0
+    out = []
+    for tri, *more in (
+        (arrays.mem_vert, arrays.mem_par),
+        (arrays.fib_vert, arrays.fib_par, arrays.fib_sched),
+        (arrays.pf_vert, arrays.pf_par),
+    ):
+        keep = free[tri.reshape(-1, 3)].any(axis=1)
+        out += [np.ascontiguousarray(a[keep]) for a in (tri, *more)]
+    faces = np.asarray(arrays.face_vert)
+    out.append(np.ascontiguousarray(faces[free[faces.reshape(-1, 3)].any(axis=1)]))
+    return NewtonRows(*out)
+
+
+class ImplicitWork(NamedTuple):
+    """The implicit step's arrays: dv (nvert, 3) m/s, the last step's velocity change
+    (warm start); x_try, v_try, f, f_expl, res, x_kv (the positions the line search's
+    viscous dissipation is taken at), dv_start (the Newton iteration's dv), full_u,
+    full_y (the projected product's) (nvert, 3) and the conjugate gradients' cg_* (nfree,
+    3, in the Newton matrix's numbering of the free points): scratch; grad (nvert, 3)
+    m^2: the volume gradient at the step's start; rows: the
+    triangles the Newton matrix reads (`newton_rows`); face (NCACHE), fib (NFIB_CACHE),
+    pf (NPF_CACHE) per row of rows: the membrane's, muscle fibres' and passive fibres'
+    tangent caches (`newton_caches`); mat: the assembled Newton matrix
+    (`hybrid.implicit_matrix`); info (len(Info),): the `Info` slots; the lungs' (empty
+    without them): lung_wall_pos, lung_wall_vel, the state's own wall arrays (not copies),
+    which the solve holds fixed; lung_wall_f (nwall, 3), lung_g (nvert, 3), lung_gf, lung_y
+    (nfree, 3): scratch of the compartment's rank-one term (`_lung_rank_one`)."""
+
+    dv: np.ndarray
+    x_try: np.ndarray
+    v_try: np.ndarray
+    f: np.ndarray
+    f_expl: np.ndarray
+    res: np.ndarray
+    x_kv: np.ndarray
+    grad: np.ndarray
+    dv_start: np.ndarray
+    full_u: np.ndarray
+    full_y: np.ndarray
+    cg_x: np.ndarray
+    cg_r: np.ndarray
+    cg_z: np.ndarray
+    cg_p: np.ndarray
+    cg_q: np.ndarray
+    cg_t: np.ndarray
+    cg_b: np.ndarray
+    rows: NewtonRows
+    face: np.ndarray
+    fib: np.ndarray
+    pf: np.ndarray
+    mat: NewtonMatrix
+    info: np.ndarray
+    lung_wall_pos: np.ndarray
+    lung_wall_vel: np.ndarray
+    lung_wall_f: np.ndarray
+    lung_g: np.ndarray
+    lung_gf: np.ndarray
+    lung_y: np.ndarray
+
+
+def implicit_work(arrays, wall_pos=None, wall_vel=None) -> ImplicitWork | None:
+    """The work arrays of a model that steps with implicit Euler, else None. wall_pos,
+    wall_vel: the state's lungs' wall (`MembraneState.lung_wall_pos`, `lung_wall_vel`), the
+    same arrays (the solve reads the wall where the rigid phase put it)."""
+    if arrays.integrator != IMPLICIT_ID:
+        return None
+    n = arrays.vert_rest.shape[0]
+    nfree = int(np.count_nonzero(np.asarray(arrays.vert_free)))
+    vec = [np.zeros((n, 3)) for _ in range(11)] + [np.zeros((nfree, 3)) for _ in range(7)]
+    rows = newton_rows(arrays)
+    return ImplicitWork(
+        *vec,
+        rows=rows,
+        face=np.zeros((rows.mem_vert.shape[0], NCACHE)),
+        fib=np.zeros((rows.fib_vert.shape[0], NFIB_CACHE)),
+        pf=np.zeros((rows.pf_vert.shape[0], NPF_CACHE)),
+        mat=newton_matrix(n, arrays.vert_free, rows.mem_vert, rows.fib_vert, rows.pf_vert),
+        info=np.zeros(len(Info)),
+        lung_wall_pos=arrays.lung_wall.copy() if wall_pos is None else wall_pos,
+        lung_wall_vel=np.zeros_like(arrays.lung_wall) if wall_vel is None else wall_vel,
+        lung_wall_f=np.zeros_like(arrays.lung_wall),
+        lung_g=np.zeros((n, 3)),
+        lung_gf=np.zeros((nfree, 3)),
+        lung_y=np.zeros((nfree, 3)),
+    )
