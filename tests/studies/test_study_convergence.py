@@ -16,11 +16,11 @@ from hybrid.studies.convergence import (
     MAX_EXTRAPOLATED_LEVELS,
     RATIO_SPACE,
     TARGETS,
-    _markdown,
     estimate,
     recommend,
     richardson,
 )
+from hybrid.studies.convergence_report import markdown
 
 
 def test_richardson_recovers_the_limit_and_order_of_a_power_law():
@@ -143,7 +143,7 @@ def test_the_recommendation_marks_levels_past_the_finest_run_and_refuses_beyond_
             finest["cpu_s_per_sim_s"] * r["nvert"] / finest["nvert"] * finest["dt"] / r["dt"], rel=1e-12
         )
     assert rows[2]["level"] is None and rows[2]["cpu_s_per_sim_s"] is None
-    text = _markdown(
+    text = markdown(
         {
             "scene": "manufactured",
             "levels": [0, 1, 2, 3],
