@@ -16,8 +16,9 @@ import hybrid
 from hybrid.errors import SceneError
 from hybrid.readouts import swept_volume
 from hybrid.regions import HalfSpace, Union_
-from hybrid.scene import Lungs, RibPair, Ribs
-from hybrid.schedule import Breathing, Table
+from hybrid.scene import Lungs
+from hybrid.schedule import Table
+from hybrid.studies.respiratory import upper_rib_scene
 from hybrid.terms.lungs import CMH2O_PA, P_REF, add_cavity_pressure, cavity_volume_rate, open_edges, thoracic_cavity
 
 CMH2O_PER_L = CMH2O_PA / 1e-3
@@ -299,26 +300,10 @@ def test_a_sigmoid_lung_s_pleural_pressure_is_its_inverted_curve():
 
 def _two_rib_pairs(activation: float):
     """The breathing trunk with lungs whose wall the lower ribs (at its foot) and an upper rib
-    pair (the pulmonary rib cage, sloping down to the front, with inspiratory muscles) carry;
-    the upper muscles driven to `activation` of their gear at the breath's peak."""
+    pair (the pulmonary rib cage, with inspiratory muscles) carry (`upper_rib_scene`)."""
     scene = hybrid.load_scene("breathing", overrides=["mesh.level=0", "duration_s=2.0"])
-    upper = RibPair(
-        name="upper_ribs",
-        head_m=(-0.13, 0.025, 0.14),
-        front_m=(0.10, 0.012, 0.10),
-        half_width_m=0.12,
-        muscle_gear_n_m=2.0,
-    )
-    ctrl = (
-        {"upper_ribs_*_muscle": Breathing(period_s=4.0, inspiration_fraction=0.4, peak=activation)}
-        if activation
-        else {}
-    )
-    rigid = dataclasses.replace(scene.rigid, ribs=Ribs(body="spine", pairs=(upper,)), ctrl=ctrl)
-    # the wall 0.12 m high: its rings at the upper ribs' own height (0.10-0.14 m), where the pleural
-    # pull on a rib sloping down to the front turns it down about its hinge
-    lungs = Lungs(**{**LUNG, "wall_height_m": 0.12}, wall_bodies="upper_ribs_*")
-    return hybrid.load(dataclasses.replace(scene, rigid=rigid, forces=(*scene.forces, lungs)))
+    with_lungs = dataclasses.replace(scene, forces=(*scene.forces, Lungs(**LUNG)))
+    return hybrid.load(upper_rib_scene(with_lungs, activation))
 
 
 def test_the_diaphragm_alone_draws_the_upper_ribs_in_and_with_their_muscles_both_rise():

@@ -69,6 +69,20 @@ STUDIES = {
             "difference should be zero to the bit), and the paper's own rigid algorithm against MuJoCo's.",
         ),
         Study(
+            "respiratory",
+            ("study", "respiratory", "--out"),
+            "respiratory.json",
+            "hybrid.studies.respiratory:markdown",
+            ("respiratory.png",),
+            "Respiratory mechanics of the trunk with lungs",
+            "The trunk with lungs (`breathing_lungs`) examined as a respiratory physiologist examines a subject: "
+            "the passive system's compliances under steps of airway-opening pressure, the relaxation's time "
+            "constant against R C (a closed form), quiet breathing against an adult's bands, an occluded "
+            "twitch and the rib cage's paradox. Nothing in the scene is fitted to these figures: each is a "
+            "prediction, and a row outside its band is a shortcoming of the model (the trunk is smaller than "
+            "an adult's; [the lungs](lungs.md) says why each is where it is).",
+        ),
+        Study(
             "extremes",
             ("study", "extremes", "--out"),
             "extremes.json",
@@ -127,7 +141,7 @@ PAGES = {
         "date, machine and version that made it; `python -m hybrid.docgen --rerun` makes them again and a test "
         "fails when this page no longer matches its JSON. Physiological ranges for the breathing scenes are on "
         "[the model](model.md) page; the history of these measurements is in the changelog.",
-        ("stability", "verification", "rigid", "extremes"),
+        ("stability", "verification", "rigid", "respiratory", "extremes"),
     ),
     "convergence.md": (
         "Error against run time",

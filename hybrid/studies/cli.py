@@ -8,6 +8,9 @@
                                                  # mesh families: DIR/verification.json, .md, .png
     hybrid study rigid [SCENE] --out DIR [--small]  # the rigid part against MuJoCo alone and the
                                                  # paper's rigid algorithm: DIR/rigid.json, .md
+    hybrid study respiratory [SCENE] --out DIR [--small] [--level K]
+                                                 # a scene with lungs as a physiologist examines it:
+                                                 # DIR/respiratory.json, .md, .png
 
 Studies with independent runs (work-precision) run them on all local cores,
 or on an existing Dask cluster with `--scheduler tcp://HOST:PORT` (the
@@ -118,6 +121,15 @@ def build_study_parser() -> argparse.ArgumentParser:
     r.add_argument("scene", nargs="?", help="a scene with a rigid part (default: breathing)")
     r.add_argument("--out", required=True, metavar="DIR", help="output folder (created)")
     r.add_argument("--small", action="store_true", help="200 coupled steps instead of 2000 (for tests)")
+    q = sub.add_parser(
+        "respiratory",
+        help="a scene with lungs examined as a physiologist would: passive compliances, the relaxation's "
+        "tau = R C, quiet breathing against an adult's bands, an occluded twitch, the rib cage's paradox",
+    )
+    q.add_argument("scene", nargs="?", default="breathing_lungs", help="a scene with lungs (default: breathing_lungs)")
+    q.add_argument("--out", required=True, metavar="DIR", help="output folder (created)")
+    q.add_argument("--small", action="store_true", help="mesh level 0 and shorter runs (seconds; for tests)")
+    q.add_argument("--level", type=int, metavar="K", help="the mesh level (default: the scene's; --small: 0)")
     return p
 
 
@@ -173,6 +185,21 @@ def _rigid(args) -> None:
         f"rigid: {r['scene']}, {r['steps']} steps: replay max |qpos| {r['replay_max_abs_qpos']:.1e}, "
         f"|qvel| {r['replay_max_abs_qvel']:.1e}; wrench relative error {r['wrench_rel_error']:.1e}; paper "
         f"algorithm order {r['paper_algorithm_order']:.3f}; {r['runtime_s']:.1f} s -> {args.out}/rigid.json"
+    )
+
+
+def _respiratory(args) -> None:
+    from . import respiratory
+
+    r = respiratory.run(args.out, args.scene, small=args.small, level=args.level)
+    rel = r["relaxation"]
+    within = sum(bool(b["within"]) for b in r["bands"])
+    print(
+        f"respiratory: {r['scene']} at level {r['level']}: C_rs "
+        f"{r['passive'][0]['respiratory_system_compliance_l_per_cmh2o']:.3f} L/cmH2O; tau {rel['tau_fitted_s']:.3f} s "
+        f"against R C {rel['tau_rc_s']:.3f} s; tidal volume {r['quiet_breathing']['tidal_volume_l']:.3f} L; "
+        f"{within} of {len(r['bands'])} figures within an adult's band; "
+        f"{r['runtime_cpu_s']:.1f} s of CPU -> {args.out}/respiratory.json"
     )
 
 
@@ -244,6 +271,7 @@ def main_study(argv) -> int:
             "verification": _verification,
             "convergence": _convergence,
             "rigid": _rigid,
+            "respiratory": _respiratory,
         }[args.study](args)
         return 0
     except HybridError as exc:

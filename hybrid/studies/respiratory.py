@@ -1,0 +1,411 @@
+"""`hybrid study respiratory [SCENE] --out DIR [--small]`: a scene with lungs
+(`hybrid.terms.lungs`) examined as a respiratory physiologist examines a subject.
+
+1. **Passive respiratory system.** The muscles relaxed (every `muscle_fibres` term's
+   tension 0, no `rigid.ctrl`), the airway-opening pressure raised by a step; at the
+   new equilibrium (flow stopped) the respiratory system's compliance C_rs = dV/dP_ao,
+   the chest wall's C_cw = dV/dP_pl (the pleural pressure's change) and the lungs'
+   C_L = dV/d(P_ao - P_pl), which must be the law's own compliance.
+2. **Relaxation, tau = R C.** The same step with the airway resistance raised to
+   `RELAXATION_RESISTANCE` (so that the volume's slow mode stands apart from the
+   membrane's and the ribs' fast ones) under implicit Euler: the volume's approach to
+   its new equilibrium, fitted by V_inf (1 - a exp(-t / tau)) from `RELAXATION_FIT_FROM_S`
+   on, against R times the compliance of the same run (V_inf over the step).
+3. **Quiet breathing**: the scene as it is, its last breath's tidal volume, pleural
+   pressure at end expiration and at end inspiration, transdiaphragmatic pressure swing,
+   dome (apex) descent, rib lift and work of breathing, each against its band for an
+   adult in quiet breathing (`BANDS`; sources in docs/lungs.md).
+4. **Twitch**: the airway occluded, the diaphragm contracting alone for `TWITCH_S`: the
+   ratio of the oesophageal (pleural) to the transdiaphragmatic pressure change at the
+   latter's peak (band 0.35-0.55, the ATS/ERS statement's normal values).
+5. **The paradox** of a rib cage without its muscles: the scene given an upper rib pair
+   (`upper_rib_scene`) that carries the cavity's wall; the hinge angles of the upper and
+   lower ribs at the end of inspiration, with the diaphragm alone and with the upper
+   ribs' inspiratory muscles.
+
+Writes DIR/respiratory.json, DIR/respiratory.md and DIR/respiratory.png. What is a
+prediction and what is not: nothing here is fitted; the bands are the adult's, and the
+default trunk is smaller than an adult's (docs/lungs.md).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import SceneError
+from ..outputs import save_figure
+from ..outputs import write_text as _write_text
+from ..resolve import resolve_scene
+from ..scene import Lungs, RibPair, Ribs
+from ..schedule import Breathing, Constant, Table
+from ..terms.fibres import MuscleFibres
+from .stability.report import write_json
+
+__all__ = ["run", "passive_compliance", "relaxation", "quiet_breathing", "twitch", "paradox", "upper_rib_scene"]
+
+#: quiet breathing of a supine adult: (low, high) and the source (docs/lungs.md, PHYSIOLOGY)
+BANDS = {
+    "tidal_volume_l": (0.4, 0.6, "physiology textbooks"),
+    "end_expiratory_pleural_pressure_cmh2o": (-6.0, -4.0, "about -5 cmH2O at FRC, textbooks"),
+    "end_inspiratory_pleural_pressure_cmh2o": (-8.5, -7.0, "VT / C_L + R_aw Q (derived)"),
+    "transdiaphragmatic_pressure_swing_cmh2o": (3.0, 8.0, "derived from the pleural and gastric swings"),
+    "apex_descent_mm": (10.0, 25.0, "Boussuges et al. 2009, Chest 135:391"),
+    "rib_lift_mm": (3.0, 5.0, "De Groote et al. 1997, J Appl Physiol 83:1531"),
+    "work_of_breathing_j_per_l": (0.2, 1.0, "physiology texts; critical care reviews"),
+    "respiratory_system_compliance_l_per_cmh2o": (0.05, 0.17, "textbooks"),
+    "twitch_pes_over_pdi": (0.35, 0.55, "ATS/ERS statement on respiratory muscle testing"),
+}
+#: the airway-opening pressure steps of the static compliance (cmH2O)
+COMPLIANCE_STEPS_CMH2O = (2.0, 5.0)
+#: the relaxation: airway resistance (cmH2O s/L), step (cmH2O), implicit Euler's step (s)
+RELAXATION_RESISTANCE = 50.0
+RELAXATION_STEP_CMH2O = 0.25
+RELAXATION_DT_S = 5e-3
+#: the fit starts after the fast modes (the membrane's and the ribs', tens of ms) have died
+RELAXATION_FIT_FROM_S = 2.0
+#: the twitch: the fibres' tension held for TWITCH_S (a single twitch's contraction time)
+TWITCH_S = 0.1
+
+
+def _lungs_of(scene):
+    for f in scene.forces:
+        if isinstance(f, Lungs):
+            return f
+    raise SceneError(f"study respiratory: scene {scene.name!r} has no lungs; expected a scene with a lungs term")
+
+
+def _with(scene, *, tension=None, **lung_changes):
+    """`scene` with every muscle_fibres term's tension replaced by `tension` (when given)
+    and the lungs term changed by `lung_changes`."""
+    forces = []
+    for f in scene.forces:
+        if tension is not None and isinstance(f, MuscleFibres):
+            f = dataclasses.replace(f, tension_n_per_m=tension)
+        if isinstance(f, Lungs) and lung_changes:
+            f = dataclasses.replace(f, **lung_changes)
+        forces.append(f)
+    rigid = scene.rigid
+    if tension is not None and rigid is not None and rigid.ctrl:
+        rigid = dataclasses.replace(rigid, ctrl={})
+    return dataclasses.replace(scene, forces=tuple(forces), rigid=rigid)
+
+
+def _trace(scene, duration_s, frame_dt_s, overrides=()):
+    from .. import load, run
+
+    sc = resolve_scene(dataclasses.replace(scene, duration_s=duration_s), overrides=overrides)
+    return run(load(sc), duration_s, frame_dt_s=frame_dt_s)
+
+
+def _step(p_cmh2o):
+    """The airway-opening pressure stepped to p at once (within a microsecond)."""
+    return Table((0.0, 1e-6), (0.0, p_cmh2o))
+
+
+def passive_compliance(scene, step_cmh2o: float, duration_s: float) -> dict:
+    """Study 1 at one step: the compliances (L/cmH2O) from the last 0.25 s's means."""
+    relaxed = _with(scene, tension=Constant(0.0), airway_opening_pressure_cmh2o=_step(step_cmh2o))
+    a = _trace(relaxed, duration_s, 0.01)["trace"].arrays()
+    late = a["t_s"] >= duration_s - 0.25
+    dv = float(np.mean(a["lung_volume_change_l"][late]))
+    dppl = float(np.mean(a["pleural_pressure_cmh2o"][late]) - a["pleural_pressure_cmh2o"][0])
+    lungs = _lungs_of(scene)
+    law = lungs.lung_compliance_l_per_cmh2o or (1.0 / lungs.lung_elastance_cmh2o_per_l)
+    return {
+        "step_cmh2o": step_cmh2o,
+        "volume_change_l": dv,
+        "pleural_pressure_change_cmh2o": dppl,
+        "late_flow_max_l_per_s": float(np.max(np.abs(a["flow_l_per_s"][late]))),
+        "respiratory_system_compliance_l_per_cmh2o": dv / step_cmh2o,
+        "chest_wall_compliance_l_per_cmh2o": dv / dppl,
+        "lung_compliance_l_per_cmh2o": dv / (step_cmh2o - dppl),
+        "law_lung_compliance_l_per_cmh2o": law,
+    }
+
+
+def relaxation(scene, duration_s: float, r: float = RELAXATION_RESISTANCE) -> dict:
+    """Study 2 at airway resistance r (cmH2O s/L): the fitted time constant against R C."""
+    from scipy.optimize import curve_fit
+
+    slow = _with(
+        scene,
+        tension=Constant(0.0),
+        airway_resistance_cmh2o_s_per_l=r,
+        rohrer_k2_cmh2o_s2_per_l2=0.0,
+        airway_opening_pressure_cmh2o=_step(RELAXATION_STEP_CMH2O),
+    )
+    a = _trace(slow, duration_s, 0.01, ("integrator=implicit_euler", f"dt_s={RELAXATION_DT_S}"))["trace"].arrays()
+    t, v = a["t_s"], a["lung_volume_change_l"]
+    fit = t >= RELAXATION_FIT_FROM_S
+
+    def law(t_, v_inf, amp, tau):
+        return v_inf * (1.0 - amp * np.exp(-t_ / tau))
+
+    guess = (v[-1], 1.0, r * v[-1] / RELAXATION_STEP_CMH2O)
+    (v_inf, amp, tau), _ = curve_fit(law, t[fit], v[fit], p0=guess)
+    compliance = v_inf / RELAXATION_STEP_CMH2O
+    return {
+        "airway_resistance_cmh2o_s_per_l": r,
+        "step_cmh2o": RELAXATION_STEP_CMH2O,
+        "dt_s": RELAXATION_DT_S,
+        "duration_s": duration_s,
+        "fit_from_s": RELAXATION_FIT_FROM_S,
+        "compliance_l_per_cmh2o": float(compliance),
+        "tau_fitted_s": float(tau),
+        "tau_rc_s": float(r * compliance),
+        "tau_ratio": float(tau / (r * compliance)),
+        # tau / C - R: what the chest wall's own dissipation adds to the airway's resistance (the
+        # membrane's drag and its soft modes' creep), if the rest of the departure is theirs
+        "chest_wall_resistance_implied_cmh2o_s_per_l": float(tau / compliance - r),
+        "fit_residual_rel": float(np.max(np.abs(v[fit] - law(t[fit], v_inf, amp, tau))) / abs(v_inf)),
+        "curve": {"t_s": t[:: max(1, len(t) // 400)].tolist(), "volume_l": v[:: max(1, len(t) // 400)].tolist()},
+        "fitted": {"v_inf_l": float(v_inf), "amplitude": float(amp)},
+    }
+
+
+def quiet_breathing(scene, duration_s: float) -> dict:
+    """Study 3: the scene as it is; its last breath's figures."""
+    out = _trace(scene, duration_s, 0.005)
+    s, a = out["summary"], out["trace"].arrays()
+    period = _breath_period(scene)
+    last = a["t_s"] >= duration_s - period - 1e-9
+    v, ppl = a["lung_volume_change_l"][last], a["pleural_pressure_cmh2o"][last]
+    return {
+        "duration_s": duration_s,
+        "last_breath_s": period,
+        "tidal_volume_l": s["tidal_volume_l"],
+        "end_expiratory_pleural_pressure_cmh2o": float(ppl[int(np.argmin(v))]),
+        "end_inspiratory_pleural_pressure_cmh2o": float(ppl[int(np.argmax(v))]),
+        "transdiaphragmatic_pressure_swing_cmh2o": s["transdiaphragmatic_pressure_swing_cmh2o"],
+        "apex_descent_mm": s["apex_descent_mm"],
+        "rib_lift_mm": s.get("rib_lift_mm"),
+        "work_of_breathing_j_per_l": s["work_of_breathing_j_per_l"],
+        "mesh_points": s["mesh_points"],
+    }
+
+
+def _breath_period(scene) -> float:
+    for f in scene.forces:
+        if isinstance(f, MuscleFibres) and isinstance(f.tension_n_per_m, Breathing):
+            return f.tension_n_per_m.period_s
+    return 4.0
+
+
+def _peak_tension(scene) -> float:
+    for f in scene.forces:
+        if isinstance(f, MuscleFibres):
+            sched = f.tension_n_per_m
+            return float(sched.peak if isinstance(sched, Breathing) else getattr(sched, "value", sched))
+    raise SceneError(f"study respiratory: scene {scene.name!r} has no muscle_fibres term for the twitch")
+
+
+def twitch(scene) -> dict:
+    """Study 4: the occluded twitch's dPes / dPdi at the peak of Pdi."""
+    peak = _peak_tension(scene)
+    pulse = Table((0.0, 0.01, 0.01 + TWITCH_S, 0.02 + TWITCH_S), (0.0, peak, peak, 0.0))
+    occluded = _with(scene, tension=pulse, airway_occluded=Constant(1.0))
+    a = _trace(occluded, 0.4, 0.002)["trace"].arrays()
+    pdi = a["transdiaphragmatic_pressure_change_cmh2o"]
+    k = int(np.argmax(pdi))
+    dpes = float(a["pleural_pressure_cmh2o"][k] - a["pleural_pressure_cmh2o"][0])
+    return {
+        "tension_n_per_m": peak,
+        "contraction_s": TWITCH_S,
+        "pdi_change_cmh2o": float(pdi[k]),
+        "pes_change_cmh2o": dpes,
+        "lung_volume_change_l": float(np.max(np.abs(a["lung_volume_change_l"]))),
+        "twitch_pes_over_pdi": abs(dpes) / float(pdi[k]),
+    }
+
+
+def upper_rib_scene(scene, activation: float, wall_height_m: float = 0.12):
+    """`scene` given an upper rib pair (the pulmonary rib cage: sloping down to the front, 0.10-0.14 m
+    high, a motor of gear 2 N m on each hinge) that carries the cavity's wall, its muscles driven by
+    a breathing cycle of peak `activation` (0: the diaphragm alone). The pair's stiffness and gear are
+    chosen, not sourced; the wall's rings meet the upper ribs at their own height."""
+    if scene.rigid is None:
+        raise SceneError(f"study respiratory: scene {scene.name!r} has no rigid part for an upper rib pair")
+    upper = RibPair(
+        name="upper_ribs",
+        head_m=(-0.13, 0.025, 0.14),
+        front_m=(0.10, 0.012, 0.10),
+        half_width_m=0.12,
+        muscle_gear_n_m=2.0,
+    )
+    period = _breath_period(scene)
+    ctrl = (
+        {"upper_ribs_*_muscle": Breathing(period_s=period, inspiration_fraction=0.4, peak=activation)}
+        if activation
+        else {}
+    )
+    rigid = dataclasses.replace(scene.rigid, ribs=Ribs(body="spine", pairs=(upper,)), ctrl=ctrl)
+    forces = tuple(
+        dataclasses.replace(f, wall_height_m=wall_height_m, wall_bodies="upper_ribs_*") if isinstance(f, Lungs) else f
+        for f in scene.forces
+    )
+    return dataclasses.replace(scene, rigid=rigid, forces=forces)
+
+
+def paradox(scene) -> dict:
+    """Study 5: the hinge angles (mrad) of the lower and upper ribs' left sides at the end of
+    inspiration (40% of the breath), the diaphragm alone and with the upper ribs' muscles."""
+    from .. import load
+
+    out = {}
+    period = _breath_period(scene)
+    for label, act in (("diaphragm_alone", 0.0), ("with_rib_cage_muscles", 1.0)):
+        sim = load(upper_rib_scene(scene, act))
+        m, d = sim.mj_model, sim.mj_data
+        lower = m.joint("rib_left_hinge").qposadr[0]
+        upper = m.joint("upper_ribs_left_hinge").qposadr[0]
+        q0 = d.qpos.copy()
+        sim.step(int(round(0.4 * period / sim.model.dt_s)))
+        out[label] = {
+            "lower_rib_angle_mrad": 1e3 * float(d.qpos[lower] - q0[lower]),
+            "upper_rib_angle_mrad": 1e3 * float(d.qpos[upper] - q0[upper]),
+        }
+    return out
+
+
+def run(out_dir, source="breathing_lungs", *, small: bool = False, level: int | None = None) -> dict:
+    """The study (module docstring) of the scene `source` at mesh `level` (default: the scene's;
+    --small: level 0 and shorter runs); writes DIR/respiratory.json, .md and .png."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    t0 = time.process_time()
+    scene = resolve_scene(source)
+    _lungs_of(scene)
+    if small and level is None:
+        level = 0
+    if level is not None:
+        scene = resolve_scene(scene, overrides=(f"mesh.level={level}",))
+    period = _breath_period(scene)
+    res: dict = {"scene": scene.name, "level": scene.mesh.level, "small": small}
+    res["passive"] = [passive_compliance(scene, p, 2.0) for p in COMPLIANCE_STEPS_CMH2O]
+    res["relaxation"] = relaxation(scene, 15.0 if small else 30.0)
+    res["quiet_breathing"] = quiet_breathing(scene, (2 if small else 3) * period)
+    res["twitch"] = twitch(scene)
+    res["paradox"] = paradox(scene) if scene.rigid is not None else None
+    res["bands"] = _band_rows(res)
+    res["runtime_cpu_s"] = time.process_time() - t0
+    write_json(out / "respiratory.json", res)
+    _write_text(out / "respiratory.md", markdown(res))
+    plot(out / "respiratory.png", res)
+    return res
+
+
+def _band_rows(res) -> list[dict]:
+    found = dict(res["quiet_breathing"])
+    found["respiratory_system_compliance_l_per_cmh2o"] = res["passive"][0]["respiratory_system_compliance_l_per_cmh2o"]
+    found["twitch_pes_over_pdi"] = res["twitch"]["twitch_pes_over_pdi"]
+    rows = []
+    for key, (lo, hi, source) in BANDS.items():
+        value = found.get(key)
+        ok = None if value is None or not math.isfinite(value) else bool(lo <= value <= hi)
+        rows.append({"metric": key, "value": value, "low": lo, "high": hi, "within": ok, "source": source})
+    return rows
+
+
+def markdown(res: dict) -> str:
+    def num(x, spec=".3g"):
+        return "-" if x is None else format(x, spec)
+
+    band = "\n".join(
+        f"| {r['metric']} | {num(r['value'])} | {r['low']:g} to {r['high']:g} | "
+        f"{'-' if r['within'] is None else ('yes' if r['within'] else 'no')} | {r['source']} |"
+        for r in res["bands"]
+    )
+    passive = "\n".join(
+        f"| {p['step_cmh2o']:g} | {p['volume_change_l']:.4f} | {p['respiratory_system_compliance_l_per_cmh2o']:.4f} | "
+        f"{p['chest_wall_compliance_l_per_cmh2o']:.4f} | {p['lung_compliance_l_per_cmh2o']:.4f} "
+        f"({p['law_lung_compliance_l_per_cmh2o']:g}) |"
+        for p in res["passive"]
+    )
+    r = res["relaxation"]
+    tw = res["twitch"]
+    par = res["paradox"]
+    par_rows = (
+        "\n".join(
+            f"| {k.replace('_', ' ')} | {v['lower_rib_angle_mrad']:+.3g} | {v['upper_rib_angle_mrad']:+.3g} |"
+            for k, v in par.items()
+        )
+        if par
+        else "| (no rigid part) | - | - |"
+    )
+    return f"""# Respiratory mechanics of scene {res["scene"]} (mesh level {res["level"]})
+
+Made by `hybrid study respiratory{" --small" if res["small"] else ""}`; {res["runtime_cpu_s"]:.0f} s of CPU.
+Nothing is fitted: every figure is a prediction of the scene's parameters; the bands are an adult's.
+
+## Against quiet breathing in an adult
+
+| metric | value | band | within | source |
+| --- | --- | --- | --- | --- |
+{band}
+
+## Passive respiratory system (muscles relaxed, steps of airway-opening pressure)
+
+| step (cmH2O) | volume (L) | C_rs (L/cmH2O) | C_cw | C_L (the law's) |
+| --- | --- | --- | --- | --- |
+{passive}
+
+## Relaxation after a step: tau = R C
+
+Airway resistance {r["airway_resistance_cmh2o_s_per_l"]:g} cmH2O s/L, step {r["step_cmh2o"]:g} cmH2O, implicit Euler
+at {r["dt_s"]:g} s, fitted from {r["fit_from_s"]:g} s: tau {r["tau_fitted_s"]:.4f} s against R C
+{r["tau_rc_s"]:.4f} s (ratio {r["tau_ratio"]:.4f}; the fit's largest residual {r["fit_residual_rel"]:.1e} of the volume).
+The departure is what the chest wall's own dissipation adds to the airway's resistance (the membrane's
+drag, and the creep of its soft modes, slow on finer meshes): tau / C - R =
+{r["chest_wall_resistance_implied_cmh2o_s_per_l"]:.3g} cmH2O s/L.
+
+## Twitch with the airway occluded
+
+The diaphragm alone at {tw["tension_n_per_m"]:g} N/m for {tw["contraction_s"]:g} s: Pdi {tw["pdi_change_cmh2o"]:+.3g} cmH2O,
+Pes {tw["pes_change_cmh2o"]:+.3g} cmH2O, ratio {tw["twitch_pes_over_pdi"]:.3f} (band 0.35-0.55).
+
+## The paradox of a rib cage without its muscles (hinge angles at end inspiration, mrad)
+
+| drive | lower ribs | upper ribs |
+| --- | --- | --- |
+{par_rows}
+"""
+
+
+def plot(path: Path, res: dict) -> None:
+    """The relaxation's volume with its fit, and the passive pressure-volume points."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    r = res["relaxation"]
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 4))
+    t = np.asarray(r["curve"]["t_s"])
+    ax1.plot(t, 1e3 * np.asarray(r["curve"]["volume_l"]), "k-", label="simulated")
+    f = r["fitted"]
+    ax1.plot(t, 1e3 * f["v_inf_l"] * (1 - f["amplitude"] * np.exp(-t / r["tau_fitted_s"])), "r--", label="fit")
+    ax1.axvline(r["fit_from_s"], color="0.7", lw=0.8)
+    ax1.set_xlabel("time (s)")
+    ax1.set_ylabel("lung volume change (mL)")
+    ax1.set_title(f"relaxation: tau {r['tau_fitted_s']:.3f} s, R C {r['tau_rc_s']:.3f} s")
+    ax1.legend()
+    p = res["passive"]
+    ax2.plot([0] + [q["step_cmh2o"] for q in p], [0] + [q["volume_change_l"] for q in p], "o-", label="P_ao (system)")
+    ax2.plot(
+        [0] + [q["pleural_pressure_change_cmh2o"] for q in p],
+        [0] + [q["volume_change_l"] for q in p],
+        "s-",
+        label="P_pl (chest wall)",
+    )
+    ax2.set_xlabel("pressure change (cmH2O)")
+    ax2.set_ylabel("lung volume change (L)")
+    ax2.set_title("passive pressure-volume, muscles relaxed")
+    ax2.legend()
+    fig.tight_layout()
+    save_figure(fig, path)
+    plt.close(fig)

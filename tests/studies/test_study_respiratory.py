@@ -1,0 +1,82 @@
+"""`hybrid study respiratory [SCENE] --out DIR` (hybrid.studies.respiratory): the passive
+system's compliances and their composition, the relaxation's tau = R C, the paradox of the
+rib cage without its muscles; and the command's refusals."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from hybrid.studies.cli import main_study
+
+
+@pytest.fixture(scope="module")
+def small(tmp_path_factory):
+    out = tmp_path_factory.mktemp("respiratory")
+    assert main_study(["respiratory", "--small", "--out", str(out)]) == 0
+    return out, json.loads((out / "respiratory.json").read_text())
+
+
+def test_a_step_of_airway_pressure_relaxes_with_tau_r_c(small):
+    """The single compartment's closed form: after a step of airway-opening pressure the lung
+    volume approaches its new equilibrium as exp(-t / tau), tau = R C, C the compliance of the
+    same run (V_inf over the step). Within 1%, from: the chest wall's own damping (the membrane's
+    drag), which adds its resistance to the airway's (measured: 0.26% of R at a tenth of the
+    scene's drag, 4.4% at ten times it, so about 0.5% at the scene's); the chest wall's stiffening
+    over the 0.25 cmH2O step (C at 0.1 and 0.5 cmH2O differ by 3%, the tangent against the secant
+    about 0.3%); backward Euler's lag, h / (2 tau) = 0.1%. At level 0 (the small study); on finer
+    meshes the abdominal wall's soft modes creep (a fifth of a second at level 4) and add a
+    resistance of their own: docs/lungs.md."""
+    _, r = small
+    rel = r["relaxation"]
+    assert rel["tau_rc_s"] > 1.0  # R C long against the fast modes (tens of ms)
+    assert rel["tau_ratio"] == pytest.approx(1.0, abs=0.01)
+    assert rel["fit_residual_rel"] < 2e-3  # one exponential after the fast modes
+    # the chest wall's dissipation adds to the airway's resistance, never takes from it
+    assert 0 < rel["chest_wall_resistance_implied_cmh2o_s_per_l"] < 0.01 * rel["airway_resistance_cmh2o_s_per_l"]
+
+
+def test_the_passive_system_composes_the_law_s_lung_with_a_chest_wall_in_the_adult_band(small):
+    """Muscles relaxed, steps of airway-opening pressure: at equilibrium the lungs' compliance,
+    dV over the transpulmonary pressure's change, is the law's (0.2 L/cmH2O) within the flow
+    left after 2 s (2e-3: the last 0.25 s's mean over the membrane's last ringing); the system's
+    compliance is a prediction of the trunk's elasticity, inside the adult's 0.05-0.17 L/cmH2O."""
+    _, r = small
+    for p in r["passive"]:
+        assert p["lung_compliance_l_per_cmh2o"] == pytest.approx(p["law_lung_compliance_l_per_cmh2o"], rel=2e-3)
+        assert p["late_flow_max_l_per_s"] < 1e-3
+        crs, ccw, cl = (
+            p[k]
+            for k in (
+                "respiratory_system_compliance_l_per_cmh2o",
+                "chest_wall_compliance_l_per_cmh2o",
+                "lung_compliance_l_per_cmh2o",
+            )
+        )
+        assert 0.05 <= crs <= 0.17 and ccw > crs < cl  # the system is stiffer than each part
+
+
+def test_the_study_reports_the_paradox_the_twitch_and_the_bands(small):
+    out, r = small
+    par = r["paradox"]
+    assert par["diaphragm_alone"]["upper_rib_angle_mrad"] < 0 < par["diaphragm_alone"]["lower_rib_angle_mrad"]
+    assert par["with_rib_cage_muscles"]["upper_rib_angle_mrad"] > 0
+    assert par["with_rib_cage_muscles"]["lower_rib_angle_mrad"] > 0
+    tw = r["twitch"]
+    assert tw["pdi_change_cmh2o"] > 0 > tw["pes_change_cmh2o"]  # the dome pulls: Pab up, Ppl down
+    assert tw["lung_volume_change_l"] < 1e-12  # the occluded airway holds the volume exactly
+    rows = {b["metric"]: b for b in r["bands"]}
+    for b in rows.values():  # each row's verdict is its value against its band
+        if b["value"] is not None:
+            assert b["within"] == (b["low"] <= b["value"] <= b["high"])
+    assert rows["twitch_pes_over_pdi"]["value"] == tw["twitch_pes_over_pdi"]
+    md = (out / "respiratory.md").read_text()
+    assert "tau = R C" in md and "| tidal_volume_l |" in md
+    assert (out / "respiratory.png").stat().st_size > 10_000
+
+
+def test_a_scene_without_lungs_is_refused_in_one_line(tmp_path, capsys):
+    assert main_study(["respiratory", "membrane_demo", "--small", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert "has no lungs" in err and err.count("\n") == 1
