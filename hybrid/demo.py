@@ -8,7 +8,7 @@ from __future__ import annotations
 import dataclasses
 
 from . import scenefile
-from .regions import HalfSpace
+from .regions import Difference, HalfSpace
 from .scene import Damping, Gravity, Lungs, Masses, MeshSpec, Muscle, Nailed, Scene, ShapeMemory, Volume
 from .schedule import Breathing
 
@@ -53,10 +53,15 @@ def breathing_lungs() -> Scene:
     1.5 cmH2O s/L (DuBois et al. 1956, J Clin Invest 35:327), spontaneous breathing (the
     airway open at 0 cmH2O); a thoracic cavity 0.12 m high over the dome's border, about 3 L
     at rest (a functional residual capacity of about 3 L, textbooks; the linear law does not
-    depend on it). The trunk's geometry and drive are the `breathing` scene's: it is small for
-    an adult (a tidal volume near 0.09 L, not 0.5 L; docs/lungs.md)."""
+    depend on it). The cavity's floor is the dome above the rib band: the band, the zone of
+    apposition the lower ribs hold, is the abdomen's wall (the abdominal rib cage), not the lungs'
+    (Mead & Loring 1982), so that the lung volume change is the pulmonary rib cage's, the
+    abdominal rib cage's and the abdomen's displacements. The trunk's geometry and drive are the
+    `breathing` scene's: it is small for an adult (a tidal volume near 0.13 L, not 0.5 L;
+    docs/lungs.md)."""
     base = scenefile.load_scene(scenefile.builtin_scene("breathing"))
     lungs = Lungs(
+        floor=Difference(base="diaphragm", minus="rib_band"),
         wall_height_m=0.12,
         lung_compliance_l_per_cmh2o=0.2,
         resting_recoil_cmh2o=5.0,

@@ -438,7 +438,13 @@ DIAGRAM_POINTS = 4000
 def _diagrams(trace) -> dict | None:
     """The Campbell and Konno-Mead diagrams' series (every k-th frame, the same frames
     for x and y), or None for a trace without lungs."""
-    keys = ("lung_volume_change_l", "pleural_pressure_cmh2o", "swept_volume_ml")
+    keys = (
+        "lung_volume_change_l",
+        "pleural_pressure_cmh2o",
+        "rib_cage_pulmonary_volume_change_l",
+        "rib_cage_abdominal_volume_change_l",
+        "abdomen_volume_change_l",
+    )
     n = len(trace)
     if not n or "resting_recoil_cmh2o" not in getattr(trace, "about", {}):
         return None
@@ -461,21 +467,20 @@ def _campbell(ax, d: dict, about: dict) -> None:
 
 
 def _konno_mead(ax, d: dict) -> None:
-    """Rib cage against abdominal displacement (L): the abdomen's the volume the region
-    "diaphragm" swept (`swept_volume_ml`: what the dome gave the lungs, which the
-    incompressible abdomen's wall gave up), the rib cage's the lung volume change minus
-    it (what the cavity's wall over the ribs gave); isovolume lines at 45 degrees."""
+    """Rib cage against abdominal displacement (L), the lung volume change's parts: the
+    abdomen's wall, and the rib cage's two (the cavity's wall and the abdominal rib cage);
+    isovolume lines at 45 degrees."""
     vol = d["lung_volume_change_l"]
-    abdomen = d["swept_volume_ml"] * 1e-3
-    rib = vol - abdomen
+    abdomen = d["abdomen_volume_change_l"]
+    rib = d["rib_cage_pulmonary_volume_change_l"] + d["rib_cage_abdominal_volume_change_l"]
     ax.plot(abdomen, rib, lw=1)
     top = float(np.nanmax(np.abs(np.concatenate([abdomen, rib, vol]))))
     for level in np.linspace(0.0, float(np.nanmax(vol)), 3)[1:]:
         ax.plot([level - top, level + top], [top, -top], color="0.7", lw=0.6)
     ax.set_xlim(min(0.0, np.nanmin(abdomen)) - 0.1 * top, max(0.0, np.nanmax(abdomen)) + 0.1 * top)
     ax.set_ylim(min(0.0, np.nanmin(rib)) - 0.1 * top, max(0.0, np.nanmax(rib)) + 0.1 * top)
-    ax.set_xlabel('abdomen: swept by "diaphragm" (L)', fontsize=8)
-    ax.set_ylabel("rib cage: lung change - abdomen (L)", fontsize=8)
+    ax.set_xlabel("abdomen (L)", fontsize=8)
+    ax.set_ylabel("rib cage: pulmonary + abdominal (L)", fontsize=8)
     ax.set_title("Konno-Mead diagram", fontsize=9)
 
 
@@ -519,7 +524,7 @@ def trace_figure(trace, *, title: str = ""):
     if np.isfinite(a[_LUNG_PRESSURES[0][0]]).any():
         panels.append((_LUNG_PRESSURES, "pressure change\n(cmH2O)", False))
     diagrams = _diagrams(trace)
-    konno = diagrams is not None and np.isfinite(diagrams["swept_volume_ml"]).any()
+    konno = diagrams is not None and np.isfinite(diagrams["abdomen_volume_change_l"]).any()
     # fixed margins: tight_layout took half a second of every run
     below = 3.6 if diagrams is not None else 0.0  # the diagrams' row (inches)
     height = 1.2 + 1.6 * len(panels) + below

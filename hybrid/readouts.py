@@ -160,3 +160,31 @@ def pitch_deg(quat: np.ndarray, axis_body: np.ndarray, anterior: np.ndarray, cra
     anterior axis (axis_body, in its own frame) toward cranial, positive when it turns up."""
     a = quat_rot(quat) @ axis_body
     return np.degrees(np.arctan2(a @ cranial, a @ anterior))
+
+
+def ring_faces(face_vert: np.ndarray, vert: int, rings: int) -> np.ndarray:
+    """The faces within `rings` rings of point `vert` (indices into face_vert): 1, the faces
+    that meet at it; 2, those that meet at its neighbours too; and so on."""
+    near = np.zeros(int(face_vert.max()) + 1, bool)
+    near[vert] = True
+    for _ in range(rings - 1):
+        near[face_vert[near[face_vert].any(axis=1)].ravel()] = True
+    return np.nonzero(near[face_vert].any(axis=1))[0]
+
+
+def axis_crossing_z(face_vert: np.ndarray, pos_frames: np.ndarray, xy: np.ndarray) -> np.ndarray:
+    """The height (m) at which the surface `face_vert` crosses the vertical line through
+    `xy` (2,) in each frame of pos_frames (k, nvert, 3): the highest crossing, linear in
+    the face it crosses; NaN for a frame whose faces miss the line. A surface's height,
+    which converges as the mesh is refined, not one mesh point's."""
+    a, b, c = (pos_frames[:, face_vert[:, j]] for j in range(3))  # (k, nface, 3)
+    e1, e2, p = b[..., :2] - a[..., :2], c[..., :2] - a[..., :2], xy - a[..., :2]
+    det = e1[..., 0] * e2[..., 1] - e2[..., 0] * e1[..., 1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = (p[..., 0] * e2[..., 1] - e2[..., 0] * p[..., 1]) / det
+        w = (e1[..., 0] * p[..., 1] - p[..., 0] * e1[..., 1]) / det
+    tol = 1e-12  # a line through a corner or along an edge belongs to every face that meets there
+    inside = (det != 0) & (u >= -tol) & (w >= -tol) & (u + w <= 1 + tol)
+    z = np.where(inside, a[..., 2] + u * (b[..., 2] - a[..., 2]) + w * (c[..., 2] - a[..., 2]), -np.inf)
+    top = z.max(axis=1) if z.shape[1] else np.full(len(pos_frames), -np.inf)
+    return np.where(np.isfinite(top), top, np.nan)

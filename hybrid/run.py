@@ -196,7 +196,6 @@ def run(
         | {int(o.every_steps) for o in observers if getattr(o, "every_steps", None)}
     )
     metrics = TraceMetrics(model)
-    rest = model.mesh.vert_pos
     breath = metrics.breath
 
     # the end of the last complete expiration, where the body should be back at rest
@@ -265,7 +264,7 @@ def run(
             if cycle_end_step is not None and batch[0] <= cycle_end_step <= batch[-1]:
                 j = int(np.searchsorted(batch, cycle_end_step))
                 at = frames.pos[j] if batched else sim.state.vert_pos
-                rest_return_mm = float(np.linalg.norm(at - rest, axis=1).max() * 1e3)
+                rest_return_mm = metrics.rest_distance_mm(at)
             if bar:
                 bar.update(int(batch[-1]))
             if stop is not None and stop() and int(batch[-1]) < nstep:  # after the last step: done

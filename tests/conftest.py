@@ -63,6 +63,7 @@ SLOW = (
     "test_cli.py::test_bench_quick_writes_json",
     "test_runs_safe.py::test_a_second_run_into_a_busy_folder_is_refused_and_sigterm_finishes_the_first",
     "test_runs_safe.py::test_the_runners_memory_does_not_grow_with_the_runs_length",
+    "test_body_metrics.py::test_the_body_metrics_converge_under_refinement",  # a breath at four levels
 )
 
 

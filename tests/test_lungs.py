@@ -14,6 +14,7 @@ from helpers import DOME_Z_M, dome_scene
 
 import hybrid
 from hybrid.errors import SceneError
+from hybrid.observers.metrics import lung_part_faces
 from hybrid.readouts import swept_volume
 from hybrid.regions import HalfSpace, Union_
 from hybrid.scene import Lungs
@@ -135,6 +136,44 @@ def test_the_lung_volume_change_is_the_sum_of_what_its_walls_swept():
     # the exact volume constraint holds the abdomen to round-off of its 7 L
     assert swept_dome == pytest.approx(-swept_abdomen, abs=1e-15)
     assert -swept_dome == pytest.approx(swept_volume(face[on_floor], rest, now), abs=1e-15)
+
+
+def test_the_lung_volume_change_is_the_pulmonary_rib_cage_the_abdominal_rib_cage_and_the_abdomen():
+    """Mead & Loring's three compartments on `breathing_lungs`, whose floor is the dome above
+    the rib band: the cavity's wall (pulmonary rib cage), the band the ribs hold (abdominal rib
+    cage) and the abdominal wall each sweep a volume; the three add up to the lung volume
+    change, and the last two to what the dome swept into the abdomen, each to round-off
+    (1e-12 of the change: the volumes are sums over faces of about 1e-18 m^3 rounding each);
+    the trace's series are these, and the summary's shares their ratios at the largest volume."""
+    sim = hybrid.load("breathing_lungs", overrides=["mesh.level=0"])
+    out = hybrid.run(sim, 1.6)  # to the end of the first inspiration
+    m, st = sim.model, sim.state
+    a = m.arrays
+    rest, now = m.mesh.vert_pos, st.vert_pos
+    v_now, _ = cavity_volume_rate(a.lung_face, a.lung_par[P_REF:], now, st.vert_vel, st.lung_wall_pos, st.lung_wall_vel)
+    dv = v_now - a.lung_par[4]
+    assert dv > 1e-5
+    on_wall = ~np.all(a.lung_face < m.nvert, axis=1)
+    pulmonary = swept_volume(
+        a.lung_face[on_wall], np.concatenate([rest, a.lung_wall]), np.concatenate([now, st.lung_wall_pos])
+    )
+    floor, rib, wall = lung_part_faces(m)
+    abdominal_rib_cage, abdomen = swept_volume(rib, rest, now), swept_volume(wall, rest, now)
+    assert abdominal_rib_cage > 0.1 * dv  # the band the ribs hold moves out: the abdominal rib cage
+    assert pulmonary + abdominal_rib_cage + abdomen == pytest.approx(dv, abs=1e-12 * dv)
+    assert -swept_volume(floor, rest, now) == pytest.approx(abdominal_rib_cage + abdomen, abs=1e-12 * dv)
+    tr = out["trace"].arrays()
+    for key, want in (
+        ("rib_cage_pulmonary_volume_change_l", pulmonary),
+        ("rib_cage_abdominal_volume_change_l", abdominal_rib_cage),
+        ("abdomen_volume_change_l", abdomen),
+    ):
+        assert tr[key][-1] == pytest.approx(want * 1e3, abs=1e-12 * dv * 1e3)
+    s = out["summary"]
+    k = int(np.argmax(tr["lung_volume_change_l"]))
+    assert s["abdomen_share"] == tr["abdomen_volume_change_l"][k] / tr["lung_volume_change_l"][k]
+    shares = s["pulmonary_rib_cage_share"] + s["abdominal_rib_cage_share"] + s["abdomen_share"]
+    assert shares == pytest.approx(1.0, abs=1e-12)
 
 
 def test_lungs_without_elastance_resistance_or_airway_pressure_add_nothing():
@@ -341,7 +380,7 @@ def test_the_recording_carries_the_lung_series_of_the_trace(tmp_path):
         tr = hybrid.run(sim, 0.5, observers=[rec])["trace"].arrays()
     data = hybrid.read(tmp_path / "run.mcap")
     lung_topics = [t for t in SCALAR_CHANNELS if t.startswith("/lungs/")]
-    assert len(lung_topics) == 5
+    assert len(lung_topics) == 8
     for topic in lung_topics:
         ch, key = data[topic], SCALAR_CHANNELS[topic]
         assert np.allclose(ch["t"], tr["t_s"], rtol=0, atol=1e-9)  # stamps in whole nanoseconds

@@ -6,8 +6,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..mesh.geometry import vertex_area
 from ..model import Model
-from ..readouts import pitch_deg, quat_rot, swept_volumes
+from ..readouts import axis_crossing_z, pitch_deg, quat_rot, ring_faces, swept_volumes
 from ..scene import Muscle, MuscleFibres, SoftVolume, Volume
 from ..schedule import Breathing, schedule_eval, stack_schedules
 from ..step import F_ALVEOLAR, F_FLOW, F_KE, F_LUNG_VOLUME, F_PLEURAL, F_PRESSURE, F_TIME, F_VOLUME
@@ -16,7 +17,16 @@ from ..terms.lungs import CMH2O_PA, CMH2O_PER_L, P_E, P_RECOIL, P_V0
 from ..terms.volume import face_volume
 from .trace import COLUMN, TRACE_KEYS
 
-__all__ = ["SWEPT_REGION", "scene_parts", "apex_vertex", "thorax_body", "first_muscle", "muscle_label", "TraceMetrics"]
+__all__ = [
+    "SWEPT_REGION",
+    "scene_parts",
+    "apex_vertex",
+    "lung_part_faces",
+    "thorax_body",
+    "first_muscle",
+    "muscle_label",
+    "TraceMetrics",
+]
 
 
 def scene_parts(model: Model) -> frozenset:
@@ -54,11 +64,46 @@ def apex_vertex(model: Model) -> int:
     return int(np.argmax(z))
 
 
-def _mean_z(pos: np.ndarray, vert: np.ndarray) -> np.ndarray:
-    """Mean z of the points vert in each frame of pos (nframe, nvert, 3), summed in
-    vert's order (a cumulative sum adds one point after the other): the same figure
-    whatever the number of frames."""
-    return np.cumsum(pos[:, vert, 2], axis=1)[:, -1] / len(vert)
+#: the edge rings about the apex whose faces the dome's axis crossing is sought in first
+APEX_RINGS = 3
+
+
+def _weighted_z(pos: np.ndarray, vert: np.ndarray, area: np.ndarray) -> np.ndarray:
+    """The area-weighted mean z of the points vert (weights `area`, their shares of the
+    surface at rest) in each frame of pos (nframe, nvert, 3): the mean height of the
+    region, whatever its mesh. Summed in vert's order (a cumulative sum adds one point
+    after the other): the same figure whatever the number of frames."""
+    return np.cumsum(pos[:, vert, 2] * area, axis=1)[:, -1] / np.cumsum(area)[-1]
+
+
+def lung_part_faces(model: Model) -> tuple:
+    """The faces whose swept volumes are the lung volume change's parts: the cavity's floor
+    (the membrane's faces under the lungs, in the membrane's orientation), then the membrane's
+    other faces, the abdomen's boundary off the floor, split into the abdominal rib cage (every
+    corner linked to a rigid body: the zone of apposition the ribs hold) and the abdomen (the
+    rest; nailed faces sweep nothing)."""
+    n = model.nvert
+    lung_face = model.arrays.lung_face
+    floor = np.ascontiguousarray(lung_face[(lung_face < n).all(axis=1)][:, ::-1])
+    under = {tuple(sorted(f)) for f in floor.tolist()}
+    face = model.mesh.face_vert
+    off = face[[tuple(sorted(f)) not in under for f in face.tolist()]]
+    linked = np.zeros(n, bool)
+    linked[model.link_vert] = True
+    held = linked[off].all(axis=1)
+    return floor, off[held], off[~held]
+
+
+def apex_height(metrics, pos: np.ndarray) -> np.ndarray:
+    """The surface's height (m) on the vertical through the apex at rest, per frame of pos;
+    the apex point's own height in a frame where the surface misses that line."""
+    z = axis_crossing_z(metrics.apex_faces, pos, metrics.apex_xy)
+    miss = np.isnan(z)
+    if miss.any():
+        z[miss] = axis_crossing_z(metrics.model.mesh.face_vert, pos[miss], metrics.apex_xy)
+        miss = np.isnan(z)
+        z[miss] = pos[miss, metrics.apex, 2]
+    return z
 
 
 def muscle_label(model: Model) -> str | None:
@@ -96,8 +141,16 @@ class TraceMetrics:
         self.apex = apex_vertex(model)
         self.link = model.link_vert
         self.rest = model.mesh.vert_pos
+        face = model.mesh.face_vert
+        # the dome's height where the surface crosses the vertical through the apex at rest; the
+        # faces within APEX_RINGS rings of it first (all of them in a frame where those miss)
+        self.apex_xy = self.rest[self.apex, :2].copy()
+        self.apex_faces = face[ring_faces(face, self.apex, APEX_RINGS)]
         self.apex_z0 = self.rest[self.apex, 2]
-        self.rib_z0 = self.rest[self.link, 2].mean() if self.link.size else 0.0
+        # each point's share of the surface at rest: means over a region that are its integrals
+        self.area = vertex_area(self.rest, face)
+        self.link_area = self.area[self.link]
+        self.rib_z0 = _weighted_z(self.rest[None], self.link, self.link_area)[0] if self.link.size else 0.0
         # the rest volume: the volume terms' own, else the closed surface's (nothing for an open one)
         self.v0 = model.arrays.vol0 or (
             float(face_volume(model.arrays.face_vert, self.rest)) if model.mesh.closed else 0.0
@@ -110,6 +163,14 @@ class TraceMetrics:
         self.thorax = thorax_body(model)
         self.thorax_axis = None  # the thorax's anterior axis in its own frame, from its pose at the first frame
         self.lung_par = model.arrays.lung_par
+        self.part_faces = lung_part_faces(model) if "lungs" in self.parts else None
+
+    def rest_distance_mm(self, pos: np.ndarray) -> float:
+        """The surface's root-mean-square distance from its rest shape (mm), each point weighted
+        by its share of the surface: an integral over the body, which converges as the mesh is
+        refined (a largest distance over points, at a stiffness jump, grows with refinement)."""
+        d2 = ((pos - self.rest) ** 2).sum(axis=1)
+        return float(np.sqrt((self.area * d2).sum() / self.area.sum()) * 1e3)
 
     def about(self) -> dict:
         """What the figure needs besides the series (`Trace.about`)."""
@@ -126,6 +187,17 @@ class TraceMetrics:
             return float(np.atleast_1d(self.muscle_fns[0][1](t))[0])
         schedule_eval(self.muscle_table, 0, t, self.muscle_val)
         return float(self.muscle_val[0])
+
+    def lung_part_rows(self, rows, pos):
+        """The lung volume change's parts (L): the abdomen's rib cage and wall off the floor by
+        the volumes they swept outward, the pulmonary rib cage (the cavity's wall) as the lung
+        change less what the floor swept into the abdomen (Mead & Loring's bookkeeping; the
+        frames hold the membrane's points, not the wall's)."""
+        floor, rib, wall = self.part_faces
+        dome_in = -swept_volumes(floor, self.rest, pos) * 1e3
+        rows[:, COLUMN["rib_cage_pulmonary_volume_change_l"]] = rows[:, COLUMN["lung_volume_change_l"]] - dome_in
+        rows[:, COLUMN["rib_cage_abdominal_volume_change_l"]] = swept_volumes(rib, self.rest, pos) * 1e3
+        rows[:, COLUMN["abdomen_volume_change_l"]] = swept_volumes(wall, self.rest, pos) * 1e3
 
     def lung_rows(self, rows, scal):
         """The lungs' series of the frames scal, NaN without lungs."""
@@ -151,8 +223,10 @@ class TraceMetrics:
         parts = self.parts
         pos, scal = frames.pos[:k], frames.scal[:k]
         rows[:, COLUMN["t_s"]] = scal[:, F_TIME]
-        rows[:, COLUMN["apex_descent_mm"]] = (self.apex_z0 - pos[:, self.apex, 2]) * 1e3
-        rows[:, COLUMN["rib_lift_mm"]] = (_mean_z(pos, self.link) - self.rib_z0) * 1e3 if "ribs" in parts else np.nan
+        rows[:, COLUMN["apex_descent_mm"]] = (self.apex_z0 - apex_height(self, pos)) * 1e3
+        rows[:, COLUMN["rib_lift_mm"]] = (
+            (_weighted_z(pos, self.link, self.link_area) - self.rib_z0) * 1e3 if "ribs" in parts else np.nan
+        )
         vol = scal[:, F_VOLUME]
         closed = "closed surface" in parts
         rows[:, COLUMN["volume_m3"]] = vol if closed else np.nan
@@ -173,6 +247,8 @@ class TraceMetrics:
         else:
             rows[:, COLUMN["thorax_pitch_deg"]] = np.nan
         self.lung_rows(rows, scal)
+        if self.part_faces is not None:
+            self.lung_part_rows(rows, pos)
         if "muscle" in parts:
             for j, t in enumerate(scal[:, F_TIME].tolist()):
                 rows[j, COLUMN["muscle_n_per_m"]] = self.muscle_at(t)

@@ -58,11 +58,24 @@ def headline(trace: Trace) -> dict:
     return head
 
 
+#: the lung volume change's parts and their summary keys (shares of it at the largest volume)
+SHARES = {
+    "rib_cage_pulmonary_volume_change_l": "pulmonary_rib_cage_share",
+    "rib_cage_abdominal_volume_change_l": "abdominal_rib_cage_share",
+    "abdomen_volume_change_l": "abdomen_share",
+}
+
+
 def breathing_work(trace: Trace, model: Model) -> dict:
-    """The work of breathing's summary keys (`hybrid.respiratory.work_of_breathing`),
-    from the trace's lung volume."""
-    cols = trace.columns(("t_s", "lung_volume_change_l"))
-    return work_of_breathing(cols["t_s"], cols["lung_volume_change_l"], model.arrays.lung_par)
+    """The work of breathing's summary keys (`hybrid.respiratory.work_of_breathing`), from the
+    trace's lung volume; and each part's share of the lung volume change at its largest
+    (from rest; null when the lungs never filled above rest)."""
+    cols = trace.columns(("t_s", "lung_volume_change_l", *SHARES))
+    vol = cols["lung_volume_change_l"]
+    k = int(np.argmax(vol)) if len(vol) else 0
+    full = len(vol) > 0 and vol[k] > 0
+    shares = {key: float(cols[part][k] / vol[k]) if full else None for part, key in SHARES.items()}
+    return {**work_of_breathing(cols["t_s"], vol, model.arrays.lung_par), **shares}
 
 
 def run_summary(

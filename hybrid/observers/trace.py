@@ -28,6 +28,10 @@ TRACE_KEYS = (
     "pleural_pressure_cmh2o",  # absolute (the oesophageal pressure's model), at the last step's start
     "alveolar_pressure_cmh2o",
     "transdiaphragmatic_pressure_change_cmh2o",  # abdominal minus pleural, change from rest
+    # the lung volume change's parts (Konno-Mead; optoelectronic plethysmography's compartments), L:
+    "rib_cage_pulmonary_volume_change_l",  # the cavity's wall (lung change less what the floor gave)
+    "rib_cage_abdominal_volume_change_l",  # swept outward by the abdomen's rib-held faces off the floor
+    "abdomen_volume_change_l",  # swept outward by the abdomen's other faces off the floor
 )
 #: the column of each series in the trace's rows
 COLUMN = {key: i for i, key in enumerate(TRACE_KEYS)}

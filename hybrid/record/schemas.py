@@ -24,6 +24,9 @@ SCALAR_CHANNELS = {
     "/lungs/pleural_pressure": "pleural_pressure_cmh2o",
     "/lungs/alveolar_pressure": "alveolar_pressure_cmh2o",
     "/lungs/transdiaphragmatic_pressure_change": "transdiaphragmatic_pressure_change_cmh2o",
+    "/lungs/rib_cage_pulmonary_volume_change": "rib_cage_pulmonary_volume_change_l",
+    "/lungs/rib_cage_abdominal_volume_change": "rib_cage_abdominal_volume_change_l",
+    "/lungs/abdomen_volume_change": "abdomen_volume_change_l",
 }
 
 #: meshes with at most this many points get the triangle list every frame

@@ -13,7 +13,8 @@
    on, against R times the compliance of the same run (V_inf over the step).
 3. **Quiet breathing**: the scene as it is, its last breath's tidal volume, pleural
    pressure at end expiration and at end inspiration, transdiaphragmatic pressure swing,
-   dome (apex) descent, rib lift and work of breathing, each against its band for an
+   dome (apex) descent, rib lift, work of breathing and the first inspiration's volume
+   shares (abdomen, pulmonary and abdominal rib cage), each against its band for an
    adult in quiet breathing (`BANDS`; sources in docs/lungs.md).
 4. **Twitch**: the airway occluded, the diaphragm contracting alone for `TWITCH_S`: the
    ratio of the oesophageal (pleural) to the transdiaphragmatic pressure change at the
@@ -57,6 +58,9 @@ BANDS = {
     "apex_descent_mm": (10.0, 25.0, "Boussuges et al. 2009, Chest 135:391"),
     "rib_lift_mm": (3.0, 5.0, "De Groote et al. 1997, J Appl Physiol 83:1531"),
     "work_of_breathing_j_per_l": (0.2, 1.0, "physiology texts; critical care reviews"),
+    "abdomen_share": (0.52, 0.75, "supine, Aliverti et al. 2001, Ann Biomed Eng 29:60"),
+    "pulmonary_rib_cage_share": (0.14, 0.33, "supine, Aliverti et al. 2001"),
+    "abdominal_rib_cage_share": (0.11, 0.17, "supine, Aliverti et al. 2001"),
     "respiratory_system_compliance_l_per_cmh2o": (0.05, 0.17, "textbooks"),
     "twitch_pes_over_pdi": (0.35, 0.55, "ATS/ERS statement on respiratory muscle testing"),
 }
@@ -64,7 +68,7 @@ BANDS = {
 COMPLIANCE_STEPS_CMH2O = (2.0, 5.0)
 #: the relaxation: airway resistance (cmH2O s/L), step (cmH2O), implicit Euler's step (s)
 RELAXATION_RESISTANCE = 50.0
-RELAXATION_STEP_CMH2O = 0.25
+RELAXATION_STEP_CMH2O = 0.05
 RELAXATION_DT_S = 5e-3
 #: the fit starts after the fast modes (the membrane's and the ribs', tens of ms) have died
 RELAXATION_FIT_FROM_S = 2.0
@@ -185,6 +189,9 @@ def quiet_breathing(scene, duration_s: float) -> dict:
         "apex_descent_mm": s["apex_descent_mm"],
         "rib_lift_mm": s.get("rib_lift_mm"),
         "work_of_breathing_j_per_l": s["work_of_breathing_j_per_l"],
+        "abdomen_share": s.get("abdomen_share"),
+        "pulmonary_rib_cage_share": s.get("pulmonary_rib_cage_share"),
+        "abdominal_rib_cage_share": s.get("abdominal_rib_cage_share"),
         "mesh_points": s["mesh_points"],
     }
 

@@ -22,10 +22,11 @@ def test_a_step_of_airway_pressure_relaxes_with_tau_r_c(small):
     """The single compartment's closed form: after a step of airway-opening pressure the lung
     volume approaches its new equilibrium as exp(-t / tau), tau = R C, C the compliance of the
     same run (V_inf over the step). Within 1%, from: the chest wall's own damping (the membrane's
-    drag), which adds its resistance to the airway's (measured: 0.26% of R at a tenth of the
-    scene's drag, 4.4% at ten times it, so about 0.5% at the scene's); the chest wall's stiffening
-    over the 0.25 cmH2O step (C at 0.1 and 0.5 cmH2O differ by 3%, the tangent against the secant
-    about 0.3%); backward Euler's lag, h / (2 tau) = 0.1%. At level 0 (the small study); on finer
+    drag), which adds its resistance to the airway's (measured with the cavity's floor over the
+    whole diaphragm: 0.26% of R at a tenth of the scene's drag, 4.4% at ten times it); the chest wall's stiffening
+    over the 0.05 cmH2O step (C at 0.05 and 0.25 cmH2O differ by 5%: the step is kept small so
+    that the secant compliance is near the tangent one, about 1% over 0.05 cmH2O, half of it
+    on tau); backward Euler's lag, h / (2 tau) = 0.1%. At level 0 (the small study); on finer
     meshes the abdominal wall's soft modes creep (a fifth of a second at level 4) and add a
     resistance of their own: docs/lungs.md."""
     _, r = small
