@@ -57,7 +57,7 @@ def breathing_lungs() -> Scene:
     apposition the lower ribs hold, is the abdomen's wall (the abdominal rib cage), not the lungs'
     (Mead & Loring 1982), so that the lung volume change is the pulmonary rib cage's, the
     abdominal rib cage's and the abdomen's displacements. The trunk's geometry and drive are the
-    `breathing` scene's: it is small for an adult (a tidal volume near 0.13 L, not 0.5 L;
+    `breathing` scene's: it is small for an adult (a tidal volume near 0.14 L, not 0.5 L;
     docs/lungs.md)."""
     base = scenefile.load_scene(scenefile.builtin_scene("breathing"))
     lungs = Lungs(

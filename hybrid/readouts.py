@@ -180,11 +180,11 @@ def axis_crossing_z(face_vert: np.ndarray, pos_frames: np.ndarray, xy: np.ndarra
     a, b, c = (pos_frames[:, face_vert[:, j]] for j in range(3))  # (k, nface, 3)
     e1, e2, p = b[..., :2] - a[..., :2], c[..., :2] - a[..., :2], xy - a[..., :2]
     det = e1[..., 0] * e2[..., 1] - e2[..., 0] * e1[..., 1]
-    with np.errstate(divide="ignore", invalid="ignore"):
+    tol = 1e-12  # a line through a corner or along an edge belongs to every face that meets there
+    with np.errstate(divide="ignore", invalid="ignore"):  # a face seen edge-on (det 0) is no crossing
         u = (p[..., 0] * e2[..., 1] - e2[..., 0] * p[..., 1]) / det
         w = (e1[..., 0] * p[..., 1] - p[..., 0] * e1[..., 1]) / det
-    tol = 1e-12  # a line through a corner or along an edge belongs to every face that meets there
-    inside = (det != 0) & (u >= -tol) & (w >= -tol) & (u + w <= 1 + tol)
-    z = np.where(inside, a[..., 2] + u * (b[..., 2] - a[..., 2]) + w * (c[..., 2] - a[..., 2]), -np.inf)
+        inside = (det != 0) & (u >= -tol) & (w >= -tol) & (u + w <= 1 + tol)
+        z = np.where(inside, a[..., 2] + u * (b[..., 2] - a[..., 2]) + w * (c[..., 2] - a[..., 2]), -np.inf)
     top = z.max(axis=1) if z.shape[1] else np.full(len(pos_frames), -np.inf)
     return np.where(np.isfinite(top), top, np.nan)

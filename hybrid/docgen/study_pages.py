@@ -106,6 +106,32 @@ STUDIES = {
             "predicted error is below each target: choose your level and step there.",
         ),
         Study(
+            "convergence-lungs",
+            (
+                "study",
+                "convergence",
+                "breathing_lungs",
+                "--levels",
+                "3-7",
+                "--duration",
+                "4",
+                "--integrator",
+                "implicit_euler",
+                "--set",
+                "dt_s=0.02",
+                "--repeats",
+                "1",
+                "--out",
+            ),
+            "convergence_lungs.json",
+            "hybrid.studies.convergence_report:markdown",
+            (),
+            "Convergence of the breathing trunk with lungs",
+            "The same study of `breathing_lungs` under implicit Euler (steps of 20, 10 and 5 ms at every level, "
+            "one breath), with the lungs' metrics: the lung volume change (its largest value is the first "
+            "breath's tidal volume) and the transdiaphragmatic pressure change. Read it as the one above.",
+        ),
+        Study(
             "work-precision",
             ("study", "work-precision", "--out"),
             "work_precision.json",
@@ -149,7 +175,7 @@ PAGES = {
         "(`hybrid study convergence SCENE --out DIR`, `hybrid study work-precision --out DIR`) before trusting "
         "a figure to a given number of digits. Every number below is generated from the JSON file named "
         "above its table (`docs/data/`), with the command, date, machine and version that made it.",
-        ("convergence", "work-precision"),
+        ("convergence", "convergence-lungs", "work-precision"),
     ),
     "performance.md": (
         "Performance",

@@ -230,11 +230,17 @@ def twitch(scene) -> dict:
     }
 
 
-def upper_rib_scene(scene, activation: float, wall_height_m: float = 0.12):
+#: the height (m) of the cavity's top with the upper rib pair: its wall's rings then meet the upper
+#: ribs at their own height (0.10-0.14 m), where the pleural pull on a rib sloping down to the front
+#: turns it down about its hinge (the sign of the paradox depends on it)
+UPPER_RIB_WALL_TOP_M = 0.165
+
+
+def upper_rib_scene(scene, activation: float):
     """`scene` given an upper rib pair (the pulmonary rib cage: sloping down to the front, 0.10-0.14 m
     high, a motor of gear 2 N m on each hinge) that carries the cavity's wall, its muscles driven by
-    a breathing cycle of peak `activation` (0: the diaphragm alone). The pair's stiffness and gear are
-    chosen, not sourced; the wall's rings meet the upper ribs at their own height."""
+    a breathing cycle of peak `activation` (0: the diaphragm alone), the cavity's top at
+    `UPPER_RIB_WALL_TOP_M`. The pair's stiffness and gear are chosen, not sourced."""
     if scene.rigid is None:
         raise SceneError(f"study respiratory: scene {scene.name!r} has no rigid part for an upper rib pair")
     upper = RibPair(
@@ -251,8 +257,13 @@ def upper_rib_scene(scene, activation: float, wall_height_m: float = 0.12):
         else {}
     )
     rigid = dataclasses.replace(scene.rigid, ribs=Ribs(body="spine", pairs=(upper,)), ctrl=ctrl)
+    lungs = _lungs_of(scene)
+    from ..model import compile_scene
+
+    border_z = float(compile_scene(scene).arrays.lung_wall[:, 2].max()) - lungs.wall_height_m
+    height = UPPER_RIB_WALL_TOP_M - border_z
     forces = tuple(
-        dataclasses.replace(f, wall_height_m=wall_height_m, wall_bodies="upper_ribs_*") if isinstance(f, Lungs) else f
+        dataclasses.replace(f, wall_height_m=height, wall_bodies="upper_ribs_*") if isinstance(f, Lungs) else f
         for f in scene.forces
     )
     return dataclasses.replace(scene, rigid=rigid, forces=forces)
