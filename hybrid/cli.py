@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import math
 import sys
 from pathlib import Path
 
@@ -73,6 +74,7 @@ def _load_and_run(args, scene) -> int:
                 raise HybridError("--duration" + text[len("duration_s") :]) from None
             raise
     run_steps(duration, sim.model.dt_s, confirmed=args.yes)
+    _warn_above_stable_step(sim.model)
     if getattr(args, "respiratory_csv", None) is not None:
         from .respiratory import lab_export_rate
         from .run import frame_interval_s
@@ -92,6 +94,20 @@ def _load_and_run(args, scene) -> int:
         return _run_into(args, sim, duration, chosen, provenance)
     finally:
         lock.release()
+
+
+def _warn_above_stable_step(model) -> None:
+    """One line before the run when an explicit integrator's step is above the per-point
+    stable-step estimate (`Model.dt_stable_s`, as `hybrid inspect` reports it): such a run
+    diverges, and saying so at the start beats a divergence after the compile."""
+    if model.scene.integrator == "implicit_euler" or not math.isfinite(model.dt_stable_s):
+        return
+    if model.dt_s > model.dt_stable_s:
+        sys.stderr.write(
+            f"hybrid: warning: dt_s = {model.dt_s:g} s is above the stable-step estimate "
+            f"{model.dt_stable_s:.3g} s of {model.scene.integrator}: expect a divergence; set dt_s "
+            'below it, or integrator = "implicit_euler"\n'
+        )
 
 
 def _run_into(args, sim, duration: float, out: Path, provenance: dict) -> int:

@@ -160,7 +160,12 @@ def test_a_file_system_error_during_a_run_is_one_line_with_status_74(tmp_path, m
 def test_the_cli_run_that_diverges_still_writes_a_readable_recording(tmp_path, capsys):
     out = tmp_path / "out"
     assert main(["run", "membrane_demo", "--dt", "0.006", "--duration", "1", "--out", str(out)]) == 2
-    assert "diverged" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "diverged" in err
+    # said at the start, before the run: the step is above the stable-step estimate (0.0045 s)
+    warning = next(line for line in err.splitlines() if "warning" in line)
+    assert "dt_s = 0.006 s is above the stable-step estimate" in warning
+    assert err.index(warning) < err.index("diverged")
     summary = json.loads((out / "summary.json").read_text())
     data = read(out / "run.mcap")
     t = data["membrane"]["t"]
@@ -169,8 +174,9 @@ def test_the_cli_run_that_diverges_still_writes_a_readable_recording(tmp_path, c
     np.testing.assert_allclose(t, expected, rtol=0, atol=1e-9)
 
 
-def test_no_record_and_record_every(tmp_path):
+def test_no_record_and_record_every(tmp_path, capsys):
     assert main(["run", "membrane_demo", "--duration", "0.1", "--out", str(tmp_path / "a"), "--no-record"]) == 0
+    assert "warning" not in capsys.readouterr().err  # the scene's own step is below its stable one
     assert not (tmp_path / "a" / "run.mcap").exists()
     assert (
         main(["run", "membrane_demo", "--duration", "0.1", "--out", str(tmp_path / "b"), "--record-every", "0.05"]) == 0
