@@ -4,13 +4,16 @@ on them: the volumes and how far any bone reaches into the membrane."""
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import trimesh
+from scipy.spatial import cKDTree
 
 from hybrid.errors import MeshError, SceneError
+from hybrid.kernel import jit
 from hybrid.mesh.cavity import open_edges
 from hybrid.mesh.intersect import crossing_faces
 from hybrid.mesh.obj import write_obj
@@ -41,9 +44,9 @@ class TrunkFit:
     penetration_mm: dict
     zoa_area_share: float
     zoa_fraction: float
+    zoa_gap_mm: tuple
     points: int
     faces: int
-    thorax_crossings: int = 0
     heights_m: dict = field(default_factory=dict)
 
     def lines(self) -> list:
@@ -53,29 +56,40 @@ class TrunkFit:
             f"scene {self.scene_path}",
             f"membrane {self.abdomen_path.name}: {self.points} points, {self.faces} triangles, closed, no crossing",
             f"abdomen {self.abdomen_volume_l:.2f} L (adults {ABDOMEN_REF_L[0]}-{ABDOMEN_REF_L[1]} L: {ABDOMEN_REF_L[2]})",
-            f"thoracic cavity {self.thorax_volume_l:.2f} L ({self.thorax_path.name}: over the dome, to the rib cage's top; "
-            f"{self.thorax_crossings} crossing face pairs{', its volume approximate' if self.thorax_crossings else ''})",
+            f"thoracic cavity {self.thorax_volume_l:.2f} L ({self.thorax_path.name}: over the dome, up the rib cage, "
+            "closed, no crossing)",
             f"bones inside the membrane, deepest: {pen}",
             f"zone of apposition: {100 * self.zoa_area_share:.0f}% of the rib cage's inner surface "
-            f"({100 * self.zoa_fraction:.0f}% of its height)",
+            f"({100 * self.zoa_fraction:.0f}% of its height); its points' distance to the nearest rib: median "
+            f"{self.zoa_gap_mm[0]:.1f} mm, 90th percentile {self.zoa_gap_mm[1]:.1f} mm",
             f"heights (m along cranial): {h}",
         ]
 
 
-def winding_number(vert: np.ndarray, face: np.ndarray, points: np.ndarray, chunk: int = 2000) -> np.ndarray:
+@jit
+def _winding(tri: np.ndarray, points: np.ndarray, out: np.ndarray) -> None:
+    for i in range(points.shape[0]):
+        px, py, pz = points[i, 0], points[i, 1], points[i, 2]
+        total = 0.0
+        for f in range(tri.shape[0]):
+            ax, ay, az = tri[f, 0, 0] - px, tri[f, 0, 1] - py, tri[f, 0, 2] - pz
+            bx, by, bz = tri[f, 1, 0] - px, tri[f, 1, 1] - py, tri[f, 1, 2] - pz
+            cx, cy, cz = tri[f, 2, 0] - px, tri[f, 2, 1] - py, tri[f, 2, 2] - pz
+            la = np.sqrt(ax * ax + ay * ay + az * az)
+            lb = np.sqrt(bx * bx + by * by + bz * bz)
+            lc = np.sqrt(cx * cx + cy * cy + cz * cz)
+            num = ax * (by * cz - bz * cy) + ay * (bz * cx - bx * cz) + az * (bx * cy - by * cx)
+            den = la * lb * lc + (ax * bx + ay * by + az * bz) * lc + (bx * cx + by * cy + bz * cz) * la
+            den += (cx * ax + cy * ay + cz * az) * lb
+            total += 2.0 * np.arctan2(num, den)
+        out[i] = total / (4.0 * np.pi)
+
+
+def winding_number(vert: np.ndarray, face: np.ndarray, points: np.ndarray) -> np.ndarray:
     """The closed surface's winding number (about 1 inside, 0 outside) at each point (n, 3):
     the solid angles of its triangles (Van Oosterom & Strackee 1983) over 4 pi."""
-    tri = vert[face]
     out = np.empty(len(points))
-    for s in range(0, len(points), chunk):
-        p = points[s : s + chunk, None, None, :]
-        d = tri[None] - p  # (n, m, 3, 3)
-        a, b, c = d[..., 0, :], d[..., 1, :], d[..., 2, :]
-        la, lb, lc = (np.linalg.norm(x, axis=-1) for x in (a, b, c))
-        num = np.einsum("...i,...i", a, np.cross(b, c))
-        den = la * lb * lc + np.einsum("...i,...i", a, b) * lc + np.einsum("...i,...i", b, c) * la
-        den += np.einsum("...i,...i", c, a) * lb
-        out[s : s + chunk] = 2.0 * np.arctan2(num, den).sum(axis=1) / (4 * np.pi)
+    _winding(np.ascontiguousarray(vert[face], dtype=np.float64), np.ascontiguousarray(points, dtype=np.float64), out)
     return out
 
 
@@ -151,16 +165,20 @@ def fit_trunk(
         raise MeshError(
             f"MJCF {sk.label}: expected pelvis bones on the midline behind the cavity (the sacrum), received none"
         )
-    z_in, z_floor = float(zp[mid].max()), float(zp[mid & behind].min())
+    z_in = float(zp[mid].max())  # the sacral promontory (or the pelvis's top on the midline)
+    # the floor's lowest point: the sacrum's (coccyx's) tip where the model names one, the
+    # level of the pelvic floor behind; else the pelvis's lowest point on the midline behind
+    sacral = [b for b in sk.of("pelvis") if re.search(r"sacr|cocc", f"{b.geom} {b.mesh}", re.IGNORECASE)]
+    if sacral:
+        zs_ = fr.cyl(np.concatenate([b.vert for b in sacral]))[1]
+        z_floor = float(zs_.min())
+    else:
+        z_floor = float(zp[mid & behind].min())
     lf = loft(env, z_in, z_floor, clearance_m=clearance_m, zoa_area_share=zoa_area_share, dome_rise_m=dome_rise_m)
     lf.extra["frame"] = fr
     _check_closed(lf.vert, lf.face, "the fitted membrane")
-    tv, tf = thoracic_cavity_surface(env, lf, clearance_m=clearance_m)
-    if open_edges(tf):
-        raise MeshError(
-            "the fitted thoracic cavity: expected a closed, consistently oriented surface, received open edges"
-        )
-    thorax_crossings = int(crossing_faces(tv, tf)[1])  # reported: its wall is not yet clean (see lines())
+    tv, tf = thoracic_cavity_surface(env, lf)
+    _check_closed(tv, tf, "the fitted thoracic cavity")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     abdomen_path, thorax_path, scene_path = out / "abdomen.obj", out / "thorax.obj", out / f"{name}.toml"
@@ -183,6 +201,11 @@ def fit_trunk(
     for role in ("rib_cage", "pelvis", "spine"):
         pts = np.concatenate([b.vert for b in sk.of(role)])
         pen[role] = 1e3 * penetration_m(lf.vert, lf.face, pts)
+    # how close the zone of apposition lies to the ribs: its points' distance to the rib
+    # cage's surface (sampled at most SAMPLE_M apart along its edges)
+    margin = max(k for k, kd in enumerate(lf.kind) if kd == "wall")
+    band = np.concatenate([lf.rings[margin], lf.points_of({"zoa"})])
+    gap = cKDTree(rib).query(lf.vert[band])[0]
     write_obj(abdomen_path, lf.vert, lf.face)
     write_obj(thorax_path, tv, tf)
     header = (
@@ -200,9 +223,9 @@ def fit_trunk(
         penetration_mm=pen,
         zoa_area_share=lf.zoa_area_share,
         zoa_fraction=lf.zoa_fraction,
+        zoa_gap_mm=(1e3 * float(np.median(gap)), 1e3 * float(np.percentile(gap, 90))),
         points=len(lf.vert),
         faces=len(lf.face),
-        thorax_crossings=thorax_crossings,
         heights_m={
             "pelvic floor": lf.z_floor,
             "pelvic inlet": lf.z_in,

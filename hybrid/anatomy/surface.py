@@ -39,6 +39,8 @@ _MIN_R_M = 0.002
 #: fraction of the margin's distance from the axis (an assumption: the wall is convex
 #: in front; it also keeps the wall's triangles out of one plane)
 WALL_BULGE = 0.1
+#: the dome's least distance inside the room its ring's azimuth leaves (m)
+_DOME_GAP_M = 0.001
 #: the thoracic cavity's top plane under the rib cage's lowest top (m)
 TOP_MARGIN_M = 0.02
 
@@ -153,6 +155,19 @@ def loft(
     share = _band_area(env, phi, z_cm, z_top, inner) / whole
     r_top = np.array([float(inner(j, z_top[j])[0]) for j in range(n)])
     z_apex = float(z_top.max()) + dome_rise_m
+    # the thoracic cavity's wall up the rib cage from the zone's top to one top plane,
+    # `TOP_MARGIN_M` under the lowest column's top (the manubrium's): the first ribs close in
+    # over the apices too fast for rings about one axis to follow
+    z_hi = float(z_rt.min()) - TOP_MARGIN_M
+    if not z_hi > z_apex:
+        raise MeshError(
+            f"expected the rib cage's top above the dome's apex ({z_apex:.4g} m), received a column topping out at "
+            f"{z_hi + TOP_MARGIN_M:.4g} m"
+        )
+    n_up = max(3, int(np.ceil(float(np.mean(z_hi - z_top)) / (2 * np.pi * float(r_top.mean()) / n))))
+    wall_z = z_top[None, :] + (z_hi - z_top)[None, :] * (np.arange(n_up + 1) / n_up)[:, None]
+    wall_r = np.array([[float(inner(j, wall_z[k, j])[0]) for j in range(n)] for k in range(n_up + 1)])
+    wall_r[0] = r_top
     r_in = np.array([float(wall(j, z_in)[0]) for j in range(n)])
 
     h = float(edge_m) if edge_m else 2 * np.pi * float(r_cm.mean()) / n
@@ -188,6 +203,7 @@ def loft(
         zd = z_top + rise * np.sin(0.5 * np.pi * t)
         flat = top_ring - ((top_ring - fr.origin) @ fr.cranial)[:, None] * fr.cranial
         ring = centre + np.cos(0.5 * np.pi * t) * (flat - centre) + (zd - fr.origin @ fr.cranial)[:, None] * fr.cranial
+        ring = _inside(env, wall_z, wall_r, ring, centre, zd)
         stations.append(("dome", float(np.sin(0.5 * np.pi * t)), zd, None))
         pts.append(ring)
     nring = len(pts)
@@ -226,11 +242,36 @@ def loft(
         zoa_area_share=share,
         columns=n,
         extra={
+            "wall_z": wall_z,
+            "wall_r": wall_r,
             "inner": inner,
             "spine_columns": spine_cols,
             "rings_per_part": {"floor": n_floor, "wall": n_wall, "zoa": n_zoa, "dome": n_dome},
         },
     )
+
+
+def _inside(env: Envelope, wall_z, wall_r, ring: np.ndarray, centre: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """The dome's ring with each point drawn toward the dome's centre line until it is
+    `_DOME_GAP_M` inside the thoracic wall (its rings `wall_z`, `wall_r` per column, linear
+    between them) at its own azimuth: the sternum slopes back above the xiphoid faster than
+    the dome's front falls away."""
+    fr = env.frame
+    out = ring.copy()
+    step = 2 * np.pi / env.columns
+    for i, p in enumerate(ring):
+        axis_c = centre + (z[i] - centre @ fr.cranial) * fr.cranial
+        for shrink in np.linspace(1.0, 0.0, 81):
+            q = axis_c + shrink * (p - axis_c)
+            phi, zq, r = fr.cyl(q[None])
+            j0 = int(np.floor(phi[0] / step)) % env.columns
+            room = min(float(np.interp(zq[0], wall_z[:, j], wall_r[:, j])) for j in (j0, (j0 + 1) % env.columns))
+            if r[0] <= room - _DOME_GAP_M:
+                out[i] = q
+                break
+        else:
+            out[i] = axis_c
+    return out
 
 
 def spine_columns(env: Envelope, z_lo: float, z_hi: float) -> np.ndarray:
@@ -247,30 +288,19 @@ def _signed_volume(vert: np.ndarray, face: np.ndarray) -> float:
     return float(np.einsum("ij,ij->i", p[:, 0], np.cross(p[:, 1], p[:, 2])).sum() / 6.0)
 
 
-def thoracic_cavity_surface(env: Envelope, lf: Loft, *, clearance_m: float) -> tuple:
+def thoracic_cavity_surface(env: Envelope, lf: Loft) -> tuple:
     """The thoracic cavity's closed surface over the dome: the dome and the zone's top ring
-    (reversed), a wall up the rib cage's inner face from the zone's top to each column's
-    highest rib point, closed by a cone to the rib cage's top on the axis. Returns (vert
+    (reversed), the wall `loft` placed up the rib cage's inner face from the zone's top to
+    one top plane under the rib cage's lowest top, closed by a shallow cone. Returns (vert
     (n, 3) m, face (m, 3)), outward."""
     n = lf.columns
     phi = env.phi()
-    inner = lf.extra["inner"]
     k_top = max(k for k, kd in enumerate(lf.kind) if kd == "zoa")
     dome_rings = [lf.rings[k] for k in range(k_top, len(lf.rings))]
-    # one top plane, `TOP_MARGIN_M` under the lowest column's top (the manubrium's): the
-    # first ribs close in over the apices too fast for rings about one axis to follow
-    z_hi = np.full(n, float(lf.z_rib_top.min()) - TOP_MARGIN_M)
-    if not np.all(z_hi > lf.z_apex):
-        raise MeshError(
-            f"expected the rib cage's top above the dome's apex ({lf.z_apex:.4g} m), received a column topping out at "
-            f"{float(z_hi.min()):.4g} m"
-        )
-    span = z_hi - lf.z_top
-    n_up = max(3, int(np.ceil(float(span.mean()) / (2 * np.pi * float(lf.r_top.mean()) / n))))
-    up = []
-    for i in range(1, n_up + 1):
-        z = lf.z_top + span * i / n_up
-        up.append(env.frame.point(phi, z, np.array([float(inner(j, z[j])[0]) for j in range(n)])))
+    wall_z, wall_r = lf.extra["wall_z"], lf.extra["wall_r"]
+    n_up = len(wall_z) - 1
+    up = [env.frame.point(phi, wall_z[k], wall_r[k]) for k in range(1, n_up + 1)]
+    z_hi = wall_z[-1]
     base = np.concatenate([lf.vert[r] for r in dome_rings] + [lf.vert[lf.apex][None]])
     nd = len(dome_rings)
     c = up[-1].mean(axis=0)
