@@ -207,20 +207,24 @@ def loft(
         stations.append(("dome", float(np.sin(0.5 * np.pi * t)), zd, None))
         pts.append(ring)
     nring = len(pts)
+    # near the poles every other column is dropped where a ring's spacing falls under half
+    # the meridian's (edges far shorter than the rest would set the stable step)
+    cols = [_ring_columns(n, float(np.mean(np.linalg.norm(np.diff(p, axis=0), axis=1))), h) for p in pts]
+    for k in range(1, nring):  # at most halving from one ring to the next
+        cols[k] = cols[k] if len(cols[k]) >= len(cols[k - 1]) // 2 else _every(n, len(cols[k - 1]) // 2)
+    for k in range(nring - 2, -1, -1):
+        cols[k] = cols[k] if len(cols[k]) >= len(cols[k + 1]) // 2 else _every(n, len(cols[k + 1]) // 2)
     bottom_pt = env.frame.point(0.0, z_floor, 0.0)
     apex_pt = centre + (z_apex - fr.origin @ fr.cranial) * fr.cranial
-    vert = np.concatenate([bottom_pt[None], *pts, apex_pt[None]])
-    rings = [1 + k * n + np.arange(n) for k in range(nring)]
-    bottom, apex = 0, 1 + nring * n
-    faces = []
-    for j in range(n):
-        jn = (j + 1) % n
-        faces.append((bottom, rings[0][jn], rings[0][j]))
-        for k in range(nring - 1):
-            a, b, c, d = rings[k][j], rings[k][jn], rings[k + 1][jn], rings[k + 1][j]
-            faces += [(a, b, c), (a, c, d)]
-        faces.append((rings[-1][j], rings[-1][jn], apex))
-    face = np.asarray(faces, np.int64)
+    vert = np.concatenate([bottom_pt[None], *[p[c] for p, c in zip(pts, cols)], apex_pt[None]])
+    start = np.cumsum([1] + [len(c) for c in cols])
+    rings = [start[k] + np.arange(len(cols[k])) for k in range(nring)]
+    bottom, apex = 0, int(start[-1])
+    face = np.concatenate(
+        [_fan(bottom, rings[0], up=False)]
+        + [_strip(rings[k], rings[k + 1]) for k in range(nring - 1)]
+        + [_fan(apex, rings[-1], up=True)]
+    )
     if _signed_volume(vert, face) < 0:
         face = face[:, [0, 2, 1]]
     return Loft(
@@ -242,6 +246,7 @@ def loft(
         zoa_area_share=share,
         columns=n,
         extra={
+            "ring_columns": cols,
             "wall_z": wall_z,
             "wall_r": wall_r,
             "inner": inner,
@@ -283,6 +288,48 @@ def spine_columns(env: Envelope, z_lo: float, z_hi: float) -> np.ndarray:
     return np.flatnonzero(seen > 0.5)
 
 
+def _every(n: int, m: int) -> np.ndarray:
+    return np.arange(0, n, n // m)
+
+
+def _ring_columns(n: int, spacing_m: float, meridian_m: float) -> np.ndarray:
+    """The columns a ring keeps: all, or every 2nd, 4th... while its spacing after dropping
+    stays at most the meridian's `meridian_m` and 6 points remain."""
+    m = n
+    while m % 2 == 0 and m // 2 >= 6 and spacing_m * n / (m // 2) <= meridian_m:
+        m //= 2
+    return _every(n, m)
+
+
+def _fan(pole: int, ring: np.ndarray, *, up: bool) -> np.ndarray:
+    nxt = np.roll(ring, -1)
+    return np.stack([ring, nxt, np.full(len(ring), pole)] if up else [np.full(len(ring), pole), nxt, ring], axis=1)
+
+
+def _strip(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """The triangles between ring lo and the ring above it, hi (as many points, or half or
+    twice as many on the same columns), oriented as quads (lo_j, lo_j+1, hi_j+1, hi_j)."""
+    a, b = len(lo), len(hi)
+    out = []
+    if a == b:
+        for j in range(a):
+            jn = (j + 1) % a
+            out += [(lo[j], lo[jn], hi[jn]), (lo[j], hi[jn], hi[j])]
+    elif b * 2 == a:  # hi coarser
+        for j in range(b):
+            f0, f1, f2 = lo[2 * j], lo[2 * j + 1], lo[(2 * j + 2) % a]
+            c0, c1 = hi[j], hi[(j + 1) % b]
+            out += [(f0, f1, c0), (f1, c1, c0), (f1, f2, c1)]
+    elif a * 2 == b:  # lo coarser
+        for j in range(a):
+            c0, c1 = lo[j], lo[(j + 1) % a]
+            f0, f1, f2 = hi[2 * j], hi[2 * j + 1], hi[(2 * j + 2) % b]
+            out += [(c0, f1, f0), (c0, c1, f1), (c1, f2, f1)]
+    else:
+        raise MeshError(f"expected rings of equal or halved point counts, received {a} and {b}")
+    return np.asarray(out, np.int64)
+
+
 def _signed_volume(vert: np.ndarray, face: np.ndarray) -> float:
     p = vert[face]
     return float(np.einsum("ij,ij->i", p[:, 0], np.cross(p[:, 1], p[:, 2])).sum() / 6.0)
@@ -302,27 +349,21 @@ def thoracic_cavity_surface(env: Envelope, lf: Loft) -> tuple:
     up = [env.frame.point(phi, wall_z[k], wall_r[k]) for k in range(1, n_up + 1)]
     z_hi = wall_z[-1]
     base = np.concatenate([lf.vert[r] for r in dome_rings] + [lf.vert[lf.apex][None]])
-    nd = len(dome_rings)
     c = up[-1].mean(axis=0)
     # a shallow cone, not a flat disc (whose triangles, in one plane, no crossing test can judge)
     top_pt = c + (float(z_hi.max()) + TOP_MARGIN_M - c @ env.frame.cranial) * env.frame.cranial
     vert = np.concatenate([base, *up, top_pt[None]])
-    d_ring = [k * n + np.arange(n) for k in range(nd)]
-    d_apex = nd * n
+    start = np.cumsum([0] + [len(r) for r in dome_rings])
+    d_ring = [start[k] + np.arange(len(dome_rings[k])) for k in range(len(dome_rings))]
+    d_apex = int(start[-1])
     w_ring = [d_ring[0]] + [d_apex + 1 + k * n + np.arange(n) for k in range(n_up)]
     top = d_apex + 1 + n_up * n
-    faces = []
-    for j in range(n):
-        jn = (j + 1) % n
-        for k in range(nd - 1):  # the dome, as in the membrane (reversed below)
-            a, b, c, d = d_ring[k][j], d_ring[k][jn], d_ring[k + 1][jn], d_ring[k + 1][j]
-            faces += [(a, c, b), (a, d, c)]
-        faces.append((d_ring[-1][j], d_apex, d_ring[-1][jn]))
-        for k in range(n_up):
-            a, b, c, d = w_ring[k][j], w_ring[k][jn], w_ring[k + 1][jn], w_ring[k + 1][j]
-            faces += [(a, b, c), (a, c, d)]
-        faces.append((w_ring[-1][j], w_ring[-1][jn], top))
-    face = np.asarray(faces, np.int64)
+    dome = np.concatenate(
+        [_strip(d_ring[k], d_ring[k + 1]) for k in range(len(d_ring) - 1)] + [_fan(d_apex, d_ring[-1], up=True)]
+    )
+    faces = [dome[:, [0, 2, 1]]]  # the dome as in the membrane, reversed
+    faces += [_strip(w_ring[k], w_ring[k + 1]) for k in range(n_up)] + [_fan(top, w_ring[-1], up=True)]
+    face = np.concatenate(faces).astype(np.int64)
     if _signed_volume(vert, face) < 0:
         face = face[:, [0, 2, 1]]
     return vert, face

@@ -15,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from hybrid import regions as R
+from hybrid.errors import MeshError
 from hybrid.scene import Masses, MeshSpec, RibPair, Ribs, Rigid, RigidLink, Scene
 from hybrid.schedule import Breathing
 from hybrid.terms import Damping, Membrane, MuscleFibres, Nailed, PassiveFibres, Volume
@@ -108,8 +109,9 @@ def trunk_scene(
     tendon = np.concatenate([tendon, [lf.apex]])
     floor = np.concatenate([lf.points_of({"floor"}), [lf.bottom]])
     spine_cols = np.asarray(lf.extra["spine_columns"], np.int64)
-    low_rings = [r for r, k in zip(lf.rings, kinds) if k in ("floor", "wall", "zoa")]
-    strip = np.concatenate([r[spine_cols] for r in low_rings]) if len(spine_cols) else np.zeros(0, np.int64)
+    cols = lf.extra["ring_columns"]
+    low = [r[np.isin(c, spine_cols)] for r, c, k in zip(lf.rings, cols, kinds) if k in ("floor", "wall", "zoa")]
+    strip = np.concatenate(low) if low else np.zeros(0, np.int64)
     regions: dict = {
         "pelvis": _idx(floor),
         "rib_band": _idx(band),
@@ -124,6 +126,8 @@ def trunk_scene(
         "moving": R.Difference(base="all", minus="fixed"),
     }
     ring_of_band = [lf.rings[margin]] + [r for r, k in zip(lf.rings, kinds) if k == "zoa"]
+    if any(len(r) != lf.columns for r in ring_of_band):
+        raise MeshError("expected the rib band's rings to hold every column, received a thinned ring")
     pairs, links = [], []
     for (part, side), cols in sectors(lf).items():
         if not cols:
