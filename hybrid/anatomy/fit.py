@@ -28,6 +28,11 @@ __all__ = ["TrunkFit", "fit_trunk", "penetration_m", "winding_number"]
 
 #: adult reference volumes the fit is set against (L): (low, high, source)
 ABDOMEN_REF_L = (5.8, 9.9, "abdominal cavity by CT volume rendering, 7.86 +/- 2.04 L in 61 adults (PMID 33226496)")
+#: what the thoracic cavity holds at least, for comparison (no checked source for the cavity's own volume)
+THORAX_NOTE = (
+    "the lungs alone hold 4.07 +/- 1.19 L at total lung capacity supine (CT, 100 adults: Cressoni et al. 2013, "
+    "Crit Care 17:R93), their tissue and blood about 0.72 L (Pierce et al. 1979, Thorax 34:726)"
+)
 
 
 @dataclass
@@ -57,7 +62,7 @@ class TrunkFit:
             f"membrane {self.abdomen_path.name}: {self.points} points, {self.faces} triangles, closed, no crossing",
             f"abdomen {self.abdomen_volume_l:.2f} L (adults {ABDOMEN_REF_L[0]}-{ABDOMEN_REF_L[1]} L: {ABDOMEN_REF_L[2]})",
             f"thoracic cavity {self.thorax_volume_l:.2f} L ({self.thorax_path.name}: over the dome, up the rib cage, "
-            "closed, no crossing)",
+            f"closed, no crossing; {THORAX_NOTE})",
             f"bones inside the membrane, deepest: {pen}",
             f"zone of apposition: {100 * self.zoa_area_share:.0f}% of the rib cage's inner surface "
             f"({100 * self.zoa_fraction:.0f}% of its height); its points' distance to the nearest rib: median "
