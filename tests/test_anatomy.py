@@ -107,3 +107,33 @@ def test_second_model_myolegs(tmp_path):
     sim = hybrid.load(fit.scene_path)
     sim.step(20)
     assert np.isfinite(sim.vert_pos).all()
+
+
+def test_one_missing_bone_named_alone():
+    import myo_sim
+
+    from hybrid.errors import RigidError
+    from hybrid.rigid.skeleton import skeleton_of_spec
+
+    spec = myo_sim.load_spec("myotorso")
+    spec.delete(next(g for g in spec.geoms if "sacrum" in (g.meshname or "")))
+    with pytest.raises(RigidError) as caught:
+        skeleton_of_spec(spec, "myotorso without its sacrum")
+    msg = str(caught.value)
+    assert "\n" not in msg
+    assert "expected a pelvis" in msg and "rib cage (" not in msg
+    assert "received none (rib_cage (1 meshes), spine (17 meshes))" in msg
+
+
+def test_ribs_placed_beside_the_spine_and_forward(torso):
+    import hybrid
+
+    fit, _ = torso
+    ribs = hybrid.load_scene(fit.scene_path).rigid.ribs
+    assert ribs.body == "torso" and tuple(ribs.anterior) == (0.0, -1.0, 0.0) and tuple(ribs.cranial) == (0, 0, 1)
+    for pair in ribs.pairs:
+        head, front = np.array(pair.head_m), np.array(pair.front_m)
+        # left (+x) of the mid-sagittal plane, the anterior end in front (-y) of the head
+        assert head[0] >= ribs.radius_m and front[0] >= ribs.radius_m
+        assert front[1] < head[1] - 0.05
+        assert pair.half_width_m > max(head[0], front[0])
