@@ -5,19 +5,23 @@ floor's lowest point up to the dome's apex, through the same stations on every c
 
 - the pelvic floor: a quarter ellipse from the floor's lowest point (the coccyx's level) up
   to the pelvic inlet (the sacral promontory's height);
-- the abdominal wall: from the inlet straight up to the costal margin (each column's lowest
-  rib point) at the margin's distance from the axis (the wall holds no bone to follow);
+- the abdominal wall: from the inlet up to the costal margin (each column's lowest rib
+  point) at the margin's distance from the axis, bulging `WALL_BULGE` halfway (the wall holds
+  no bone to follow);
 - the zone of apposition: up the rib cage's inner face from the costal margin, over the
   same fraction of each column's rib cage height; the fraction is solved for so that the
   zone covers `zoa_area_share` of the rib cage's inner surface (Mead 1979, Am Rev Respir
   Dis 119:31: a quarter to a third of it during quiet breathing upright);
-- the dome: a quarter ellipse from the zone's top to the apex on the axis, `dome_rise_m`
-  above the zone's highest point.
+- the dome: rings shrinking, as a quarter ellipse, from the zone's top toward the apex
+  over the centre of the zone's top ring, `dome_rise_m` above the zone's highest point,
+  each point drawn in under the thoracic cavity's wall.
 
-Each point keeps `clearance_m` inside the skeleton's inner face wherever a bone lies in its
-cell (the spine, the sacrum and the pelvis as well as the ribs). A point's height along its
-meridian only increases, and its meridian lies in its own half-plane about the axis, so
-meridians cannot meet; `hybrid.mesh.intersect` checks the triangles between them.
+Each point below the dome keeps `clearance_m` inside the skeleton's inner face wherever a
+bone lies in its cell (the spine, the sacrum and the pelvis as well as the ribs). A point's
+height along its meridian only increases and, below the dome, its meridian lies in its own
+half-plane about the axis; near the poles every other column is dropped where the rings
+close in. `hybrid.anatomy.fit` checks the result: closed, oriented, no two triangles
+crossing (`hybrid.mesh.intersect`).
 """
 
 from __future__ import annotations
