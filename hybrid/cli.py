@@ -347,6 +347,21 @@ def _cmd_inspect(args) -> int:
     return main_inspect(args)
 
 
+def _cmd_anatomy(args) -> int:
+    from .anatomy import fit_trunk
+
+    fit = fit_trunk(
+        args.model,
+        args.out,
+        name=args.name,
+        columns=args.columns,
+        clearance_m=args.clearance_m,
+        dome_rise_m=args.dome_rise_m,
+    )
+    print("\n".join(fit.lines()))
+    return 0
+
+
 def _cmd_study(args) -> int:
     from .studies.cli import main_study
 
@@ -443,6 +458,17 @@ def build_parser() -> argparse.ArgumentParser:
     i.add_argument("--without", action="append", metavar="NAME", help="drop a force term or constraint by name")
     i.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a scene value, e.g. dt_s=5e-4")
     i.set_defaults(func=_cmd_inspect)
+    a = sub.add_parser(
+        "anatomy",
+        help="fit the abdomen and diaphragm to a model's rib cage, spine and pelvis: mesh files and a scene",
+    )
+    a.add_argument("model", help="an MJCF file, or a package model (myo_sim:myotorso), as rigid.mjcf names it")
+    a.add_argument("--out", type=_out_arg, required=True, help="the folder to write into (only there)")
+    a.add_argument("--name", default="fitted_trunk", help="the scene's name and file (NAME.toml)")
+    a.add_argument("--columns", type=int, default=48, help="points around the trunk (even)")
+    a.add_argument("--clearance-m", type=float, default=0.005, help="the membrane's distance inside the bones (m)")
+    a.add_argument("--dome-rise-m", type=float, default=0.03, help="the dome's apex above the zone of apposition (m)")
+    a.set_defaults(func=_cmd_anatomy)
     st = sub.add_parser(
         "study", help="numerical studies: stability, extremes, work-precision", add_help=False, prefix_chars="\0"
     )

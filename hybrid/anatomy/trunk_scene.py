@@ -1,0 +1,194 @@
+"""The scene of a fitted trunk: the lofted surface's regions (by the part each ring belongs
+to), its rib band linked to articulated ribs added on the model's thoracic body
+(`[rigid.ribs]`: no model on the registries has its ribs as separate bodies), the spine's
+strip and the pelvic floor nailed, and the breathing terms of `myotorso_breathing`.
+
+The band is parted as in `models/scenes/myotorso_breathing.toml`: its front (the costal
+cartilages, up to `FRONT_DEG` off the anterior midline) to a front pair of ribs, its sides
+and back to a lower pair, one free column of points between them, at the anterior midline
+and beside the spine (two bodies holding neighbouring points would tear the sheet across
+one triangle). Material and rib parameters are that scene's, each with its source there.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from hybrid import regions as R
+from hybrid.errors import MeshError
+from hybrid.scene import Masses, MeshSpec, RibPair, Ribs, Rigid, RigidLink, Scene
+from hybrid.schedule import Breathing
+from hybrid.terms import Damping, Membrane, MuscleFibres, Nailed, PassiveFibres, Volume
+
+from .surface import Loft
+
+__all__ = ["FRONT_DEG", "TENDON_RISE", "trunk_scene", "sectors"]
+
+#: the band's front part, linked to the front pair, reaches this far off the anterior
+#: midline (deg; the costal cartilages of the lower ribs)
+FRONT_DEG = 40.0
+#: the central tendon: the dome above this fraction of its rise (an assumption: the tendon
+#: is the dome's top, its muscle the rest)
+TENDON_RISE = 0.6
+#: the ribs added: capsule radius (m), as `myotorso_breathing`
+RIB_RADIUS_M = 0.006
+
+
+def _idx(points) -> R.Indices:
+    return R.Indices(indices=tuple(int(i) for i in np.unique(np.asarray(points, np.int64))))
+
+
+def sectors(lf: Loft) -> dict:
+    """The band's columns of each pair and side: {("front"|"side", "left"|"right"): [j...]}."""
+    n = lf.columns
+    spine = set(int(j) for j in lf.extra["spine_columns"])
+    step = 360.0 / n
+    front = [j for j in range(1, n // 2) if j * step <= FRONT_DEG]
+    after = (max(front) if front else 0) + 2
+    spine_left = [j for j in range(1, n // 2 + 1) if j in spine]
+    last = (min(spine_left) if spine_left else n // 2) - 2
+    side = list(range(after, last + 1))
+    return {
+        ("front", "left"): front,
+        ("side", "left"): side,
+        ("front", "right"): [n - j for j in front],
+        ("side", "right"): [n - j for j in side],
+    }
+
+
+def _pair(name, lf: Loft, band_pts: np.ndarray, spine_pts: np.ndarray, mid: float, clearance_m: float) -> RibPair:
+    fr = lf.extra["frame"]
+    z = float(np.mean(band_pts @ fr.cranial))
+    sz = spine_pts @ fr.cranial
+    near = spine_pts[np.abs(sz - z) < 0.01]
+    if not len(near):
+        near = spine_pts[np.argsort(np.abs(sz - z))[:50]]
+    width = float(np.max(np.abs(near @ fr.left - mid)))
+    centre = near.mean(axis=0)
+    head = centre + (mid - centre @ fr.left + 0.75 * width) * fr.left + (z - centre @ fr.cranial) * fr.cranial
+    lateral = band_pts @ fr.left - mid
+    ok = band_pts[lateral >= 2 * RIB_RADIUS_M]
+    tip = ok[int(np.argmax(ok @ fr.anterior))]
+    out = tip - fr.axis(tip @ fr.cranial)
+    out -= (out @ fr.cranial) * fr.cranial
+    front = tip + clearance_m * out / np.linalg.norm(out)
+    half = float(lateral.max()) + clearance_m + RIB_RADIUS_M
+    return RibPair(
+        name=name,
+        head_m=tuple(float(x) for x in head),
+        front_m=tuple(float(x) for x in front),
+        half_width_m=half,
+        axis_angle_deg=35.0,
+        stiffness_n_m_per_rad=4.0,
+        damping_n_m_s_per_rad=0.05,
+        mass_kg=0.2,
+    )
+
+
+def trunk_scene(
+    lf: Loft,
+    *,
+    name: str,
+    mjcf: str,
+    mesh_file: str,
+    rib_body: str,
+    spine_pts: np.ndarray,
+    clearance_m: float,
+    fix_root: bool = False,
+) -> Scene:
+    """The `Scene` of the lofted surface `lf` (module docstring), its mesh read from
+    `mesh_file` (relative to the scene's folder), its rigid part `mjcf`, the ribs added on
+    `rib_body`."""
+    fr = lf.extra["frame"]
+    mid = float(fr.origin @ fr.left)
+    kinds = lf.kind
+    margin = max(k for k, kd in enumerate(kinds) if kd == "wall")  # the costal margin ring
+    band = np.concatenate([lf.rings[margin], lf.points_of({"zoa"})])
+    dome = np.concatenate([lf.points_of({"dome"}), [lf.apex]])
+    tendon = np.concatenate([r for r, k, s in zip(lf.rings, kinds, lf.dome_rise) if k == "dome" and s >= TENDON_RISE])
+    tendon = np.concatenate([tendon, [lf.apex]])
+    floor = np.concatenate([lf.points_of({"floor"}), [lf.bottom]])
+    spine_cols = np.asarray(lf.extra["spine_columns"], np.int64)
+    cols = lf.extra["ring_columns"]
+    low = [r[np.isin(c, spine_cols)] for r, c, k in zip(lf.rings, cols, kinds) if k in ("floor", "wall", "zoa")]
+    strip = np.concatenate(low) if low else np.zeros(0, np.int64)
+    regions: dict = {
+        "pelvis": _idx(floor),
+        "rib_band": _idx(band),
+        "dome": _idx(dome),
+        "diaphragm": R.Union_(parts=("rib_band", "dome")),
+        "abdomen": R.Difference(base="all", minus="diaphragm"),
+        "tendon": _idx(tendon),
+        "muscle": R.Difference(base="diaphragm", minus="tendon"),
+        "spine_strip": _idx(strip),
+        "spine": R.Difference(base="spine_strip", minus="pelvis"),
+        "fixed": R.Union_(parts=("spine", "pelvis")),
+        "moving": R.Difference(base="all", minus="fixed"),
+    }
+    ring_of_band = [lf.rings[margin]] + [r for r, k in zip(lf.rings, kinds) if k == "zoa"]
+    if any(len(r) != lf.columns for r in ring_of_band):
+        raise MeshError("expected the rib band's rings to hold every column, received a thinned ring")
+    pairs, links = [], []
+    for (part, side), cols in sectors(lf).items():
+        if not cols:
+            continue
+        pts = np.concatenate([r[np.asarray(cols)] for r in ring_of_band])
+        regions[f"ribs_{part}_{side}_points"] = _idx(pts)
+        links.append(
+            RigidLink(region=f"ribs_{part}_{side}_points", body=f"ribs_{part}_{side}", name=f"ribs_{part}_{side}")
+        )
+        if side == "left":
+            pairs.append(_pair(f"ribs_{part}", lf, lf.vert[pts], spine_pts, mid, clearance_m))
+    apex = lf.vert[lf.apex]
+    axis_pt = fr.axis(lf.z_in)  # the hoops' axis: the cavity's, straight through the abdomen
+    forces = (
+        Membrane(name="diaphragm_elasticity", region="diaphragm", youngs_modulus_n_per_m=20.0, poisson_ratio=0.3),
+        Membrane(name="tendon_elasticity", region="tendon", youngs_modulus_n_per_m=500.0, poisson_ratio=0.3),
+        Membrane(name="abdomen_elasticity", region="abdomen", youngs_modulus_n_per_m=20.0, poisson_ratio=0.3),
+        PassiveFibres(
+            name="abdomen_hoops",
+            region="abdomen",
+            modulus_n_per_m=600.0,
+            around_axis=tuple(float(x) for x in fr.cranial),
+            axis_point_m=tuple(float(x) for x in axis_pt),
+        ),
+        MuscleFibres(
+            name="muscle",
+            region="muscle",
+            toward_m=tuple(float(x) for x in apex),
+            tension_n_per_m=Breathing(period_s=4.0, inspiration_fraction=0.4, peak=20.0),
+            force_length_width=0.67,
+        ),
+        Damping(region="moving", drag_n_s_per_m3=200.0),
+    )
+    constraints = (Nailed(name="spine", region="spine"), Nailed(name="pelvis", region="pelvis"), Volume())
+    rigid = Rigid(
+        mjcf=mjcf,
+        links=tuple(links),
+        prefix="membrane_",
+        add_link_mass=True,
+        lock=("*",),
+        fix_root=fix_root,
+        ribs=Ribs(
+            body=rib_body,
+            pairs=tuple(pairs),
+            anterior=tuple(float(x) for x in fr.anterior),
+            cranial=tuple(float(x) for x in fr.cranial),
+            radius_m=RIB_RADIUS_M,
+            sternum_stiffness_n_per_m=1000.0,
+            sternum_damping_n_s_per_m=0.5,
+        ),
+    )
+    return Scene(
+        mesh=MeshSpec(generator=None, path=mesh_file),
+        masses=Masses(total_kg=4.0),
+        regions=regions,
+        forces=forces,
+        constraints=constraints,
+        rigid=rigid,
+        dt_s="auto",
+        integrator="symplectic_euler",
+        formulation="continuum",
+        duration_s=12.0,
+        name=name,
+    )

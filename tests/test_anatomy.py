@@ -1,0 +1,139 @@
+"""The trunk fitted to a model's skeleton (`hybrid.anatomy`, `hybrid anatomy`): on myo-sim's
+torso a closed, consistently oriented membrane that does not cross itself, inside the bones,
+of an adult abdomen's volume, whose scene loads and steps; a model without the bones refused
+in one line."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytest.importorskip("myo_sim")
+
+from hybrid.anatomy import fit_trunk  # noqa: E402
+from hybrid.anatomy.fit import ABDOMEN_REF_L, winding_number  # noqa: E402
+from hybrid.cli import main  # noqa: E402
+from hybrid.mesh.cavity import open_edges  # noqa: E402
+from hybrid.mesh.intersect import crossing_faces  # noqa: E402
+from hybrid.mesh.obj import read_obj  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def torso(tmp_path_factory):
+    out = tmp_path_factory.mktemp("torso")
+    return fit_trunk("myo_sim:myotorso", out), out
+
+
+def test_membrane_closed_oriented_not_crossing(torso):
+    fit, out = torso
+    vert, face = read_obj(str(fit.abdomen_path))[:2]
+    assert open_edges(face) == []
+    assert crossing_faces(vert, face)[1] == 0
+    # outward: the winding number is 1 at a point on the axis between inlet and margin
+    inside = vert[face].reshape(-1, 3).mean(axis=0)
+    assert winding_number(vert, face, inside[None])[0] == pytest.approx(1.0, abs=1e-6)
+    assert fit.thorax_volume_l > 0
+    assert sorted(p.name for p in out.iterdir()) == ["abdomen.obj", "fitted_trunk.toml", "thorax.obj"]
+
+
+def test_penetration_measured_on_the_triangles():
+    import trimesh
+
+    from hybrid.anatomy.fit import penetration_m
+
+    s = trimesh.creation.icosphere(3, radius=0.1)
+    vert, face = np.asarray(s.vertices), np.asarray(s.faces)
+    # the centre: as deep as the faceted sphere's inscribed distance; a point outside: none
+    depth = penetration_m(vert, face, np.array([[0.0, 0.0, 0.0], [0.2, 0.0, 0.0]]))
+    assert 0.099 < depth < 0.1
+    assert penetration_m(vert, face, np.array([[0.2, 0.0, 0.0]])) == 0.0
+
+
+def test_without_clearance_the_bones_touch(tmp_path):
+    # the measure can fail: with the membrane on the bones' inner face, some reach into it
+    fit = fit_trunk("myo_sim:myotorso", tmp_path, clearance_m=0.0)
+    assert max(fit.penetration_mm.values()) > 0.0
+
+
+def test_volume_in_the_adult_band_and_bones_outside(torso):
+    fit, _ = torso
+    lo, hi, _ = ABDOMEN_REF_L  # CT of 61 adults: 7.86 +/- 2.04 L (mean +/- 1 SD)
+    assert lo <= fit.abdomen_volume_l <= hi
+    assert fit.penetration_mm["rib_cage"] < 1.0
+    assert fit.penetration_mm["pelvis"] < 1.0
+    assert 0.25 <= fit.zoa_area_share <= 1 / 3  # Mead 1979, by construction (calibrated)
+
+
+def test_scene_loads_and_steps(torso):
+    import hybrid
+
+    fit, _ = torso
+    scene = hybrid.load_scene(fit.scene_path)
+    assert {"rib_band", "dome", "diaphragm", "abdomen", "spine", "pelvis"} <= set(scene.regions)
+    assert {link.body for link in scene.rigid.links} == {
+        "ribs_front_left",
+        "ribs_front_right",
+        "ribs_side_left",
+        "ribs_side_right",
+    }
+    sim = hybrid.load(fit.scene_path)
+    sim.step(20)
+    assert sim.steps_done == 20
+    assert np.isfinite(sim.vert_pos).all()
+    assert abs(sim.volume_rel_error) < 1e-6
+
+
+@pytest.mark.parametrize("model", ["trunk", "tests/data/humanoid.xml"])
+def test_model_without_the_bones_refused_in_one_line(model, tmp_path, capsys):
+    from pathlib import Path
+
+    source = model if model == "trunk" else str(Path(__file__).parent / "data" / "humanoid.xml")
+    assert main(["anatomy", source, "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1
+    assert "cannot fit a trunk" in err and "rib cage" in err and "pelvis" in err and "spine" in err
+    assert not (tmp_path / "out").exists()
+
+
+def test_second_model_myolegs(tmp_path):
+    """myo-sim's torso on legs: the same rib cage, with the hip bones (which close the lower
+    abdomen in) and a pelvis body; its scene steps."""
+    import hybrid
+
+    fit = fit_trunk("myo_sim:myolegs", tmp_path)
+    lo, hi, _ = ABDOMEN_REF_L
+    assert lo <= fit.abdomen_volume_l <= hi
+    assert fit.penetration_mm["pelvis"] < 1.0
+    sim = hybrid.load(fit.scene_path)
+    sim.step(20)
+    assert np.isfinite(sim.vert_pos).all()
+
+
+def test_one_missing_bone_named_alone():
+    import myo_sim
+
+    from hybrid.errors import RigidError
+    from hybrid.rigid.skeleton import skeleton_of_spec
+
+    spec = myo_sim.load_spec("myotorso")
+    spec.delete(next(g for g in spec.geoms if "sacrum" in (g.meshname or "")))
+    with pytest.raises(RigidError) as caught:
+        skeleton_of_spec(spec, "myotorso without its sacrum")
+    msg = str(caught.value)
+    assert "\n" not in msg
+    assert "expected a pelvis" in msg and "rib cage (" not in msg
+    assert "received none (rib_cage (1 meshes), spine (17 meshes))" in msg
+
+
+def test_ribs_placed_beside_the_spine_and_forward(torso):
+    import hybrid
+
+    fit, _ = torso
+    ribs = hybrid.load_scene(fit.scene_path).rigid.ribs
+    assert ribs.body == "torso" and tuple(ribs.anterior) == (0.0, -1.0, 0.0) and tuple(ribs.cranial) == (0, 0, 1)
+    for pair in ribs.pairs:
+        head, front = np.array(pair.head_m), np.array(pair.front_m)
+        # left (+x) of the mid-sagittal plane, the anterior end in front (-y) of the head
+        assert head[0] >= ribs.radius_m and front[0] >= ribs.radius_m
+        assert front[1] < head[1] - 0.05
+        assert pair.half_width_m > max(head[0], front[0])
