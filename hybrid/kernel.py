@@ -50,6 +50,7 @@ warnings.filterwarnings("ignore", "First-class function type feature is experime
 
 __all__ = [
     "CACHE_DIR",
+    "cache_base",
     "FAST",
     "FAST_NO_FMA",
     "FLAGS",
@@ -154,10 +155,15 @@ def _cache_dir(package_root: Path = Path(__file__).resolve().parent) -> str:
     for path in kernel_sources(package_root):
         digest.update(path.relative_to(package_root).as_posix().encode())
         digest.update(path.read_bytes())
-    base = os.environ.get("NUMBA_CACHE_DIR") or os.path.join(
+    return os.path.join(cache_base(), "numba-" + digest.hexdigest()[:16])
+
+
+def cache_base() -> str:
+    """The folder the package's caches live in (NUMBA_CACHE_DIR, else ~/.cache/hybrid): the
+    compiled kernels' folder and the other caches' (`hybrid.mesh.hulls`), each of one version."""
+    return os.environ.get("NUMBA_CACHE_DIR") or os.path.join(
         os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache"), "hybrid"
     )
-    return os.path.join(base, "numba-" + digest.hexdigest()[:16])
 
 
 CACHE_DIR = _cache_dir()
@@ -170,7 +176,8 @@ def prune_old_caches(
 ) -> list[str]:
     """Mark cache_dir as used now, and remove its sibling folders of other versions
     of the kernel sources ("numba-" and 16 hex digits) not used for keep_days: each
-    kernel change or numba upgrade leaves one (5-12 MB). Returns the folders removed."""
+    kernel change or numba upgrade leaves one (5-12 MB); so are the convex hulls' folders
+    ("hulls-", `hybrid.mesh.hulls`, which marks its own when used). Returns the folders removed."""
     now = time.time() if now is None else now
     base = Path(cache_dir).parent
     try:
@@ -183,7 +190,7 @@ def prune_old_caches(
         return []
     removed = []
     for folder in siblings:
-        if folder.name == Path(cache_dir).name or not re.fullmatch(r"numba-[0-9a-f]{16}", folder.name):
+        if folder.name == Path(cache_dir).name or not re.fullmatch(r"(?:numba|hulls)-[0-9a-f]{16}", folder.name):
             continue
         try:
             used = folder / ".last_used"

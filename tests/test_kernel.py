@@ -122,13 +122,16 @@ def test_old_cache_folders_of_other_versions_are_removed_and_nothing_else(tmp_pa
     unmarked_old = _folder(tmp_path, "numba-cccccccccccccccc", None)  # from before the marks: its own mtime
     os.utime(unmarked_old, (now - 40 * DAY, now - 40 * DAY))
     other = _folder(tmp_path, "numba-notahash", now - 400 * DAY)  # not one of ours by name
+    old_hulls = _folder(tmp_path, "hulls-dddddddddddddddd", now - 31 * DAY)  # hybrid.mesh.hulls, unused
+    used_hulls = _folder(tmp_path, "hulls-eeeeeeeeeeeeeeee", now - DAY)
     removed = prune_old_caches(str(current), 30, now)
-    assert sorted(removed) == sorted([str(old), str(unmarked_old)])
+    assert sorted(removed) == sorted([str(old), str(unmarked_old), str(old_hulls)])
+    assert used_hulls.exists()
     assert not old.exists() and not unmarked_old.exists()
     assert recent.exists() and other.exists()
     # the folder in use is marked as used now, and is never a candidate
     assert (current / ".last_used").stat().st_mtime == now
-    assert prune_old_caches(str(current), 0, now + 10 * DAY) == [str(recent)]
+    assert sorted(prune_old_caches(str(current), 0, now + 10 * DAY)) == sorted([str(recent), str(used_hulls)])
     assert current.exists()
 
 
