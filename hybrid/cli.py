@@ -45,9 +45,13 @@ def _cmd_run(args) -> int:
         return _load_and_run(args, scene)
 
 
-#: what a first run's compile takes on a 2-core machine (s), membrane only or with a rigid part
-#: (the 80-point scenes, serial build: 12-14 s of CPU, 19-25 s of wall time under a load of 4)
-COMPILE_ESTIMATE_S = {"membrane": 12, "rigid": 15}
+#: the CPU seconds a first run's compile takes, membrane only or with a rigid part: measured
+#: by the notice itself ("compiled in ... s of CPU") on an empty NUMBA_CACHE_DIR, `hybrid run
+#: membrane_demo` and `hybrid run` (breathing) --duration 0.01 --no-record, three runs each on
+#: a 2-core machine under a load of 5: 14.2, 14.7, 15.0 and 21.0, 22.5, 26.0 s of CPU (wall
+#: 26-40 and 37-78 s then); the medians. The progress counts CPU seconds, which a busy machine
+#: slows but does not falsify; re-measure when the kernels change
+COMPILE_ESTIMATE_S = {"membrane": 15, "rigid": 22}
 
 
 def _load_and_run(args, scene) -> int:
