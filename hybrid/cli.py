@@ -171,6 +171,8 @@ def _run_into(args, sim, duration: float, out: Path, provenance: dict) -> int:
                     signal.signal(sig, signal.SIG_IGN)
                 if recorder is not None:
                     recorder.close()
+            if args.own_process:  # the figure's library lives to the end too: paused again
+                gc.disable()
             write_outputs(result, out)
             if getattr(args, "respiratory_rate_hz", None) is not None:  # the trace's spill is still open here
                 from .respiratory import write_lab_csv

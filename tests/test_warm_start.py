@@ -2,7 +2,8 @@
 leaves what it built to the operating system at its end (`hybrid.cli.main` freezes the
 collector's objects: the interpreter's last collections freed them one by one, 0.3 s of
 CPU after a warm run); `hybrid run` pauses the collector while it sets the run up and
-resumes it, what setting up made frozen, before the run; `main()` called by a program
+resumes it, what setting up made frozen, before the run, then pauses it for the figure
+(matplotlib's objects live to the end too); `main()` called by a program
 leaves the collector alone. No test here times anything: each checks the mechanism."""
 
 from __future__ import annotations
@@ -59,6 +60,7 @@ def watch(what, fn):
 
 hybrid.model.compile_scene = watch("setup", compile_scene)
 sys.modules["hybrid.run"].run = watch("run", run)
+sys.modules["hybrid.run"].write_outputs = watch("outputs", sys.modules["hybrid.run"].write_outputs)
 argv = ["run", "membrane_demo", "--duration", "0.002", "--no-record", "--out"]
 main([*argv, sys.argv[1] + "/program"])  # called by a program
 sys.argv = ["hybrid", *argv, sys.argv[1] + "/command"]
@@ -77,8 +79,10 @@ def test_the_run_command_sets_up_with_the_collector_paused_and_runs_with_it_on(t
     assert seen == [
         ["setup", True, False],  # a program's main(): the collector as it was
         ["run", True, False],
+        ["outputs", True, False],
         ["setup", False, False],  # the command: paused while it sets up
         ["run", True, True],  # on for the run, what setting up made frozen
+        ["outputs", False, True],  # paused again for the figure
     ]
     for folder in ("program", "command"):
         assert (tmp_path / folder / "summary.json").is_file()
