@@ -54,11 +54,12 @@ def _cmd_run(args) -> int:
 
 #: the CPU seconds a first run's compile takes, membrane only or with a rigid part: measured
 #: by the notice itself ("compiled in ... s of CPU") on an empty NUMBA_CACHE_DIR, `hybrid run
-#: membrane_demo` and `hybrid run` (breathing) --duration 0.01 --no-record, three runs each on
-#: a 2-core machine under a load of 5: 14.2, 14.7, 15.0 and 21.0, 22.5, 26.0 s of CPU (wall
-#: 26-40 and 37-78 s then); the medians. The progress counts CPU seconds, which a busy machine
-#: slows but does not falsify; re-measure when the kernels change
-COMPILE_ESTIMATE_S = {"membrane": 15, "rigid": 22}
+#: membrane_demo` and `hybrid run` (breathing) --duration 0.01 --no-record on a 2-core machine
+#: under a load of 4-6: 14.2, 14.7, 15.0 s and 16.6, 16.6, 17.0, 21.0, 22.5, 26.0 s of CPU (wall
+#: 26-40 and 25-78 s then); the medians. CPU seconds are steadier than wall seconds on a busy
+#: machine, not constant (cores shared with other programs run slower); re-measure when the
+#: kernels change
+COMPILE_ESTIMATE_S = {"membrane": 15, "rigid": 19}
 
 
 def _load_and_run(args, scene) -> int:
