@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import gc
 import math
 import sys
 from pathlib import Path
@@ -37,6 +38,12 @@ def _out_arg(text: str) -> Path:
 def _cmd_run(args) -> int:
     from .resolve import resolve_scene
 
+    if args.own_process:
+        # the collector paused while the run is set up (`_collector_resumed`): what that builds
+        # (numba's registries, MuJoCo, the model) lives to the end, so a collection only walks it
+        # (0.15 s of CPU of a warm 0.01 s run)
+        gc.disable()
+
     # everything that can be refused is, before the output folder is touched
     scene = resolve_scene(args.scene, overrides=args.set or (), without=args.without or ())
     if args.dt is not None:
@@ -46,9 +53,14 @@ def _cmd_run(args) -> int:
         return _load_and_run(args, scene)
 
 
-#: what a first run's compile takes on a 2-core machine (s), membrane only or with a rigid part
-#: (the 80-point scenes, serial build: 12-14 s of CPU, 19-25 s of wall time under a load of 4)
-COMPILE_ESTIMATE_S = {"membrane": 12, "rigid": 15}
+#: the CPU seconds a first run's compile takes, membrane only or with a rigid part: measured
+#: by the notice itself ("compiled in ... s of CPU") on an empty NUMBA_CACHE_DIR, `hybrid run
+#: membrane_demo` and `hybrid run` (breathing) --duration 0.01 --no-record on a 2-core machine
+#: under a load of 4-6: 14.2, 14.7, 15.0 s and 16.6, 16.6, 17.0, 21.0, 22.5, 26.0 s of CPU (wall
+#: 26-40 and 25-78 s then); the medians. CPU seconds are steadier than wall seconds on a busy
+#: machine, not constant (cores shared with other programs run slower); re-measure when the
+#: kernels change
+COMPILE_ESTIMATE_S = {"membrane": 15, "rigid": 19}
 
 
 def _load_and_run(args, scene) -> int:
@@ -90,6 +102,8 @@ def _load_and_run(args, scene) -> int:
     provenance = run_provenance(
         sim, command=["hybrid", *args.argv], overrides=args.set or [], without=args.without or []
     )
+    if args.own_process:
+        _collector_resumed()
     try:
         return _run_into(args, sim, duration, chosen, provenance)
     finally:
@@ -108,6 +122,13 @@ def _warn_above_stable_step(model) -> None:
             f"{model.dt_stable_s:.3g} s of {model.scene.integrator}: expect a divergence; set dt_s "
             'below it, or integrator = "implicit_euler"\n'
         )
+
+
+def _collector_resumed() -> None:
+    """The collector on again for the run, the objects made so far frozen: never walked
+    again, by the run's collections nor at the process's end (`main`)."""
+    gc.freeze()
+    gc.enable()
 
 
 def _run_into(args, sim, duration: float, out: Path, provenance: dict) -> int:
@@ -167,6 +188,8 @@ def _run_into(args, sim, duration: float, out: Path, provenance: dict) -> int:
                     signal.signal(sig, signal.SIG_IGN)
                 if recorder is not None:
                     recorder.close()
+            if args.own_process:  # the figure's library lives to the end too: paused again
+                gc.disable()
             write_outputs(result, out)
             if getattr(args, "respiratory_rate_hz", None) is not None:  # the trace's spill is still open here
                 from .respiratory import write_lab_csv
@@ -478,6 +501,19 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    own = argv is None
+    try:
+        return _main(argv)
+    finally:
+        if own:
+            # the command's process ends now: what it built is left to the operating system
+            # rather than freed object by object by the interpreter's last collections (after a
+            # warm `hybrid run`, 0.3 s of CPU and 0.5 s of wall time, mostly numba's and LLVM's
+            # objects); atexit handlers still run, and every file the command wrote is closed
+            gc.freeze()
+
+
+def _main(argv: list[str] | None) -> int:
     prune_old_caches()
     own = argv is None
     argv = sys.argv[1:] if argv is None else list(argv)

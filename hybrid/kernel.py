@@ -50,6 +50,7 @@ warnings.filterwarnings("ignore", "First-class function type feature is experime
 
 __all__ = [
     "CACHE_DIR",
+    "cache_base",
     "FAST",
     "FAST_NO_FMA",
     "FLAGS",
@@ -154,10 +155,15 @@ def _cache_dir(package_root: Path = Path(__file__).resolve().parent) -> str:
     for path in kernel_sources(package_root):
         digest.update(path.relative_to(package_root).as_posix().encode())
         digest.update(path.read_bytes())
-    base = os.environ.get("NUMBA_CACHE_DIR") or os.path.join(
+    return os.path.join(cache_base(), "numba-" + digest.hexdigest()[:16])
+
+
+def cache_base() -> str:
+    """The folder the package's caches live in (NUMBA_CACHE_DIR, else ~/.cache/hybrid): the
+    compiled kernels' folder and the other caches' (`hybrid.mesh.hulls`), each of one version."""
+    return os.environ.get("NUMBA_CACHE_DIR") or os.path.join(
         os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache"), "hybrid"
     )
-    return os.path.join(base, "numba-" + digest.hexdigest()[:16])
 
 
 CACHE_DIR = _cache_dir()
@@ -170,7 +176,8 @@ def prune_old_caches(
 ) -> list[str]:
     """Mark cache_dir as used now, and remove its sibling folders of other versions
     of the kernel sources ("numba-" and 16 hex digits) not used for keep_days: each
-    kernel change or numba upgrade leaves one (5-12 MB). Returns the folders removed."""
+    kernel change or numba upgrade leaves one (5-12 MB); so are the convex hulls' folders
+    ("hulls-", `hybrid.mesh.hulls`, which marks its own when used). Returns the folders removed."""
     now = time.time() if now is None else now
     base = Path(cache_dir).parent
     try:
@@ -183,7 +190,7 @@ def prune_old_caches(
         return []
     removed = []
     for folder in siblings:
-        if folder.name == Path(cache_dir).name or not re.fullmatch(r"numba-[0-9a-f]{16}", folder.name):
+        if folder.name == Path(cache_dir).name or not re.fullmatch(r"(?:numba|hulls)-[0-9a-f]{16}", folder.name):
             continue
         try:
             used = folder / ".last_used"
@@ -319,13 +326,19 @@ def numba_info() -> dict:
 
 
 @contextlib.contextmanager
-def compile_notice(estimate_s: float, stream=None, *, tick_s: float = 1.0):
+def compile_notice(
+    estimate_cpu_s: float, stream=None, *, tick_s: float = 1.0, line_every_s: float = 10.0, cpu_clock=time.process_time
+):
     """Say when kernels compile within the block: at the first compile (numba's
     "numba:compile" event fires only when no build is cached, before compiling), one
-    line "compiling kernels for this scene, first run only, about N s" on `stream`
-    (stderr); then, while compiling, the seconds so far against the estimate (a
-    bar redrawn on a terminal, else a line every 10 s); at the end of the block
-    the time it took. Nothing at all when every kernel came from the cache."""
+    line "compiling kernels for this scene, first run only, about N s of CPU" on
+    `stream` (stderr); then, while compiling, the progress: the CPU seconds compiling
+    has taken against the estimate (a bar redrawn on a terminal, else a line every
+    10 s), which a busy machine slows but does not falsify (the wall time is shown
+    beside it; past the estimate it says so instead of a full bar); at the end of the
+    block the wall and CPU time it took. Nothing at all when every kernel came from the
+    cache. `cpu_clock`: the process's CPU seconds (compiling is this process's main
+    thread; the others wait); `line_every_s`: the wall seconds between lines off a terminal."""
     import sys
     import threading
 
@@ -333,7 +346,7 @@ def compile_notice(estimate_s: float, stream=None, *, tick_s: float = 1.0):
 
     stream = sys.stderr if stream is None else stream
     tty = hasattr(stream, "isatty") and stream.isatty()
-    state = {"depth": 0, "t0": None, "spent": 0.0, "since": None, "shown": -1}
+    state = {"depth": 0, "t0": None, "spent": 0.0, "since": None, "cpu": 0.0, "cpu_since": None, "shown": -1}
     lock = threading.Lock()
     done = threading.Event()
 
@@ -344,18 +357,31 @@ def compile_notice(estimate_s: float, stream=None, *, tick_s: float = 1.0):
         except (OSError, ValueError):  # a closed or broken stream: the run goes on
             pass
 
+    def so_far() -> tuple[float, float]:
+        """(wall, CPU) seconds spent compiling, the current compile included."""
+        wall, cpu = state["spent"], state["cpu"]
+        if state["since"] is not None:
+            wall += time.perf_counter() - state["since"]
+            cpu += cpu_clock() - state["cpu_since"]
+        return wall, cpu
+
+    def words(cpu: float) -> str:
+        if cpu <= estimate_cpu_s:
+            return f"{cpu:.0f} of about {estimate_cpu_s:.0f} s of CPU"
+        return f"{cpu:.0f} s of CPU, longer than the {estimate_cpu_s:.0f} s estimated"
+
     def progress() -> None:
         while not done.wait(tick_s):
             with lock:
                 if state["since"] is None:
                     continue
-                el = state["spent"] + time.perf_counter() - state["since"]
+                wall, cpu = so_far()
             if tty:
-                n = min(int(30 * el / estimate_s), 30)
-                write(f"\r[{'#' * n}{'.' * (30 - n)}] compiling, {el:4.0f} s of about {estimate_s:.0f} s")
-            elif int(el // 10) > state["shown"] and el >= 10:
-                state["shown"] = int(el // 10)
-                write(f"hybrid: compiling, {10 * state['shown']} s\n")
+                n = min(int(30 * cpu / estimate_cpu_s), 30) if estimate_cpu_s > 0 else 30
+                write(f"\r[{'#' * n}{'.' * (30 - n)}] {words(cpu)}, {wall:.0f} s so far")
+            elif int(wall // line_every_s) > state["shown"] and wall >= line_every_s:
+                state["shown"] = int(wall // line_every_s)
+                write(f"hybrid: compiling, {wall:.0f} s so far ({words(cpu)})\n")
 
     class Notice(event.Listener):
         def on_start(self, ev):
@@ -365,16 +391,19 @@ def compile_notice(estimate_s: float, stream=None, *, tick_s: float = 1.0):
                     return
                 if state["t0"] is None:
                     state["t0"] = time.perf_counter()
-                    write(f"hybrid: compiling kernels for this scene, first run only, about {estimate_s:.0f} s\n")
+                    write(
+                        "hybrid: compiling kernels for this scene, first run only, "
+                        f"about {estimate_cpu_s:.0f} s of CPU\n"
+                    )
                     threading.Thread(target=progress, name="hybrid-compile-notice", daemon=True).start()
-                state["since"] = time.perf_counter()
+                state["since"], state["cpu_since"] = time.perf_counter(), cpu_clock()
 
         def on_end(self, ev):
             with lock:
                 state["depth"] -= 1
                 if state["depth"] == 0 and state["since"] is not None:
-                    state["spent"] += time.perf_counter() - state["since"]
-                    state["since"] = None
+                    state["spent"], state["cpu"] = so_far()
+                    state["since"] = state["cpu_since"] = None
 
     listener = Notice()
     event.register("numba:compile", listener)
@@ -385,6 +414,6 @@ def compile_notice(estimate_s: float, stream=None, *, tick_s: float = 1.0):
         done.set()
         if state["t0"] is not None:
             write(
-                ("\n" if tty else "") + f"hybrid: compiled in {state['spent']:.1f} s; "
+                ("\n" if tty else "") + f"hybrid: compiled in {state['spent']:.1f} s ({state['cpu']:.1f} s of CPU); "
                 f"later runs load the kernels from {CACHE_DIR}\n"
             )

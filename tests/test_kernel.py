@@ -1,20 +1,24 @@
 """How the kernels are compiled (hybrid.kernel): the compiled-code cache, a folder per
 version of the kernel sources (an edit elsewhere keeps it), writes locked, entries safe
 to load in any order; folders of other versions removed once unused for a while, by the
-command line (not by `import hybrid`); and the multi-core build of the per-point passes."""
+command line (not by `import hybrid`); the multi-core build of the per-point passes; and
+the first run's notice, its progress counted in the CPU seconds compiling took."""
 
 from __future__ import annotations
 
+import io
 import os
+import re
 import shutil
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from hybrid.kernel import prune_old_caches
+from hybrid.kernel import compile_notice, prune_old_caches
 from hybrid.model import compile_scene
 
 
@@ -122,13 +126,16 @@ def test_old_cache_folders_of_other_versions_are_removed_and_nothing_else(tmp_pa
     unmarked_old = _folder(tmp_path, "numba-cccccccccccccccc", None)  # from before the marks: its own mtime
     os.utime(unmarked_old, (now - 40 * DAY, now - 40 * DAY))
     other = _folder(tmp_path, "numba-notahash", now - 400 * DAY)  # not one of ours by name
+    old_hulls = _folder(tmp_path, "hulls-dddddddddddddddd", now - 31 * DAY)  # hybrid.mesh.hulls, unused
+    used_hulls = _folder(tmp_path, "hulls-eeeeeeeeeeeeeeee", now - DAY)
     removed = prune_old_caches(str(current), 30, now)
-    assert sorted(removed) == sorted([str(old), str(unmarked_old)])
+    assert sorted(removed) == sorted([str(old), str(unmarked_old), str(old_hulls)])
+    assert used_hulls.exists()
     assert not old.exists() and not unmarked_old.exists()
     assert recent.exists() and other.exists()
     # the folder in use is marked as used now, and is never a candidate
     assert (current / ".last_used").stat().st_mtime == now
-    assert prune_old_caches(str(current), 0, now + 10 * DAY) == [str(recent)]
+    assert sorted(prune_old_caches(str(current), 0, now + 10 * DAY)) == sorted([str(recent), str(used_hulls)])
     assert current.exists()
 
 
@@ -279,3 +286,57 @@ def test_auto_switching_builds_mid_run_changes_no_bit(monkeypatch):
         else:
             assert np.array_equal(series, traces["auto"][0][key], equal_nan=True), key  # NaN: a part it lacks
     assert np.array_equal(traces["serial"][1], traces["auto"][1])
+
+
+class _Stream(io.StringIO):
+    def __init__(self, tty: bool):
+        super().__init__()
+        self.tty = tty
+
+    def isatty(self):
+        return self.tty
+
+
+def _wait_for(stream, text, timeout_s=30.0):
+    end = time.monotonic() + timeout_s
+    while text not in stream.getvalue():
+        assert time.monotonic() < end, stream.getvalue()
+        time.sleep(0.005)
+
+
+@pytest.mark.parametrize("tty", [True, False])
+def test_the_compile_notice_counts_the_compiles_cpu_against_its_estimate(tty):
+    """The progress is the CPU seconds compiling took (a clock given here), against the
+    estimate; past it, the notice says so instead of showing a full bar; the end line
+    gives the wall and CPU time; what is not compiling (between compiles) is not counted."""
+    from numba.core import event
+
+    cpu = {"s": 100.0}
+    stream = _Stream(tty)
+    with compile_notice(8, stream, tick_s=0.005, line_every_s=0.01, cpu_clock=lambda: cpu["s"]):
+        with event.trigger_event("numba:compile"):
+            with event.trigger_event("numba:compile"):  # a callee's compile within: counted once
+                cpu["s"] += 2.0
+            _wait_for(stream, "2 of about 8 s of CPU")
+        cpu["s"] += 50.0  # not compiling: not counted
+        with event.trigger_event("numba:compile"):
+            cpu["s"] += 7.0
+            _wait_for(stream, "9 s of CPU, longer than the 8 s estimated")
+    text = stream.getvalue()
+    lines = text.replace("\r", "\n").splitlines()
+    assert lines[0] == "hybrid: compiling kernels for this scene, first run only, about 8 s of CPU"
+    assert re.fullmatch(
+        r"hybrid: compiled in \d+\.\d s \(9\.0 s of CPU\); later runs load the kernels from .*", lines[-1]
+    )
+    if tty:
+        assert "[#######.......................] 2 of about 8 s of CPU" in text  # 2/8 of 30 marks
+        assert "[##############################] 9 s of CPU, longer than the 8 s estimated" in text
+    else:
+        assert "\r" not in text and "#" not in text
+
+
+def test_the_compile_notice_is_silent_without_a_compile():
+    stream = _Stream(False)
+    with compile_notice(8, stream, tick_s=0.005):
+        pass
+    assert stream.getvalue() == ""

@@ -7,6 +7,7 @@ The package's rooms:
 - `surface`: the `Mesh` class (construction, loading, immutability, geometry);
 - `geometry`: volume, its gradient, vertex areas and the row-wise helpers, on plain arrays;
 - `validate`: the checks of a surface and the building of its edges and fans;
+- `hulls`: the convex hull's triangles of points on a sphere, cached on disk;
 - `spheres`: `uv_sphere` (the paper's 80-point body), `icosahedron`, `icosphere`, `irregular_sphere`,
   `fibonacci_sphere` and `ring_sphere` (pole-free, any size), `level_counts` (the mesh levels).
 """

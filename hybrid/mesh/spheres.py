@@ -12,6 +12,7 @@ import numpy as np
 from hybrid.checks import MAX_POINTS, mesh_points
 from hybrid.errors import MeshError
 
+from .hulls import hull_faces
 from .refine import split_faces
 from .surface import Mesh
 
@@ -234,15 +235,9 @@ def _spiral_points(npoint: int) -> np.ndarray:
 
 
 def _hull_mesh(p: np.ndarray, radius: float, ctr: np.ndarray, name: str) -> Mesh:
-    """The convex hull's triangles of the unit vectors p, faces outward, scaled and moved."""
-    from scipy.spatial import ConvexHull
-
-    faces = ConvexHull(p).simplices.astype(np.int64)
-    # outward: each face's normal along its centroid
-    a, b, c = p[faces[:, 0]], p[faces[:, 1]], p[faces[:, 2]]
-    inward = np.einsum("ij,ij->i", np.cross(b - a, c - a), a + b + c) < 0
-    faces[inward] = faces[inward][:, ::-1]
-    return Mesh.from_arrays(radius * p + ctr, faces, name=name)
+    """The convex hull's triangles of the unit vectors p, faces outward (`hull_faces`,
+    cached), scaled and moved."""
+    return Mesh.from_arrays(radius * p + ctr, hull_faces(p), name=name)
 
 
 def _check_npoint(npoint, who: str) -> int:

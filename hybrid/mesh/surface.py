@@ -305,16 +305,12 @@ class Mesh:
     def components(self) -> list[np.ndarray]:
         """The surface's connected pieces (points joined by edges), each as its sorted
         point indices, the piece of point 0 first (then by their first point)."""
-        from scipy.sparse import coo_matrix
-        from scipy.sparse.csgraph import connected_components
-
-        e = self.edge_vert
-        graph = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(self.nvert, self.nvert))
-        count, label = connected_components(graph, directed=False)
-        if count == 1:
+        label = components_label(self.edge_vert, self.nvert)
+        if not label.any():
             return [np.arange(self.nvert)]
         order = np.argsort(label, kind="stable")
-        return sorted(np.split(order, np.cumsum(np.bincount(label))[:-1]), key=lambda part: part[0])
+        _, size = np.unique(label, return_counts=True)
+        return sorted(np.split(order, np.cumsum(size)[:-1]), key=lambda part: part[0])
 
     def require_one_piece(self, why: str) -> None:
         """Raise `MeshError` if the surface is several disjoint pieces, naming each (its
@@ -361,6 +357,23 @@ class Mesh:
             process=False,
             validate=False,
         )
+
+
+def components_label(edge_vert: np.ndarray, nvert: int) -> np.ndarray:
+    """Each point's piece, named by its smallest point (nvert,) int64: labels passed along
+    the edges, the smaller kept, and each label replaced by its own label's, until none
+    changes (numpy alone: scipy's graph routines cost a run 0.2 s of CPU to import)."""
+    label = np.arange(nvert)
+    a, b = edge_vert[:, 0], edge_vert[:, 1]
+    while True:
+        low = np.minimum(label[a], label[b])
+        new = label.copy()
+        np.minimum.at(new, a, low)
+        np.minimum.at(new, b, low)
+        new = new[new]  # a label's own label: a long path's labels halve their distance each pass
+        if np.array_equal(new, label):
+            return label
+        label = new
 
 
 def _rebuild_mesh(vert_pos, face_vert, name):
