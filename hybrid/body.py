@@ -107,9 +107,15 @@ def _build_mesh(scene: Scene) -> Mesh:
         m = Mesh.load(scene.resolve(spec.path))
         pos, face = m.vert_pos * val["unit_scale"] + center, m.face_vert
         level = val.get("level") or 0
-        if level:
-            pos, face = _refine_file_mesh(pos, face, level)
-        return Mesh.from_arrays(pos, face, name=m.name if not level else f"{m.name}_level{level}")
+        if not level:
+            return Mesh.from_arrays(pos, face, name=m.name)
+        from .mesh.refine import refinement_of
+
+        coarse = pos
+        pos, face = _refine_file_mesh(pos, face, level)
+        # regions given on the file's points (`Indices`) carry to the new ones through it
+        ref = refinement_of(coarse, m.face_vert, level)
+        return Mesh.from_arrays(pos, face, name=f"{m.name}_level{level}", refinement=ref)
     radius = val["radius_m"]
     gen = spec.generator
     if val.get("level") is not None and gen not in LEVEL_GENERATORS:
@@ -195,7 +201,12 @@ def point_masses(spec: Masses, mesh: Mesh, regions: dict) -> np.ndarray:
     for name, rho in dens.items():
         rho = checks.positive(f"masses.density_kg_per_m2[{name!r}]", rho, checks.MAX_MASS_KG, " kg/m^2")
         idx = _regions.select(
-            name, mesh.vert_pos, name=f"masses.density_kg_per_m2[{name!r}]", regions=regions, face_vert=mesh.face_vert
+            name,
+            mesh.vert_pos,
+            name=f"masses.density_kg_per_m2[{name!r}]",
+            regions=regions,
+            face_vert=mesh.face_vert,
+            refinement=mesh.refinement,
         )
         m[idx] = rho * area[idx]
     missing = np.nonzero(np.isnan(m))[0]

@@ -165,6 +165,7 @@ class Model:
             self.scene.regions,
             self.regions[name],
             name=name,
+            refinement=self.mesh.refinement,
         )
 
     def without_speed_limit(self) -> Model:
@@ -212,7 +213,13 @@ def _positive(value, name):
 
 def _region(sel, mesh, regions, what):
     return _regions.select(
-        sel, mesh.vert_pos, name=what, regions=regions, border_vert=mesh.border_vert, face_vert=mesh.face_vert
+        sel,
+        mesh.vert_pos,
+        name=what,
+        regions=regions,
+        border_vert=mesh.border_vert,
+        face_vert=mesh.face_vert,
+        refinement=mesh.refinement,
     )
 
 

@@ -162,6 +162,7 @@ def select(
     regions: dict | None = None,
     border_vert: np.ndarray | None = None,
     face_vert: np.ndarray | None = None,
+    refinement=None,
 ) -> np.ndarray:
     """Evaluate a selector on rest positions vert_pos (nvert, 3) m.
 
@@ -170,7 +171,7 @@ def select(
     selector is malformed or selects no vertex, or a `Patch` (which needs the
     faces face_vert) covers an area its radius does not explain.
     """
-    idx = _select(sel, vert_pos, name, regions or {}, (border_vert, face_vert))
+    idx = _select(sel, vert_pos, name, regions or {}, (border_vert, face_vert, refinement))
     idx = np.unique(idx).astype(np.int32)
     if idx.size == 0:
         raise SceneError(
@@ -230,7 +231,7 @@ MAX_SELECTOR_DEPTH = 32
 
 def _select(sel, vert_pos, name, regions, surface, depth=0) -> np.ndarray:
     nvert = len(vert_pos)
-    border_vert, face_vert = surface
+    border_vert, face_vert, refinement = surface
     if depth > MAX_SELECTOR_DEPTH:
         raise SceneError(
             f"region {name!r}: selectors nested more than {MAX_SELECTOR_DEPTH} levels deep; "
@@ -253,10 +254,12 @@ def _select(sel, vert_pos, name, regions, surface, depth=0) -> np.ndarray:
         idx = np.asarray(sel.indices)
         if idx.ndim != 1 or (idx.size and not np.issubdtype(idx.dtype, np.integer)):
             raise SceneError(f"region {name!r}: expected a list of vertex indices, received {sel.indices!r}")
-        bad = idx[(idx < 0) | (idx >= nvert)]
+        # on a mesh refined from a file, the indices are the file's points (they keep theirs)
+        given = nvert if refinement is None else len(refinement.coarse_pos)
+        bad = idx[(idx < 0) | (idx >= given)]
         if bad.size:
-            raise SceneError(f"region {name!r}: vertex indices must lie in [0, {nvert}), received {bad[:5].tolist()}")
-        return idx
+            raise SceneError(f"region {name!r}: vertex indices must lie in [0, {given}), received {bad[:5].tolist()}")
+        return idx if refinement is None else refinement.carry_points(idx, nvert)
     if isinstance(sel, HalfSpace):
         p, n = _vec3(sel.point, f"region {name!r}.point"), _vec3(sel.normal, f"region {name!r}.normal")
         if np.linalg.norm(n) == 0:
@@ -401,14 +404,37 @@ def select_faces(
     if any(contains(geo, cls) for cls in (Indices, Border, Nearest, Patch)):
         return None
     tri = np.asarray(vert_pos)[np.asarray(face_vert)]
-    return np.unique(_select(geo, tri.mean(axis=1), name, {}, (None, None))).astype(np.int64)
+    return np.unique(_select(geo, tri.mean(axis=1), name, {}, (None, None, None))).astype(np.int64)
 
 
 def faces_of(
-    sel: Selector, vert_pos: np.ndarray, face_vert: np.ndarray, selectors: dict, verts: np.ndarray, *, name: str
+    sel: Selector,
+    vert_pos: np.ndarray,
+    face_vert: np.ndarray,
+    selectors: dict,
+    verts: np.ndarray,
+    *,
+    name: str,
+    refinement=None,
 ) -> np.ndarray:
     """A region's faces, by the one rule the terms and the readouts share: those whose
     centroid it holds for a region of geometry (`select_faces`), else those with two
-    of their points among its points `verts`."""
+    of their points among its points `verts`. On a mesh refined from a file
+    (`refinement`), a region given by the file's points (`Indices`) has the faces inside
+    its faces on the file's mesh: its border follows the file's edges at every level."""
     faces = select_faces(sel, vert_pos, face_vert, selectors, name=name)
-    return faces if faces is not None else region_faces(face_vert, verts, len(vert_pos))
+    if faces is not None:
+        return faces
+    if refinement is not None and _given_by_points(sel, selectors):
+        coarse = refinement.coarse_pos
+        pts = _select(_expand(sel, selectors), coarse, name, {}, (None, refinement.coarse_face, None))
+        own = region_faces(refinement.coarse_face, pts, len(coarse))
+        return np.nonzero(np.isin(refinement.face_parent, own))[0]
+    return region_faces(face_vert, verts, len(vert_pos))
+
+
+def _given_by_points(sel, selectors) -> bool:
+    try:
+        return contains(_expand(sel, selectors), Indices)
+    except KeyError:
+        return False

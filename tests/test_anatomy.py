@@ -83,6 +83,31 @@ def test_scene_loads_and_steps(torso):
     assert abs(sim.volume_rel_error) < 1e-6
 
 
+def test_the_fitted_trunk_refines_by_level_with_its_regions(torso):
+    """`mesh.level = 1` on the fitted trunk: its regions, given by the file's points, carry to
+    the new points and faces (the diaphragm's and the abdomen's faces still split the surface
+    once, their areas as at level 0 to the refined surface's change), and it steps."""
+    import hybrid
+
+    fit, _ = torso
+    coarse = hybrid.load(fit.scene_path).model
+    fine_sim = hybrid.load(fit.scene_path, overrides=["mesh.level=1"])
+    fine = fine_sim.model
+    assert fine.nvert > 3 * coarse.nvert
+    for m in (coarse, fine):
+        d, a = m.region_faces("diaphragm"), m.region_faces("abdomen")
+        assert len(np.intersect1d(d, a)) == 0 and len(d) + len(a) == m.mesh.nface
+
+    def area(m, name):
+        tri = m.mesh.vert_pos[m.mesh.face_vert[m.region_faces(name)]]
+        return 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1).sum()
+
+    for name in ("diaphragm", "rib_band", "pelvis"):
+        assert area(fine, name) == pytest.approx(area(coarse, name), rel=0.05)
+    fine_sim.step(5)
+    assert np.isfinite(fine_sim.vert_pos).all()
+
+
 @pytest.mark.parametrize("model", ["trunk", "tests/data/humanoid.xml"])
 def test_model_without_the_bones_refused_in_one_line(model, tmp_path, capsys):
     from pathlib import Path

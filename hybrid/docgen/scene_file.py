@@ -141,7 +141,10 @@ _LINKS = {
 }
 # the selectors' fields' units and values (a field not here: its unit from its name)
 _SELECTOR_FIELDS = {
-    "indices": ("-", "[i, j, ...], vertex indices >= 0"),
+    "indices": (
+        "-",
+        "[i, j, ...], vertex indices >= 0 (of a mesh file: its points, which keep their indices at every `mesh.level`; the new points between two of them join the region)",
+    ),
     "point": ("m", "[x, y, z]"),
     "normal": ("-", "[x, y, z], non-zero"),
     "center": ("m", "[x, y, z]"),

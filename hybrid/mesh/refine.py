@@ -22,6 +22,8 @@ are multiplied by about 4 and the spacing halved. Three ways to place the points
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from hybrid.errors import MeshError
@@ -35,6 +37,8 @@ __all__ = [
     "interpolating_control",
     "refine_smooth",
     "refine_file_mesh",
+    "Refinement",
+    "refinement_of",
     "SPHERE_FIT_REL_TOL",
 ]
 
@@ -69,6 +73,57 @@ def split_faces(
         pos = np.concatenate([pos, mid])
         face = _split_topology(face, mid_index)
     return pos, face
+
+
+@dataclasses.dataclass(frozen=True)
+class Refinement:
+    """How a mesh was made from a coarser one by splitting each face into four `level`
+    times (the file's points keep their indices): the coarse mesh (coarse_pos (n0, 3) m,
+    coarse_face (nf0, 3)); each new point's parents, the ends of the edge it split
+    (vert_parent (n - n0, 2), in index order; the points of level k start at level_start[k],
+    their parents all below it); and each face's coarse face (face_parent (nface,))."""
+
+    coarse_pos: np.ndarray
+    coarse_face: np.ndarray
+    vert_parent: np.ndarray
+    level_start: tuple
+    face_parent: np.ndarray
+
+    def carry_points(self, coarse_points: np.ndarray, nvert: int) -> np.ndarray:
+        """The points of the fine mesh in a set given on the coarse mesh's points: its own
+        points, and each new point whose parents both are (the set's inside: an edge
+        between the set and the rest gives a point of neither)."""
+        inside = np.zeros(nvert, bool)
+        inside[np.asarray(coarse_points, np.int64)] = True
+        n0 = len(self.coarse_pos)
+        ends = (*self.level_start[1:], nvert)
+        for start, end in zip(self.level_start, ends):
+            a, b = self.vert_parent[start - n0 : end - n0].T
+            inside[start:end] = inside[a] & inside[b]
+        return np.nonzero(inside)[0]
+
+
+def refinement_of(coarse_pos: np.ndarray, coarse_face: np.ndarray, level: int) -> Refinement:
+    """The `Refinement` of splitting (coarse_pos, coarse_face) `level` times, as
+    `split_faces` and `refine_smooth` split them (the same topology)."""
+    face = np.asarray(coarse_face, np.int64)
+    n = len(coarse_pos)
+    parents, starts = [], []
+    face_parent = np.arange(len(face))
+    for _ in range(int(level)):
+        key, mid_index = _edge_keys(face, n)
+        starts.append(n)
+        parents.append(np.stack([key // n, key % n], axis=1))
+        face = _split_topology(face, mid_index)
+        face_parent = np.tile(face_parent, 4)  # _split_topology's four blocks, each in its parent's order
+        n += len(key)
+    return Refinement(
+        coarse_pos=np.asarray(coarse_pos, float).copy(),
+        coarse_face=np.asarray(coarse_face, np.int64).copy(),
+        vert_parent=np.concatenate(parents) if parents else np.zeros((0, 2), np.int64),
+        level_start=tuple(starts),
+        face_parent=face_parent,
+    )
 
 
 def _edge_keys(face: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:

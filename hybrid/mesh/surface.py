@@ -116,6 +116,7 @@ class Mesh:
         "edge_vert",
         "border_vert",
         "name",
+        "refinement",
     )
     # the slots' types (annotations only: no class attribute, so no clash with __slots__)
     vert_pos: np.ndarray
@@ -129,8 +130,9 @@ class Mesh:
     edge_vert: np.ndarray
     border_vert: np.ndarray
     name: str
+    refinement: object  # hybrid.mesh.refine.Refinement of a mesh refined from a coarser one, or None
 
-    def __init__(self, vert_pos, face_vert, *, name: str = "mesh"):
+    def __init__(self, vert_pos, face_vert, *, name: str = "mesh", refinement=None):
         name = str(name)
         pos = check_vert_pos(vert_pos, name)
         face = check_face_vert(face_vert, len(pos), name)
@@ -141,6 +143,7 @@ class Mesh:
             nvert=len(pos),
             nface=len(face),
             name=name,
+            refinement=refinement,
             **topo,
         )
         for key, value in fields.items():
@@ -151,7 +154,7 @@ class Mesh:
     # -- construction -------------------------------------------------------
 
     @classmethod
-    def from_arrays(cls, vert_pos, face_vert, *, name: str = "mesh") -> Mesh:
+    def from_arrays(cls, vert_pos, face_vert, *, name: str = "mesh", refinement=None) -> Mesh:
         """Validate arrays and build a mesh (the arrays are copied).
 
         vert_pos (nvert, 3) real, m; face_vert (nface, 3) int in [0, nvert),
@@ -164,9 +167,10 @@ class Mesh:
         (an edge used twice in the same direction), non-manifold vertices
         (incident faces not a single fan) and closed surfaces that face
         inward (negative volume). Open surfaces are allowed; see
-        `require_closed`.
+        `require_closed`. `refinement`: how the mesh was refined from a coarser one
+        (`hybrid.mesh.refine.Refinement`), for regions given on the coarse mesh's points.
         """
-        return cls(vert_pos, face_vert, name=name)
+        return cls(vert_pos, face_vert, name=name, refinement=refinement)
 
     @classmethod
     def load(cls, path, *, name: str | None = None) -> Mesh:
@@ -237,7 +241,7 @@ class Mesh:
 
     def __reduce__(self):
         # __slots__ + a blocking __setattr__ defeat the default pickling; rebuild instead.
-        return (_rebuild_mesh, (np.array(self.vert_pos), np.array(self.face_vert), self.name))
+        return (_rebuild_mesh, (np.array(self.vert_pos), np.array(self.face_vert), self.name, self.refinement))
 
     def __repr__(self) -> str:
         kind = "closed" if self.closed else f"open, {len(self.border_vert)} border vertices"
@@ -376,5 +380,5 @@ def components_label(edge_vert: np.ndarray, nvert: int) -> np.ndarray:
         label = new
 
 
-def _rebuild_mesh(vert_pos, face_vert, name):
-    return Mesh(vert_pos, face_vert, name=name)
+def _rebuild_mesh(vert_pos, face_vert, name, refinement=None):
+    return Mesh(vert_pos, face_vert, name=name, refinement=refinement)

@@ -166,6 +166,7 @@ def build_rigid(
             regions=regions,
             border_vert=mesh.border_vert,
             face_vert=mesh.face_vert,
+            refinement=mesh.refinement,
         )
         twice = [int(i) for i in idx if int(i) in owner]
         if twice:
@@ -276,6 +277,7 @@ def _check_not_constrained(scene: Scene, mesh, regions: dict, link_vert: np.ndar
                 regions=regions,
                 border_vert=mesh.border_vert,
                 face_vert=mesh.face_vert,
+                refinement=mesh.refinement,
             )
             kind = "keep_in" if isinstance(con, KeepIn) else type(con).__name__.lower()
             claim_points(claims[:1], idx, kind, what)

@@ -358,7 +358,10 @@ class Build:
         """The faces of region `sel` (its points `idx`): those whose centroid it holds when
         it is made of geometry (`hybrid.regions.select_faces`), else those with two of
         their points in it."""
-        return _regions.faces_of(sel, self.mesh.vert_pos, self.mesh.face_vert, self.selectors, idx, name=what)
+        mesh = self.mesh
+        return _regions.faces_of(
+            sel, mesh.vert_pos, mesh.face_vert, self.selectors, idx, name=what, refinement=mesh.refinement
+        )
 
     def region(self, sel, what: str) -> np.ndarray:
         """The sorted vertex indices a selector picks (SceneError naming `what` if none)."""
@@ -369,6 +372,7 @@ class Build:
             regions=self.regions,
             border_vert=self.mesh.border_vert,
             face_vert=self.mesh.face_vert,
+            refinement=self.mesh.refinement,
         )
 
     def schedule(self, value, what: str, ncomp: int) -> int:
