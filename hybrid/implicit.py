@@ -60,7 +60,19 @@ import math
 
 import numpy as np
 
-from .implicit_matrix import assemble, cg_update, dot, gather, matrix_product, scatter, scatter_add, sgs_sweep, split_cg
+from .implicit_lungs import add_lung_forces, lung_potential, lung_rank_one
+from .implicit_matrix import (
+    add_rank_one,
+    assemble,
+    cg_update,
+    dot,
+    gather,
+    matrix_product,
+    scatter,
+    scatter_add,
+    sgs_sweep,
+    split_cg,
+)
 from .implicit_work import (
     EXPLICIT,
     I_CARRIED,
@@ -86,16 +98,6 @@ from .implicit_work import (
 from .kernel import CHUNK_VERTS, kernel
 from .switches import T_DAMPING, T_LUNGS, T_MEMBRANE, T_MUSCLE_FIBRES, T_PASSIVE_FIBRES, T_VOLUME
 from .terms.fibres import add_muscle_fibres
-from .terms.lungs import (
-    CMH2O_PA,
-    P_K1,
-    P_K2,
-    P_REF,
-    add_cavity_pressure,
-    cavity_volume_rate,
-    lung_load,
-    lung_recoil,
-)
 from .terms.membrane import add_membrane_serial, membrane_energy
 from .terms.passive_fibres import add_passive_fibres
 from .terms.tangents import (
@@ -160,10 +162,7 @@ def implicit_forces(m, tri, sched_val, x, v, out, w):
             for a in range(3):
                 out[i, a] -= c * v[i, a]
     if on[T_LUNGS]:
-        ref = m.lung_par[P_REF:]
-        vol, rate = cavity_volume_rate(m.lung_face, ref, x, v, w.lung_wall_pos, w.lung_wall_vel)
-        _, load = lung_load(m.lung_par, sched_val[m.lung_sched[0], 0] * CMH2O_PA, vol, rate)
-        add_cavity_pressure(m.lung_face, ref, load, x, w.lung_wall_pos, out, w.lung_wall_f, True)
+        add_lung_forces(m, sched_val, x, v, out, w)
 
 
 @kernel
@@ -227,29 +226,34 @@ def newton_product(m, rows, face, fib, pf, h, project, u, y):
 
 
 @kernel
-def _product(m, w, h, project, u, y):
+def _product(m, w, h, project, u, y, rank_c=0.0, rank_g=None):
     """y = the Newton matrix times u ((nfree, 3), the matrix's numbering): assembled, or
     with the Hessian projected element by element (the rare projected Newton iteration,
-    on every point: w.full_u is zero on the fixed ones).
+    on every point: w.full_u is zero on the fixed ones); plus c g (g . u) when rank_g is given.
     # Model: w.mat's pattern (free, row_ptr, col); projected: m (vert_mass, damp_coef, term_on), w.rows
     # Data in: project, u (nfree, 3); assembled: w.mat.amat; projected: w.face, w.fib, w.pf, h (s)
+    # Data in: rank_c (kg/m^4), rank_g (nfree, 3) m^2 or None (`hybrid.implicit_lungs.lung_rank_one`)
     # Data out: y (nfree, 3)   # Scratch: w.full_u, w.full_y (nvert, 3) (projected)
     """
     if not project:
         matrix_product(w.mat, u, y)
-        return
-    scatter(w.mat.free, u, w.full_u)
-    newton_product(m, w.rows, w.face, w.fib, w.pf, h, True, w.full_u, w.full_y)
-    gather(w.mat.free, 1.0, w.full_y, y)
+    else:
+        scatter(w.mat.free, u, w.full_u)
+        newton_product(m, w.rows, w.face, w.fib, w.pf, h, True, w.full_u, w.full_y)
+        gather(w.mat.free, 1.0, w.full_y, y)
+    if rank_g is not None:
+        add_rank_one(rank_c, rank_g, u, y)
 
 
 @kernel
-def _solve(m, w, h, project, target, cg_max):
+def _solve(m, w, h, project, target, cg_max, rank_c=0.0, rank_g=None):
     """w.cg_x = the preconditioned conjugate gradients' solution of (Newton matrix) x = w.cg_r
-    ((nfree, 3), the matrix's numbering), to |residual| <= target or cg_max iterations.
-    Returns the iterations (-1: negative curvature at the first, as `split_cg`).
+    ((nfree, 3), the matrix's numbering; plus c g g^T when rank_g is given, as `_product`), to
+    |residual| <= target or cg_max iterations. Returns the iterations (-1: negative curvature
+    at the first, as `split_cg`).
     # Model: w.mat's pattern (free, row_ptr, col); projected: m, w.rows
     # Data in: w.mat (amat, sdiag, dinv: `assemble`), h (s), project, target (N s), cg_max; projected: w.face, w.fib, w.pf
+    # Data in: rank_c (kg/m^4), rank_g (nfree, 3) m^2 or None
     # Data in/out: w.cg_r (nfree, 3) N s (h res in, the recursive residual out)   # Data out: w.cg_x (nfree, 3) m/s
     # Scratch: w.cg_z, w.cg_p, w.cg_q (nfree, 3), w.mat.acc; projected: w.full_u, w.full_y
     """
@@ -263,7 +267,7 @@ def _solve(m, w, h, project, target, cg_max):
             p[i, a] = z[i, a]
     rz = dot(r, z)
     for k in range(cg_max):
-        _product(m, w, h, project, p, q)
+        _product(m, w, h, project, p, q, rank_c, rank_g)
         pq = dot(p, q)
         if not pq > 0.0:  # negative curvature (or p = 0): stop with what we have (truncated Newton)
             return -1 if k == 0 else k
@@ -362,12 +366,8 @@ def _merit(m, sched_val, h, dv, w):
         total += fibre_energy(tri.fib_vert, tri.fib_par, tri.fib_sched, sched_val, w.x_try)
     if on[T_PASSIVE_FIBRES]:
         total += passive_fibres_energy_kernel(tri.pf_vert, tri.pf_par, w.x_try)
-    if on[T_LUNGS]:  # E (V - V0)^2 / 2 - P_ao V, and h times the airway's dissipation K1 Q^2 / 2 + K2 |Q|^3 / 3
-        par = m.lung_par
-        vol, rate = cavity_volume_rate(m.lung_face, par[P_REF:], w.x_try, w.v_try, w.lung_wall_pos, w.lung_wall_vel)
-        pao = sched_val[m.lung_sched[0], 0] * CMH2O_PA
-        total += lung_recoil(par, vol)[2] - pao * vol
-        total += h * (0.5 * par[P_K1] * rate * rate + par[P_K2] * abs(rate) ** 3 / 3.0)
+    if on[T_LUNGS]:
+        total += lung_potential(m, sched_val, h, w)
     return total
 
 
@@ -386,52 +386,6 @@ def _volume_gradient(face_vert, pos, grad):
             grad[i, 0] += sixth * (pos[j, 1] * pos[l, 2] - pos[j, 2] * pos[l, 1])
             grad[i, 1] += sixth * (pos[j, 2] * pos[l, 0] - pos[j, 0] * pos[l, 2])
             grad[i, 2] += sixth * (pos[j, 0] * pos[l, 1] - pos[j, 1] * pos[l, 0])
-
-
-@kernel
-def _lung_rank_one(m, w, h, project, eta, cg_max):
-    """The lungs' stiffness in the Newton solve: the matrix A + c g g^T, c = h^2 E + h dR/dQ
-    (E = dP_L/dV, the recoil's slope; R(Q) Q the airway's pressure drop) and g the cavity's volume gradient on the free
-    points, both at the iteration's start; w.cg_x = A^-1 r turned into (A + c g g^T)^-1 r by
-    Sherman-Morrison, with A^-1 g from a second solve (a rank-one term the sparse matrix cannot
-    hold; staggered a step behind, an enclosed compartment is the unstable case of
-    partitioned coupling). Returns the second solve's iterations.
-    # Model: m.lung_face, m.lung_par, w.mat's pattern   # Data in: w.x_try, w.v_try (the iteration's start), w.cg_x
-    # Data out: w.cg_x   # Scratch: w.lung_g, w.lung_gf, w.lung_y, w.lung_wall_f, w.cg_r and the solve's
-    """
-    par = m.lung_par
-    ref = par[P_REF:]
-    vol, rate = cavity_volume_rate(m.lung_face, ref, w.x_try, w.v_try, w.lung_wall_pos, w.lung_wall_vel)
-    c = h * h * lung_recoil(par, vol)[1] + h * (par[P_K1] + 2.0 * par[P_K2] * abs(rate))
-    if c == 0.0:
-        return 0
-    g = w.lung_g
-    for i in range(g.shape[0]):
-        g[i, 0] = g[i, 1] = g[i, 2] = 0.0
-    add_cavity_pressure(m.lung_face, ref, 1.0, w.x_try, w.lung_wall_pos, g, w.lung_wall_f, True)
-    rows_of = w.mat.free
-    gather(rows_of, 1.0, g, w.lung_gf)
-    y = w.lung_y
-    for f in range(rows_of.shape[0]):
-        for a in range(3):
-            y[f, a] = w.cg_x[f, a]  # A^-1 r
-            w.cg_r[f, a] = w.lung_gf[f, a]
-    target = FORCING * eta * math.sqrt(dot(w.lung_gf, w.lung_gf))
-    if project:
-        k = _solve(m, w, h, True, target, cg_max)
-    else:
-        k = split_cg(w.mat, w.cg_r, w.cg_x, w.cg_z, w.cg_p, w.cg_q, w.cg_t, w.cg_b, target, cg_max)
-        if k < 0:  # negative curvature at once: g along it; keep A^-1 r alone
-            for f in range(rows_of.shape[0]):
-                for a in range(3):
-                    w.cg_x[f, a] = y[f, a]
-            return 1
-    gy, gz = dot(w.lung_gf, y), dot(w.lung_gf, w.cg_x)  # g . A^-1 r, g . A^-1 g
-    beta = c * gy / (1.0 + c * gz)
-    for f in range(rows_of.shape[0]):
-        for a in range(3):
-            w.cg_x[f, a] = y[f, a] - beta * w.cg_x[f, a]
-    return k
 
 
 @kernel
@@ -490,14 +444,36 @@ def implicit_step(m, s, sched_val, step, imp):
         gather(rows_of, h, w.res, w.cg_r)
         # solve just accurately enough: FORCING of what convergence asks, at most FORCING of the residual
         eta = min(FORCING, FORCING * tol * max(scale, scale_mean) / rn)
-        k = split_cg(w.mat, w.cg_r, w.cg_x, w.cg_z, w.cg_p, w.cg_q, w.cg_t, w.cg_b, eta * h * rn, cg_max)
-        project = k < 0
-        if project:
+        target = eta * h * rn
+        # the lungs' rank-one stiffness in the product (`hybrid.implicit_lungs`)
+        lungs = m.term_on[T_LUNGS] != 0
+        c_lung = lung_rank_one(m, w, h) if lungs else 0.0
+        if lungs:
+            k = split_cg(
+                w.mat,
+                w.cg_r,
+                w.cg_x,
+                w.cg_z,
+                w.cg_p,
+                w.cg_q,
+                w.cg_t,
+                w.cg_b,
+                target,
+                cg_max,
+                c_lung,
+                w.lung_gf,
+                w.lung_gh,
+            )
+        else:
+            k = split_cg(w.mat, w.cg_r, w.cg_x, w.cg_z, w.cg_p, w.cg_q, w.cg_t, w.cg_b, target, cg_max)
+        if k < 0:
             gather(rows_of, h, w.res, w.cg_r)
-            k = 1 + _solve(m, w, h, True, eta * h * rn, cg_max)
+            k = 1 + (
+                _solve(m, w, h, True, target, cg_max, c_lung, w.lung_gf)
+                if lungs
+                else _solve(m, w, h, True, target, cg_max)
+            )
             info[I_PROJECTED_TOTAL] += 1
-        if m.term_on[T_LUNGS]:
-            k += _lung_rank_one(m, w, h, project, eta, cg_max)
         cg_total += k
         it += 1
         # a correction below the positions' rounding (ULPS units in the last place of the

@@ -36,6 +36,8 @@ __all__ = [
     "upper_solve",
     "lower_solve",
     "split_cg",
+    "half_sweep",
+    "add_rank_one",
     "dot",
     "cg_update",
     "gather",
@@ -337,9 +339,34 @@ def cg_update(alpha, p, q, x, r):
     return rr
 
 
+@kernel(inline="always")
+def add_rank_one(c, u, p, q):
+    """q += c u (u . p) ((n, 3)).
+    # Model: none   # Data in: c, u, p (n, 3)   # Data in/out: q (n, 3)
+    """
+    s = c * dot(u, p)
+    for i in range(q.shape[0]):
+        for a in range(3):
+            q[i, a] += s * u[i, a]
+
+
 @kernel
-def split_cg(mat, r, x, y, p, q, t, b, target, cg_max):
-    """x = the solution of A x = r (A the assembled Newton matrix; vectors (nfree, 3), in the
+def half_sweep(mat, u, out):
+    """out = C^-1 u = G^T (D + L)^-1 u, the half of the sweep `split_cg` iterates with (C C^T its
+    preconditioner; (nfree, 3)).
+    # Model: mat.row_ptr, mat.col   # Data in: mat.amat, mat.dinv, mat.gchol, u (nfree, 3)
+    # Data out: out (nfree, 3)   # Scratch: mat.acc
+    """
+    lower_solve(mat, u, out)
+    g = mat.gchol
+    for i in range(out.shape[0]):
+        _gt(g[i], out[i, 0], out[i, 1], out[i, 2], out, i)
+
+
+@kernel
+def split_cg(mat, r, x, y, p, q, t, b, target, cg_max, rank_c=0.0, rank_g=None, rank_gh=None):
+    """x = the solution of A x = r (A the assembled Newton matrix, plus c g g^T when rank_g
+    is given: the lungs' rank-one stiffness, `hybrid.implicit_lungs`; vectors (nfree, 3), in the
     matrix's numbering) by the preconditioned conjugate gradients of `hybrid.implicit._solve` in
     Eisenstat's implementation: with P = (D + L) D^-1 (D + U) = C C^T, C = (D + L) G^-T
     (D = G G^T, D the sweep's diagonal blocks sdiag, L = U^T the assembled off-diagonal
@@ -350,8 +377,13 @@ def split_cg(mat, r, x, y, p, q, t, b, target, cg_max):
     instead of a product and a sweep (three). Stops when the residual b - A x is at most
     target, looked at when |C^-1 r| has fallen by target / |r_0| (then replacing the
     recursive C^-1 r if not yet), or at negative curvature as `_solve`. Returns the
-    iterations (-1: negative curvature at once).
+    iterations (-1: negative curvature at once). The rank-one term adds c ^g (^g . p) to the
+    product (^g = C^-1 g = rank_gh, `half_sweep`): a rank-one change of the matrix adds at
+    most one iteration in exact arithmetic, where solving A^-1 g apart for Sherman-Morrison took
+    a second solve (a smooth vector over the whole dome, 18 iterations against the first's 8 on
+    the breathing scene at level 8).
     # Model: mat.row_ptr, mat.col   # Data in: mat.amat, mat.dinv, mat.gchol, mat.ediag, target, cg_max
+    # Data in: rank_c (kg/m^4), rank_g (nfree, 3) m^2 or None, rank_gh (nfree, 3): C^-1 rank_g
     # Data in/out: r (nfree, 3) (out: the recursive C^-1 r)   # Data out: x (nfree, 3)
     # Scratch: y, p, q, t, b (nfree, 3), mat.acc
     """
@@ -384,6 +416,8 @@ def split_cg(mat, r, x, y, p, q, t, b, target, cg_max):
         lower_solve(mat, q, t)
         for i in range(n):
             _gt(g[i], x[i, 0] + t[i, 0], x[i, 1] + t[i, 1], x[i, 2] + t[i, 2], q, i)
+        if rank_g is not None:  # + c ^g ^g^T p
+            add_rank_one(rank_c, rank_gh, p, q)
         pq = dot(p, q)
         if not pq > 0.0:  # negative curvature (or p = 0): stop with what we have (truncated Newton)
             if k == 0:
@@ -396,7 +430,7 @@ def split_cg(mat, r, x, y, p, q, t, b, target, cg_max):
         # b - A x at x = C^-T y (the recursive one drifts from it at tight tolerances); if it is
         # not yet small enough, r^ = C^-1 (b - A x) replaces the recursive one
         if math.sqrt(rr_new) <= stop:
-            if _true_residual(mat, g, y, b, x, q, t) <= target:
+            if _true_residual(mat, g, y, b, x, q, t, rank_c, rank_g) <= target:
                 break
             lower_solve(mat, q, t)
             rr_new = 0.0
@@ -415,9 +449,11 @@ def split_cg(mat, r, x, y, p, q, t, b, target, cg_max):
 
 
 @kernel
-def _true_residual(mat, g, y, b, x, q, t):
-    """x = C^-T y = (D + U)^-1 G y; q = b - A x (t: scratch); |q|.
+def _true_residual(mat, g, y, b, x, q, t, rank_c, rank_g):
+    """x = C^-T y = (D + U)^-1 G y; q = b - (A + c g g^T) x (t: scratch; no rank-one term when
+    rank_g is None); |q|.
     # Model: mat.row_ptr, mat.col   # Data in: mat.amat, mat.dinv, g (nfree, 6) (mat.gchol), y, b (nfree, 3)
+    # Data in: rank_c (kg/m^4), rank_g (nfree, 3) m^2 or None
     # Data out: x, q (nfree, 3); returns |q|   # Scratch: t (nfree, 3)
     """
     n = y.shape[0]
@@ -425,6 +461,8 @@ def _true_residual(mat, g, y, b, x, q, t):
         _g(g[i], y[i, 0], y[i, 1], y[i, 2], t, i)
     upper_solve(mat, t, x)
     matrix_product(mat, x, q)
+    if rank_g is not None:
+        add_rank_one(rank_c, rank_g, x, q)
     rr = 0.0
     for i in range(n):
         for c in range(3):

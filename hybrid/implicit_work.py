@@ -109,8 +109,8 @@ class ImplicitWork(NamedTuple):
     tangent caches (`newton_caches`); mat: the assembled Newton matrix
     (`hybrid.implicit_matrix`); info (len(Info),): the `Info` slots; the lungs' (empty
     without them): lung_wall_pos, lung_wall_vel, the state's own wall arrays (not copies),
-    which the solve holds fixed; lung_wall_f (nwall, 3), lung_g (nvert, 3), lung_gf, lung_y
-    (nfree, 3): scratch of the compartment's rank-one term (`_lung_rank_one`)."""
+    which the solve holds fixed; lung_wall_f (nwall, 3), lung_g (nvert, 3), lung_gf, lung_gh
+    (nfree, 3): the compartment's rank-one term (`hybrid.implicit_lungs.lung_rank_one`)."""
 
     dv: np.ndarray
     x_try: np.ndarray
@@ -141,7 +141,7 @@ class ImplicitWork(NamedTuple):
     lung_wall_f: np.ndarray
     lung_g: np.ndarray
     lung_gf: np.ndarray
-    lung_y: np.ndarray
+    lung_gh: np.ndarray
 
 
 def implicit_work(arrays, wall_pos=None, wall_vel=None) -> ImplicitWork | None:
@@ -167,5 +167,5 @@ def implicit_work(arrays, wall_pos=None, wall_vel=None) -> ImplicitWork | None:
         lung_wall_f=np.zeros_like(arrays.lung_wall),
         lung_g=np.zeros((n, 3)),
         lung_gf=np.zeros((nfree, 3)),
-        lung_y=np.zeros((nfree, 3)),
+        lung_gh=np.zeros((nfree, 3)),
     )

@@ -22,7 +22,7 @@ LAYERS = (
     ("terms", ("terms", "terms.*")),
     ("scene", ("scene", "scenefile", "scenefile.*", "rigidfile", "demo", "resolve")),
     ("model, rigid", ("model", "body", "rigid", "rigid.*")),
-    ("step", ("step", "switches", "readouts", "implicit", "implicit_work", "implicit_matrix")),
+    ("step", ("step", "switches", "readouts", "implicit", "implicit_work", "implicit_matrix", "implicit_lungs")),
     ("step loop", ("loop",)),
     ("coupled step", ("coupling",)),
     ("simulation", ("simulation", "builds", "control", "state", "diagnosis", "anatomy", "anatomy.*")),

@@ -1,0 +1,81 @@
+"""The lungs in implicit Euler's Newton solve (`hybrid.implicit`): their pleural load on the
+dome among the forces the solve treats implicitly, their energy and the airway's dissipation
+in the line search's potential, and their stiffness c g g^T (c = h^2 dP_L/dV + h dR/dQ, g the
+cavity's volume gradient on the free points) in the Newton matrix.
+
+The stiffness is rank one, which the sparse matrix cannot hold; staggered a step behind, an
+enclosed compartment is the unstable case of partitioned coupling. It joins the conjugate
+gradients' product instead (`hybrid.implicit_matrix.split_cg`): a rank-one change of the
+matrix adds at most one iteration in exact arithmetic. The first version applied it by
+Sherman-Morrison with A^-1 g from a second solve each Newton iteration: on the breathing
+scene at level 8 (implicit Euler at 30 ms, 200 steps) that solve took 18.5 iterations
+against the first's 8 (g is smooth over the whole dome, the slowest kind of vector for a
+Gauss-Seidel preconditioner) and 7.2 of the run's 13.4 s.
+"""
+
+from __future__ import annotations
+
+from .implicit_matrix import gather, half_sweep
+from .kernel import kernel
+from .terms.lungs import (
+    CMH2O_PA,
+    P_K1,
+    P_K2,
+    P_REF,
+    add_cavity_pressure,
+    cavity_volume_rate,
+    lung_load,
+    lung_recoil,
+)
+
+__all__ = ["add_lung_forces", "lung_potential", "lung_rank_one"]
+
+
+@kernel
+def add_lung_forces(m, sched_val, x, v, out, w):
+    """out += the pleural load on the dome's free points at (x, v): (P_pl + P_L0) grad_i V
+    (`hybrid.terms.lungs`), the wall held where the rigid phase put it.
+    # Model: m.lung_face, m.lung_par, m.lung_sched   # Data in: sched_val, x (m), v (m/s), w.lung_wall_pos, w.lung_wall_vel
+    # Data in/out: out (N)   # Scratch: w.lung_wall_f
+    """
+    ref = m.lung_par[P_REF:]
+    vol, rate = cavity_volume_rate(m.lung_face, ref, x, v, w.lung_wall_pos, w.lung_wall_vel)
+    _, load = lung_load(m.lung_par, sched_val[m.lung_sched[0], 0] * CMH2O_PA, vol, rate)
+    add_cavity_pressure(m.lung_face, ref, load, x, w.lung_wall_pos, out, w.lung_wall_f, True)
+
+
+@kernel
+def lung_potential(m, sched_val, h, w):
+    """The lungs' part of the incremental potential at w.x_try, w.v_try (J): E (V - V0)^2 / 2
+    (the recoil's energy) - P_ao V, and h times the airway's dissipation K1 Q^2 / 2 + K2 |Q|^3 / 3.
+    # Model: m.lung_face, m.lung_par, m.lung_sched   # Data in: sched_val, h (s), w.x_try, w.v_try, w.lung_wall_*
+    # Data out: returns J
+    """
+    par = m.lung_par
+    vol, rate = cavity_volume_rate(m.lung_face, par[P_REF:], w.x_try, w.v_try, w.lung_wall_pos, w.lung_wall_vel)
+    pao = sched_val[m.lung_sched[0], 0] * CMH2O_PA
+    total = lung_recoil(par, vol)[2] - pao * vol
+    return total + h * (0.5 * par[P_K1] * rate * rate + par[P_K2] * abs(rate) ** 3 / 3.0)
+
+
+@kernel
+def lung_rank_one(m, w, h):
+    """The lungs' stiffness c g g^T at the Newton iteration's start (w.x_try, w.v_try): returns
+    c = h^2 dP_L/dV + h dR/dQ (kg/m^4; R(Q) Q the airway's pressure drop); w.lung_gf = g on the
+    free points (the matrix's numbering) and w.lung_gh = C^-1 g (`half_sweep`, of the matrix
+    `assemble` left in w.mat), what `split_cg` adds to its product.
+    # Model: m.lung_face, m.lung_par, w.mat (pattern, free)   # Data in: w.x_try, w.v_try, w.mat (assembled)
+    # Data out: w.lung_gf (nfree, 3) m^2, w.lung_gh (nfree, 3); returns kg/m^4
+    # Scratch: w.lung_g (nvert, 3), w.lung_wall_f, w.mat.acc
+    """
+    par = m.lung_par
+    ref = par[P_REF:]
+    vol, rate = cavity_volume_rate(m.lung_face, ref, w.x_try, w.v_try, w.lung_wall_pos, w.lung_wall_vel)
+    c = h * h * lung_recoil(par, vol)[1] + h * (par[P_K1] + 2.0 * par[P_K2] * abs(rate))
+    g = w.lung_g
+    for i in range(g.shape[0]):
+        g[i, 0] = g[i, 1] = g[i, 2] = 0.0
+    add_cavity_pressure(m.lung_face, ref, 1.0, w.x_try, w.lung_wall_pos, g, w.lung_wall_f, True)
+    gather(w.mat.free, 1.0, g, w.lung_gf)
+    half_sweep(w.mat, w.lung_gf, w.lung_gh)
+    return c
