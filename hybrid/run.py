@@ -196,6 +196,7 @@ def run(
         | {int(o.every_steps) for o in observers if getattr(o, "every_steps", None)}
     )
     metrics = TraceMetrics(model)
+    metrics.control = sim.control.arrays  # the inputs that ran, where the user's program set them
     breath = metrics.breath
 
     # the end of the last complete expiration, where the body should be back at rest

@@ -101,3 +101,34 @@ def test_bad_controls_are_refused_in_one_line():
     assert not sim.control.is_set(TENSION)  # nothing set by a refused call
     sim.control.set(TENSION, np.float32(3.5))  # numpy scalars are numbers
     assert sim.control.value(TENSION) == 3.5
+
+
+def test_the_trace_and_the_recording_keep_the_controls_that_ran(tmp_path):
+    """The muscle's tension set by the user's program (an observer acting as a controller,
+    between frames) is what the trace's `muscle_n_per_m` and the recording's channel say ran,
+    frame by frame, not the scene's schedule; released, the schedule is recorded again."""
+    from hybrid.record import Recorder
+
+    sim = hybrid.load("breathing", overrides=["mesh.level=0"])
+    key = "forces['muscle'].tension_n_per_m"
+    sent = []
+
+    def controller(sim, trace):  # after each frame's row: the next frame's steps read it
+        k = len(sent)
+        if k < 20:
+            sim.control.set(key, 3.0 + k)
+        else:
+            sim.control.release(key)
+        sent.append(3.0 + k if k < 20 else None)
+
+    with Recorder(tmp_path / "run.mcap", sim) as rec:
+        tr = hybrid.run(sim, 0.5, observers=[rec, controller], frame_dt_s=0.01)["trace"].arrays()
+    column = tr["muscle_n_per_m"]
+    assert column[0] == 0.0  # the start: the schedule's value at rest
+    for k in range(1, 21):  # frame k ran with what the controller set after frame k - 1
+        assert column[k] == sent[k - 1]
+    scheduled = hybrid.load("breathing", overrides=["mesh.level=0"])
+    want = hybrid.run(scheduled, 0.5, frame_dt_s=0.01)["trace"].arrays()["muscle_n_per_m"]
+    assert np.array_equal(column[22:], want[22:])  # released: the schedule again
+    data = hybrid.read(tmp_path / "run.mcap")
+    assert np.array_equal(data["/muscle_stiffness"]["value"], column[: len(data["/muscle_stiffness"]["value"])])

@@ -127,6 +127,14 @@ def first_muscle(model: Model):
     return None, None
 
 
+def first_muscle_key(model: Model) -> str | None:
+    """The first muscle's input key ("forces['NAME'].tension_n_per_m" or ".stiffness"), or None."""
+    for term in model.scene.forces:
+        if isinstance(term, (Muscle, MuscleFibres)):
+            return f"forces[{term.name!r}].{'stiffness' if isinstance(term, Muscle) else 'tension_n_per_m'}"
+    return None
+
+
 #: the region whose swept volume the trace gives (`swept_volume_ml`)
 SWEPT_REGION = "diaphragm"
 
@@ -159,6 +167,12 @@ class TraceMetrics:
         # the muscle stiffness at each frame: its table stacked once, evaluated compiled
         self.muscle_table, self.muscle_fns = stack_schedules([muscle_sched]) if muscle_sched is not None else (None, [])
         self.muscle_val = np.zeros(3)
+        # the first muscle's row among the model's inputs: a value the user's program set
+        # (`hybrid.Control`) is what ran, and what the trace records, not the schedule
+        key = first_muscle_key(model)
+        names = [k for k, _ in model.control_keys]
+        self.muscle_row = names.index(key) if key in names else None
+        self.control = None  # the run's ControlArrays (`hybrid.run.run` sets it)
         self.swept_faces = model.mesh.face_vert[model.region_faces(SWEPT_REGION)] if "diaphragm" in self.parts else None
         self.thorax = thorax_body(model)
         self.thorax_axis = None  # the thorax's anterior axis in its own frame, from its pose at the first frame
@@ -249,7 +263,11 @@ class TraceMetrics:
         self.lung_rows(rows, scal)
         if self.part_faces is not None:
             self.lung_part_rows(rows, pos)
-        if "muscle" in parts:
+        c, row = self.control, self.muscle_row
+        if "muscle" in parts and c is not None and row is not None and c.user[row]:
+            # set by the user's program: held over the compiled call whose frames these are
+            rows[:, COLUMN["muscle_n_per_m"]] = c.value[row, 0]
+        elif "muscle" in parts:
             for j, t in enumerate(scal[:, F_TIME].tolist()):
                 rows[j, COLUMN["muscle_n_per_m"]] = self.muscle_at(t)
         else:
