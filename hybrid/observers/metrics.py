@@ -11,7 +11,7 @@ from ..model import Model
 from ..readouts import axis_crossing_z, pitch_deg, quat_rot, ring_faces, swept_volumes
 from ..scene import Muscle, MuscleFibres, SoftVolume, Volume
 from ..schedule import Breathing, schedule_eval, stack_schedules
-from ..step import F_ALVEOLAR, F_FLOW, F_KE, F_LUNG_VOLUME, F_PLEURAL, F_PRESSURE, F_TIME, F_VOLUME
+from ..step import F_ALVEOLAR, F_FLOW, F_KE, F_LUNG_VOLUME, F_PLEURAL, F_PRESSURE, F_TIME, F_VOLUME, ControlArrays
 from ..terms import Lungs
 from ..terms.lungs import CMH2O_PA, CMH2O_PER_L, P_E, P_RECOIL, P_V0
 from ..terms.volume import face_volume
@@ -172,7 +172,7 @@ class TraceMetrics:
         key = first_muscle_key(model)
         names = [k for k, _ in model.control_keys]
         self.muscle_row = names.index(key) if key in names else None
-        self.control = None  # the run's ControlArrays (`hybrid.run.run` sets it)
+        self.control: ControlArrays | None = None  # the run's inputs (`hybrid.run.run` sets them)
         self.swept_faces = model.mesh.face_vert[model.region_faces(SWEPT_REGION)] if "diaphragm" in self.parts else None
         self.thorax = thorax_body(model)
         self.thorax_axis = None  # the thorax's anterior axis in its own frame, from its pose at the first frame
