@@ -36,10 +36,10 @@ def _refine_file_mesh(pos, face, level):
             f"{len(face) * 4**level} (about {npoint} points); expected at most {checks.MAX_POINTS} points"
         )
     try:
-        pos, face, _ = refine_file_mesh(pos, face, level, "mesh.level on a file mesh")
+        pos, face, scheme = refine_file_mesh(pos, face, level, "mesh.level on a file mesh")
     except MeshError as exc:
         raise SceneError(str(exc)) from None
-    return pos, face
+    return pos, face, scheme
 
 
 #: the largest body a scene's membrane may be, across (m): a trunk is about 0.3 m, so a body
@@ -112,9 +112,10 @@ def _build_mesh(scene: Scene) -> Mesh:
         from .mesh.refine import refinement_of
 
         coarse = pos
-        pos, face = _refine_file_mesh(pos, face, level)
-        # regions given on the file's points (`Indices`) carry to the new ones through it
-        ref = refinement_of(coarse, m.face_vert, level)
+        pos, face, scheme = _refine_file_mesh(pos, face, level)
+        # regions given on the file's points (`Indices`) carry to the new ones through it; on
+        # the smooth surface through a file's points (not a sphere's), regions of geometry too
+        ref = refinement_of(coarse, m.face_vert, level, carry_geometry=scheme == "loop")
         return Mesh.from_arrays(pos, face, name=f"{m.name}_level{level}", refinement=ref)
     radius = val["radius_m"]
     gen = spec.generator

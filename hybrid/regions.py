@@ -172,6 +172,11 @@ def select(
     faces face_vert) covers an area its radius does not explain.
     """
     idx = _select(sel, vert_pos, name, regions or {}, (border_vert, face_vert, refinement))
+    if refinement is not None and refinement.carry_geometry and not contains(sel, (Nearest, Patch, Border)):
+        # the region on the file's points (which keep their indices and positions), carried
+        n0 = len(refinement.coarse_pos)
+        carried = refinement.carry_points(idx[idx < n0], len(vert_pos))
+        idx = carried if carried.size else idx
     idx = np.unique(idx).astype(np.int32)
     if idx.size == 0:
         raise SceneError(
@@ -422,6 +427,13 @@ def faces_of(
     of their points among its points `verts`. On a mesh refined from a file
     (`refinement`), a region given by the file's points (`Indices`) has the faces inside
     its faces on the file's mesh: its border follows the file's edges at every level."""
+    if refinement is not None and refinement.carry_geometry and not _topological(sel, selectors):
+        # the faces inside the region's faces on the file's mesh, by the same rule there
+        coarse, coarse_face = refinement.coarse_pos, refinement.coarse_face
+        own = select_faces(sel, coarse, coarse_face, selectors, name=name)
+        if own is None:
+            own = region_faces(coarse_face, verts[verts < len(coarse)], len(coarse))
+        return np.nonzero(np.isin(refinement.face_parent, own))[0]
     faces = select_faces(sel, vert_pos, face_vert, selectors, name=name)
     if faces is not None:
         return faces
@@ -431,6 +443,15 @@ def faces_of(
         own = region_faces(refinement.coarse_face, pts, len(coarse))
         return np.nonzero(np.isin(refinement.face_parent, own))[0]
     return region_faces(face_vert, verts, len(vert_pos))
+
+
+def _topological(sel, selectors) -> bool:
+    """Whether a selector depends on the mesh's topology (nearest point, patch, border),
+    which a coarser mesh does not share."""
+    try:
+        return contains(_expand(sel, selectors), (Nearest, Patch, Border))
+    except KeyError:
+        return True
 
 
 def _given_by_points(sel, selectors) -> bool:

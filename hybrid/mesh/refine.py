@@ -81,13 +81,17 @@ class Refinement:
     times (the file's points keep their indices): the coarse mesh (coarse_pos (n0, 3) m,
     coarse_face (nf0, 3)); each new point's parents, the ends of the edge it split
     (vert_parent (n - n0, 2), in index order; the points of level k start at level_start[k],
-    their parents all below it); and each face's coarse face (face_parent (nface,))."""
+    their parents all below it); and each face's coarse face (face_parent (nface,)).
+    carry_geometry: regions of geometry too are taken on the coarse mesh and carried (their
+    borders then follow the coarse edges at every level: a fixed region, whose results
+    converge at the surface's own order), not only regions of the file's points."""
 
     coarse_pos: np.ndarray
     coarse_face: np.ndarray
     vert_parent: np.ndarray
     level_start: tuple
     face_parent: np.ndarray
+    carry_geometry: bool = False
 
     def carry_points(self, coarse_points: np.ndarray, nvert: int) -> np.ndarray:
         """The points of the fine mesh in a set given on the coarse mesh's points: its own
@@ -103,7 +107,9 @@ class Refinement:
         return np.nonzero(inside)[0]
 
 
-def refinement_of(coarse_pos: np.ndarray, coarse_face: np.ndarray, level: int) -> Refinement:
+def refinement_of(
+    coarse_pos: np.ndarray, coarse_face: np.ndarray, level: int, *, carry_geometry: bool = False
+) -> Refinement:
     """The `Refinement` of splitting (coarse_pos, coarse_face) `level` times, as
     `split_faces` and `refine_smooth` split them (the same topology)."""
     face = np.asarray(coarse_face, np.int64)
@@ -123,6 +129,7 @@ def refinement_of(coarse_pos: np.ndarray, coarse_face: np.ndarray, level: int) -
         vert_parent=np.concatenate(parents) if parents else np.zeros((0, 2), np.int64),
         level_start=tuple(starts),
         face_parent=face_parent,
+        carry_geometry=carry_geometry,
     )
 
 

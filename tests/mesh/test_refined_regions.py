@@ -91,3 +91,31 @@ def test_an_index_past_the_file_s_points_is_refused_in_one_line(tmp_path):
     with pytest.raises(hybrid.errors.SceneError) as err:
         hybrid.load(Scene(**{**scene.__dict__, "regions": bad}))
     assert "must lie in [0, 66)" in str(err.value) and "\n" not in str(err.value)
+
+
+def test_regions_of_geometry_on_a_smooth_file_surface_are_taken_on_the_file_s_mesh(tmp_path):
+    """A half-space region on the capsule (off a sphere: refined on the smooth surface through
+    its points): at every level its faces are those inside its faces on the file's mesh (by the
+    centroid rule there), so its border follows the file's edges and does not cut across the
+    new faces; on a sphere's file mesh (refined on its sphere) the geometry is kept exact."""
+    from hybrid.regions import HalfSpace
+
+    scene = _scene(tmp_path, 0)
+    regions = {"top": HalfSpace((0.0, 0.0, 0.02), (0.0, 0.0, 1.0)), "rest": Difference("all", "top")}
+    coarse = hybrid.load(Scene(**{**scene.__dict__, "regions": regions})).model
+    for level in (1, 2):
+        m = hybrid.load(
+            Scene(**{**scene.__dict__, "regions": regions, "mesh": MeshSpec(path=scene.mesh.path, level=level)})
+        ).model
+        assert m.mesh.refinement.carry_geometry
+        top, rest = m.region_faces("top"), m.region_faces("rest")
+        assert np.array_equal(np.unique(m.mesh.refinement.face_parent[top]), np.sort(coarse.region_faces("top")))
+        assert len(np.intersect1d(top, rest)) == 0 and len(top) + len(rest) == m.mesh.nface
+    sphere = trimesh.creation.icosphere(subdivisions=1, radius=0.1)
+    hybrid.mesh.Mesh.from_arrays(sphere.vertices, sphere.faces, name="ball").save(tmp_path / "ball.obj")
+    ball = hybrid.load(
+        Scene(**{**scene.__dict__, "regions": regions, "mesh": MeshSpec(path=str(tmp_path / "ball.obj"), level=2)})
+    ).model
+    assert not ball.mesh.refinement.carry_geometry
+    z = ball.mesh.vert_pos[ball.regions["top"], 2]
+    assert (z >= 0.02).all()  # the half-space itself, on every point of the finer sphere
