@@ -62,7 +62,7 @@ def rerun(names=None, *, full: bool = False, data: Path = DATA) -> None:
             print("running", " ".join(shown), flush=True)
             subprocess.run([sys.executable, "-m", "hybrid", *args, str(target)], check=True)
             folder = target if target.is_dir() else target.parent
-            result = json.loads((folder / study.json_name).read_text(encoding="utf-8"))
+            result = json.loads((folder / (study.written or study.json_name)).read_text(encoding="utf-8"))
             stored = {"made_by": _made(shown, "full" if full else "small"), "result": result}
             (data / study.json_name).write_text(json.dumps(stored, indent=1) + "\n", encoding="utf-8")
             for fig in study.figures:

@@ -17,7 +17,8 @@ __all__ = ["Study", "STUDIES", "PAGES", "render_study_page"]
 class Study:
     """A study whose JSON a page shows: its `hybrid ...` command (the output folder's
     option last), the JSON file it writes there, its figures, and its markdown from
-    that JSON (`markdown`: "module:function", the study's own report)."""
+    that JSON (`markdown`: "module:function", the study's own report); `written`: the JSON
+    the command writes when it is not `json_name` (two studies by one command)."""
 
     name: str
     command: tuple[str, ...]
@@ -26,6 +27,7 @@ class Study:
     figures: tuple[str, ...] = ()
     title: str = ""
     how_to_read: str = ""
+    written: str = ""
 
 
 #: every study the pages show; `--rerun` runs each command (small unless --full)
@@ -130,6 +132,7 @@ STUDIES = {
             "The same study of `breathing_lungs` under implicit Euler (steps of 20, 10 and 5 ms at every level, "
             "one breath), with the lungs' metrics: the lung volume change (its largest value is the first "
             "breath's tidal volume) and the transdiaphragmatic pressure change. Read it as the one above.",
+            written="convergence.json",
         ),
         Study(
             "work-precision",
