@@ -201,14 +201,7 @@ def point_masses(spec: Masses, mesh: Mesh, regions: dict) -> np.ndarray:
     m = np.full(mesh.nvert, np.nan)
     for name, rho in dens.items():
         rho = checks.positive(f"masses.density_kg_per_m2[{name!r}]", rho, checks.MAX_MASS_KG, " kg/m^2")
-        idx = _regions.select(
-            name,
-            mesh.vert_pos,
-            name=f"masses.density_kg_per_m2[{name!r}]",
-            regions=regions,
-            face_vert=mesh.face_vert,
-            refinement=mesh.refinement,
-        )
+        idx = _regions.select_on(name, mesh, name=f"masses.density_kg_per_m2[{name!r}]", regions=regions)
         m[idx] = rho * area[idx]
     missing = np.nonzero(np.isnan(m))[0]
     if missing.size:

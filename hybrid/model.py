@@ -158,15 +158,7 @@ class Model:
 
     def region_faces(self, name: str) -> np.ndarray:
         """The faces of the named region, by the rule the terms use (`hybrid.regions.faces_of`)."""
-        return _regions.faces_of(
-            self.scene.regions[name],
-            self.mesh.vert_pos,
-            self.mesh.face_vert,
-            self.scene.regions,
-            self.regions[name],
-            name=name,
-            refinement=self.mesh.refinement,
-        )
+        return _regions.faces_on(self.scene.regions[name], self.mesh, self.scene.regions, self.regions[name], name=name)
 
     def without_speed_limit(self) -> Model:
         """The same model without the runaway test (`max_speed_m_s`): for numerical
@@ -212,15 +204,7 @@ def _positive(value, name):
 
 
 def _region(sel, mesh, regions, what):
-    return _regions.select(
-        sel,
-        mesh.vert_pos,
-        name=what,
-        regions=regions,
-        border_vert=mesh.border_vert,
-        face_vert=mesh.face_vert,
-        refinement=mesh.refinement,
-    )
+    return _regions.select_on(sel, mesh, name=what, regions=regions)
 
 
 #: the share of the stable-step estimate that dt_s = "auto" takes (the estimate is

@@ -34,6 +34,8 @@ __all__ = [
     "select",
     "contains",
     "select_faces",
+    "select_on",
+    "faces_on",
 ]
 
 
@@ -141,6 +143,25 @@ class Difference:
 Selector = Union[
     All, Border, Indices, HalfSpace, Ball, Box, Wedge, Nearest, Patch, Union_, Intersection, Difference, str
 ]
+
+
+def select_on(sel: Selector, mesh, *, name: str, regions: dict | None = None) -> np.ndarray:
+    """`select` on a `hybrid.mesh.Mesh`: its rest positions, border, faces and, for a mesh
+    refined from a file, its `refinement` (what every region of a scene is evaluated with)."""
+    return select(
+        sel,
+        mesh.vert_pos,
+        name=name,
+        regions=regions,
+        border_vert=mesh.border_vert,
+        face_vert=mesh.face_vert,
+        refinement=mesh.refinement,
+    )
+
+
+def faces_on(sel: Selector, mesh, selectors: dict, verts: np.ndarray, *, name: str) -> np.ndarray:
+    """`faces_of` on a `hybrid.mesh.Mesh` (its refinement included)."""
+    return faces_of(sel, mesh.vert_pos, mesh.face_vert, selectors, verts, name=name, refinement=mesh.refinement)
 
 
 def contains(sel, cls) -> bool:

@@ -195,8 +195,7 @@ def run(
         {min(frame_steps, MAX_STEPS_PER_CALL)}
         | {int(o.every_steps) for o in observers if getattr(o, "every_steps", None)}
     )
-    metrics = TraceMetrics(model)
-    metrics.control = sim.control.arrays  # the inputs that ran, where the user's program set them
+    metrics = TraceMetrics(model, sim.control.arrays)  # the inputs that ran, where the user's program set them
     breath = metrics.breath
 
     # the end of the last complete expiration, where the body should be back at rest

@@ -143,7 +143,8 @@ class TraceMetrics:
     """The trace's rows of a run's frames: the scene's rest figures, taken once, and
     each series measured from the frames captured (`fill`)."""
 
-    def __init__(self, model: Model):
+    def __init__(self, model: Model, control: ControlArrays | None = None):
+        """`control`: the run's inputs, where a user's program may set the muscle's."""
         self.model = model
         self.parts = scene_parts(model)
         self.apex = apex_vertex(model)
@@ -172,7 +173,7 @@ class TraceMetrics:
         key = first_muscle_key(model)
         names = [k for k, _ in model.control_keys]
         self.muscle_row = names.index(key) if key in names else None
-        self.control: ControlArrays | None = None  # the run's inputs (`hybrid.run.run` sets them)
+        self.control = control
         self.swept_faces = model.mesh.face_vert[model.region_faces(SWEPT_REGION)] if "diaphragm" in self.parts else None
         self.thorax = thorax_body(model)
         self.thorax_axis = None  # the thorax's anterior axis in its own frame, from its pose at the first frame

@@ -159,15 +159,7 @@ def build_rigid(
                 f"{what}.body: no body or site named {link.body!r} in {label}; "
                 f"available bodies: {bodies}; sites: {sites}"
             )
-        idx = _regions.select(
-            link.region,
-            mesh.vert_pos,
-            name=f"{what}.region",
-            regions=regions,
-            border_vert=mesh.border_vert,
-            face_vert=mesh.face_vert,
-            refinement=mesh.refinement,
-        )
+        idx = _regions.select_on(link.region, mesh, name=f"{what}.region", regions=regions)
         twice = [int(i) for i in idx if int(i) in owner]
         if twice:
             raise SceneError(
@@ -270,15 +262,7 @@ def _check_not_constrained(scene: Scene, mesh, regions: dict, link_vert: np.ndar
     for con in scene.constraints:
         if isinstance(con, (Nailed, Prescribed, KeepIn)):
             what = f"constraints[{con.name!r}].region"
-            idx = _regions.select(
-                con.region,
-                mesh.vert_pos,
-                name=what,
-                regions=regions,
-                border_vert=mesh.border_vert,
-                face_vert=mesh.face_vert,
-                refinement=mesh.refinement,
-            )
+            idx = _regions.select_on(con.region, mesh, name=what, regions=regions)
             kind = "keep_in" if isinstance(con, KeepIn) else type(con).__name__.lower()
             claim_points(claims[:1], idx, kind, what)
 

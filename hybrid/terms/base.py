@@ -358,22 +358,11 @@ class Build:
         """The faces of region `sel` (its points `idx`): those whose centroid it holds when
         it is made of geometry (`hybrid.regions.select_faces`), else those with two of
         their points in it."""
-        mesh = self.mesh
-        return _regions.faces_of(
-            sel, mesh.vert_pos, mesh.face_vert, self.selectors, idx, name=what, refinement=mesh.refinement
-        )
+        return _regions.faces_on(sel, self.mesh, self.selectors, idx, name=what)
 
     def region(self, sel, what: str) -> np.ndarray:
         """The sorted vertex indices a selector picks (SceneError naming `what` if none)."""
-        return _regions.select(
-            sel,
-            self.mesh.vert_pos,
-            name=what,
-            regions=self.regions,
-            border_vert=self.mesh.border_vert,
-            face_vert=self.mesh.face_vert,
-            refinement=self.mesh.refinement,
-        )
+        return _regions.select_on(sel, self.mesh, name=what, regions=self.regions)
 
     def schedule(self, value, what: str, ncomp: int) -> int:
         """Row of the validated schedule `value` in the model's schedule table."""
