@@ -34,8 +34,6 @@ __all__ = [
     "select",
     "contains",
     "select_faces",
-    "select_on",
-    "faces_on",
 ]
 
 
