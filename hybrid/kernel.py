@@ -261,8 +261,12 @@ def _our_cache():
 
 def jit(fn=None, **flags):
     """`numba.njit(cache=True, **flags)` caching into `CACHE_DIR`, without the C-callable
-    copy (`FLAGS`); for compiled helpers outside the step (they keep numba's default
-    arithmetic flags)."""
+    copy (`FLAGS`); for compiled helpers outside the step. Their arithmetic flags are numba's
+    defaults, set explicitly: numba lets a callee that does not set `fastmath` inherit its
+    caller's, so a helper the step also calls (`hybrid.sites`) would round one way compiled
+    for the step and another compiled for a Python call, its bits depending on which came
+    first into the cache."""
+    flags.setdefault("fastmath", False)
 
     def wrap(f):
         with _our_cache():

@@ -21,24 +21,30 @@ def documented(doc: str | None) -> bool:
     return all(tag.search(doc or "") for tag in TAGS)
 
 
-def step_kernels() -> dict:
-    """Every kernel of the package by qualified name: the numba functions that
-    `hybrid.kernel.kernel` and `kernel_twin` made, found among all live objects once
-    every module is imported (also those no module name binds); they are compiled
-    without reference counting (`FLAGS`), which `hybrid.kernel.jit`'s helpers outside
-    the step keep."""
+def compiled_functions() -> dict:
+    """Every numba function of the package by qualified name, found among all live objects
+    once every module is imported (also those no module name binds)."""
     for info in pkgutil.walk_packages(hybrid.__path__, "hybrid."):
         if info.name != "hybrid.__main__":  # runs the command line
             importlib.import_module(info.name)
     found = {}
     for d in gc.get_objects():
         try:  # a weak proxy whose object is gone raises on any look
-            is_kernel = isinstance(d, CPUDispatcher)
+            is_compiled = isinstance(d, CPUDispatcher)
         except ReferenceError:
             continue
-        if is_kernel and d.py_func.__module__.startswith("hybrid.") and d.targetoptions.get("_nrt") is False:
+        if is_compiled and d.py_func.__module__.startswith("hybrid."):
             found[f"{d.py_func.__module__}.{d.py_func.__qualname__}"] = d
     return found
+
+
+def step_kernels() -> dict:
+    """Every kernel of the package by qualified name: the numba functions that
+    `hybrid.kernel.kernel` and `kernel_twin` made, found among all live objects once
+    every module is imported (also those no module name binds); they are compiled
+    without reference counting (`FLAGS`), which `hybrid.kernel.jit`'s helpers outside
+    the step keep."""
+    return {name: d for name, d in compiled_functions().items() if d.targetoptions.get("_nrt") is False}
 
 
 def test_every_kernel_says_what_it_reads_and_writes():
@@ -57,3 +63,14 @@ def test_the_check_reads_the_convention():
     assert not documented("# Model: a\n# Data out: c")  # no inputs named
     assert not documented("Model: a, Data in: b, Data out: c")
     assert not documented(None)
+
+
+def test_every_compiled_function_sets_its_arithmetic_flags():
+    # numba lets a function that does not set `fastmath` inherit its caller's: a helper
+    # called both from the step (fast arithmetic) and from Python would then round
+    # differently by which build reached the cache first, and a run's bits would depend
+    # on the order scenes were first run in
+    found = compiled_functions()
+    assert len(found) > len(step_kernels())  # the helpers outside the step are found too
+    unset = sorted(name for name, d in found.items() if "fastmath" not in d.targetoptions)
+    assert not unset, unset
