@@ -5,9 +5,9 @@ The rigid part is built at model time (`hybrid.rigid.build_rigid`, called by
 points' masses on their bodies). `Coupling` (made by `Simulation` for such scenes)
 owns this run's MuJoCo model and data and hands them to the one compiled step loop
 (`hybrid.loop.run_steps`, whose docstring gives the coupled step's order) as its
-`RigidPack`. The loop calls MuJoCo's C `mj_step1`/`mj_step2` directly: their
-addresses are registered with LLVM as external symbols when this module is imported,
-so the loop is cached on disk like the other kernels.
+`RigidPack`. The loop calls MuJoCo's C `mj_step1`/`mj_step2` directly, at the
+addresses the pack carries (`MjViews.fn_step`, ...), so the loop's cached code names no
+symbol and is the same for every scene.
 
 Weight of the linked points: with `Rigid.add_link_mass` (the default) each linked
 point's mass m_i is on its body (`hybrid.rigid.compose`), and MuJoCo applies its
@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import ctypes
 
-import llvmlite.binding as _llvm
 import mujoco
 import numpy as np
 
@@ -43,22 +42,8 @@ _INTEGRATION = int(mujoco.mjtState.mjSTATE_INTEGRATION)
 _DSBL_GRAVITY = int(mujoco.mjtDisableBit.mjDSBL_GRAVITY)
 
 
-# ----------------------------------------------------------------- MuJoCo from numba
-
-
-def _register_mujoco_symbols() -> None:
-    """Make MuJoCo's C step functions callable from cached numba code.
-
-    The addresses of `mj_step`, `mj_step1`, `mj_step2` of the library the bindings
-    use are registered with LLVM under private names; compiled code refers to them by
-    name, so a cached function links again in a new process (where the addresses
-    differ) as long as this ran first (it runs when this module is imported).
-    """
-    for name, fn in zip(("step", "step1", "step2"), mj_step_ctypes()):
-        _llvm.add_symbol(f"hybrid_mj_{name}", ctypes.cast(fn, ctypes.c_void_p).value)
-
-
-_register_mujoco_symbols()
+# MuJoCo's C step functions for the compiled loop: (mj_step, mj_step1, mj_step2)' addresses
+_MJ_FUNCTIONS = tuple(ctypes.cast(fn, ctypes.c_void_p).value for fn in mj_step_ctypes())
 
 
 class Coupling:
@@ -139,6 +124,7 @@ class Coupling:
         d = sys.data
         self._mj = MjViews(
             *sys.pointers(),
+            *_MJ_FUNCTIONS,
             d.site_xpos,
             d.xipos,
             d.xfrc_applied,
@@ -176,7 +162,7 @@ class Coupling:
         record = bool(self.record_wrenches)
         hist = WrenchHistory(np.empty((nstep, mjm.nbody, 6)), np.empty((nstep, mjm.nq))) if record else self._no_hist
         self._mj_time = self.system.data.time
-        return RigidPack(self._links, self._ctrls, self._mj, self._wall, self._rk4(), record, hist)
+        return RigidPack(True, self._links, self._ctrls, self._mj, self._wall, self._rk4(), record, hist)
 
     def finish(self, rig: RigidPack, state: MembraneState, step0: int, done: int) -> None:
         """After the loop ran `done` steps from step0 with `rig`: keep the recorded wrenches,

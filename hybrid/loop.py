@@ -4,7 +4,7 @@ with or without a rigid part, with the scene's schedules or the user's controls.
 
 One step, from time t:
 1. the membrane's forces at t (`hybrid.step.membrane_forces`: only the terms the model has);
-2. with a rigid part (`rig` not None): every linked point's membrane force, plus the
+2. with a rigid part (`rig.coupled`): every linked point's membrane force, plus the
    pressure force of the last volume projection p grad_i V (how the incompressible
    abdomen pushes on the ribs), plus its weight correction, goes to its body as a
    wrench at its site (`xfrc_applied`); the driven actuators take their controls
@@ -14,10 +14,16 @@ One step, from time t:
 3. the free points integrate, the local constraints and the exact volume projection
    apply, the divergence check runs (`hybrid.step.membrane_advance`).
 
-MuJoCo stays behind its door: this module declares MuJoCo's C step functions by the
-names `hybrid.coupling` registers with LLVM when it is imported (it is, by every
-scene with a rigid part, before its first step), and a membrane-only scene passes
-`rig=None`, which prunes the rigid phases when the loop compiles: it never loads MuJoCo.
+One compiled loop for every scene: which terms a model has, its integrator and whether
+it has a rigid part are read at run time (`MembraneArrays.term_on`, `.integrator`,
+`RigidPack.coupled`), never specialised on, so that a scene with another set of terms
+loads the loop from the cache instead of compiling it again. Only the multi-core build is
+an argument that prunes (`par`): a model too small for it never compiles it.
+
+MuJoCo stays behind its door: the loop calls MuJoCo's C step functions through the
+addresses `hybrid.coupling` puts in the pack (`MjViews.fn_step`, ...), so the compiled
+code names no MuJoCo symbol, and a membrane-only scene passes an empty pack
+(`membrane_only`): it never loads MuJoCo.
 """
 
 from __future__ import annotations
@@ -25,10 +31,12 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
+from llvmlite import ir
 from numba import types
+from numba.extending import intrinsic
 
 from .kernel import kernel
-from .schedule import schedule_eval
+from .schedule import schedule_eval, stack_schedules
 from .sites import add_point_wrench_kernel, point_wrench_kernel, site_vel_kernel
 from .step import (
     F_ALVEOLAR,
@@ -63,14 +71,26 @@ __all__ = [
     "capture_frame",
     "kinetic_energy_of",
     "run_steps",
+    "membrane_only",
 ]
 
-# MuJoCo's C step functions, by the names `hybrid.coupling` registers (module docstring)
-_SIG = types.void(types.intp, types.intp)
-_mj_step = types.ExternalFunction("hybrid_mj_step", _SIG)
-_mj_step1 = types.ExternalFunction("hybrid_mj_step1", _SIG)
-_mj_step2 = types.ExternalFunction("hybrid_mj_step2", _SIG)
 LUNGS_ID = Lungs.id
+
+
+@intrinsic
+def _call_mj(typingctx, fn, model_ptr, data_ptr):
+    """Call the C function `void f(const mjModel*, mjData*)` at address fn (MuJoCo's
+    `mj_step`, `mj_step1`, `mj_step2`: `MjViews`): an address read at run time, so that the
+    compiled loop names no symbol and its cache loads in any process, MuJoCo loaded or not."""
+    sig = types.void(types.intp, types.intp, types.intp)
+
+    def codegen(context, builder, signature, args):
+        word = ir.IntType(64)
+        target = builder.inttoptr(args[0], ir.FunctionType(ir.VoidType(), [word, word]).as_pointer())
+        builder.call(target, [args[1], args[2]])
+        return context.get_dummy_value()
+
+    return sig, codegen
 
 
 class LinkArrays(NamedTuple):
@@ -126,7 +146,9 @@ class CtrlArrays(NamedTuple):
 
 class MjViews(NamedTuple):
     """MuJoCo's model and data as the compiled loop sees them: model_ptr, data_ptr
-    (int), the `mjModel*` and `mjData*` for the C step functions, and views of the
+    (int), the `mjModel*` and `mjData*` for the C step functions; fn_step, fn_step1,
+    fn_step2 (int): the addresses of `mj_step`, `mj_step1`, `mj_step2` of the library the
+    bindings use (`hybrid.rigid.mj_step_ctypes`); and views of the
     `MjData`'s own arrays (valid as long as it lives), written by MuJoCo's step:
     site_xpos (nsite, 3) m; xipos (nbody, 3) m, the bodies' centres of mass;
     xfrc_applied (nbody, 6) [N, N m]; cvel (nbody, 6) [rad/s, m/s]; subtree_com
@@ -135,6 +157,9 @@ class MjViews(NamedTuple):
 
     model_ptr: int
     data_ptr: int
+    fn_step: int
+    fn_step1: int
+    fn_step2: int
     site_xpos: np.ndarray
     xipos: np.ndarray
     xfrc_applied: np.ndarray
@@ -156,10 +181,12 @@ class WrenchHistory(NamedTuple):
 
 
 class RigidPack(NamedTuple):
-    """The rigid half of a coupled loop (`hybrid.coupling.Coupling` makes it): links,
-    ctrls, mj, wall (above); rk4: bool, MuJoCo integrates with RK4 (step with `mj_step`);
+    """The rigid half of a coupled loop (`hybrid.coupling.Coupling` makes it): coupled:
+    bool, a rigid part to step (False: `membrane_only`, every array empty); links, ctrls,
+    mj, wall (above); rk4: bool, MuJoCo integrates with RK4 (step with `mj_step`);
     record: bool, keep each step's wrenches and qpos in hist."""
 
+    coupled: bool
     links: LinkArrays
     ctrls: CtrlArrays
     mj: MjViews
@@ -279,10 +306,10 @@ def rigid_phase(m, s, t, row, rig):
             for a in range(6):
                 hist.xfrc[row, b, a] = xfrc[b, a]
     if rig.rk4:
-        _mj_step(mj.model_ptr, mj.data_ptr)
+        _call_mj(mj.fn_step, mj.model_ptr, mj.data_ptr)
     else:
-        _mj_step2(mj.model_ptr, mj.data_ptr)
-    _mj_step1(mj.model_ptr, mj.data_ptr)
+        _call_mj(mj.fn_step2, mj.model_ptr, mj.data_ptr)
+    _call_mj(mj.fn_step1, mj.model_ptr, mj.data_ptr)
     if rig.record:
         for a in range(qpos.shape[0]):
             hist.qpos[row, a] = qpos[a]
@@ -331,44 +358,18 @@ def carry_wall(wall, site_xpos, wall_pos, wall_vel):
 
 
 @kernel
-def run_steps(
-    m,
-    s,
-    c,
-    stops,
-    step0,
-    frames,
-    rig,
-    par=True,
-    shape_memory=True,
-    membrane=True,
-    applied=True,
-    attraction=True,
-    mass_spring=True,
-    muscle=True,
-    soft_volume=True,
-    pressure=True,
-    fibres=True,
-    passive=True,
-    lungs=True,
-    prescribed=True,
-    keep_in=True,
-    volume=True,
-    shake=True,
-    lungs_held=True,
-):
+def run_steps(m, s, c, stops, step0, frames, rig, par=True):
     """Steps (module docstring) to each step index of stops, capturing a frame at each
     (a stop at the current step captures it without stepping). Returns the frames
     captured: fewer than stops when a step fails, its status then in s.status
     (s.status[1]: the failing step's index). Step k runs from t = origin + k h: the
     same times however a run is cut into calls (a checkpoint, frames, timed pieces).
-    # Model:    m (MembraneArrays); rig: None (membrane only: its phases not compiled) or RigidPack
+    # Model:    m (MembraneArrays); rig (RigidPack): the rigid part, or `membrane_only`'s empty pack
     # Data in:  s (MembraneState) at step step0; c (ControlArrays): the inputs;
     #           stops (nframe,) int64 increasing step indices from step0
     # Data out: s, c.value and c.value_next (the scheduled rows), MuJoCo's state after the steps done;
     #           frames (FrameArrays): frame i at stops[i]
     # par:      None: the membrane's serial passes only (`hybrid.step.step_par`)
-    # switches: None for a term the model lacks, not compiled (`hybrid.step.step_switches`)
     """
     h = m.dt
     origin = s.scal[S_ORIGIN]
@@ -376,35 +377,38 @@ def run_steps(
     for f in range(stops.shape[0]):
         for k in range(stops[f] - done):
             t = origin + (done + k) * h
-            membrane_forces(
-                m,
-                s,
-                c,
-                t,
-                par,
-                shape_memory,
-                membrane,
-                applied,
-                attraction,
-                mass_spring,
-                muscle,
-                soft_volume,
-                pressure,
-                fibres,
-                passive,
-                lungs,
-            )
-            if rig is not None:
+            membrane_forces(m, s, c, t, par)
+            if rig.coupled:
                 rigid_phase(m, s, t, done - step0 + k, rig)
-            if membrane_advance(m, s, c, t, done + k, par, prescribed, keep_in, volume, shake, lungs_held) != OK:
+            if membrane_advance(m, s, c, t, done + k, par) != OK:
                 return f
             s.scal[S_TIME] = origin + (done + k + 1) * h
         done = stops[f]
         capture_frame(m, s, frames.pos[f], frames.scal[f])
-        if rig is not None:
+        if rig.coupled:
             for b in range(frames.body_pos.shape[1]):
                 for a in range(3):
                     frames.body_pos[f, b, a] = rig.mj.xpos[b + 1, a]
                 for a in range(4):
                     frames.body_quat[f, b, a] = rig.mj.xquat[b + 1, a]
     return stops.shape[0]
+
+
+def membrane_only() -> RigidPack:
+    """The pack of a scene without a rigid part: `coupled` False, every array empty, no
+    MuJoCo (the loop never reads it)."""
+    i64, f3 = np.zeros(0, np.int64), np.zeros((0, 3))
+    # read-only as a rigid part's (`hybrid.rigid.CoupledRigid`): the same types, the same compiled loop
+    fixed = _read_only(np.zeros(0, np.int64))
+    links = LinkArrays(_read_only(np.zeros(0, np.int32)), fixed, fixed, fixed, f3, f3, f3)
+    ctrls = CtrlArrays(fixed, stack_schedules(())[0], np.zeros(0, np.uint8), np.zeros(3))
+    mj = MjViews(
+        0, 0, 0, 0, 0, f3, f3, np.zeros((0, 6)), np.zeros((0, 6)), f3, np.zeros(0), f3, np.zeros((0, 4)), np.zeros(0)
+    )
+    wall = WallArrays(i64, np.zeros(0), f3, i64, i64, i64, f3, f3)
+    return RigidPack(False, links, ctrls, mj, wall, False, False, WrenchHistory(np.zeros((0, 0, 6)), np.zeros((0, 0))))
+
+
+def _read_only(a: np.ndarray) -> np.ndarray:
+    a.flags.writeable = False
+    return a

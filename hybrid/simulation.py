@@ -19,7 +19,7 @@ from .control import Control
 from .diagnosis import advice, failure
 from .errors import ArgumentError, SceneError, SimulationDiverged
 from .implicit import Info
-from .loop import Frames, kinetic_energy_of, run_steps
+from .loop import Frames, kinetic_energy_of, membrane_only, run_steps
 from .model import TERMS, Model
 from .state import State
 from .step import (
@@ -29,11 +29,13 @@ from .step import (
     S_TIME,
     new_control,
     new_state,
-    step_switches,
+    step_par,
 )
 from .terms.volume import face_volume
 
 __all__ = ["Simulation"]
+
+_MEMBRANE_ONLY = membrane_only()  # the loop's rigid pack for a scene without a rigid part
 
 
 def _read_only(a: np.ndarray) -> np.ndarray:
@@ -226,11 +228,11 @@ class Simulation:
         (`hybrid.loop.run_steps`), capturing into frames from index `first` on; the
         frames captured."""
         step0 = self.steps_done
-        rig = None if self.rigid is None else self.rigid.pack(int(stops[-1]) - step0)
+        rig = _MEMBRANE_ONLY if self.rigid is None else self.rigid.pack(int(stops[-1]) - step0)
         count = run_steps(
-            arrays, self.state, self.control.arrays, stops, step0, frames.arrays(first), rig, *step_switches(arrays)
+            arrays, self.state, self.control.arrays, stops, step0, frames.arrays(first), rig, step_par(arrays)
         )
-        if self.rigid is not None and rig is not None:  # both or neither
+        if self.rigid is not None:
             done = (int(stops[-1]) if count == len(stops) else int(self.state.status[1])) - step0
             self.rigid.finish(rig, self.state, step0, done)
         return count

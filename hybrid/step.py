@@ -37,9 +37,7 @@ from .implicit import (
 from .kernel import CHUNK_VERTS, chunk_count, kernel, kernel_twin
 from .model import MembraneArrays
 from .schedule import KIND_PYTHON, schedule_eval
-from .switches import (  # each term's flag in MembraneArrays.term_on and its call counter, and the switches
-    ADVANCE_SWITCHES,
-    FORCE_SWITCHES,
+from .switches import (  # each term's flag in MembraneArrays.term_on and its call counter
     T_APPLIED,
     T_ATTRACTION,
     T_DAMPING,
@@ -56,10 +54,7 @@ from .switches import (  # each term's flag in MembraneArrays.term_on and its ca
     T_SHAPE_MEMORY,
     T_SOFT_VOLUME,
     T_VOLUME,
-    advance_switches,
-    force_switches,
     step_par,
-    step_switches,
 )
 from .terms import (
     STEP_FORCES,
@@ -106,11 +101,6 @@ __all__ = [
     "membrane_forces",
     "membrane_advance",
     "step_par",
-    "FORCE_SWITCHES",
-    "ADVANCE_SWITCHES",
-    "force_switches",
-    "advance_switches",
-    "step_switches",
 ]
 
 
@@ -238,29 +228,10 @@ def eval_schedules(sched, user, t, out):
 
 
 @kernel(inline="always")
-def membrane_forces(
-    m,
-    s,
-    c,
-    t,
-    par=True,
-    shape_memory=True,
-    membrane=True,
-    applied=True,
-    attraction=True,
-    mass_spring=True,
-    muscle=True,
-    soft_volume=True,
-    pressure=True,
-    fibres=True,
-    passive=True,
-    lungs=True,
-):
-    """Step phase 1: the force of every term the model has, at time t. `par`: None
-    when the model never runs the multi-core build (`serial_only`), which is then
-    not even compiled; else m.parallel chooses at run time. The switches after it
-    (`force_switches`): None for a term the model lacks, whose kernel is then not
-    compiled; True: its flag in m.term_on decides.
+def membrane_forces(m, s, c, t, par=True):
+    """Step phase 1: the force of every term the model has (its flag in m.term_on), at
+    time t. `par`: None when the model never runs the multi-core build (`step_par`),
+    which is then not even compiled; else m.parallel chooses at run time.
     # Model: m (MembraneArrays)   # Data in: s.vert_pos, s.vert_vel
     # Data out: s.vert_force, c.value, s.term_calls (and pressure for soft volume)
     """
@@ -268,27 +239,27 @@ def membrane_forces(
     on = m.term_on
     # implicit Euler: the terms it treats implicitly once, kept for its solve (`implicit_start_forces`)
     implicit = m.integrator == IMPLICIT_ID
-    _pointwise_forces(m, s, par, shape_memory, implicit)
-    if membrane is not None and on[T_MEMBRANE] and not implicit:
+    _pointwise_forces(m, s, par, implicit)
+    if on[T_MEMBRANE] and not implicit:
         if par is not None and m.parallel:
             membrane_faces_parallel(m.mem_vert, m.mem_par, m.kv_on, s.vert_pos, s.vert_vel, s.face_force)
             membrane_gather_parallel(m.mvf_ptr, m.mvf_slot, s.face_force, s.vert_force)
         else:
             add_membrane_serial(m.mem_vert, m.mem_par, m.kv_on, s.vert_pos, s.vert_vel, s.vert_force)
         s.term_calls[T_MEMBRANE] += 1
-    if applied is not None and on[T_APPLIED]:
+    if on[T_APPLIED]:
         add_applied(m.app_vert, m.app_sched, c.value, s.vert_force)
         s.term_calls[T_APPLIED] += 1
-    if attraction is not None and on[T_ATTRACTION]:
+    if on[T_ATTRACTION]:
         add_attraction(m.att_vert, m.att_stiff, m.att_target, m.att_sched, c.value, s.vert_pos, s.vert_force)
         s.term_calls[T_ATTRACTION] += 1
-    if mass_spring is not None and on[T_MASS_SPRING]:
+    if on[T_MASS_SPRING]:
         add_mass_spring(m.spring_vert, m.spring_stiff, m.spring_rest, s.vert_pos, s.vert_force)
         s.term_calls[T_MASS_SPRING] += 1
-    if muscle is not None and on[T_MUSCLE]:
+    if on[T_MUSCLE]:
         add_muscle(m.mus_vert, m.mus_nbr, m.mus_sched, c.value, s.vert_pos, s.vert_force)
         s.term_calls[T_MUSCLE] += 1
-    if soft_volume is not None and on[T_SOFT_VOLUME]:
+    if on[T_SOFT_VOLUME]:
         s.scal[S_PRESSURE] = soft_volume_force(
             m.ring_ptr,
             m.ring_vert,
@@ -302,16 +273,16 @@ def membrane_forces(
             s.vert_force,
         )
         s.term_calls[T_SOFT_VOLUME] += 1
-    if pressure is not None and on[T_PRESSURE]:
+    if on[T_PRESSURE]:
         add_pressure(m.ring_ptr, m.ring_vert, m.pres_sched, c.value, s.vert_pos, s.vert_force)
         s.term_calls[T_PRESSURE] += 1
-    if fibres is not None and on[T_MUSCLE_FIBRES] and not implicit:
+    if on[T_MUSCLE_FIBRES] and not implicit:
         add_muscle_fibres(m.fib_vert, m.fib_par, m.fib_sched, c.value, s.vert_pos, s.vert_force)
         s.term_calls[T_MUSCLE_FIBRES] += 1
-    if passive is not None and on[T_PASSIVE_FIBRES] and not implicit:
+    if on[T_PASSIVE_FIBRES] and not implicit:
         add_passive_fibres(m.pf_vert, m.pf_par, s.vert_pos, s.vert_force)
         s.term_calls[T_PASSIVE_FIBRES] += 1
-    if lungs is not None and on[T_LUNGS]:
+    if on[T_LUNGS]:
         lungs_step_force(m, s, c)
         s.term_calls[T_LUNGS] += 1
     for term in literal_unroll(STEP_FORCES):  # the terms that bring their own kernel (`Term.step_force`)
@@ -368,9 +339,9 @@ _integrate_serial, _integrate_parallel = kernel_twin(_integrate)
 
 
 @kernel(inline="always")
-def _pointwise_forces(m, s, par, shape_memory, implicit=False):
+def _pointwise_forces(m, s, par, implicit=False):
     """Step phase 1 for gravity, damping and shape memory: the shape memory's
-    ring gathers (compiled unless `shape_memory` is None), then the fused pass
+    ring gathers, then the fused pass
     `hybrid.terms.pointwise.point_forces` (serial or parallel build).
     # Model: m (term_on, accel, damp_coef, sm_*, ring_*, vert_free, vert_mass)   # Data in: s.vert_pos, s.vert_vel
     # Data out: s.vert_force (added to), s.term_calls   # Scratch: s.sm_sums
@@ -379,7 +350,7 @@ def _pointwise_forces(m, s, par, shape_memory, implicit=False):
     sm = on[T_SHAPE_MEMORY] != 0
     grav, damp = on[T_GRAVITY] != 0, on[T_DAMPING] != 0 and not implicit  # implicit Euler's drag: its own
     if par is not None and m.parallel:
-        if shape_memory is not None and sm:
+        if sm:
             shape_memory_frames_parallel(m.sm_vert, m.ring_ptr, m.ring_vert, m.ring_closed, s.vert_pos, s.sm_sums)
         point_forces_parallel(
             m.vert_free,
@@ -398,7 +369,7 @@ def _pointwise_forces(m, s, par, shape_memory, implicit=False):
             s.vert_force,
         )
     else:
-        if shape_memory is not None and sm:
+        if sm:
             shape_memory_frames(m.sm_vert, m.ring_ptr, m.ring_vert, m.ring_closed, s.vert_pos, s.sm_sums)
         point_forces_serial(
             m.vert_free,
@@ -422,16 +393,14 @@ def _pointwise_forces(m, s, par, shape_memory, implicit=False):
 
 
 @kernel(inline="always")
-def membrane_advance(
-    m, s, c, t, step, par=True, prescribed=True, keep_in=True, volume=True, shake=True, lungs_held=True
-):
-    """Step phases 2-5: integrate, project, check. Returns a status code. `par` and
-    the switches after it (`advance_switches`): as `membrane_forces`.
+def membrane_advance(m, s, c, t, step, par=True):
+    """Step phases 2-5: integrate, project, check. Returns a status code. `par`: as
+    `membrane_forces`.
     # Model: m   # Data in: s.vert_force   # Data out: s.vert_pos, s.vert_vel, s.scal, s.status
     """
     pos, vel = s.vert_pos, s.vert_vel
     # the projection's direction where the step starts
-    if shake is not None and m.volume_shake and m.term_on[T_VOLUME]:
+    if m.volume_shake and m.term_on[T_VOLUME]:
         if par is not None and m.parallel:
             volume_direction_parallel(m.ring_ptr, m.ring_vert, m.vert_weight, pos, s.dirn)
         else:
@@ -444,14 +413,14 @@ def membrane_advance(
             _integrate_serial(m.vert_free, m.vert_mass, m.integrator == 0, m.dt, s.vert_force, pos, vel, s.vert_acc)
     elif code != OK:
         return code
-    code = _after_integration(m, s, c, t, step, par, prescribed, keep_in, volume, lungs_held)
-    if code == OK and volume is not None and m.term_on[T_VOLUME]:  # implicit Euler's solve carried part of the pressure
+    code = _after_integration(m, s, c, t, step, par)
+    if code == OK and m.term_on[T_VOLUME]:  # implicit Euler's solve carried part of the pressure
         s.scal[S_PRESSURE] = implicit_pressure(s.implicit, s.scal[S_PRESSURE])
     return code
 
 
 @kernel(inline="always")
-def _after_integration(m, s, c, t, step, par, prescribed, keep_in, volume, lungs_held):
+def _after_integration(m, s, c, t, step, par):
     """Step phases 3-5 after `_integrate`: check, local constraints, volume. Returns a status code.
     # Model: m   # Data in: s.vert_acc (the integration's sums per chunk), c.user
     # Data in/out: s.vert_pos, s.vert_vel   # Data out: s.scal, s.status on failure, s.grad, c.value_next
@@ -482,15 +451,15 @@ def _after_integration(m, s, c, t, step, par, prescribed, keep_in, volume, lungs
     if dmax > lim * lim:
         return _fail(s, DIVERGED_RUNAWAY, step, worst)
     on = m.term_on
-    if prescribed is not None and on[T_PRESCRIBED]:
+    if on[T_PRESCRIBED]:
         eval_schedules(m.sched, c.user, t + h, c.value_next)
         apply_prescribed(m.pre_vert, m.pre_rest, m.pre_sched, c.value_next, h, pos, vel)
         s.term_calls[T_PRESCRIBED] += 1
-    if keep_in is not None and on[T_KEEP_IN]:
+    if on[T_KEEP_IN]:
         apply_keep_in(m.kin_vert, m.kin_shape, m.shape_kind, m.shape_par, pos, vel)
         s.term_calls[T_KEEP_IN] += 1
-    if lungs_held is not None and on[T_LUNGS] and s.lung[L_OCCLUDED] > 0.0:  # the occluded airway: both volumes
-        abdomen = volume is not None and on[T_VOLUME] != 0
+    if on[T_LUNGS] and s.lung[L_OCCLUDED] > 0.0:  # the occluded airway: both volumes
+        abdomen = on[T_VOLUME] != 0
         phi, phi_hold, held = project_occluded(m, s, h, abdomen)
         s.term_calls[T_VOLUME] += abdomen
         if not held:
@@ -503,7 +472,7 @@ def _after_integration(m, s, c, t, step, par, prescribed, keep_in, volume, lungs
         if abdomen:
             s.scal[S_PHI] = phi
             s.scal[S_PRESSURE] = phi / (h * h)
-    elif volume is not None and on[T_VOLUME]:
+    elif on[T_VOLUME]:
         if par is None:  # a None argument: the multi-core build is not compiled
             phi, st = project_volume(
                 m.ring_ptr,

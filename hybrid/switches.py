@@ -1,10 +1,11 @@
-"""The step kernels' switches: which term kernels a model's compiled step holds.
+"""The step's term ids and its one specialising argument.
 
-A switch is an argument of the step kernels (`hybrid.step.membrane_forces`,
-`hybrid.step.membrane_advance`, `hybrid.loop.run_steps`): None for a term the model lacks,
-whose branch numba then prunes when the kernel compiles, so that a first run compiles only the
-kernels its scene uses; True compiles the branch and the model's flag (`term_on`) decides at
-run time: the same arithmetic either way.
+Which terms a model has is read at run time, each term's flag in `MembraneArrays.term_on`
+(ids below): the one compiled step loop (`hybrid.loop.run_steps`) serves every scene and
+every set of terms. Compiling a loop per set of terms (a None argument for a term a model
+lacks, which numba prunes) made every new set of terms a new compile of the whole loop, 15
+to 50 s; read at run time, a flag costs a branch per term per step. The multi-core build is
+the one argument still pruned (`step_par`): a model too small for it never compiles it.
 """
 
 from __future__ import annotations
@@ -29,14 +30,7 @@ from .terms import (
 )
 from .terms.fibres import MuscleFibres
 
-__all__ = [
-    "FORCE_SWITCHES",
-    "ADVANCE_SWITCHES",
-    "step_par",
-    "force_switches",
-    "advance_switches",
-    "step_switches",
-]
+__all__ = ["step_par"]
 
 #: each term's flag in MembraneArrays.term_on and its call counter (the step's names for the ids)
 T_GRAVITY, T_DAMPING = Gravity.id, Damping.id
@@ -52,55 +46,3 @@ def step_par(arrays: MembraneArrays):
     when the kernel compiles, so a first run compiles the serial passes only; else
     True, both builds compiled and `arrays.parallel` choosing."""
     return True if arrays.parallel else None
-
-
-# after `par`: one per term kernel (or pass) that a model may lack, in the order of the
-# kernels' parameters (module docstring)
-FORCE_SWITCHES = {
-    "shape_memory": T_SHAPE_MEMORY,
-    "membrane": T_MEMBRANE,
-    "applied": T_APPLIED,
-    "attraction": T_ATTRACTION,
-    "mass_spring": T_MASS_SPRING,
-    "muscle": T_MUSCLE,
-    "soft_volume": T_SOFT_VOLUME,
-    "pressure": T_PRESSURE,
-    "fibres": T_MUSCLE_FIBRES,
-    "passive": T_PASSIVE_FIBRES,
-    "lungs": T_LUNGS,
-}
-# shake: the volume projection's direction where the step starts (`volume_shake`)
-# lungs_held: the occluded airway's projection (the lungs' `project_occluded`)
-ADVANCE_SWITCHES = {
-    "prescribed": T_PRESCRIBED,
-    "keep_in": T_KEEP_IN,
-    "volume": T_VOLUME,
-    "shake": T_VOLUME,
-    "lungs_held": T_LUNGS,
-}
-
-
-def _switches(arrays: MembraneArrays, names: dict) -> tuple:
-    """One switch per name: True when the model has the term (and, for shake, projects
-    along the step's start), else None."""
-    on = arrays.term_on.tolist()
-    return tuple(True if on[i] and (name != "shake" or arrays.volume_shake) else None for name, i in names.items())
-
-
-def force_switches(arrays: MembraneArrays) -> tuple:
-    """`membrane_forces`' arguments after (m, s, t) for a model: (par, then one per
-    `FORCE_SWITCHES`, None for a term the model lacks)."""
-    return (step_par(arrays),) + _switches(arrays, FORCE_SWITCHES)
-
-
-def advance_switches(arrays: MembraneArrays) -> tuple:
-    """`membrane_advance`'s arguments after (m, s, t, step) for a model: (par, then
-    one per `ADVANCE_SWITCHES`)."""
-    return (step_par(arrays),) + _switches(arrays, ADVANCE_SWITCHES)
-
-
-def step_switches(arrays: MembraneArrays) -> tuple:
-    """The whole loops' (`run_membrane`, `hybrid.coupling.run_coupled`, their frame
-    versions) last arguments for a model: `force_switches`, then `advance_switches`
-    without its `par`."""
-    return force_switches(arrays) + _switches(arrays, ADVANCE_SWITCHES)

@@ -1,6 +1,8 @@
 """A first run says what it does (issue 15, item 3): on an empty compile cache,
 `hybrid run` says on stderr that it compiles before it does; with the kernels cached,
-nothing. A sweep runs its first task alone, so that the others load what it compiled."""
+nothing. It compiles the one step loop that every later scene of its integrator's family
+loads (issue 30). A sweep runs its first task alone, so that the others load what it
+compiled."""
 
 from __future__ import annotations
 
@@ -51,25 +53,30 @@ try:
     runpy.run_module("hybrid", run_name="__main__", alter_sys=True)
 except SystemExit as stop:
     code = stop.code
-import hybrid
-from hybrid import loop, step
-from hybrid.terms import fibres, local, lungs, membrane, muscle, passive_fibres, shape_memory, springs, volume
-kernels = {  # each switch of the step: the kernels it guards
-    "shape_memory": [shape_memory.shape_memory_frames, shape_memory.shape_memory_frames_parallel],
-    "membrane": [membrane.add_membrane_serial, membrane.membrane_faces_parallel, membrane.membrane_gather_parallel],
-    "applied": [springs.add_applied], "attraction": [springs.add_attraction], "mass_spring": [springs.add_mass_spring],
-    "muscle": [muscle.add_muscle], "soft_volume": [volume.soft_volume_force], "pressure": [volume.add_pressure],
-    "fibres": [fibres.add_muscle_fibres], "passive": [passive_fibres.add_passive_fibres], "prescribed": [local.apply_prescribed], "keep_in": [local.apply_keep_in],
-    "volume": [volume.project_volume],
-    "shake": [volume.volume_direction_serial, volume.volume_direction_parallel],
-    "lungs": [lungs.add_cavity_pressure], "lungs_held": [lungs.project_occluded],
-}
-names = list(step.FORCE_SWITCHES) + list(step.ADVANCE_SWITCHES)
-switches = step.step_switches(hybrid.load("membrane_demo").model.arrays)[1:]
-print(json.dumps({"code": code, "loops": {k.py_func.__name__: len(k.signatures) for k in
-                  (loop.run_steps,)},
-                  "kernels": {name: [len(k.signatures) for k in kernels[name]] for name in names},
-                  "on": {name: on is not None for name, on in zip(names, switches)}}))
+from hybrid import implicit, loop
+from hybrid.terms import membrane, volume
+print(json.dumps({"code": code, "loops": len(loop.run_steps.signatures),
+                  "parallel": [len(k.signatures) for k in (membrane.membrane_faces_parallel,
+                               volume.volume_direction_parallel)],
+                  "implicit": [len(k.signatures) for k in (implicit.implicit_forces, implicit.newton_caches)]}))
+"""
+
+# after the first run, in a new process on its cache: scenes with other terms, a rigid part, the
+# paper's formulation and lungs, each stepped; how the step loop came (loaded or compiled)
+_OTHER_SCENES = """
+import dataclasses, json, hybrid
+from hybrid import loop
+from hybrid.terms import Pressure
+demo = hybrid.load_scene("membrane_demo")
+custom = dataclasses.replace(demo, forces=demo.forces[1:] + (Pressure(10.0),))  # no gravity, a pressure
+runs = {}
+for name, scene in (("breathing_paper", "breathing_paper"), ("breathing_lungs", "breathing_lungs"),
+                    ("custom", custom)):
+    sim = hybrid.load(scene)
+    sim.step(3)
+    runs[name] = sorted(n for n, c in sim.term_calls.items() if c)
+stats = loop.run_steps.stats
+print(json.dumps({"runs": runs, "hits": sum(stats.cache_hits.values()), "misses": sum(stats.cache_misses.values())}))
 """
 
 
@@ -101,23 +108,36 @@ def test_a_first_run_says_it_compiles_and_a_second_does_not(first_run, tmp_path)
     assert warm.returncode == 0 and warm.stderr == ""
 
 
-def test_a_first_run_compiles_only_the_kernels_its_scene_uses(first_run):
-    """Issue 15: on an empty compile cache, `hybrid run` compiles the kernels of the
-    terms its scene has and no other (their branches are pruned when the step
-    compiles: `hybrid.step.step_switches`), and the one step loop once."""
+def test_a_first_run_compiles_the_one_step_loop_once_and_no_build_its_scene_cannot_reach(first_run):
+    """Issue 30: on an empty compile cache, `hybrid run` compiles the one step loop once, with
+    every term (their flags read at run time: `hybrid.switches`), and not what its scene cannot
+    reach: membrane_demo (80 points, symplectic Euler) neither the multi-core build nor
+    implicit Euler's solve."""
     proc = first_run["process"]
     assert proc.returncode == 0, proc.stderr[-2000:]
     got = json.loads(proc.stdout.splitlines()[-1])
     assert got["code"] == 0
-    assert got["loops"] == {"run_steps": 1}  # the one step loop, once: a membrane-only scene
-    on = got["on"]
-    # membrane_demo: shape memory, muscle, nailed points and the volume constraint; no other term
-    assert {name for name, used in on.items() if used} == {"shape_memory", "muscle", "volume"}
-    for name, counts in got["kernels"].items():
-        if on[name]:  # the serial build of a small scene, not the parallel twins
-            assert counts[0] == 1 and sum(counts) == 1, (name, counts)
-        else:
-            assert sum(counts) == 0, (name, counts)
+    assert got["loops"] == 1
+    assert got["parallel"] == [0, 0]
+    assert got["implicit"] == [0, 0]
+
+
+def test_scenes_with_other_terms_and_a_rigid_part_load_the_first_runs_loop(first_run):
+    """Issue 30: after the first run (membrane_demo: four terms, no rigid part), scenes with
+    other sets of terms (the paper's coupled trunk, the trunk with lungs, the demo without
+    gravity and with a pressure: a set no packaged scene has) load the compiled step loop
+    from the cache: no compile of it in their process."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT), NUMBA_CACHE_DIR=str(first_run["cache"]))
+    proc = subprocess.run([sys.executable, "-c", _OTHER_SCENES], capture_output=True, text=True, env=env, timeout=900)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    got = json.loads(proc.stdout.splitlines()[-1])
+    runs = got["runs"]
+    # the three term sets differ from the first run's and from each other
+    first = ["damping", "gravity", "muscle", "shape_memory", "volume"]
+    assert len({tuple(r) for r in runs.values()} | {tuple(first)}) == 4, runs
+    assert "pressure" in runs["custom"] and "gravity" not in runs["custom"]
+    assert "lungs" in runs["breathing_lungs"]
+    assert got["misses"] == 0 and got["hits"] >= 1, got
 
 
 def _stamped(i):

@@ -424,8 +424,8 @@ class Lungs(Term):
         "lung_par": lambda n: np.zeros(NPAR),
         "lung_sched": lambda n: np.zeros(2, np.int64),
     }
-    # called by name in the step with a switch (`hybrid.step.FORCE_SWITCHES`), so that a scene without
-    # lungs compiles none of their kernels (not through `Term.step_force`, compiled for every scene)
+    # called by name in the step (`hybrid.step.membrane_forces`): implicit Euler treats their load in
+    # its solve, so the step needs more of them than `Term.step_force` gives
     wall_height_m: float = param("positive", hi=10.0)
     floor: object = param("selector", "diaphragm")
     lung_elastance_cmh2o_per_l: float = param("nonneg", None, hi=1e4)

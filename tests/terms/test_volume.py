@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 from numba import njit
 
-from hybrid.loop import run_steps
+from hybrid.loop import membrane_only, run_steps
 from hybrid.mesh import uv_sphere
 from hybrid.mesh import volume as face_volume
 from hybrid.mesh import volume_gradient as face_volume_gradient
@@ -40,7 +40,7 @@ from hybrid.scene import (
     Volume,
 )
 from hybrid.simulation import Simulation
-from hybrid.step import S_PRESSURE, membrane_forces, new_control, new_state, step_switches
+from hybrid.step import S_PRESSURE, membrane_forces, new_control, new_state, step_par
 
 VOLUME_RTOL = 1e-12  # the issue's bound; see the module docstring for why it is reachable
 
@@ -114,15 +114,14 @@ def _face_volume(face, pos):
 
 
 @njit(error_model="numpy")
-def _steps_checking_volume(arrays, state, control, frames, nstep, step0, face, v0, err, switches):
+def _steps_checking_volume(arrays, state, control, frames, rig, nstep, step0, face, v0, err, par):
     """nstep single compiled steps (the very loop Simulation.step runs, one step
-    per call, with the model's switches: `hybrid.step.step_switches`, the terms it
-    lacks not compiled), recording |V - V0| / V0 after each into err[step0 + k].
+    per call, with the model's `par`: `hybrid.step.step_par`), recording |V - V0| / V0 after each into err[step0 + k].
     Not cached on disk: a cache would not notice changes in the core's kernels."""
     stop = np.zeros(1, np.int64)
     for k in range(nstep):
         stop[0] = step0 + k + 1
-        if run_steps(arrays, state, control, stop, step0 + k, frames, None, *switches) != 1:
+        if run_steps(arrays, state, control, stop, step0 + k, frames, rig, par) != 1:
             return k
         err[step0 + k] = abs(_face_volume(face, state.vert_pos) - v0) / v0
     return nstep
@@ -133,7 +132,7 @@ def test_volume_exact_every_step_icosphere_10242():
     (in a compiled loop around the compiled step), after every chunk of 100
     with numpy and trimesh, and for 200 more steps through the public step(1).
     The chunks alternate the serial and the multi-core builds of the step (each
-    the variant `Simulation` compiles for it, `hybrid.step.step_switches`), so both
+    as `Simulation` runs it, `hybrid.step.step_par`), so both
     keep the volume exact over the run."""
     # 4 kg on 10,242 points: m ~ 3.9e-4 kg. Shape memory k = 3000 N/m gives a
     # per-point bound 2/omega ~ 7e-4 s for symplectic Euler (the model reports
@@ -160,12 +159,13 @@ def test_volume_exact_every_step_icosphere_10242():
             sim.state,
             sim.control.arrays,
             sim.frames_buffer(1).arrays(),
+            membrane_only(),
             chunk,
             c * chunk,
             face,
             v0,
             err,
-            step_switches(arrays),
+            step_par(arrays),
         )
         assert done == chunk, f"step failed at {c * chunk + done}: status {sim.state.status}"
         sim.steps_done += done
