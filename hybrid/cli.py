@@ -56,11 +56,11 @@ def _cmd_run(args) -> int:
 #: the CPU seconds a first run's compile takes, membrane only or with a rigid part: measured
 #: by the notice itself ("compiled in ... s of CPU") on an empty NUMBA_CACHE_DIR, `hybrid run
 #: membrane_demo` and `hybrid run` (breathing) --duration 0.01 --no-record on a 2-core machine
-#: under a load of 4-6: 14.2, 14.7, 15.0 s and 16.6, 16.6, 17.0, 21.0, 22.5, 26.0 s of CPU (wall
-#: 26-40 and 25-78 s then); the medians. CPU seconds are steadier than wall seconds on a busy
-#: machine, not constant (cores shared with other programs run slower); re-measure when the
-#: kernels change
-COMPILE_ESTIMATE_S = {"membrane": 15, "rigid": 19}
+#: at a load below 1: 33.1, 30.4 s and 39.5, 33.5, 37.6 s of CPU (the one step loop that
+#: every scene then loads, `hybrid.loop.run_steps`); the medians, rounded. CPU seconds are
+#: steadier than wall seconds on a busy machine, not constant (cores shared with other
+#: programs run slower); re-measure when the kernels change
+COMPILE_ESTIMATE_S = {"membrane": 32, "rigid": 38}
 
 
 def _load_and_run(args, scene) -> int:
