@@ -253,5 +253,41 @@ def write_ellipsoid(folder: Path, family: str, npoint: int, axes_m=ELLIPSOID_AXE
 
 
 #: Roache's factor of safety on a discretisation error estimated from two meshes at an order
-#: not observed but assumed (the grid convergence index; 1.25 where three meshes observe it)
+#: not observed but assumed (the grid convergence index), and on one from three meshes at the order
+#: they observe (Roache 1998, Verification and Validation in Computational Science and Engineering)
 SAFETY_TWO_MESHES = 3.0
+SAFETY_THREE_MESHES = 1.25
+
+
+def family_errors(values, level_errors, ratio: float = 2.0, order: float = 2.0) -> dict:
+    """A family of files of one shape, coarse to fine, the spacing divided by `ratio` a file, and a
+    value of each (the limit of its own levels, known to `level_errors`): each value's estimated
+    distance from the shape's ("sampling": the finest's the grid convergence index of the two
+    finest at the formal `order`, SAFETY_TWO_MESHES |x_n - x_n-1| / (ratio^order - 1); a coarser
+    one's at most its distance to the next plus that one's, each distance widened by both
+    values' level errors), and the family's limit (Richardson at `order`) with its error
+    estimate (its distance from the finest value plus the finest's)."""
+    from hybrid.studies.convergence import richardson
+
+    x, e = list(values), list(level_errors)
+    d = [abs(x[i + 1] - x[i]) + e[i] + e[i + 1] for i in range(len(x) - 1)]
+    sampling = [SAFETY_TWO_MESHES * d[-1] / (ratio**order - 1.0) + e[-1]]
+    for i in reversed(range(len(d))):
+        sampling.insert(0, d[i] + sampling[0])
+    limit = richardson(x, ratio, order=order)[0]
+    return {"values": x, "sampling": sampling, "limit": limit, "limit_error": abs(limit - x[-1]) + sampling[-1]}
+
+
+def limit_allowance(estimate: dict, ratio: float, order: float = 2.0) -> float:
+    """How far a convergence study's limit (`hybrid.studies.convergence.estimate`, one metric)
+    may be from the exact one: its own error estimate where it has one; where it has none (three
+    levels whose order they fit), the grid convergence index of its two finest levels, Fs |x_K -
+    x_K-1| / (ratio^p - 1), plus the limit's distance from the finest level (the index bounds that
+    level's error): Fs = SAFETY_THREE_MESHES at the order the levels show, at most the method's
+    formal `order`, or SAFETY_TWO_MESHES at the formal order where they show none."""
+    if estimate["limit_error_estimate"] is not None:
+        return float(estimate["limit_error_estimate"])
+    x = estimate["value_by_level"]
+    observed = estimate["observed_order_space"]
+    safety, p = (SAFETY_TWO_MESHES, order) if observed is None else (SAFETY_THREE_MESHES, min(observed, order))
+    return safety * abs(x[-1] - x[-2]) / (ratio**p - 1.0) + abs(estimate["limit"] - x[-1])

@@ -37,16 +37,16 @@ import pytest
 from helpers import (
     ELLIPSOID_AXES_M,
     ELLIPSOID_FILES,
-    SAFETY_TWO_MESHES,
     ellipsoid_area_m2,
     ellipsoid_volume_m3,
+    family_errors,
     write_ellipsoid,
 )
 
 from hybrid.body import build_mesh
 from hybrid.mesh import vertex_area
 from hybrid.scene import MeshSpec, Scene
-from hybrid.studies.convergence import RATIO_SPACE_FILE, _limit_error, fit_space, richardson
+from hybrid.studies.convergence import RATIO_SPACE_FILE, _limit_error, fit_space
 
 LEVELS = (0, 1, 2, 3)
 #: the order of both discretisations: the levels' polyhedra inscribed in a smooth surface, and
@@ -64,10 +64,10 @@ def exact(axes_m=ELLIPSOID_AXES_M) -> dict:
     return {"volume_m3": ellipsoid_volume_m3(axes_m), "area_m2": ellipsoid_area_m2(axes_m)}
 
 
-def measure_file(folder, family: str, npoint: int, axes_m=ELLIPSOID_AXES_M) -> dict:
+def measure_file(folder, kind: str, npoint: int, axes_m=ELLIPSOID_AXES_M) -> dict:
     """Per quantity: the file's polyhedron's value (level 0), its levels' values, their fitted
     order, the limit (the file's smooth surface's value) and that limit's error estimate."""
-    path = write_ellipsoid(folder, family, npoint, axes_m)
+    path = write_ellipsoid(folder, kind, npoint, axes_m)
     values: dict = {q: [] for q in QUANTITIES}
     for level in LEVELS:
         mesh = build_mesh(Scene(mesh=MeshSpec(path=str(path), level=level)))
@@ -81,19 +81,11 @@ def measure_file(folder, family: str, npoint: int, axes_m=ELLIPSOID_AXES_M) -> d
     return out
 
 
-def family_errors(files: list, q: str) -> dict:
-    """A family's files (coarse to fine): each surface's value, its estimated distance from the
-    shape's (`sampling`, module docstring), and the family's limit with its error estimate."""
-    x = [f[q]["surface"] for f in files]
-    e = [f[q]["level_error"] for f in files]
-    # each change widened by both values' own error from the levels
-    d = [abs(x[i + 1] - x[i]) + e[i] + e[i + 1] for i in range(len(x) - 1)]
-    gci = SAFETY_TWO_MESHES * d[-1] / (RATIO_SPACE_FILE**ORDER - 1.0)
-    sampling = [gci + e[-1]]
-    for i in reversed(range(len(d))):
-        sampling.insert(0, d[i] + sampling[0])
-    limit = richardson(x, RATIO_SPACE_FILE, order=ORDER)[0]
-    return {"surface": x, "sampling": sampling, "limit": limit, "limit_error": abs(limit - x[-1]) + sampling[-1]}
+def family(files: list, q: str) -> dict:
+    """A family's estimated errors (`helpers.family_errors`) from its files' measurements."""
+    return family_errors(
+        [f[q]["surface"] for f in files], [f[q]["level_error"] for f in files], RATIO_SPACE_FILE, ORDER
+    )
 
 
 @pytest.fixture(scope="module")
@@ -138,8 +130,8 @@ def gaps(measured, q: str, other: str = "irregular") -> tuple[list, list]:
     """At each resolution: the gap between the regular family and `other`, and the sum of their
     estimated errors (both relative to the exact value)."""
     ref = exact()[q]
-    reg, irr = family_errors(measured["regular"], q), family_errors(measured[other], q)
-    gap = [abs(a - b) / ref for a, b in zip(reg["surface"], irr["surface"])]
+    reg, irr = family(measured["regular"], q), family(measured[other], q)
+    gap = [abs(a - b) / ref for a, b in zip(reg["values"], irr["values"])]
     allowed = [(a + b) / ref for a, b in zip(reg["sampling"], irr["sampling"])]
     return gap, allowed
 
@@ -161,10 +153,10 @@ def test_both_families_converge_to_the_ellipsoids_volume_and_area(measured):
     toward their smooth surfaces is what buys it: each file's surface is closer to the shape than
     its polyhedron (measured: 6.3 to 330 times closer, the irregular files the least)."""
     for q, ref in exact().items():
-        fams = {fam: family_errors(measured[fam], q) for fam in ELLIPSOID_FILES}
+        fams = {fam: family(measured[fam], q) for fam in ELLIPSOID_FILES}
         for fam, est in fams.items():
             assert abs(est["limit"] - ref) <= est["limit_error"], (q, fam, est["limit"] / ref - 1, est)
-            for f, surface in zip(measured[fam], est["surface"]):
+            for f, surface in zip(measured[fam], est["values"]):
                 polyhedron = f[q]["levels"][0]
                 assert abs(surface - ref) < 0.5 * abs(polyhedron - ref), (q, fam, surface / ref - 1)
         reg, irr = fams.values()
@@ -178,5 +170,5 @@ def test_a_family_on_a_three_percent_taller_ellipsoid_is_told_apart(measured):
     for q in QUANTITIES:
         gap, allowed = gaps(measured, q, other="taller")
         assert gap[-1] > allowed[-1], (q, gap, allowed)
-        reg, taller = family_errors(measured["regular"], q), family_errors(measured["taller"], q)
+        reg, taller = family(measured["regular"], q), family(measured["taller"], q)
         assert abs(reg["limit"] - taller["limit"]) > reg["limit_error"] + taller["limit_error"], q
