@@ -200,3 +200,94 @@ def dome_scene(lungs, displacement_m, duration_s: float = 4.0, dt_s: float = 1e-
         integrator="symplectic_euler",
         duration_s=duration_s,
     )
+
+
+# ----------------------------------------------------------------- one ellipsoid in two triangulations
+
+#: the ellipsoid of tests/mesh/test_two_triangulations.py and its study (semi-axes, m: a trunk's size)
+ELLIPSOID_AXES_M = (0.15, 0.12, 0.10)
+#: the point counts of its two families of files, coarse to fine, the spacing halved a step (points x 4):
+#: a regular triangulation (an icosphere's, subdivisions 1-3) and an irregular one (`irregular_sphere`:
+#: the spiral points moved at random by up to a third of their spacing, their convex hull)
+ELLIPSOID_FILES = {"regular": (42, 162, 642), "irregular": (40, 160, 640)}
+#: the irregular family's random moves
+ELLIPSOID_SEED = 28
+
+
+def ellipsoid_volume_m3(axes_m=ELLIPSOID_AXES_M) -> float:
+    a, b, c = axes_m
+    return 4.0 / 3.0 * np.pi * a * b * c
+
+
+def ellipsoid_area_m2(axes_m=ELLIPSOID_AXES_M) -> float:
+    """Legendre's closed form, a >= b >= c: 2 pi c^2 + 2 pi a b (E(phi, m) sin^2 phi + F(phi, m)
+    cos^2 phi) / sin phi, cos phi = c / a, m = a^2 (b^2 - c^2) / (b^2 (a^2 - c^2))."""
+    from scipy.special import ellipeinc, ellipkinc
+
+    a, b, c = sorted(axes_m, reverse=True)
+    phi = np.arccos(c / a)
+    m = a * a * (b * b - c * c) / (b * b * (a * a - c * c))
+    s = np.sin(phi)
+    return float(
+        2 * np.pi * c * c + 2 * np.pi * a * b / s * (ellipeinc(phi, m) * s * s + ellipkinc(phi, m) * (1 - s * s))
+    )
+
+
+def ellipsoid_triangulation(family: str, npoint: int, axes_m=ELLIPSOID_AXES_M) -> tuple[np.ndarray, np.ndarray]:
+    """(vert_pos, face_vert) of a family of `ELLIPSOID_FILES`: the unit sphere's points and faces
+    stretched onto the ellipsoid (x a, y b, z c): each point on it; a convex hull stays one."""
+    if family == "regular":
+        sphere = icosphere({42: 1, 162: 2, 642: 3}[npoint])
+    else:
+        from hybrid.mesh import irregular_sphere
+
+        sphere = irregular_sphere(npoint, seed=ELLIPSOID_SEED)
+    return sphere.vert_pos * np.asarray(axes_m), np.array(sphere.face_vert)
+
+
+def write_ellipsoid(folder: Path, family: str, npoint: int, axes_m=ELLIPSOID_AXES_M) -> Path:
+    """The triangulation written as an OBJ file in `folder`; its path."""
+    path = Path(folder) / f"ellipsoid_{family}_{npoint}.obj"
+    Mesh.from_arrays(*ellipsoid_triangulation(family, npoint, axes_m), name=path.stem).save(path)
+    return path
+
+
+#: Roache's factor of safety on a discretisation error estimated from two meshes at an order
+#: not observed but assumed (the grid convergence index), and on one from three meshes at the order
+#: they observe (Roache 1998, Verification and Validation in Computational Science and Engineering)
+SAFETY_TWO_MESHES = 3.0
+SAFETY_THREE_MESHES = 1.25
+
+
+def family_errors(values, level_errors, ratio: float = 2.0, order: float = 2.0) -> dict:
+    """A family of files of one shape, coarse to fine, the spacing divided by `ratio` a file, and a
+    value of each (the limit of its own levels, known to `level_errors`): each value's estimated
+    distance from the shape's ("sampling": the finest's the grid convergence index of the two
+    finest at the formal `order`, SAFETY_TWO_MESHES |x_n - x_n-1| / (ratio^order - 1); a coarser
+    one's at most its distance to the next plus that one's, each distance widened by both
+    values' level errors), and the family's limit (Richardson at `order`) with its error
+    estimate (its distance from the finest value plus the finest's)."""
+    from hybrid.studies.convergence import richardson
+
+    x, e = list(values), list(level_errors)
+    d = [abs(x[i + 1] - x[i]) + e[i] + e[i + 1] for i in range(len(x) - 1)]
+    sampling = [SAFETY_TWO_MESHES * d[-1] / (ratio**order - 1.0) + e[-1]]
+    for i in reversed(range(len(d))):
+        sampling.insert(0, d[i] + sampling[0])
+    limit = richardson(x, ratio, order=order)[0]
+    return {"values": x, "sampling": sampling, "limit": limit, "limit_error": abs(limit - x[-1]) + sampling[-1]}
+
+
+def limit_allowance(estimate: dict, ratio: float, order: float = 2.0) -> float:
+    """How far a convergence study's limit (`hybrid.studies.convergence.estimate`, one metric)
+    may be from the exact one: its own error estimate where it has one; where it has none (three
+    levels whose order they fit), the grid convergence index of its two finest levels, Fs |x_K -
+    x_K-1| / (ratio^p - 1), plus the limit's distance from the finest level (the index bounds that
+    level's error): Fs = SAFETY_THREE_MESHES at the order the levels show, at most the method's
+    formal `order`, or SAFETY_TWO_MESHES at the formal order where they show none."""
+    if estimate["limit_error_estimate"] is not None:
+        return float(estimate["limit_error_estimate"])
+    x = estimate["value_by_level"]
+    observed = estimate["observed_order_space"]
+    safety, p = (SAFETY_TWO_MESHES, order) if observed is None else (SAFETY_THREE_MESHES, min(observed, order))
+    return safety * abs(x[-1] - x[-2]) / (ratio**p - 1.0) + abs(estimate["limit"] - x[-1])

@@ -25,8 +25,10 @@ Time       at each level, Richardson extrapolation of the three steps (two when
 Space      the levels' dt -> 0 values fitted by limit + C h^p over the five
            finest levels (h = r^-K, r the spacing ratio, `fit_space`): the limit, the observed
            order in space p, and the limit's own error estimate (the larger of the
-           fit's rms residual and how far the limit moves when the finest level is
-           left out). Errors are relative to the limit.
+           fit's rms residual and how far the limit moves when the coarsest level is
+           left out, `_limit_error`; none, "-", from exactly three levels whose order
+           they fit: two levels cannot fit an order too). Errors are relative to the
+           limit.
 Work       each run's cost: the process's CPU time of the run (after a warm-up
            that compiles) per simulated second, which other programs on the machine
            do not inflate as they do its wall time; a run under REPEAT_BELOW_S of CPU
@@ -212,28 +214,49 @@ FIT_ORDERS = np.linspace(0.5, 4.0, 351)
 def fit_space(levels, values, nfit: int = FIT_LEVELS, ratio: float = RATIO_SPACE):
     """x_K = limit + C h_K^p over the `nfit` finest levels, h_K = ratio^-K: for each p of
     FIT_ORDERS the least-squares (limit, C), the p of least residual kept. Returns (limit,
-    p or None, rms residual, the limit of the same fit without the finest level or None):
-    p is None when the best order is an end of FIT_ORDERS (no order fits; the limit is
-    then that of p = 1, the formal order of borders that do not follow the mesh). A fit
-    over several levels rather than Richardson's three, as the regions' borders
-    that do not follow the mesh add an error that is not smooth in h."""
+    p or None, rms residual): p is None when the best order is an end of FIT_ORDERS (no
+    order fits; the limit is then that of p = 1, the formal order of borders that do not
+    follow the mesh). A fit over several levels rather than Richardson's three, as the
+    regions' borders that do not follow the mesh add an error that is not smooth in h."""
     lv = np.asarray(levels[-nfit:], float)
     x = np.asarray(values[-nfit:], float)
     h = ratio ** (-lv)
-
-    def solve(p, hh, xx):
-        a = np.stack([np.ones_like(hh), hh**p], axis=1)
-        coef, *_ = np.linalg.lstsq(a, xx, rcond=None)
-        return coef, float(np.sqrt(np.mean((a @ coef - xx) ** 2)))
-
-    fits = [(solve(p, h, x), p) for p in FIT_ORDERS]
+    fits = [(_solve_space(p, h, x), p) for p in FIT_ORDERS]
     (coef, rms), p = min(fits, key=lambda f: f[0][1])
     observed = float(p)
     if p in (FIT_ORDERS[0], FIT_ORDERS[-1]):  # no order fits: the values are not yet asymptotic
         observed, p = None, 1.0  # the formal order of the regions' borders
-        coef, rms = solve(p, h, x)
-    coarser = solve(p, h[:-1], x[:-1])[0][0] if len(x) >= 3 else None
-    return float(coef[0]), observed, rms, (float(coarser) if coarser is not None else None)
+        coef, rms = _solve_space(p, h, x)
+    return float(coef[0]), observed, rms
+
+
+def _solve_space(p: float, h: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, float]:
+    """The least-squares (limit, C) of x = limit + C h^p, and its rms residual."""
+    a = np.stack([np.ones_like(h), h**p], axis=1)
+    coef, *_ = np.linalg.lstsq(a, x, rcond=None)
+    return coef, float(np.sqrt(np.mean((a @ coef - x) ** 2)))
+
+
+def _limit_error(levels, values, limit: float, observed, rms: float, ratio: float, nfit: int = FIT_LEVELS):
+    """The error estimate of `fit_space`'s limit over the same levels: the larger of its rms
+    residual and how far the limit moves when the coarsest of the fit's levels is left out
+    (the least asymptotic: its limit refitted on the finer ones, the order fitted again
+    where `fit_space` fitted it, else at the formal order 1). None where too few levels are
+    left for that fit: exactly three levels whose order they fit (the remaining two fit a
+    limit at a given order, not an order too; the three are fitted to the order grid's spacing, so the rms
+    residual is no estimate either, and leaving out the finest at the fitted order moves
+    nothing: it gave 0, or the FIT_ORDERS grid's spacing, for any three values)."""
+    lv, x = list(levels[-nfit:]), list(values[-nfit:])
+    if observed is None:  # the formal order: two levels fit its limit
+        if len(lv) < 3:
+            return None
+        h = ratio ** (-np.asarray(lv[1:], float))
+        finer = float(_solve_space(1.0, h, np.asarray(x[1:], float))[0][0])
+    else:
+        if len(lv) < 4:
+            return None
+        finer = fit_space(lv[1:], x[1:], nfit=len(lv) - 1, ratio=ratio)[0]
+    return max(rms, abs(limit - finer))
 
 
 def estimate(runs: list, metrics, levels, ratio: float = RATIO_SPACE) -> dict:
@@ -256,9 +279,9 @@ def estimate(runs: list, metrics, levels, ratio: float = RATIO_SPACE) -> dict:
         xs = [x for _, x in per_level]
         lv = [level for level, _ in per_level]
         if len(xs) >= 3:
-            limit, p_obs, rms, coarser = fit_space(lv, xs, ratio=ratio)
+            limit, p_obs, rms = fit_space(lv, xs, ratio=ratio)
             p = 1.0 if p_obs is None else p_obs
-            err_est = max(rms, abs(limit - coarser)) if coarser is not None else rms
+            err_est = _limit_error(lv, xs, limit, p_obs, rms, ratio)
         else:
             limit, p_obs, p = richardson(xs, ratio)
             err_est = None

@@ -78,6 +78,52 @@ def test_estimate_separates_space_and_time_and_recommends_the_cheapest_run():
             assert row["basis"] == "beyond" and row["level"] is None and row["levels_past_finest"] > 2
 
 
+def test_the_limits_error_estimate_leaves_the_coarsest_level_out_and_is_none_from_three_fitted_levels():
+    """The limit's error estimate is how far the limit moves when the coarsest level, the least
+    asymptotic, is left out: large on a law whose coarse level is off its power law, none from
+    exactly three levels whose order they fit (they are fitted exactly, and two cannot fit an
+    order: any figure there would be made up)."""
+    three = estimate(_grid(levels=(0, 1, 2), p=2.0), ("m",), (0, 1, 2))["m"]
+    assert three["observed_order_space"] == pytest.approx(2.0, abs=1e-9)
+    assert three["limit"] == pytest.approx(10.0, rel=1e-9) and three["limit_error_estimate"] is None
+    assert "| m | 10 | - |" in markdown(
+        {
+            "scene": "manufactured",
+            "levels": [0, 1, 2],
+            "steps_per_level": 3,
+            "duration_s": 1.0,
+            "overrides": [],
+            "metrics": ["m"],
+            "estimate": {"m": three},
+            "finest_change": {},
+            "runs": [],
+            "recommendation": [],
+            "failures": [],
+        }
+    )
+    # four levels on the law: the three finer ones give the same limit, an estimate of round-off
+    four = estimate(_grid(levels=(0, 1, 2, 3), p=2.0), ("m",), (0, 1, 2, 3))["m"]
+    assert four["limit_error_estimate"] == pytest.approx(0.0, abs=1e-9)
+    # the coarsest level 5% of the limit off the law: the limit over all four moves (0.094, its
+    # fitted order 3.87) and the estimate is at least that move; leaving the finest level out at
+    # the fitted order, which fits the coarse level's error again, gave 0.015
+    runs = _grid(levels=(0, 1, 2, 3), p=2.0)
+    for r in runs:
+        if r["level"] == 0:
+            r["values"]["m"] += 0.5
+    off = estimate(runs, ("m",), (0, 1, 2, 3))["m"]
+    assert abs(off["limit"] - 10.0) > 1e-3
+    assert off["limit_error_estimate"] >= abs(off["limit"] - 10.0) * (1 - 1e-6)
+    # three levels whose order is not fitted (an oscillation): the formal order 1, whose limit
+    # the two finer levels fit again, gives an estimate
+    runs = _grid(levels=(0, 1, 2), p=1.0)
+    for r in runs:
+        if r["level"] == 1:
+            r["values"]["m"] -= 1.0
+    osc = estimate(runs, ("m",), (0, 1, 2))["m"]
+    assert osc["observed_order_space"] is None and osc["limit_error_estimate"] > 0
+
+
 def check_known_answer(res, limit, p, q, ratio):
     """What `write` computed from runs of x = limit + cs h^p + ct dt (h = ratio^-K):
     the limit, the orders in space and time, and errors that fall by ratio^p a level."""
