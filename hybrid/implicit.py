@@ -449,23 +449,9 @@ def implicit_step(m, s, sched_val, step, imp):
         lungs = m.term_on[T_LUNGS] != 0
         c_lung = lung_rank_one(m, w, h) if lungs else 0.0
         if lungs:
-            k = split_cg(
-                w.mat,
-                w.cg_r,
-                w.cg_x,
-                w.cg_z,
-                w.cg_p,
-                w.cg_q,
-                w.cg_t,
-                w.cg_b,
-                target,
-                cg_max,
-                c_lung,
-                w.lung_gf,
-                w.lung_gh,
-            )
+            k = split_cg(w, target, cg_max, c_lung, w.lung_gf, w.lung_gh)
         else:
-            k = split_cg(w.mat, w.cg_r, w.cg_x, w.cg_z, w.cg_p, w.cg_q, w.cg_t, w.cg_b, target, cg_max)
+            k = split_cg(w, target, cg_max)
         if k < 0:
             gather(rows_of, h, w.res, w.cg_r)
             k = 1 + (

@@ -364,7 +364,7 @@ def half_sweep(mat, u, out):
 
 
 @kernel
-def split_cg(mat, r, x, y, p, q, t, b, target, cg_max, rank_c=0.0, rank_g=None, rank_gh=None):
+def split_cg(w, target, cg_max, rank_c=0.0, rank_g=None, rank_gh=None):
     """x = the solution of A x = r (A the assembled Newton matrix, plus c g g^T when rank_g
     is given: the lungs' rank-one stiffness, `hybrid.implicit_lungs`; vectors (nfree, 3), in the
     matrix's numbering) by the preconditioned conjugate gradients of `hybrid.implicit._solve` in
@@ -382,11 +382,12 @@ def split_cg(mat, r, x, y, p, q, t, b, target, cg_max, rank_c=0.0, rank_g=None, 
     most one iteration in exact arithmetic, where solving A^-1 g apart for Sherman-Morrison took
     a second solve (a smooth vector over the whole dome, 18 iterations against the first's 8 on
     the breathing scene at level 8).
-    # Model: mat.row_ptr, mat.col   # Data in: mat.amat, mat.dinv, mat.gchol, mat.ediag, target, cg_max
+    # Model: w.mat.row_ptr, w.mat.col   # Data in: w.mat.amat, .dinv, .gchol, .ediag, target, cg_max
     # Data in: rank_c (kg/m^4), rank_g (nfree, 3) m^2 or None, rank_gh (nfree, 3): C^-1 rank_g
-    # Data in/out: r (nfree, 3) (out: the recursive C^-1 r)   # Data out: x (nfree, 3)
-    # Scratch: y, p, q, t, b (nfree, 3), mat.acc
+    # Data in/out: r = w.cg_r (nfree, 3) (out: the recursive C^-1 r)   # Data out: x = w.cg_x (nfree, 3)
+    # Scratch: y, p, q, t, b = w.cg_z, w.cg_p, w.cg_q, w.cg_t, w.cg_b (nfree, 3), w.mat.acc
     """
+    mat, r, x, y, p, q, t, b = w.mat, w.cg_r, w.cg_x, w.cg_z, w.cg_p, w.cg_q, w.cg_t, w.cg_b
     g, e = mat.gchol, mat.ediag
     n = r.shape[0]
     for i in range(x.shape[0]):

@@ -353,17 +353,15 @@ def _pointwise_forces(m, s, par, implicit=False):
         if sm:
             shape_memory_frames_parallel(m.sm_vert, m.ring_ptr, m.ring_vert, m.ring_closed, s.vert_pos, s.sm_sums)
         point_forces_parallel(
+            (grav, damp, sm),
             m.vert_free,
             m.vert_mass,
             m.accel,
-            grav,
             m.damp_coef,
-            damp,
             m.sm_vert,
             m.sm_stiff,
             m.sm_coef,
             s.sm_sums,
-            sm,
             s.vert_pos,
             s.vert_vel,
             s.vert_force,
@@ -372,17 +370,15 @@ def _pointwise_forces(m, s, par, implicit=False):
         if sm:
             shape_memory_frames(m.sm_vert, m.ring_ptr, m.ring_vert, m.ring_closed, s.vert_pos, s.sm_sums)
         point_forces_serial(
+            (grav, damp, sm),
             m.vert_free,
             m.vert_mass,
             m.accel,
-            grav,
             m.damp_coef,
-            damp,
             m.sm_vert,
             m.sm_stiff,
             m.sm_coef,
             s.sm_sums,
-            sm,
             s.vert_pos,
             s.vert_vel,
             s.vert_force,
@@ -482,10 +478,7 @@ def _after_integration(m, s, c, t, step, par):
                 h,
                 pos,
                 vel,
-                s.grad,
-                s.dirn,
-                s.cubic,
-                s.vert_acc,
+                (s.grad, s.dirn, s.cubic, s.vert_acc),
                 None,
                 m.volume_shake,
             )
@@ -498,10 +491,7 @@ def _after_integration(m, s, c, t, step, par):
                 h,
                 pos,
                 vel,
-                s.grad,
-                s.dirn,
-                s.cubic,
-                s.vert_acc,
+                (s.grad, s.dirn, s.cubic, s.vert_acc),
                 m.parallel,
                 m.volume_shake,
             )

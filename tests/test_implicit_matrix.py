@@ -156,7 +156,7 @@ def test_eisenstats_conjugate_gradients_take_the_same_iterates_as_the_swept_ones
     from hybrid.implicit_matrix import lower_solve, split_cg, upper_solve
 
     def _solve_split(w, target, cg_max):
-        return split_cg(w.mat, w.cg_r, w.cg_x, w.cg_z, w.cg_p, w.cg_q, w.cg_t, w.cg_b, target, cg_max)
+        return split_cg(w, target, cg_max)
 
     a, rows, face, fib, pf, mat = setup
     n = a.vert_rest.shape[0]
@@ -225,7 +225,7 @@ def test_a_rank_one_term_in_the_conjugate_gradients_costs_at_most_an_iteration_m
 
     def run(*rank, cg_max=10 * n):
         w.cg_r[:] = r
-        k = split_cg(w.mat, w.cg_r, w.cg_x, w.cg_z, w.cg_p, w.cg_q, w.cg_t, w.cg_b, target, cg_max, *rank)
+        k = split_cg(w, target, cg_max, *rank)
         return k, w.cg_x.copy()
 
     plain, _ = run()

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import gc
 import importlib
+import inspect
 import pkgutil
 import re
 
@@ -74,3 +75,17 @@ def test_every_compiled_function_sets_its_arithmetic_flags():
     assert len(found) > len(step_kernels())  # the helpers outside the step are found too
     unset = sorted(name for name, d in found.items() if "fastmath" not in d.targetoptions)
     assert not unset, unset
+
+
+def test_no_kernel_takes_more_than_twelve_parameters():
+    # the step path passes packs (`MembraneArrays`, `MembraneState`, `RigidPack`, tuples of
+    # flags or scratch), not long argument lists: a long list is where a new term's
+    # argument goes in at the wrong place, and every call site must change with it
+    kernels = step_kernels()
+    assert len(kernels) > 100  # the finder sees the whole step (136 kernels when written)
+    long = sorted(
+        f"{name}: {len(inspect.signature(d.py_func).parameters)}"
+        for name, d in kernels.items()
+        if len(inspect.signature(d.py_func).parameters) > 12
+    )
+    assert not long, long

@@ -110,17 +110,15 @@ def _first_at_least(idx, lo):
 
 
 def _point_forces(
+    terms_on,
     vert_free,
     vert_mass,
     accel,
-    gravity_on,
     damp_coef,
-    damping_on,
     sm_vert,
     sm_stiff,
     sm_coef,
     sm_sums,
-    add_sm,
     vert_pos,
     vert_vel,
     vert_force,
@@ -131,12 +129,13 @@ def _point_forces(
     add_sm, the shape memory's second pass (`hybrid.terms.shape_memory.shape_memory_force`,
     its frames already gathered into sm_sums). The points run in chunks of
     CHUNK_VERTS, each walking the sorted sm_vert from its first point on.
-    # Model: vert_free (nvert,) uint8, vert_mass (nvert,) kg, accel (3,) m/s^2,
-    #        damp_coef (nvert,) N s/m; gravity_on, damping_on: bool;
+    # Model: terms_on (gravity_on, damping_on, add_sm): bools; vert_free (nvert,) uint8,
+    #        vert_mass (nvert,) kg, accel (3,) m/s^2, damp_coef (nvert,) N s/m;
     #        sm_vert (nsm,) int32 sorted, sm_stiff (nsm,) N/m, sm_coef (nsm, 3) m
     # Data in: sm_sums (nsm, 9), vert_pos (nvert, 3) m, vert_vel (nvert, 3) m/s
     # Data out: vert_force (nvert, 3) N
     """
+    gravity_on, damping_on, add_sm = terms_on
     n = vert_pos.shape[0]
     nsm = np.uint64(sm_vert.shape[0])
     for c in prange((n + CHUNK_VERTS - 1) // CHUNK_VERTS):

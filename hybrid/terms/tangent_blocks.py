@@ -30,11 +30,12 @@ __all__ = ["membrane_tangent_blocks", "fibre_tangent_blocks", "passive_fibres_ta
 
 
 @kernel(inline="always", fastmath=FAST_NO_FMA)
-def _add_block(mat, s, transpose, v0, v1, v2, v3, v4, v5, v6, v7, v8, diag):
+def _add_block(mat, s, transpose, v, diag):
     """mat[s] += v + diag I (v row-major), or its transpose.
-    # Model: none   # Data in: s, transpose, v0..v8 (a 3x3 block, row-major), diag
+    # Model: none   # Data in: s, transpose, v (9,) tuple (a 3x3 block, row-major), diag
     # Data out: mat[s] (9,), added to
     """
+    v0, v1, v2, v3, v4, v5, v6, v7, v8 = v
     b = mat[s]
     b[0] += v0 + diag
     b[4] += v4 + diag
@@ -104,10 +105,10 @@ def membrane_tangent_blocks(mem_vert, mem_par, cache, kx, kv, slot, amat, pdiag)
                 v6 = cl * qmz * qnx + cu * qnz * qmx + ww * a02
                 v7 = cl * qmz * qny + cu * qnz * qmy + ww * a12
                 v8 = cl * qmz * qnz + cu * qnz * qmz + ww * a22
-                _add_block(amat, s, mem_vert[k, m] > mem_vert[k, n], v0, v1, v2, v3, v4, v5, v6, v7, v8, geo_e)
+                _add_block(amat, s, mem_vert[k, m] > mem_vert[k, n], (v0, v1, v2, v3, v4, v5, v6, v7, v8), geo_e)
                 if m == n:
                     geo_p = kg * (w00 * c[9] + w01 * c[10] + w11 * c[11])
-                    _add_block(pdiag, mem_vert[k, m], False, v0, v1, v2, v3, v4, v5, v6, v7, v8, geo_p)
+                    _add_block(pdiag, mem_vert[k, m], False, (v0, v1, v2, v3, v4, v5, v6, v7, v8), geo_p)
 
 
 @kernel(inline="always", fastmath=FAST_NO_FMA)
@@ -140,15 +141,7 @@ def _edge_blocks(tri, c, slot, scale, rank_e, rank_p, e_col, p_col, amat, pdiag)
                 amat,
                 s,
                 tri[m] > tri[n],
-                re * g0,
-                re * g1,
-                re * g2,
-                re * g3,
-                re * g4,
-                re * g5,
-                re * g6,
-                re * g7,
-                re * g8,
+                (re * g0, re * g1, re * g2, re * g3, re * g4, re * g5, re * g6, re * g7, re * g8),
                 lap_e,
             )
             if m == n:
@@ -157,15 +150,7 @@ def _edge_blocks(tri, c, slot, scale, rank_e, rank_p, e_col, p_col, amat, pdiag)
                     pdiag,
                     tri[m],
                     False,
-                    rp * g0,
-                    rp * g1,
-                    rp * g2,
-                    rp * g3,
-                    rp * g4,
-                    rp * g5,
-                    rp * g6,
-                    rp * g7,
-                    rp * g8,
+                    (rp * g0, rp * g1, rp * g2, rp * g3, rp * g4, rp * g5, rp * g6, rp * g7, rp * g8),
                     lap_p,
                 )
 

@@ -476,9 +476,7 @@ volume_direction_serial, volume_direction_parallel = kernel_twin(_volume_directi
 
 
 @kernel
-def project_volume(
-    ring_ptr, ring_vert, vol0, vert_weight, h, vert_pos, vert_vel, grad, dirn, cubic, chunk_acc, parallel, shake=False
-):
+def project_volume(ring_ptr, ring_vert, vol0, vert_weight, h, vert_pos, vert_vel, scratch, parallel, shake=False):
     """Exact constant-volume projection (paper 4.2-4.3).
 
     X = X* + phi D, D_i = w_i grad_i V(X*) (with `shake`, D as given: the gradient
@@ -500,10 +498,12 @@ def project_volume(
     the quadratic term still moves the volume by about 2.5e-11 per step.
     # Model: ring_ptr, ring_vert (closed fans), vol0 m^3, vert_weight (nvert,) 1/kg
     # Data in/out: vert_pos, vert_vel
-    # Scratch: grad (volume gradient at X*, kept for the rib coupling), dirn, cubic (2,),
-    #          chunk_acc (chunk_count(nvert), >= 3): the sums of each chunk of points
+    # Scratch: scratch = (grad, dirn, cubic, chunk_acc): grad (volume gradient at X*, kept
+    #          for the rib coupling), dirn, cubic (2,), chunk_acc (chunk_count(nvert), >= 3):
+    #          the sums of each chunk of points
     # parallel: as `centroid`
     """
+    grad, dirn, cubic, chunk_acc = scratch
     ref = centroid(vert_pos, chunk_acc, parallel)
     if parallel is not None and parallel:
         _volume_gather_parallel(ring_ptr, ring_vert, ref, vert_weight, vert_pos, grad, dirn, chunk_acc, shake)
