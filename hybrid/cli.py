@@ -17,7 +17,7 @@ import sys
 from pathlib import Path
 
 from .errors import HybridError
-from .kernel import compile_notice, prune_old_caches
+from .kernel import compile_notice, has_cached_build, prune_old_caches
 
 __all__ = ["main"]
 
@@ -49,18 +49,46 @@ def _cmd_run(args) -> int:
     if args.dt is not None:
         scene = dataclasses.replace(scene, dt_s=args.dt)
     # a first run (nothing in the compile cache) says so before it compiles
-    with compile_notice(COMPILE_ESTIMATE_S["rigid" if scene.rigid is not None else "membrane"]):
+    with compile_notice(_compile_estimate(scene)):
         return _load_and_run(args, scene)
 
 
-#: the CPU seconds a first run's compile takes, membrane only or with a rigid part: measured
-#: by the notice itself ("compiled in ... s of CPU") on an empty NUMBA_CACHE_DIR, `hybrid run
-#: membrane_demo` and `hybrid run` (breathing) --duration 0.01 --no-record on a 2-core machine
-#: at a load below 1: 33.1, 30.4 s and 39.5, 33.5, 37.6 s of CPU (the one step loop that
-#: every scene then loads, `hybrid.loop.run_steps`); the medians, rounded. CPU seconds are
-#: steadier than wall seconds on a busy machine, not constant (cores shared with other
-#: programs run slower); re-measure when the kernels change
-COMPILE_ESTIMATE_S = {"membrane": 32, "rigid": 38}
+def _compile_estimate(scene):
+    """The compile notice's estimate (`hybrid.kernel.compile_notice`): a first run's whole
+    compile when the step loop has no cached build; once it has one, only the compile of
+    another build of the loop (implicit Euler's, the multi-core one) is announced, and a
+    scene's few small helpers are said only at the end."""
+    from .loop import loop_build, run_steps
+
+    implicit = scene.integrator == "implicit_euler"
+    first = not has_cached_build(run_steps)
+    whole = COMPILE_ESTIMATE_S["implicit" if implicit else "rigid" if scene.rigid is not None else "membrane"]
+
+    def estimate(dispatcher, arg_types):
+        if first:
+            return whole
+        if dispatcher is run_steps and arg_types is not None:  # another build of the loop
+            return LOOP_BUILD_ESTIMATE_S[loop_build(arg_types)]
+        return None
+
+    return estimate
+
+
+#: the CPU seconds a first run's compile takes (nothing cached), membrane only, with a rigid
+#: part, or under implicit Euler: measured by the notice itself ("compiled in ... s of CPU")
+#: on an empty NUMBA_CACHE_DIR, --duration 0.01 or 0.02 --no-record, on a 2-core machine at a
+#: load below 1: `hybrid run membrane_demo` 33.1, 30.4 s; `hybrid run` (breathing) 39.5, 33.5,
+#: 37.6 s; `hybrid run breathing_lungs --set integrator=implicit_euler --set dt_s=0.01` 145 s
+#: (once). CPU seconds are steadier than wall seconds on a busy machine, not constant (cores
+#: shared with other programs run slower); re-measure when the kernels change
+COMPILE_ESTIMATE_S = {"membrane": 32, "rigid": 38, "implicit": 145}
+
+#: the CPU seconds another build of the one step loop takes once a first run has cached one
+#: (`hybrid.loop.loop_build`), measured the same way, once each: the serial build after the
+#: implicit one, `hybrid run` (breathing) 22.9 s; the multi-core one after those,
+#: `hybrid run membrane_demo --set mesh.level=6` 38.0 s; the implicit one after the serial
+#: one 108 s (with another process on the second core)
+LOOP_BUILD_ESTIMATE_S = {"serial": 23, "parallel": 38, "implicit": 108}
 
 
 def _load_and_run(args, scene) -> int:

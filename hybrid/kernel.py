@@ -66,6 +66,7 @@ __all__ = [
     "kernel_sources",
     "prune_old_caches",
     "compile_notice",
+    "has_cached_build",
     "numba_info",
 ]
 
@@ -329,14 +330,26 @@ def numba_info() -> dict:
     return {"numba": numba.__version__, "numba_threads": numba.get_num_threads()}
 
 
+def has_cached_build(dispatcher) -> bool:
+    """Whether numba's disk cache holds a build of this compiled function for its current
+    source, of any signature (an index from older source counts as none). False where the
+    cache cannot be read (numba's cache internals: a guess, used only for the compile notice)."""
+    try:
+        return bool(dispatcher._cache._cache_file._load_index())
+    except Exception:  # noqa: BLE001 - numba internals moved: assume nothing cached
+        return False
+
+
 @contextlib.contextmanager
 def compile_notice(
-    estimate_cpu_s: float, stream=None, *, tick_s: float = 1.0, line_every_s: float = 10.0, cpu_clock=time.process_time
+    estimate_cpu_s, stream=None, *, tick_s: float = 1.0, line_every_s: float = 10.0, cpu_clock=time.process_time
 ):
     """Say when kernels compile within the block: at the first compile (numba's
     "numba:compile" event fires only when no build is cached, before compiling), one
     line "compiling kernels for this scene, first run only, about N s of CPU" on
-    `stream` (stderr); then, while compiling, the progress: the CPU seconds compiling
+    `stream` (stderr). `estimate_cpu_s`: N, or a function of the compiling function and
+    its argument types giving N, or None for a compile too small to announce (counted,
+    and said at the end, but the line waits for one it gives a number for); then, while compiling, the progress: the CPU seconds compiling
     has taken against the estimate (a bar redrawn on a terminal, else a line every
     10 s), which a busy machine slows but does not falsify (the wall time is shown
     beside it; past the estimate it says so instead of a full bar); at the end of the
@@ -350,7 +363,10 @@ def compile_notice(
 
     stream = sys.stderr if stream is None else stream
     tty = hasattr(stream, "isatty") and stream.isatty()
+    estimate_of = estimate_cpu_s if callable(estimate_cpu_s) else (lambda dispatcher, args: estimate_cpu_s)
     state = {"depth": 0, "t0": None, "spent": 0.0, "since": None, "cpu": 0.0, "cpu_since": None, "shown": -1}
+    state["said"] = False  # the first line written
+    state["estimate"] = 0.0
     lock = threading.Lock()
     done = threading.Event()
 
@@ -370,18 +386,20 @@ def compile_notice(
         return wall, cpu
 
     def words(cpu: float) -> str:
-        if cpu <= estimate_cpu_s:
-            return f"{cpu:.0f} of about {estimate_cpu_s:.0f} s of CPU"
-        return f"{cpu:.0f} s of CPU, longer than the {estimate_cpu_s:.0f} s estimated"
+        estimate = state["estimate"]
+        if cpu <= estimate:
+            return f"{cpu:.0f} of about {estimate:.0f} s of CPU"
+        return f"{cpu:.0f} s of CPU, longer than the {estimate:.0f} s estimated"
 
     def progress() -> None:
         while not done.wait(tick_s):
             with lock:
-                if state["since"] is None:
+                if state["since"] is None or not state["said"]:
                     continue
                 wall, cpu = so_far()
+            estimate = state["estimate"]
             if tty:
-                n = min(int(30 * cpu / estimate_cpu_s), 30) if estimate_cpu_s > 0 else 30
+                n = min(int(30 * cpu / estimate), 30) if estimate > 0 else 30
                 write(f"\r[{'#' * n}{'.' * (30 - n)}] {words(cpu)}, {wall:.0f} s so far")
             elif int(wall // line_every_s) > state["shown"] and wall >= line_every_s:
                 state["shown"] = int(wall // line_every_s)
@@ -395,11 +413,15 @@ def compile_notice(
                     return
                 if state["t0"] is None:
                     state["t0"] = time.perf_counter()
-                    write(
-                        "hybrid: compiling kernels for this scene, first run only, "
-                        f"about {estimate_cpu_s:.0f} s of CPU\n"
-                    )
                     threading.Thread(target=progress, name="hybrid-compile-notice", daemon=True).start()
+                if not state["said"]:
+                    data = ev.data or {}
+                    estimate = estimate_of(data.get("dispatcher"), data.get("args"))
+                    if estimate is not None:
+                        state["said"], state["estimate"] = True, float(estimate)
+                        write(
+                            f"hybrid: compiling kernels for this scene, first run only, about {estimate:.0f} s of CPU\n"
+                        )
                 state["since"], state["cpu_since"] = time.perf_counter(), cpu_clock()
 
         def on_end(self, ev):

@@ -72,6 +72,7 @@ __all__ = [
     "kinetic_energy_of",
     "run_steps",
     "membrane_only",
+    "loop_build",
 ]
 
 LUNGS_ID = Lungs.id
@@ -355,6 +356,15 @@ def carry_wall(wall, site_xpos, wall_pos, wall_vel):
         for a in range(3):
             wall_pos[p, a] += w * (site_xpos[sid, a] - wall.rest[j, a])
             wall_vel[p, a] += w * wall.vel[j, a]
+
+
+def loop_build(arg_types) -> str:
+    """Which build of `run_steps` its argument types make: "implicit" (the state carries
+    implicit Euler's work arrays), else "parallel" (the multi-core passes) or "serial".
+    For the compile notice's estimate (`hybrid.cli`)."""
+    if arg_types[1].types[-1] != types.none:  # MembraneState.implicit
+        return "implicit"
+    return "serial" if arg_types[7] == types.none else "parallel"  # par
 
 
 @kernel

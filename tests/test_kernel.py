@@ -340,3 +340,35 @@ def test_the_compile_notice_is_silent_without_a_compile():
     with compile_notice(8, stream, tick_s=0.005):
         pass
     assert stream.getvalue() == ""
+
+
+def test_the_compile_notice_announces_only_the_compiles_its_estimate_names():
+    """A scene whose step loop is cached compiles a few small helpers: the notice says
+    nothing before them (its estimate gives None) and only the end line; a compile the
+    estimate gives a number for (another build of the loop) is announced with it."""
+    from numba.core import event
+
+    big = object()  # stands for the step loop's dispatcher
+    seen = []
+
+    def estimate(dispatcher, arg_types):
+        seen.append((dispatcher, arg_types))
+        return 30 if dispatcher is big else None
+
+    stream = _Stream(False)
+    with compile_notice(estimate, stream, tick_s=0.005):
+        with event.trigger_event("numba:compile", data={"dispatcher": "helper", "args": ("f8",)}):
+            pass
+    assert seen == [("helper", ("f8",))]
+    lines = stream.getvalue().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("hybrid: compiled in "), lines
+
+    stream = _Stream(False)
+    with compile_notice(estimate, stream, tick_s=0.005):
+        with event.trigger_event("numba:compile", data={"dispatcher": "helper", "args": ()}):
+            pass
+        with event.trigger_event("numba:compile", data={"dispatcher": big, "args": ()}):
+            pass
+    lines = stream.getvalue().splitlines()
+    assert lines[0] == "hybrid: compiling kernels for this scene, first run only, about 30 s of CPU", lines
+    assert lines[-1].startswith("hybrid: compiled in ") and len(lines) == 2
