@@ -229,7 +229,8 @@ def newton_product(m, rows, face, fib, pf, h, project, u, y):
 def _product(m, w, h, project, u, y, rank_c=0.0, rank_g=None):
     """y = the Newton matrix times u ((nfree, 3), the matrix's numbering): assembled, or
     with the Hessian projected element by element (the rare projected Newton iteration,
-    on every point: w.full_u is zero on the fixed ones); plus c g (g . u) when rank_g is given.
+    on every point: w.full_u is zero on the fixed ones); plus c g (g . u) when rank_g is given
+    and c is not 0.
     # Model: w.mat's pattern (free, row_ptr, col); projected: m (vert_mass, damp_coef, term_on), w.rows
     # Data in: project, u (nfree, 3); assembled: w.mat.amat; projected: w.face, w.fib, w.pf, h (s)
     # Data in: rank_c (kg/m^4), rank_g (nfree, 3) m^2 or None (`hybrid.implicit_lungs.lung_rank_one`)
@@ -241,7 +242,7 @@ def _product(m, w, h, project, u, y, rank_c=0.0, rank_g=None):
         scatter(w.mat.free, u, w.full_u)
         newton_product(m, w.rows, w.face, w.fib, w.pf, h, True, w.full_u, w.full_y)
         gather(w.mat.free, 1.0, w.full_y, y)
-    if rank_g is not None:
+    if rank_g is not None and rank_c != 0.0:
         add_rank_one(rank_c, rank_g, u, y)
 
 
@@ -446,19 +447,12 @@ def implicit_step(m, s, sched_val, step, imp):
         eta = min(FORCING, FORCING * tol * max(scale, scale_mean) / rn)
         target = eta * h * rn
         # the lungs' rank-one stiffness in the product (`hybrid.implicit_lungs`)
-        lungs = m.term_on[T_LUNGS] != 0
-        c_lung = lung_rank_one(m, w, h) if lungs else 0.0
-        if lungs:
-            k = split_cg(w, target, cg_max, c_lung, w.lung_gf, w.lung_gh)
-        else:
-            k = split_cg(w, target, cg_max)
+        # (c = 0 without lungs: one build of the solves serves every scene, the term skipped at run time)
+        c_lung = lung_rank_one(m, w, h) if m.term_on[T_LUNGS] != 0 else 0.0
+        k = split_cg(w, target, cg_max, c_lung, w.lung_gf, w.lung_gh)
         if k < 0:
             gather(rows_of, h, w.res, w.cg_r)
-            k = 1 + (
-                _solve(m, w, h, True, target, cg_max, c_lung, w.lung_gf)
-                if lungs
-                else _solve(m, w, h, True, target, cg_max)
-            )
+            k = 1 + _solve(m, w, h, True, target, cg_max, c_lung, w.lung_gf)
             info[I_PROJECTED_TOTAL] += 1
         cg_total += k
         it += 1

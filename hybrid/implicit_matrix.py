@@ -417,7 +417,7 @@ def split_cg(w, target, cg_max, rank_c=0.0, rank_g=None, rank_gh=None):
         lower_solve(mat, q, t)
         for i in range(n):
             _gt(g[i], x[i, 0] + t[i, 0], x[i, 1] + t[i, 1], x[i, 2] + t[i, 2], q, i)
-        if rank_g is not None:  # + c ^g ^g^T p
+        if rank_g is not None and rank_c != 0.0:  # + c ^g ^g^T p
             add_rank_one(rank_c, rank_gh, p, q)
         pq = dot(p, q)
         if not pq > 0.0:  # negative curvature (or p = 0): stop with what we have (truncated Newton)
@@ -462,7 +462,7 @@ def _true_residual(mat, g, y, b, x, q, t, rank_c, rank_g):
         _g(g[i], y[i, 0], y[i, 1], y[i, 2], t, i)
     upper_solve(mat, t, x)
     matrix_product(mat, x, q)
-    if rank_g is not None:
+    if rank_g is not None and rank_c != 0.0:
         add_rank_one(rank_c, rank_g, x, q)
     rr = 0.0
     for i in range(n):
