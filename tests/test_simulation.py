@@ -294,3 +294,22 @@ def test_membrane_only_scene_never_imports_mujoco_and_absent_terms_never_run(tmp
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.split() == ["False", "True"]
+
+
+def test_a_pickled_model_runs_the_compiled_loop_of_the_original(membrane_model):
+    # a sweep's worker receives its model pickled, and numpy unpickles arrays writable: an
+    # array's flag is part of the compiled loop's signature, so without the simulation's
+    # read-only views the worker would compile the whole loop again (a minute on 2 cores)
+    import pickle
+
+    from hybrid.loop import run_steps
+
+    first = Simulation(membrane_model)
+    first.step(3)
+    builds = len(run_steps.signatures)
+    back = pickle.loads(pickle.dumps(membrane_model))
+    assert back.arrays.vert_rest.flags.writeable  # the premise: what pickling gives
+    again = Simulation(back)
+    again.step(3)
+    assert len(run_steps.signatures) == builds
+    np.testing.assert_array_equal(again.vert_pos, first.vert_pos)  # the same run, to the bit
