@@ -77,18 +77,19 @@ def _compile_estimate(scene):
 #: the CPU seconds a first run's compile takes (nothing cached), membrane only, with a rigid
 #: part, or under implicit Euler: measured by the notice itself ("compiled in ... s of CPU")
 #: on an empty NUMBA_CACHE_DIR, --duration 0.01 or 0.02 --no-record, on a 2-core machine at a
-#: load below 1: `hybrid run membrane_demo` 33.1, 30.4 s; `hybrid run` (breathing) 39.5, 33.5,
-#: 37.6 s; `hybrid run breathing_lungs --set integrator=implicit_euler --set dt_s=0.01` 145 s
-#: (once). CPU seconds are steadier than wall seconds on a busy machine, not constant (cores
-#: shared with other programs run slower); re-measure when the kernels change
-COMPILE_ESTIMATE_S = {"membrane": 32, "rigid": 38, "implicit": 145}
+#: load about 1: `hybrid run membrane_demo` 33.1, 30.4 s; `hybrid run` (breathing) 39.5, 33.5,
+#: 37.6, 45.8 s; `hybrid run breathing_lungs --set integrator=implicit_euler --set dt_s=0.01`
+#: 142 s (once; `breathing` so, without lungs, 122 s). CPU seconds are steadier than wall
+#: seconds on a busy machine, not constant (cores shared with other programs run slower);
+#: re-measure when the kernels change
+COMPILE_ESTIMATE_S = {"membrane": 32, "rigid": 38, "implicit": 142}
 
 #: the CPU seconds another build of the one step loop takes once a first run has cached one
-#: (`hybrid.loop.loop_build`), measured the same way, once each: the serial build after the
-#: implicit one, `hybrid run` (breathing) 22.9 s; the multi-core one after those,
-#: `hybrid run membrane_demo --set mesh.level=6` 38.0 s; the implicit one after the serial
-#: one 108 s (with another process on the second core)
-LOOP_BUILD_ESTIMATE_S = {"serial": 23, "parallel": 38, "implicit": 108}
+#: (`hybrid.loop.loop_build`), measured the same way: the serial build after the implicit
+#: one, `hybrid run` (breathing) 22.9, 19.4 s; the multi-core one after those, `hybrid run
+#: membrane_demo --set mesh.level=6` 38.0 s (once); the implicit one after the serial one,
+#: the implicit `breathing_lungs` above, 114 s (once)
+LOOP_BUILD_ESTIMATE_S = {"serial": 21, "parallel": 38, "implicit": 114}
 
 
 def _load_and_run(args, scene) -> int:
