@@ -10,6 +10,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+from typing import Any
 
 import numpy as np
 
@@ -63,7 +64,9 @@ class Simulation:
         # views, always: an array's flag is part of the compiled loop's signature, and a model
         # that was pickled (a sweep's worker) arrives with writable ones, which would compile
         # the whole loop again
-        frozen = {k: _read_only(v) for k, v in model.arrays._asdict().items() if isinstance(v, np.ndarray)}
+        frozen: dict[str, Any] = {
+            k: _read_only(v) for k, v in model.arrays._asdict().items() if isinstance(v, np.ndarray)
+        }
         self._arrays = {p: model.arrays._replace(parallel=p, **frozen) for p in (False, True)}
         self._piece_frame: Frames | None = None  # `_run_piece`'s scratch frame
         self.rigid = None
