@@ -126,6 +126,12 @@ class Model:
     # ("forces['muscle_fibres'].tension_n_per_m", 1) (`hybrid.Control`)
     control_keys: tuple = ()
 
+    def __setstate__(self, state: dict) -> None:
+        # numpy unpickles arrays writable, and an array's flag is part of the compiled
+        # loop's signature: a model pickled to a sweep's worker would compile it again
+        self.__dict__.update(state)
+        _freeze(self.arrays)
+
     @property
     def nvert(self) -> int:
         return self.mesh.nvert
@@ -250,6 +256,14 @@ def auto_dt_implicit(dt_stable_explicit_s: float) -> float:
     return min(nice_floor(IMPLICIT_AUTO_FACTOR * dt_stable_explicit_s), IMPLICIT_AUTO_MAX_S)
 
 
+def _freeze(arrays: MembraneArrays) -> None:
+    """The model's arrays read-only: nothing changes a model, and the compiled loop's
+    signature holds each array's flag (one build for every model)."""
+    for arr in arrays:
+        if isinstance(arr, np.ndarray):
+            arr.flags.writeable = False
+
+
 def compile_scene(scene: Scene) -> Model:
     """Validate `scene` and build its immutable model (see the module docstring).
     dt_s = "auto": the scene is compiled once to estimate its stable step, then with
@@ -352,9 +366,7 @@ def _compile(scene: Scene) -> Model:
         volume_shake=scene.formulation == "continuum",
         parallel=use_parallel(nvert),
     )
-    for arr in arrays:
-        if isinstance(arr, np.ndarray):
-            arr.flags.writeable = False
+    _freeze(arrays)
     terms = tuple(TERMS[i] for i in range(len(TERMS)) if b.term_on[i])
     return Model(
         scene=scene,

@@ -10,7 +10,6 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from typing import Any
 
 import numpy as np
 
@@ -60,14 +59,8 @@ class Simulation:
         _check_model(model)
         self.model = model
         self.builds = BuildChoice(model.arrays.parallel, build)
-        # the model's arrays with each build's flag: what the compiled calls take. Read-only
-        # views, always: an array's flag is part of the compiled loop's signature, and a model
-        # that was pickled (a sweep's worker) arrives with writable ones, which would compile
-        # the whole loop again
-        frozen: dict[str, Any] = {
-            k: _read_only(v) for k, v in model.arrays._asdict().items() if isinstance(v, np.ndarray)
-        }
-        self._arrays = {p: model.arrays._replace(parallel=p, **frozen) for p in (False, True)}
+        # the model's arrays with each build's flag: what the compiled calls take
+        self._arrays = {p: model.arrays._replace(parallel=p) for p in (False, True)}
         self._piece_frame: Frames | None = None  # `_run_piece`'s scratch frame
         self.rigid = None
         if model.rigid is not None:
