@@ -24,15 +24,15 @@ SELF_EXCITATION_DAMPING = 0.15
 BODY_SPAN_MAX_M = 5.0
 
 
-def failure(model, s) -> Exception:
+def failure(model, s, solver=None) -> Exception:
     """The error a failed step's status in state `s` (a `MembraneState`) stands for, with
-    the advice that helps (`advice`)."""
+    the advice that helps (`advice`); solver: the step's solver arrays (`StepWork.solver`)."""
     code, step, vert = int(s.status[0]), int(s.status[1]), int(s.status[2])
     h = model.arrays.dt
     t = step * h
     if code == IMPLICIT_NOT_CONVERGED:
-        assert s.implicit is not None  # the code only implicit Euler's step sets
-        info = s.implicit.info
+        assert solver is not None  # the code only implicit Euler's step sets
+        info = solver.info
         a = model.arrays
         # the iterations ran out: more of them is what helps (a smaller step needs them too)
         capped = int(info[Info.NEWTON]) >= a.implicit_max_iter

@@ -390,13 +390,13 @@ def _volume_gradient(face_vert, pos, grad):
 
 
 @kernel
-def implicit_step(m, s, sched_val, step, imp):
+def implicit_step(m, s, sched_val, step, imp, vert_acc):
     """Step phase 2 for implicit Euler: the free points' new velocities and positions,
-    with the divergence check's sums per chunk of points into s.vert_acc (as
+    with the divergence check's sums per chunk of points into vert_acc (as
     `hybrid.step._integrate`). Returns 0 (done), `IMPLICIT_NOT_CONVERGED` (status
     set, state unchanged) or `EXPLICIT` when imp is None (another integrator).
     # Model: m   # Data in: imp.f_expl (the explicit forces at the step's start), sched_val (the inputs at t)
-    # Data in/out: s.vert_pos, s.vert_vel, imp   # Data out: s.vert_acc, s.status on failure
+    # Data in/out: s.vert_pos, s.vert_vel, imp   # Data out: vert_acc (chunk_count(nvert), 4), s.status on failure
     """
     if imp is None:
         return EXPLICIT
@@ -516,7 +516,7 @@ def implicit_step(m, s, sched_val, step, imp):
     info[I_FORCE] = scale_start
     info[I_FORCE_SUM] += scale_start
     info[I_SOLVED] += 1.0
-    acc = s.vert_acc
+    acc = vert_acc
     for c in range(acc.shape[0]):
         dsum = ke = dmax = 0.0
         far = 0

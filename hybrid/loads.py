@@ -142,7 +142,7 @@ class Loads:
                     link_force = self.sim.rigid.link_forces() - self._extra
                 out[g.label] = link_force[g.rows]
             else:
-                f = np.array(s.vert_force[g.vert])
+                f = np.array(self.sim.work.vert_force[g.vert])
                 if self.exact_volume:
                     f += p * s.grad[g.vert]
                 out[g.label] = f

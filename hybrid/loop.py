@@ -268,12 +268,12 @@ class Frames:
 
 
 @kernel(inline="always")
-def rigid_phase(m, s, t, row, rig):
+def rigid_phase(m, s, w, t, row, rig):
     """Step phase 2 (module docstring): forces to the sites, controls, MuJoCo's step,
     the linked points onto their sites.
     # Model:    m (MembraneArrays); rig.links.vert, .site_id, .site_body, .site_root,
     #           .extra_force; rig.ctrls.act, .sched, .user; rig.rk4; rig.wall (the lungs' carried wall)
-    # Data in:  s.vert_force, s.grad, s.scal[S_PRESSURE] (the last projection's), s.lung_wall_force;
+    # Data in:  w.vert_force, s.grad, s.scal[S_PRESSURE] (the last projection's), w.lung_wall_force;
     #           rig.mj: MuJoCo's state; t (s), the step's time; row: the step's row of rig.hist
     # Data out: MuJoCo's state (through rig.mj.data_ptr), rig.mj.xfrc_applied,
     #           rig.mj.ctrl[rig.ctrls.act] (the rows the user does not set); the linked
@@ -282,7 +282,7 @@ def rigid_phase(m, s, t, row, rig):
     # Scratch:  rig.links.force, .vel, rig.ctrls.val, rig.wall.force, .vel
     """
     links, ctrls, mj, hist = rig.links, rig.ctrls, rig.mj, rig.hist
-    pos, vel, frc, grad = s.vert_pos, s.vert_vel, s.vert_force, s.grad
+    pos, vel, frc, grad = s.vert_pos, s.vert_vel, w.vert_force, s.grad
     link_vert, site_id, link_force, link_vel = links.vert, links.site_id, links.force, links.vel
     xfrc, qpos = mj.xfrc_applied, mj.qpos
     p = s.scal[S_PRESSURE]
@@ -296,7 +296,7 @@ def rigid_phase(m, s, t, row, rig):
             xfrc[wall.site_body[j], a] = 0.0
     point_wrench_kernel(mj.site_xpos, mj.xipos, site_id, links.site_body, link_force, xfrc)
     if wall.point.shape[0]:  # the lungs' wall: its load added to the bodies that carry it
-        _gather_rows(wall.point, s.lung_wall_force, wall.force)
+        _gather_rows(wall.point, w.lung_wall_force, wall.force)
         add_point_wrench_kernel(mj.site_xpos, mj.xipos, wall.site_id, wall.site_body, wall.weight, wall.force, xfrc)
     for j in range(ctrls.act.shape[0]):
         if not ctrls.user[j]:
@@ -351,24 +351,24 @@ def carry_wall(wall, site_xpos, wall_pos, wall_vel):
             wall_vel[p, a] = 0.0
     for j in range(wall.point.shape[0]):
         p = wall.point[j]
-        w = wall.weight[j]
+        share = wall.weight[j]
         sid = wall.site_id[j]
         for a in range(3):
-            wall_pos[p, a] += w * (site_xpos[sid, a] - wall.rest[j, a])
-            wall_vel[p, a] += w * wall.vel[j, a]
+            wall_pos[p, a] += share * (site_xpos[sid, a] - wall.rest[j, a])
+            wall_vel[p, a] += share * wall.vel[j, a]
 
 
 def loop_build(arg_types) -> str:
-    """Which build of `run_steps` its argument types make: "implicit" (the state carries
-    implicit Euler's work arrays), else "parallel" (the multi-core passes) or "serial".
+    """Which build of `run_steps` its argument types make: "implicit" (the step's work
+    carries implicit Euler's), else "parallel" (the multi-core passes) or "serial".
     For the compile notice's estimate (`hybrid.cli`)."""
-    if arg_types[1].types[-1] != types.none:  # MembraneState.implicit
+    if arg_types[2].types[-1] != types.none:  # StepWork.solver
         return "implicit"
-    return "serial" if arg_types[7] == types.none else "parallel"  # par
+    return "serial" if arg_types[8] == types.none else "parallel"  # par
 
 
 @kernel
-def run_steps(m, s, c, stops, step0, frames, rig, par=True):
+def run_steps(m, s, w, c, stops, step0, frames, rig, par=True):
     """Steps (module docstring) to each step index of stops, capturing a frame at each
     (a stop at the current step captures it without stepping). Returns the frames
     captured: fewer than stops when a step fails, its status then in s.status
@@ -376,6 +376,7 @@ def run_steps(m, s, c, stops, step0, frames, rig, par=True):
     same times however a run is cut into calls (a checkpoint, frames, timed pieces).
     # Model:    m (MembraneArrays); rig (RigidPack): the rigid part, or `membrane_only`'s empty pack
     # Data in:  s (MembraneState) at step step0; c (ControlArrays): the inputs;
+    #           w (StepWork): the step's work arrays and its solver's;
     #           stops (nframe,) int64 increasing step indices from step0
     # Data out: s, c.value and c.value_next (the scheduled rows), MuJoCo's state after the steps done;
     #           frames (FrameArrays): frame i at stops[i]
@@ -387,10 +388,10 @@ def run_steps(m, s, c, stops, step0, frames, rig, par=True):
     for f in range(stops.shape[0]):
         for k in range(stops[f] - done):
             t = origin + (done + k) * h
-            membrane_forces(m, s, c, t, par)
+            membrane_forces(m, s, w, c, t, par)
             if rig.coupled:
-                rigid_phase(m, s, t, done - step0 + k, rig)
-            if membrane_advance(m, s, c, t, done + k, par) != OK:
+                rigid_phase(m, s, w, t, done - step0 + k, rig)
+            if membrane_advance(m, s, w, c, t, done + k, par) != OK:
                 return f
             s.scal[S_TIME] = origin + (done + k + 1) * h
         done = stops[f]

@@ -29,6 +29,7 @@ from .step import (
     S_TIME,
     new_control,
     new_state,
+    new_work,
     step_par,
 )
 from .terms.volume import face_volume
@@ -88,6 +89,7 @@ class Simulation:
     def reset(self) -> None:
         """Back to rest at t = 0."""
         self.state = new_state(self.model.arrays)
+        self.work = new_work(self.model.arrays, self.state)  # the step's scratch and its solver's arrays
         self.steps_done = 0
         self.failed: Exception | None = None
         if self.rigid is not None:
@@ -121,7 +123,7 @@ class Simulation:
     @property
     def vert_force(self) -> np.ndarray:
         """(nvert, 3) N, the forces of the last step before its constraints, a read-only view."""
-        return _read_only(self.state.vert_force)
+        return _read_only(self.work.vert_force)
 
     @property
     def volume(self) -> float:
@@ -230,7 +232,15 @@ class Simulation:
         step0 = self.steps_done
         rig = _MEMBRANE_ONLY if self.rigid is None else self.rigid.pack(int(stops[-1]) - step0)
         count = run_steps(
-            arrays, self.state, self.control.arrays, stops, step0, frames.arrays(first), rig, step_par(arrays)
+            arrays,
+            self.state,
+            self.work,
+            self.control.arrays,
+            stops,
+            step0,
+            frames.arrays(first),
+            rig,
+            step_par(arrays),
         )
         if self.rigid is not None:
             done = (int(stops[-1]) if count == len(stops) else int(self.state.status[1])) - step0
@@ -309,7 +319,7 @@ class Simulation:
 
     def _raise(self) -> None:
         """Raise the failure the state records (`hybrid.diagnosis.failure`); further steps refuse."""
-        self.failed = failure(self.model, self.state)
+        self.failed = failure(self.model, self.state, self.work.solver)
         raise self.failed
 
     def suggest_dt(self) -> float:
@@ -322,7 +332,7 @@ class Simulation:
         """A copy of the run's state (`hybrid.State`): `set_state(state)` restarts from it
         bit for bit, in this `Simulation` or another of the same model."""
         s = self.state
-        imp = s.implicit
+        imp = self.work.solver
         return State(
             steps_done=int(self.steps_done),
             vert_pos=s.vert_pos.copy(),
@@ -343,7 +353,7 @@ class Simulation:
         s, model = self.state, self.model
         want = {
             "vert_pos": s.vert_pos.shape,
-            "implicit_dv": None if s.implicit is None else s.implicit.dv.shape,
+            "implicit_dv": None if self.work.solver is None else self.work.solver.dv.shape,
             "mj_state": None if self.rigid is None else self.rigid.mj_state().shape,
         }
         for name, shape in want.items():
@@ -363,9 +373,9 @@ class Simulation:
         if state.lung_wall_pos is not None and state.lung_wall_vel is not None:
             s.lung_wall_pos[:] = state.lung_wall_pos
             s.lung_wall_vel[:] = state.lung_wall_vel
-        if s.implicit is not None:
-            s.implicit.dv[:] = state.implicit_dv
-            s.implicit.info[:] = state.implicit_info
+        if self.work.solver is not None:
+            self.work.solver.dv[:] = state.implicit_dv
+            self.work.solver.info[:] = state.implicit_info
         if self.rigid is not None:
             assert state.mj_state is not None  # its shape checked above
             self.rigid.set_mj_state(state.mj_state)
@@ -438,9 +448,9 @@ class Simulation:
             s.vert_pos[:] = pos
             s.scal[S_PRESSURE] = s.scal[S_PHI] = 0.0
             s.grad[:] = 0.0
-            if s.implicit is not None:  # implicit Euler's warm start and carried pressure: the old state's
-                s.implicit.dv[:] = 0.0
-                s.implicit.info[Info.PRESSURE] = 0.0
+            if self.work.solver is not None:  # implicit Euler's warm start and carried pressure: the old state's
+                self.work.solver.dv[:] = 0.0
+                self.work.solver.info[Info.PRESSURE] = 0.0
         if vel is not None:
             s.vert_vel[:] = vel
         if time_s is not None:

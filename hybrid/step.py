@@ -94,8 +94,10 @@ __all__ = [
     "Scal",
     "StepStatus",
     "MembraneState",
+    "StepWork",
     "FrameColumn",
     "new_state",
+    "new_work",
     "ControlArrays",
     "new_control",
     "membrane_forces",
@@ -129,63 +131,80 @@ OK, DIVERGED_NONFINITE, DIVERGED_RUNAWAY, VOLUME_FAILED = StepStatus
 
 
 class MembraneState(NamedTuple):
-    """What changes during a run. vert_pos (nvert, 3) m; vert_vel (nvert, 3) m/s;
-    vert_force (nvert, 3) N (forces of the last step, before constraints);
-    grad (nvert, 3) m^2 volume gradient at the last projection; face_force (nface_m, 6) N:
-    the membrane triangles' forces (parallel build's scratch); sm_sums (nsm, 9),
-    dirn, cubic: scratch; vert_acc (chunk_count(nvert), 4): scratch, the sums
-    of the per-point passes over each chunk of points (hybrid.kernel);
+    """What a step advances (a checkpoint's `hybrid.State` copies it). vert_pos (nvert, 3) m;
+    vert_vel (nvert, 3) m/s; grad (nvert, 3) m^2: the volume gradient at the last
+    projection (with a rigid part the next step sends p grad_i V to the ribs);
     scal: time s, pressure Pa, phi, kinetic energy J, largest step displacement m;
     status: code, failing step, worst vertex, projection status;
     term_calls (nterm,): how many times each term's kernel ran;
     lung (NLUNG,): the lungs' compartment at the last step's start (`hybrid.terms.lungs.LungSlot`);
     lung_wall_pos (nwall, 3) m, lung_wall_vel (nwall, 3) m/s: the cavity wall's points, which
-    the rigid bodies carry; lung_wall_force (nwall, 3) N: the pleural load on them (to their bodies);
-    lung_scratch (5, nvert, 3): the occluded airway's projection (empty rows without lungs);
-    implicit: implicit Euler's work arrays (hybrid.implicit), None for the other integrators."""
+    the rigid bodies carry."""
 
     vert_pos: np.ndarray
     vert_vel: np.ndarray
-    vert_force: np.ndarray
     grad: np.ndarray
-    face_force: np.ndarray
-    sm_sums: np.ndarray
-    vert_acc: np.ndarray
-    dirn: np.ndarray
-    cubic: np.ndarray
     scal: np.ndarray
     status: np.ndarray
     term_calls: np.ndarray
     lung: np.ndarray
     lung_wall_pos: np.ndarray
     lung_wall_vel: np.ndarray
+
+
+class StepWork(NamedTuple):
+    """What a step writes before it reads: not state, never in a checkpoint. vert_force
+    (nvert, 3) N: the step's forces before its constraints (`Simulation.vert_force`);
+    face_force (nface_m, 6) N: the membrane triangles' forces (the multi-core build's);
+    sm_sums (nsm, 9): the shape memory's ring sums; vert_acc (chunk_count(nvert), 4): the
+    per-point passes' sums over each chunk of points (hybrid.kernel); dirn (nvert, 3), cubic
+    (2,): the volume projection's; lung_wall_force (nwall, 3) N: the pleural load on the
+    cavity wall (to its bodies); lung_scratch (5, nvert, 3): the occluded airway's
+    projection (empty rows without lungs); solver: the solver's own arrays
+    (`hybrid.implicit_work`): implicit Euler's `ImplicitWork` (its warm start and carried
+    pressure, which a checkpoint keeps, and its Newton work arrays), None for the explicit
+    integrators."""
+
+    vert_force: np.ndarray
+    face_force: np.ndarray
+    sm_sums: np.ndarray
+    vert_acc: np.ndarray
+    dirn: np.ndarray
+    cubic: np.ndarray
     lung_wall_force: np.ndarray
     lung_scratch: np.ndarray
-    implicit: ImplicitWork | None = None
+    solver: ImplicitWork | None = None
 
 
 def new_state(arrays: MembraneArrays) -> MembraneState:
+    """The state before a first step: the points at rest, the lungs at rest."""
     n = arrays.vert_rest.shape[0]
-    wall_pos, wall_vel = arrays.lung_wall.copy(), np.zeros_like(arrays.lung_wall)
     return MembraneState(
         vert_pos=arrays.vert_rest.copy(),
         vert_vel=np.zeros((n, 3)),
-        vert_force=np.zeros((n, 3)),
         grad=np.zeros((n, 3)),
+        scal=np.zeros(8),
+        status=np.zeros(4, np.int64),
+        term_calls=np.zeros(len(TERMS), np.int64),
+        lung=_lung_start(arrays),
+        lung_wall_pos=arrays.lung_wall.copy(),
+        lung_wall_vel=np.zeros_like(arrays.lung_wall),
+    )
+
+
+def new_work(arrays: MembraneArrays, state: MembraneState) -> StepWork:
+    """The step's work arrays for the model's arrays, with its solver's (for `state`'s wall)."""
+    n = arrays.vert_rest.shape[0]
+    return StepWork(
+        vert_force=np.zeros((n, 3)),
         face_force=np.zeros((arrays.mem_vert.shape[0], 6)),
         sm_sums=np.zeros((arrays.sm_vert.shape[0], 9)),
         vert_acc=np.zeros((chunk_count(n), 4)),
         dirn=np.zeros((n, 3)),
         cubic=np.zeros(2),
-        scal=np.zeros(8),
-        status=np.zeros(4, np.int64),
-        term_calls=np.zeros(len(TERMS), np.int64),
-        lung=_lung_start(arrays),
-        lung_wall_pos=wall_pos,
-        lung_wall_vel=wall_vel,
         lung_wall_force=np.zeros_like(arrays.lung_wall),
         lung_scratch=np.zeros((5, n if arrays.lung_face.shape[0] else 0, 3)),
-        implicit=implicit_work(arrays, wall_pos, wall_vel),
+        solver=implicit_work(arrays, state.lung_wall_pos, state.lung_wall_vel),
     )
 
 
@@ -228,36 +247,36 @@ def eval_schedules(sched, user, t, out):
 
 
 @kernel(inline="always")
-def membrane_forces(m, s, c, t, par=True):
+def membrane_forces(m, s, w, c, t, par=True):
     """Step phase 1: the force of every term the model has (its flag in m.term_on), at
     time t. `par`: None when the model never runs the multi-core build (`step_par`),
     which is then not even compiled; else m.parallel chooses at run time.
     # Model: m (MembraneArrays)   # Data in: s.vert_pos, s.vert_vel
-    # Data out: s.vert_force, c.value, s.term_calls (and pressure for soft volume)
+    # Data out: w.vert_force, c.value, s.term_calls (and pressure for soft volume)
     """
     eval_schedules(m.sched, c.user, t, c.value)
     on = m.term_on
     # implicit Euler: the terms it treats implicitly once, kept for its solve (`implicit_start_forces`)
     implicit = m.integrator == IMPLICIT_ID
-    _pointwise_forces(m, s, par, implicit)
+    _pointwise_forces(m, s, w, par, implicit)
     if on[T_MEMBRANE] and not implicit:
         if par is not None and m.parallel:
-            membrane_faces_parallel(m.mem_vert, m.mem_par, m.kv_on, s.vert_pos, s.vert_vel, s.face_force)
-            membrane_gather_parallel(m.mvf_ptr, m.mvf_slot, s.face_force, s.vert_force)
+            membrane_faces_parallel(m.mem_vert, m.mem_par, m.kv_on, s.vert_pos, s.vert_vel, w.face_force)
+            membrane_gather_parallel(m.mvf_ptr, m.mvf_slot, w.face_force, w.vert_force)
         else:
-            add_membrane_serial(m.mem_vert, m.mem_par, m.kv_on, s.vert_pos, s.vert_vel, s.vert_force)
+            add_membrane_serial(m.mem_vert, m.mem_par, m.kv_on, s.vert_pos, s.vert_vel, w.vert_force)
         s.term_calls[T_MEMBRANE] += 1
     if on[T_APPLIED]:
-        add_applied(m.app_vert, m.app_sched, c.value, s.vert_force)
+        add_applied(m.app_vert, m.app_sched, c.value, w.vert_force)
         s.term_calls[T_APPLIED] += 1
     if on[T_ATTRACTION]:
-        add_attraction(m.att_vert, m.att_stiff, m.att_target, m.att_sched, c.value, s.vert_pos, s.vert_force)
+        add_attraction(m.att_vert, m.att_stiff, m.att_target, m.att_sched, c.value, s.vert_pos, w.vert_force)
         s.term_calls[T_ATTRACTION] += 1
     if on[T_MASS_SPRING]:
-        add_mass_spring(m.spring_vert, m.spring_stiff, m.spring_rest, s.vert_pos, s.vert_force)
+        add_mass_spring(m.spring_vert, m.spring_stiff, m.spring_rest, s.vert_pos, w.vert_force)
         s.term_calls[T_MASS_SPRING] += 1
     if on[T_MUSCLE]:
-        add_muscle(m.mus_vert, m.mus_nbr, m.mus_sched, c.value, s.vert_pos, s.vert_force)
+        add_muscle(m.mus_vert, m.mus_nbr, m.mus_sched, c.value, s.vert_pos, w.vert_force)
         s.term_calls[T_MUSCLE] += 1
     if on[T_SOFT_VOLUME]:
         s.scal[S_PRESSURE] = soft_volume_force(
@@ -268,29 +287,29 @@ def membrane_forces(m, s, c, t, par=True):
             m.soft_bulk,
             s.vert_pos,
             s.grad,
-            s.cubic,
-            s.vert_acc,
-            s.vert_force,
+            w.cubic,
+            w.vert_acc,
+            w.vert_force,
         )
         s.term_calls[T_SOFT_VOLUME] += 1
     if on[T_PRESSURE]:
-        add_pressure(m.ring_ptr, m.ring_vert, m.pres_sched, c.value, s.vert_pos, s.vert_force)
+        add_pressure(m.ring_ptr, m.ring_vert, m.pres_sched, c.value, s.vert_pos, w.vert_force)
         s.term_calls[T_PRESSURE] += 1
     if on[T_MUSCLE_FIBRES] and not implicit:
-        add_muscle_fibres(m.fib_vert, m.fib_par, m.fib_sched, c.value, s.vert_pos, s.vert_force)
+        add_muscle_fibres(m.fib_vert, m.fib_par, m.fib_sched, c.value, s.vert_pos, w.vert_force)
         s.term_calls[T_MUSCLE_FIBRES] += 1
     if on[T_PASSIVE_FIBRES] and not implicit:
-        add_passive_fibres(m.pf_vert, m.pf_par, s.vert_pos, s.vert_force)
+        add_passive_fibres(m.pf_vert, m.pf_par, s.vert_pos, w.vert_force)
         s.term_calls[T_PASSIVE_FIBRES] += 1
     if on[T_LUNGS]:
-        lungs_step_force(m, s, c)
+        lungs_step_force(m, s, w, c)
         s.term_calls[T_LUNGS] += 1
     for term in literal_unroll(STEP_FORCES):  # the terms that bring their own kernel (`Term.step_force`)
         tid = term[0]
         if tid >= 0 and on[tid]:
-            term[1](m, s, c)
+            term[1](m, s, w, c)
             s.term_calls[tid] += 1
-    if implicit_start_forces(m, c.value, s.vert_pos, s.vert_vel, s.implicit, s.vert_force):
+    if implicit_start_forces(m, c.value, s.vert_pos, s.vert_vel, w.solver, w.vert_force):
         for k in (T_MEMBRANE, T_MUSCLE_FIBRES, T_PASSIVE_FIBRES):
             s.term_calls[k] += on[k]
 
@@ -339,19 +358,19 @@ _integrate_serial, _integrate_parallel = kernel_twin(_integrate)
 
 
 @kernel(inline="always")
-def _pointwise_forces(m, s, par, implicit=False):
+def _pointwise_forces(m, s, w, par, implicit=False):
     """Step phase 1 for gravity, damping and shape memory: the shape memory's
     ring gathers, then the fused pass
     `hybrid.terms.pointwise.point_forces` (serial or parallel build).
     # Model: m (term_on, accel, damp_coef, sm_*, ring_*, vert_free, vert_mass)   # Data in: s.vert_pos, s.vert_vel
-    # Data out: s.vert_force (added to), s.term_calls   # Scratch: s.sm_sums
+    # Data out: w.vert_force (added to), s.term_calls   # Scratch: w.sm_sums
     """
     on = m.term_on
     sm = on[T_SHAPE_MEMORY] != 0
     grav, damp = on[T_GRAVITY] != 0, on[T_DAMPING] != 0 and not implicit  # implicit Euler's drag: its own
     if par is not None and m.parallel:
         if sm:
-            shape_memory_frames_parallel(m.sm_vert, m.ring_ptr, m.ring_vert, m.ring_closed, s.vert_pos, s.sm_sums)
+            shape_memory_frames_parallel(m.sm_vert, m.ring_ptr, m.ring_vert, m.ring_closed, s.vert_pos, w.sm_sums)
         point_forces_parallel(
             (grav, damp, sm),
             m.vert_free,
@@ -361,14 +380,14 @@ def _pointwise_forces(m, s, par, implicit=False):
             m.sm_vert,
             m.sm_stiff,
             m.sm_coef,
-            s.sm_sums,
+            w.sm_sums,
             s.vert_pos,
             s.vert_vel,
-            s.vert_force,
+            w.vert_force,
         )
     else:
         if sm:
-            shape_memory_frames(m.sm_vert, m.ring_ptr, m.ring_vert, m.ring_closed, s.vert_pos, s.sm_sums)
+            shape_memory_frames(m.sm_vert, m.ring_ptr, m.ring_vert, m.ring_closed, s.vert_pos, w.sm_sums)
         point_forces_serial(
             (grav, damp, sm),
             m.vert_free,
@@ -378,10 +397,10 @@ def _pointwise_forces(m, s, par, implicit=False):
             m.sm_vert,
             m.sm_stiff,
             m.sm_coef,
-            s.sm_sums,
+            w.sm_sums,
             s.vert_pos,
             s.vert_vel,
-            s.vert_force,
+            w.vert_force,
         )
     s.term_calls[T_GRAVITY] += on[T_GRAVITY]
     s.term_calls[T_DAMPING] += on[T_DAMPING]
@@ -389,38 +408,38 @@ def _pointwise_forces(m, s, par, implicit=False):
 
 
 @kernel(inline="always")
-def membrane_advance(m, s, c, t, step, par=True):
+def membrane_advance(m, s, w, c, t, step, par=True):
     """Step phases 2-5: integrate, project, check. Returns a status code. `par`: as
     `membrane_forces`.
-    # Model: m   # Data in: s.vert_force   # Data out: s.vert_pos, s.vert_vel, s.scal, s.status
+    # Model: m   # Data in: w.vert_force   # Data out: s.vert_pos, s.vert_vel, s.scal, s.status
     """
     pos, vel = s.vert_pos, s.vert_vel
     # the projection's direction where the step starts
     if m.volume_shake and m.term_on[T_VOLUME]:
         if par is not None and m.parallel:
-            volume_direction_parallel(m.ring_ptr, m.ring_vert, m.vert_weight, pos, s.dirn)
+            volume_direction_parallel(m.ring_ptr, m.ring_vert, m.vert_weight, pos, w.dirn)
         else:
-            volume_direction_serial(m.ring_ptr, m.ring_vert, m.vert_weight, pos, s.dirn)
-    code = implicit_step(m, s, c.value, step, s.implicit)  # implicit Euler (hybrid.implicit), else EXPLICIT
+            volume_direction_serial(m.ring_ptr, m.ring_vert, m.vert_weight, pos, w.dirn)
+    code = implicit_step(m, s, c.value, step, w.solver, w.vert_acc)  # implicit Euler (hybrid.implicit), else EXPLICIT
     if code == EXPLICIT:
         if par is not None and m.parallel:
-            _integrate_parallel(m.vert_free, m.vert_mass, m.integrator == 0, m.dt, s.vert_force, pos, vel, s.vert_acc)
+            _integrate_parallel(m.vert_free, m.vert_mass, m.integrator == 0, m.dt, w.vert_force, pos, vel, w.vert_acc)
         else:
-            _integrate_serial(m.vert_free, m.vert_mass, m.integrator == 0, m.dt, s.vert_force, pos, vel, s.vert_acc)
+            _integrate_serial(m.vert_free, m.vert_mass, m.integrator == 0, m.dt, w.vert_force, pos, vel, w.vert_acc)
     elif code != OK:
         return code
-    code = _after_integration(m, s, c, t, step, par)
+    code = _after_integration(m, s, w, c, t, step, par)
     if code == OK and m.term_on[T_VOLUME]:  # implicit Euler's solve carried part of the pressure
-        s.scal[S_PRESSURE] = implicit_pressure(s.implicit, s.scal[S_PRESSURE])
+        s.scal[S_PRESSURE] = implicit_pressure(w.solver, s.scal[S_PRESSURE])
     return code
 
 
 @kernel(inline="always")
-def _after_integration(m, s, c, t, step, par):
+def _after_integration(m, s, w, c, t, step, par):
     """Step phases 3-5 after `_integrate`: check, local constraints, volume. Returns a status code.
-    # Model: m   # Data in: s.vert_acc (the integration's sums per chunk), c.user
+    # Model: m   # Data in: w.vert_acc (the integration's sums per chunk), c.user
     # Data in/out: s.vert_pos, s.vert_vel   # Data out: s.scal, s.status on failure, s.grad, c.value_next
-    # Scratch: s.dirn, s.cubic
+    # Scratch: w.dirn, w.cubic
     """
     h = m.dt
     pos, vel = s.vert_pos, s.vert_vel
@@ -428,7 +447,7 @@ def _after_integration(m, s, c, t, step, par):
     dsum = 0.0
     worst = 0
     ke = 0.0
-    acc = s.vert_acc
+    acc = w.vert_acc
     for ch in range(acc.shape[0]):  # the chunks in order: both builds agree, the first largest step wins
         dsum += acc[ch, 0]
         ke += acc[ch, 1]
@@ -456,7 +475,7 @@ def _after_integration(m, s, c, t, step, par):
         s.term_calls[T_KEEP_IN] += 1
     if on[T_LUNGS] and s.lung[L_OCCLUDED] > 0.0:  # the occluded airway: both volumes
         abdomen = on[T_VOLUME] != 0
-        phi, phi_hold, held = project_occluded(m, s, h, abdomen)
+        phi, phi_hold, held = project_occluded(m, s, w, h, abdomen)
         s.term_calls[T_VOLUME] += abdomen
         if not held:
             s.status[3] = PROJ_NO_ROOT
@@ -478,7 +497,7 @@ def _after_integration(m, s, c, t, step, par):
                 h,
                 pos,
                 vel,
-                (s.grad, s.dirn, s.cubic, s.vert_acc),
+                (s.grad, w.dirn, w.cubic, w.vert_acc),
                 None,
                 m.volume_shake,
             )
@@ -491,7 +510,7 @@ def _after_integration(m, s, c, t, step, par):
                 h,
                 pos,
                 vel,
-                (s.grad, s.dirn, s.cubic, s.vert_acc),
+                (s.grad, w.dirn, w.cubic, w.vert_acc),
                 m.parallel,
                 m.volume_shake,
             )

@@ -268,7 +268,7 @@ def test_the_wall_follows_its_ribs_and_hands_them_its_load_through_the_blend():
             want[b, 3:] += np.cross(site_xpos[s] - xipos[b], f)
 
     add(sys_.site_id, sys_.site_body, cpl.link_forces())
-    wall_f = sys_.wall_weight[:, None] * sim.state.lung_wall_force[sys_.wall_point]
+    wall_f = sys_.wall_weight[:, None] * sim.work.lung_wall_force[sys_.wall_point]
     add(sys_.wall_site_id, rib, wall_f)
     scale = np.abs(want).max()
     assert np.max(np.abs(xfrc - want)) <= 1e-12 * scale  # the same sums in another order
@@ -293,7 +293,7 @@ def test_implicit_euler_holds_the_lungs_in_its_solve():
     imp = hybrid.run(sim, 4.0)["summary"]
     for key in ("tidal_volume_l", "apex_descent_mm", "rib_lift_mm"):
         assert imp[key] == pytest.approx(ref[key], rel=0.01), key
-    info = sim.state.implicit.info
+    info = sim.work.solver.info
     assert info[Info.NEWTON_TOTAL] <= 444 and info[Info.CG_TOTAL] <= 1873
 
 
@@ -372,7 +372,7 @@ def test_the_diaphragm_alone_draws_the_upper_ribs_in_and_with_their_muscles_both
         f = d.xfrc_applied[body, :3]
         sys_ = sim.rigid.system
         mine = sys_.wall_site_body == body
-        want = (sys_.wall_weight[mine, None] * sim.state.lung_wall_force[sys_.wall_point[mine]]).sum(axis=0)
+        want = (sys_.wall_weight[mine, None] * sim.work.lung_wall_force[sys_.wall_point[mine]]).sum(axis=0)
         assert np.allclose(f, want, rtol=1e-9, atol=1e-12)
     (lo0, up0), (lo1, up1) = angles[0.0], angles[1.0]
     assert lo0 > 0 > up0  # the diaphragm alone: the lower ribs rise, the upper ones are drawn in

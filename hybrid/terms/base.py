@@ -180,7 +180,7 @@ def order_terms(classes) -> None:
 
 
 @kernel(inline="always")
-def no_force(m, s, c):
+def no_force(m, s, w, c):
     """The end of `registered_forces`: adds nothing.
     # Model: none   # Data in: none   # Data out: none
     """
@@ -207,9 +207,10 @@ class Term:
     formulations: ClassVar[tuple] = FORMULATIONS
     #: the array whose rows are triangles (n, 3): each row kept when any of its corners moves
     triangle_rows: ClassVar[str | None] = None
-    #: the kernel `step_force(m, s, c)` the step calls for a force term it has no call of
+    #: the kernel `step_force(m, s, w, c)` the step calls for a force term it has no call of
     #: its own for (`registered_forces`): m the model's arrays (this term's among them),
-    #: s the state (its vert_pos, vert_vel in, vert_force added to), c the inputs
+    #: s the state (its vert_pos, vert_vel in), w the step's work (its vert_force added to),
+    #: c the inputs
     step_force: ClassVar[object] = None
 
     def check_formulation(self, formulation: str, what: str) -> None:

@@ -247,7 +247,7 @@ def _two_volumes(face_vert, lung_face, ref, pos, wall, g1, g2, abdomen):
 
 
 @kernel
-def project_occluded(m, s, h, abdomen):
+def project_occluded(m, s, w, h, abdomen):
     """The occluded airway: the cavity's volume held at s.lung[HELD_VOLUME] exactly, with the
     abdomen's at m.vol0 when `abdomen` (both constraints share the dome's points). After free
     integration to X*, X = X* + phi1 d1 + phi2 d2, d_k = w_i grad_i V_k(X*) (w = 1/m on the
@@ -256,11 +256,11 @@ def project_occluded(m, s, h, abdomen):
     pressure and the occlusion's pleural pressure (Pa).
     # Model: m.face_vert, m.lung_face, m.lung_par, m.vol0, m.vert_weight   # Data in: s.lung[HELD_VOLUME], wall
     # Data in/out: s.vert_pos, s.vert_vel   # Data out: s.grad (the abdomen's gradient at X*)
-    # Scratch: s.lung_scratch (5, nvert, 3)
+    # Scratch: w.lung_scratch (5, nvert, 3)
     """
-    sc = s.lung_scratch
+    sc = w.lung_scratch
     x0, d1, d2, g1, g2 = sc[0], sc[1], sc[2], sc[3], sc[4]
-    pos, vel, w = s.vert_pos, s.vert_vel, m.vert_weight
+    pos, vel, weight = s.vert_pos, s.vert_vel, m.vert_weight
     ref = m.lung_par[P_REF:]
     wall = s.lung_wall_pos
     n = pos.shape[0]
@@ -268,8 +268,8 @@ def project_occluded(m, s, h, abdomen):
     for i in range(n):
         for a in range(3):
             x0[i, a] = pos[i, a]
-            d1[i, a] = w[i] * g1[i, a]
-            d2[i, a] = w[i] * g2[i, a]
+            d1[i, a] = weight[i] * g1[i, a]
+            d2[i, a] = weight[i] * g2[i, a]
             s.grad[i, a] = g1[i, a]
     t1, t2 = m.vol0, s.lung[L_HELD]
     tol1, tol2 = 16 * 2.0**-52 * abs(t1), 16 * 2.0**-52 * abs(t2)
@@ -358,12 +358,12 @@ def lung_load(par, pao, vol, rate):
 
 
 @kernel(inline="always")
-def lungs_step_force(m, s, c):
+def lungs_step_force(m, s, w, c):
     """The step's call (`Term.step_force`): the lumped law at the step's start (module
     docstring), its readouts into s.lung, the pleural load on the cavity's points.
     # Model: m.lung_face, m.lung_par, m.lung_sched, m.vert_free
     # Data in: s.vert_pos, s.vert_vel, s.lung_wall_pos, s.lung_wall_vel, c.value, s.lung[HOLD_PRESSURE]
-    # Data out: s.vert_force (added to), s.lung_wall_force (the wall's, to its bodies), s.lung (`LungSlot`)
+    # Data out: w.vert_force (added to), w.lung_wall_force (the wall's, to its bodies), s.lung (`LungSlot`)
     """
     par = m.lung_par
     ref = par[P_REF:]
@@ -384,11 +384,11 @@ def lungs_step_force(m, s, c):
     s.lung[L_AIRWAY] = pao
     # implicit Euler adds the membrane points' share in its solve (`hybrid.implicit.implicit_forces`)
     add_cavity_pressure(
-        m.lung_face, ref, load, s.vert_pos, wall, s.vert_force, s.lung_wall_force, m.integrator != IMPLICIT_EULER
+        m.lung_face, ref, load, s.vert_pos, wall, w.vert_force, w.lung_wall_force, m.integrator != IMPLICIT_EULER
     )
     hold = s.lung[L_HOLD] if occluded else 0.0  # the occlusion's last pressure, to the bodies (as the abdomen's)
     if hold != 0.0:
-        add_hold_pressure(m.lung_face, ref, hold, s.vert_pos, wall, m.vert_free, s.vert_force, s.lung_wall_force)
+        add_hold_pressure(m.lung_face, ref, hold, s.vert_pos, wall, m.vert_free, w.vert_force, w.lung_wall_force)
     s.lung[L_HOLD] = hold
     s.lung[L_PLEURAL] += hold
     s.lung[L_ALVEOLAR] += hold

@@ -13,7 +13,7 @@ from hybrid.model import compile_scene
 from hybrid.regions import Ball, HalfSpace
 from hybrid.scene import Masses, MuscleFibres, Scene
 from hybrid.schedule import Breathing, evaluate
-from hybrid.step import membrane_forces, new_control, new_state
+from hybrid.step import membrane_forces, new_control, new_state, new_work
 from hybrid.terms.fibres import add_muscle_fibres, fibre_shares
 from hybrid.terms.tangents import fibre_energy
 
@@ -34,8 +34,9 @@ def _model(mesh, tension=40.0):
 def _forces(model, pos, t=0.0):
     state = new_state(model.arrays)
     state.vert_pos[:] = pos
-    membrane_forces(model.arrays, state, new_control(model.arrays), t)
-    return state.vert_force.copy()
+    work = new_work(model.arrays, state)
+    membrane_forces(model.arrays, state, work, new_control(model.arrays), t)
+    return work.vert_force.copy()
 
 
 @pytest.mark.parametrize("family", LEVELS)

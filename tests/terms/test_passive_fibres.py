@@ -11,7 +11,7 @@ from hybrid.errors import SceneError
 from hybrid.mesh import fibonacci_sphere, ring_sphere, uv_sphere
 from hybrid.model import compile_scene
 from hybrid.scene import Masses, PassiveFibres, Scene
-from hybrid.step import membrane_forces, new_control, new_state
+from hybrid.step import membrane_forces, new_control, new_state, new_work
 from hybrid.terms.passive_fibres import passive_fibres_energy
 
 R = 0.1
@@ -32,8 +32,9 @@ def _model(mesh, **direction):
 def _forces(model, pos):
     state = new_state(model.arrays)
     state.vert_pos[:] = pos
-    membrane_forces(model.arrays, state, new_control(model.arrays), 0.0)
-    return state.vert_force.copy()
+    work = new_work(model.arrays, state)
+    membrane_forces(model.arrays, state, work, new_control(model.arrays), 0.0)
+    return work.vert_force.copy()
 
 
 def _area(mesh):

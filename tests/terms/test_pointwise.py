@@ -19,7 +19,7 @@ def test_step_forces_are_the_terms_added_point_by_point(subdivisions, parallel):
     import dataclasses
 
     from hybrid.bench import bench_membrane
-    from hybrid.step import membrane_forces, new_control, new_state
+    from hybrid.step import membrane_forces, new_control, new_state, new_work
 
     model = compile_scene(bench_membrane(subdivisions))
     model = dataclasses.replace(model, arrays=model.arrays._replace(parallel=parallel))
@@ -29,7 +29,8 @@ def test_step_forces_are_the_terms_added_point_by_point(subdivisions, parallel):
     state = new_state(a)
     state.vert_pos[:] = a.vert_rest + rng.normal(scale=1e-3, size=a.vert_rest.shape)
     state.vert_vel[:] = rng.normal(scale=1e-2, size=a.vert_rest.shape)
-    membrane_forces(a, state, new_control(a), 0.0)
+    work = new_work(a, state)
+    membrane_forces(a, state, work, new_control(a), 0.0)
     want = np.where(a.vert_free[:, None] > 0, a.vert_mass[:, None] * a.accel[None, :], 0.0)
     want -= a.damp_coef[:, None] * state.vert_vel
     add_shape_memory(
@@ -43,4 +44,4 @@ def test_step_forces_are_the_terms_added_point_by_point(subdivisions, parallel):
         np.zeros((a.sm_vert.size, 9)),
         want,
     )
-    np.testing.assert_allclose(state.vert_force, want, rtol=0, atol=1e-13 * np.abs(want).max())
+    np.testing.assert_allclose(work.vert_force, want, rtol=0, atol=1e-13 * np.abs(want).max())

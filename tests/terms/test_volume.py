@@ -40,7 +40,7 @@ from hybrid.scene import (
     Volume,
 )
 from hybrid.simulation import Simulation
-from hybrid.step import S_PRESSURE, membrane_forces, new_control, new_state, step_par
+from hybrid.step import S_PRESSURE, membrane_forces, new_control, new_state, new_work, step_par
 
 VOLUME_RTOL = 1e-12  # the issue's bound; see the module docstring for why it is reachable
 
@@ -114,14 +114,14 @@ def _face_volume(face, pos):
 
 
 @njit(error_model="numpy")
-def _steps_checking_volume(arrays, state, control, frames, rig, nstep, step0, face, v0, err, par):
+def _steps_checking_volume(arrays, state, work, control, frames, rig, nstep, step0, face, v0, err, par):
     """nstep single compiled steps (the very loop Simulation.step runs, one step
     per call, with the model's `par`: `hybrid.step.step_par`), recording |V - V0| / V0 after each into err[step0 + k].
     Not cached on disk: a cache would not notice changes in the core's kernels."""
     stop = np.zeros(1, np.int64)
     for k in range(nstep):
         stop[0] = step0 + k + 1
-        if run_steps(arrays, state, control, stop, step0 + k, frames, rig, par) != 1:
+        if run_steps(arrays, state, work, control, stop, step0 + k, frames, rig, par) != 1:
             return k
         err[step0 + k] = abs(_face_volume(face, state.vert_pos) - v0) / v0
     return nstep
@@ -157,6 +157,7 @@ def test_volume_exact_every_step_icosphere_10242():
         done = _steps_checking_volume(
             arrays,
             sim.state,
+            sim.work,
             sim.control.arrays,
             sim.frames_buffer(1).arrays(),
             membrane_only(),
@@ -286,14 +287,15 @@ def test_soft_volume_force_is_the_attraction_to_the_volume_satisfying_points():
         state = new_state(model.arrays)
         pos = mesh.vert_pos * scale + rng.normal(scale=1e-3, size=mesh.vert_pos.shape)
         state.vert_pos[:] = pos
-        membrane_forces(model.arrays, state, new_control(model.arrays), 0.0)
+        work = new_work(model.arrays, state)
+        membrane_forces(model.arrays, state, work, new_control(model.arrays), 0.0)
         phi, g = _soft_phi(pos, mesh.face_vert, mesh.volume())
         p = state.scal[S_PRESSURE]
         assert np.sign(p) == sign
         # phi is the root of a cubic whose constant term, V - V0 ~ 3e-2 V0, is a
         # difference of volumes: relative roundoff ~ eps / 3e-2, far below 1e-10
         assert p == pytest.approx(k * phi, rel=1e-10)
-        np.testing.assert_allclose(state.vert_force, k * phi * g, rtol=0, atol=1e-10 * np.abs(k * phi * g).max())
+        np.testing.assert_allclose(work.vert_force, k * phi * g, rtol=0, atol=1e-10 * np.abs(k * phi * g).max())
         assert (mesh.volume(pos) - mesh.volume()) * sign < 0  # compressed <=> p > 0
 
 
