@@ -10,6 +10,7 @@ fails still writes what it recorded.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import gc
 import math
@@ -44,13 +45,26 @@ def _cmd_run(args) -> int:
         # (0.15 s of CPU of a warm 0.01 s run)
         gc.disable()
 
-    # everything that can be refused is, before the output folder is touched
-    scene = resolve_scene(args.scene, overrides=args.set or (), without=args.without or ())
-    if args.dt is not None:
-        scene = dataclasses.replace(scene, dt_s=args.dt)
-    # a first run (nothing in the compile cache) says so before it compiles
-    with compile_notice(_compile_estimate(scene)):
-        return _load_and_run(args, scene)
+    with _figure_process(args) as drawer:
+        # everything that can be refused is, before the output folder is touched
+        scene = resolve_scene(args.scene, overrides=args.set or (), without=args.without or ())
+        if args.dt is not None:
+            scene = dataclasses.replace(scene, dt_s=args.dt)
+        # a first run (nothing in the compile cache) says so before it compiles
+        with compile_notice(_compile_estimate(scene)):
+            return _load_and_run(args, scene, drawer)
+
+
+def _figure_process(args):
+    """As a command, the run's figure is drawn by a process of its own started now
+    (`hybrid.pictures.run_figure.FigureProcess`): it imports matplotlib, 0.45 s of a warm
+    run's 1.9, on the other core while this one imports, checks and steps. Not for main()
+    called in a program, which keeps its own matplotlib from one figure to the next."""
+    if not args.own_process or "matplotlib.figure" in sys.modules:
+        return contextlib.nullcontext(None)
+    from .pictures.run_figure import FigureProcess
+
+    return FigureProcess()
 
 
 def _compile_estimate(scene):
@@ -92,7 +106,7 @@ COMPILE_ESTIMATE_S = {"membrane": 32, "rigid": 38, "implicit": 142}
 LOOP_BUILD_ESTIMATE_S = {"serial": 21, "parallel": 38, "implicit": 114}
 
 
-def _load_and_run(args, scene) -> int:
+def _load_and_run(args, scene, drawer=None) -> int:
     from .model import compile_scene
     from .provenance import run_provenance
     from .run import claim_folder, default_out, run_steps
@@ -134,7 +148,7 @@ def _load_and_run(args, scene) -> int:
     if args.own_process:
         _collector_resumed()
     try:
-        return _run_into(args, sim, duration, chosen, provenance)
+        return _run_into(args, sim, duration, chosen, provenance, drawer)
     finally:
         lock.release()
 
@@ -160,7 +174,7 @@ def _collector_resumed() -> None:
     gc.enable()
 
 
-def _run_into(args, sim, duration: float, out: Path, provenance: dict) -> int:
+def _run_into(args, sim, duration: float, out: Path, provenance: dict, drawer=None) -> int:
     """The run, its folder locked. summary.json says "running" from the start, then
     "ok", "failed" or "interrupted": never an earlier run's. SIGINT (Ctrl-C), SIGTERM
     and SIGHUP stop the run after its current compiled call (a second one at once);
@@ -219,7 +233,7 @@ def _run_into(args, sim, duration: float, out: Path, provenance: dict) -> int:
                     recorder.close()
             if args.own_process:  # the figure's library lives to the end too: paused again
                 gc.disable()
-            write_outputs(result, out)
+            write_outputs(result, out, drawer=drawer)
             if getattr(args, "respiratory_rate_hz", None) is not None:  # the trace's spill is still open here
                 from .respiratory import write_lab_csv
 

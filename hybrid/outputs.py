@@ -41,6 +41,7 @@ __all__ = [
     "write_outputs",
     "plot_name",
     "plot_trace",
+    "figure_series",
     "trace_figure",
     "PLOT_BINS",
 ]
@@ -401,36 +402,17 @@ def plot_name(scene_name: str) -> str:
     return f"{scene_name}.png"
 
 
-def write_outputs(result: dict, out_dir: Path, *, plot: bool = True) -> None:
-    """Write summary.json (and the plot, `plot_name`) into out_dir."""
+def write_outputs(result: dict, out_dir: Path, *, plot: bool = True, drawer=None) -> None:
+    """Write summary.json (and the plot, `plot_name`) into out_dir. `drawer`: as `plot_trace`."""
     out_dir.mkdir(parents=True, exist_ok=True)
     write_summary(result["summary"], out_dir)
     if plot:
         scene = result["summary"]["scene"]
-        plot_trace(result["trace"], out_dir / plot_name(scene), title=scene)
+        plot_trace(result["trace"], out_dir / plot_name(scene), title=scene, drawer=drawer)
 
 
 #: a plot draws each series' lowest and highest value in this many runs of frames
 PLOT_BINS = 2000
-
-# the panels a plot may have, in order: (series, label, log scale); `muscle_n_per_m`'s
-# label is the trace's own (`Trace.about["muscle"]`: a stiffness or a fibre tension)
-_PANELS = (
-    ("rib_lift_mm", "rib lift (mm)", False),
-    ("apex_descent_mm", "apex descent (mm)", False),
-    ("volume_rel_error", "volume error |V - V0| / V0", True),
-    ("volume_rel_change", "volume change |V - V0| / V0", False),
-    ("pressure_pa", "pressure (Pa)", False),
-    ("muscle_n_per_m", "muscle (N/m)", False),
-    ("lung_volume_change_l", "lung volume\nabove rest (L)", False),
-    ("flow_l_per_s", "flow in (L/s)", False),
-    ("pleural_pressure_cmh2o", "pleural pressure,\nPoes (cmH2O)", False),
-)
-# the lungs' pressures that are 0 at rest, one panel (cmH2O): (series, legend)
-_LUNG_PRESSURES = (
-    ("alveolar_pressure_cmh2o", "alveolar"),
-    ("transdiaphragmatic_pressure_change_cmh2o", "Pdi - Pdi(rest)"),
-)
 #: points at most of a diagram's loop (every k-th frame: x and y of the same frames)
 DIAGRAM_POINTS = 4000
 
@@ -452,43 +434,43 @@ def _diagrams(trace) -> dict | None:
     return d if np.isfinite(d["lung_volume_change_l"]).any() else None
 
 
-def _campbell(ax, d: dict, about: dict) -> None:
-    """Pleural pressure against lung volume, with the lungs' static recoil line (no
-    flow, airway open): the loop's width off the line is the airway's resistance."""
-    vol, ppl = d["lung_volume_change_l"], d["pleural_pressure_cmh2o"]
-    ax.plot(ppl, vol, lw=1)
-    e, recoil = about["lung_elastance_cmh2o_per_l"], about["resting_recoil_cmh2o"]
-    span = np.array([min(0.0, np.nanmin(vol)), max(0.0, np.nanmax(vol))])
-    ax.plot(-recoil - e * span, span, "k--", lw=0.8, label=f"static recoil, E = {e:.3g} cmH2O/L")
-    ax.set_xlabel("pleural pressure, Poes (cmH2O)", fontsize=8)
-    ax.set_ylabel("lung volume above rest (L)", fontsize=8)
-    ax.set_title("Campbell diagram", fontsize=9)
-    ax.legend(fontsize=7, loc="best")
+def figure_series(trace) -> dict:
+    """What the run's figure draws (`hybrid.pictures.run_figure.draw`), arrays and names
+    only: the envelope of each series drawn ("t_s" and a key each), "panels" (series,
+    label, log scale) for what the scene has, "about" and "diagrams" (or None)."""
+    from .pictures.run_figure import LUNG_PRESSURES, PANELS
+
+    a = trace.envelope(PLOT_BINS)
+    about = getattr(trace, "about", {})
+    panels: list = [(key, label, log) for key, label, log in PANELS if np.isfinite(a[key]).any()]
+    if any(key == "volume_rel_error" for key, _, _ in panels):  # the change is the error then
+        panels = [p for p in panels if p[0] != "volume_rel_change"]
+    panels = [
+        (k, about.get("muscle") or lab, log) if k == "muscle_n_per_m" else (k, lab, log) for k, lab, log in panels
+    ]
+    if np.isfinite(a[LUNG_PRESSURES[0][0]]).any():
+        panels.append((LUNG_PRESSURES, "pressure change\n(cmH2O)", False))
+    drawn = {"t_s"} | {name for k, _, _ in panels for name in ([s for s, _ in k] if isinstance(k, tuple) else [k])}
+    return {
+        **{k: np.asarray(a[k]) for k in drawn},
+        "panels": panels,
+        "about": dict(about),
+        "diagrams": _diagrams(trace),
+    }
 
 
-def _konno_mead(ax, d: dict) -> None:
-    """Rib cage against abdominal displacement (L), the lung volume change's parts: the
-    abdomen's wall, and the rib cage's two (the cavity's wall and the abdominal rib cage);
-    isovolume lines at 45 degrees."""
-    vol = d["lung_volume_change_l"]
-    abdomen = d["abdomen_volume_change_l"]
-    rib = d["rib_cage_pulmonary_volume_change_l"] + d["rib_cage_abdominal_volume_change_l"]
-    ax.plot(abdomen, rib, lw=1)
-    top = float(np.nanmax(np.abs(np.concatenate([abdomen, rib, vol]))))
-    for level in np.linspace(0.0, float(np.nanmax(vol)), 3)[1:]:
-        ax.plot([level - top, level + top], [top, -top], color="0.7", lw=0.6)
-    ax.set_xlim(min(0.0, np.nanmin(abdomen)) - 0.1 * top, max(0.0, np.nanmax(abdomen)) + 0.1 * top)
-    ax.set_ylim(min(0.0, np.nanmin(rib)) - 0.1 * top, max(0.0, np.nanmax(rib)) + 0.1 * top)
-    ax.set_xlabel("abdomen (L)", fontsize=8)
-    ax.set_ylabel("rib cage: pulmonary + abdominal (L)", fontsize=8)
-    ax.set_title("Konno-Mead diagram", fontsize=9)
+def plot_trace(trace, path: Path, *, title: str = "", drawer=None) -> None:
+    """`trace_figure(trace, title)` into `path` as PNG, replaced whole. `drawer`: a
+    `hybrid.pictures.run_figure.FigureProcess` that draws it in a process of its own;
+    drawn here without one, or when that process failed."""
+    from .pictures.run_figure import png_bytes
 
-
-def plot_trace(trace, path: Path, *, title: str = "") -> None:
-    """`trace_figure(trace, title)` into `path` as PNG, replaced whole."""
-    fig = trace_figure(trace, title=title)
+    series = figure_series(trace)
+    png = drawer.png(series, title) if drawer is not None else None
+    if png is None:
+        png = png_bytes(series, title=title)
     with replaced(path, "wb") as f:
-        fig.savefig(f, dpi=100, format="png")
+        f.write(png)
 
 
 def trace_figure(trace, *, title: str = ""):
@@ -499,54 +481,7 @@ def trace_figure(trace, *, title: str = ""):
     (stiffness or fibre tension, as `trace.about["muscle"]` says); with lungs, the lung
     volume, the flow, the pleural pressure and, in one panel, the alveolar pressure and
     the transdiaphragmatic pressure's change, and under them a Campbell diagram and, with a region named "diaphragm", a
-    Konno-Mead diagram (docs/outputs.md). A figure of its own, outside pyplot's (whose
-    import costs a run 0.1 s of CPU more): nothing to close, drawn by Agg as PNG."""
-    from matplotlib.figure import Figure
+    Konno-Mead diagram (docs/outputs.md). Drawn by `hybrid.pictures.run_figure.draw`."""
+    from .pictures.run_figure import draw
 
-    a = trace.envelope(PLOT_BINS)
-    about = getattr(trace, "about", {})
-    panels: list = [(key, label, log) for key, label, log in _PANELS if np.isfinite(a[key]).any()]
-    if any(key == "volume_rel_error" for key, _, _ in panels):  # the change is the error then
-        panels = [p for p in panels if p[0] != "volume_rel_change"]
-    panels = [
-        (k, about.get("muscle") or lab, log) if k == "muscle_n_per_m" else (k, lab, log) for k, lab, log in panels
-    ]
-    if np.isfinite(a[_LUNG_PRESSURES[0][0]]).any():
-        panels.append((_LUNG_PRESSURES, "pressure change\n(cmH2O)", False))
-    diagrams = _diagrams(trace)
-    konno = diagrams is not None and np.isfinite(diagrams["abdomen_volume_change_l"]).any()
-    # fixed margins: tight_layout took half a second of every run
-    below = 3.6 if diagrams is not None else 0.0  # the diagrams' row (inches)
-    height = 1.2 + 1.6 * len(panels) + below
-    fig = Figure(figsize=(7, height))
-    grid = fig.add_gridspec(
-        len(panels), 1, left=0.13, right=0.97, top=1 - 0.45 / height, bottom=(0.55 + below) / height, hspace=0.15
-    )
-    axes = []
-    for i, (key, label, log) in enumerate(panels):
-        ax = fig.add_subplot(grid[i, 0], sharex=axes[0] if axes else None)
-        axes.append(ax)
-        if isinstance(key, tuple):  # several series, one unit
-            for series, legend in key:
-                ax.plot(a["t_s"], a[series], label=legend)
-            ax.legend(fontsize=7, loc="best", ncol=len(key))
-        elif log:
-            ax.semilogy(a["t_s"], np.maximum(a[key], 1e-17))
-        else:
-            ax.plot(a["t_s"], a[key])
-        ax.set_ylabel(label, fontsize=8)
-        ax.grid(alpha=0.3)
-        if i < len(panels) - 1:
-            ax.tick_params(labelbottom=False)
-    axes[-1].set_xlabel("time (s)")
-    axes[0].set_title(title)
-    if diagrams is not None:
-        row = fig.add_gridspec(1, 2, left=0.13, right=0.97, top=(below - 0.5) / height, bottom=0.5 / height, wspace=0.4)
-        ax = fig.add_subplot(row[0, 0])
-        _campbell(ax, diagrams, about)
-        ax.grid(alpha=0.3)
-        if konno:
-            ax = fig.add_subplot(row[0, 1])
-            _konno_mead(ax, diagrams)
-            ax.grid(alpha=0.3)
-    return fig
+    return draw(figure_series(trace), title=title)

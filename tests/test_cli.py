@@ -145,7 +145,7 @@ def test_a_file_system_error_during_a_run_is_one_line_with_status_74(tmp_path, m
 
     runner = importlib.import_module("hybrid.run")  # the module (`hybrid.run` is its function)
 
-    def full_disk(result, out):
+    def full_disk(result, out, **_):
         raise OSError(errno.ENOSPC, "No space left on device", str(out / "summary.json"))
 
     monkeypatch.setattr(runner, "write_outputs", full_disk)
