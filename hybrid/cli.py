@@ -18,6 +18,7 @@ import sys
 from pathlib import Path
 
 from .errors import HybridError
+from .integrators import is_implicit
 from .kernel import compile_notice, has_cached_build, prune_old_caches
 
 __all__ = ["main"]
@@ -74,7 +75,7 @@ def _compile_estimate(scene):
     scene's few small helpers are said only at the end."""
     from .loop import loop_build, run_steps
 
-    implicit = scene.integrator == "implicit_euler"
+    implicit = is_implicit(scene.integrator)
     first = not has_cached_build(run_steps)
     whole = COMPILE_ESTIMATE_S["implicit" if implicit else "rigid" if scene.rigid is not None else "membrane"]
 
@@ -157,7 +158,7 @@ def _warn_above_stable_step(model) -> None:
     """One line before the run when an explicit integrator's step is above the per-point
     stable-step estimate (`Model.dt_stable_s`, as `hybrid inspect` reports it): such a run
     diverges, and saying so at the start beats a divergence after the compile."""
-    if model.scene.integrator == "implicit_euler" or not math.isfinite(model.dt_stable_s):
+    if is_implicit(model.scene.integrator) or not math.isfinite(model.dt_stable_s):
         return
     if model.dt_s > model.dt_stable_s:
         sys.stderr.write(

@@ -12,6 +12,7 @@ import numpy as np
 
 from .errors import ConstraintError, SimulationDiverged
 from .implicit import IMPLICIT_NOT_CONVERGED, Info
+from .integrators import EXPLICIT_EULER_ID
 from .step import DIVERGED_NONFINITE, S_MAXDISP, VOLUME_FAILED
 from .terms.volume import PROJ_NO_GRADIENT
 
@@ -121,7 +122,7 @@ def _step_advice(model) -> tuple[str, float]:
     h = a.dt
     k, c, m = model.vert_stiffness, a.damp_coef, a.vert_mass
     held = (a.vert_free > 0) & (k > 0)
-    if a.integrator == 0 and np.any(held & (c == 0)):
+    if a.integrator == EXPLICIT_EULER_ID and np.any(held & (c == 0)):
         # one step of x'' = -k/m x multiplies the amplitude by sqrt(1 + h^2 k/m) > 1
         undamped = np.flatnonzero(held & (c == 0))
         i = int(undamped[0])
@@ -139,7 +140,7 @@ def _step_advice(model) -> tuple[str, float]:
         # bound in closed form: c/k for damped explicit Euler (|1 - h c/m + h^2 k/m| < 1),
         # 2 sqrt(m/k) for symplectic Euler, 2 m/c for the damping alone
         with np.errstate(divide="ignore", invalid="ignore", over="ignore", under="ignore"):
-            spring = np.where(k > 0, c / k if a.integrator == 0 else 2.0 * np.sqrt(m / k), np.inf)
+            spring = np.where(k > 0, c / k if a.integrator == EXPLICIT_EULER_ID else 2.0 * np.sqrt(m / k), np.inf)
             drag = np.where(c > 0, 2.0 * m / c, np.inf)
         per = np.where(a.vert_free > 0, np.minimum(spring, drag), np.inf)
         i = int(np.argmin(per))

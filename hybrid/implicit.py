@@ -74,7 +74,6 @@ from .implicit_matrix import (
     split_cg,
 )
 from .implicit_work import (
-    EXPLICIT,
     I_CARRIED,
     I_CG,
     I_CG_TOTAL,
@@ -393,13 +392,11 @@ def _volume_gradient(face_vert, pos, grad):
 def implicit_step(m, s, sched_val, step, imp, vert_acc):
     """Step phase 2 for implicit Euler: the free points' new velocities and positions,
     with the divergence check's sums per chunk of points into vert_acc (as
-    `hybrid.step._integrate`). Returns 0 (done), `IMPLICIT_NOT_CONVERGED` (status
-    set, state unchanged) or `EXPLICIT` when imp is None (another integrator).
+    `hybrid.step._integrate`). Returns 0 (done) or `IMPLICIT_NOT_CONVERGED` (status
+    set, state unchanged). Called by `hybrid.step.integrate` when the step holds imp.
     # Model: m   # Data in: imp.f_expl (the explicit forces at the step's start), sched_val (the inputs at t)
     # Data in/out: s.vert_pos, s.vert_vel, imp   # Data out: vert_acc (chunk_count(nvert), 4), s.status on failure
     """
-    if imp is None:
-        return EXPLICIT
     h = m.dt
     pos, vel = s.vert_pos, s.vert_vel
     n = pos.shape[0]

@@ -9,13 +9,12 @@ from typing import NamedTuple
 import numpy as np
 
 from .implicit_matrix import NewtonMatrix, newton_matrix
-from .terms.lungs import IMPLICIT_EULER
+from .integrators import IMPLICIT_EULER_ID
 from .terms.tangents import NCACHE, NFIB_CACHE, NPF_CACHE
 
 __all__ = [
     "IMPLICIT_ID",
     "IMPLICIT_NOT_CONVERGED",
-    "EXPLICIT",
     "Info",
     "NewtonRows",
     "newton_rows",
@@ -23,12 +22,10 @@ __all__ = [
     "implicit_work",
 ]
 
-#: `MembraneArrays.integrator` of implicit Euler
-IMPLICIT_ID = 2
-assert IMPLICIT_ID == IMPLICIT_EULER
+#: `MembraneArrays.integrator` of implicit Euler (`hybrid.integrators`)
+IMPLICIT_ID = IMPLICIT_EULER_ID
 #: the step status of a Newton solve that did not converge (beside hybrid.step.StepStatus)
 IMPLICIT_NOT_CONVERGED = 4
-EXPLICIT = -1  # implicit_step's answer for the other integrators
 
 
 class Info(IntEnum):

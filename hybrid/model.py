@@ -22,6 +22,8 @@ from . import schedule as _sched
 from .body import MAX_BODY_M as MAX_BODY_M  # re-exported: tests and MeshSpec's docs name it here
 from .body import build_mesh, point_masses
 from .errors import SceneError
+from .integrators import BY_NAME, EXPLICIT_EULER_ID
+from .integrators import INTEGRATORS as _INTEGRATORS
 from .kernel import use_parallel
 from .mesh import Mesh
 from .scene import DEFAULT_DT_S, FORMULATIONS, INTEGRATORS, Scene
@@ -31,7 +33,7 @@ from .terms.base import check_value
 
 __all__ = ["TERMS", "MembraneArrays", "Model", "compile_scene", "build_mesh"]
 
-INTEGRATOR_ID = {"explicit_euler": 0, "symplectic_euler": 1, "implicit_euler": 2}
+INTEGRATOR_ID = {i.name: i.id for i in _INTEGRATORS}
 
 # What the compiled step reads besides the terms' own arrays (hybrid.terms),
 # name -> meaning; MembraneArrays is these, then every term class's arrays.
@@ -188,15 +190,15 @@ def _check_duration(duration, dt):
 
 
 def _integrator_id(name, formulation):
-    if name not in INTEGRATOR_ID:
+    if name not in BY_NAME:
         raise SceneError(f"integrator: expected one of {list(INTEGRATORS)}, received {name!r}")
-    if name == "implicit_euler" and formulation != "continuum":
+    if BY_NAME[name].needs_hessian and formulation != "continuum":
         # the paper's shape memory and muscle derive from no energy: no Hessian to solve with
         raise SceneError(
-            f"integrator: 'implicit_euler' needs formulation 'continuum' (forces with a Hessian), "
+            f"integrator: {name!r} needs formulation 'continuum' (forces with a Hessian), "
             f"received formulation {formulation!r}; use 'symplectic_euler' or 'explicit_euler'"
         )
-    return INTEGRATOR_ID[name]
+    return BY_NAME[name].id
 
 
 def _scene_value(scene, name):
@@ -273,7 +275,7 @@ def compile_scene(scene: Scene) -> Model:
         raise SceneError(f"scene: expected a hybrid.scene.Scene, received {type(scene).__name__}")
     if isinstance(scene.dt_s, str) and scene.dt_s == "auto":
         probe = _compile(dataclasses.replace(scene, dt_s=None))
-        if probe.arrays.integrator == INTEGRATOR_ID["implicit_euler"]:  # no stability bound of its own
+        if _INTEGRATORS[probe.arrays.integrator].implicit:  # no stability bound of its own
             explicit = probe.with_dt(probe.dt_s, "symplectic_euler").dt_stable_s
             return _compile(dataclasses.replace(scene, dt_s=auto_dt_implicit(explicit)))
         return _compile(dataclasses.replace(scene, dt_s=auto_dt(probe.dt_stable_s)))
@@ -415,13 +417,13 @@ def _stable_dt(arrays: MembraneArrays, vert_stiffness: np.ndarray, vert_viscosit
     damp = arrays.damp_coef if vert_viscosity is None else arrays.damp_coef + vert_viscosity
     # points with neither stiffness nor damping move freely: no step limit
     free = (arrays.vert_free > 0) & ((vert_stiffness > 0) | (damp > 0))
-    if not np.any(free) or arrays.integrator == INTEGRATOR_ID["implicit_euler"]:  # backward Euler: any step
+    if not np.any(free) or _INTEGRATORS[arrays.integrator].implicit:  # backward Euler: any step
         return math.inf
-    integ = "explicit_euler" if arrays.integrator == 0 else "symplectic_euler"
+    integ = _INTEGRATORS[arrays.integrator].name
     h = max_stable_dt(arrays.vert_mass[free], vert_stiffness[free], damp[free], integ, h_hi=10.0)
     h_min = float(h.min())
     damped = free & (arrays.damp_coef > 0)
-    if arrays.integrator == 0 and arrays.term_on[Volume.id] and np.any(damped):
+    if arrays.integrator == EXPLICIT_EULER_ID and arrays.term_on[Volume.id] and np.any(damped):
         # explicit Euler + volume projection: the projection cancels the position
         # step h v along the gradient and its velocity correction cancels v, so
         # that component of v is multiplied by -h c/m each step: h < m/c too

@@ -17,6 +17,7 @@ from pathlib import Path
 
 from . import checks
 from .errors import SceneError
+from .integrators import NAMES
 from .terms import (
     AppliedForce,
     Attraction,
@@ -67,7 +68,7 @@ __all__ = [
     "Lungs",
 ]
 
-INTEGRATORS = ("explicit_euler", "symplectic_euler", "implicit_euler")
+INTEGRATORS = NAMES  # hybrid.integrators
 #: the step of a scene without a rigid part that sets no dt_s (s)
 DEFAULT_DT_S = 1e-3
 #: how the membrane's parameters are meant (hybrid.terms.base.FORMULATIONS): "paper", the

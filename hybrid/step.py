@@ -26,7 +26,6 @@ import numpy as np
 from numba import literal_unroll, prange
 
 from .implicit import (
-    EXPLICIT,
     IMPLICIT_ID,
     ImplicitWork,
     implicit_pressure,
@@ -34,6 +33,7 @@ from .implicit import (
     implicit_step,
     implicit_work,
 )
+from .integrators import EXPLICIT_EULER_ID
 from .kernel import CHUNK_VERTS, chunk_count, kernel, kernel_twin
 from .model import MembraneArrays
 from .schedule import KIND_PYTHON, schedule_eval
@@ -407,26 +407,40 @@ def _pointwise_forces(m, s, w, par, implicit=False):
     s.term_calls[T_SHAPE_MEMORY] += on[T_SHAPE_MEMORY]
 
 
+@kernel
+def integrate(m, s, w, c, step, par, solver):
+    """Step phase 2 with the model's integrator (`hybrid.integrators`): implicit Euler's
+    Newton solve when the step's work holds its arrays (`solver`, an argument so that a
+    build without them prunes that branch: no solve compiled), else the explicit pair,
+    explicit or symplectic Euler by the model's id. Returns a status code.
+    # Model: m   # Data in: w.vert_force, c.value   # Data in/out: s.vert_pos, s.vert_vel, solver
+    # Data out: w.vert_acc (the divergence check's sums per chunk), s.status on failure
+    """
+    if solver is not None:
+        return implicit_step(m, s, c.value, step, solver, w.vert_acc)
+    explicit = m.integrator == EXPLICIT_EULER_ID
+    if par is not None and m.parallel:
+        _integrate_parallel(m.vert_free, m.vert_mass, explicit, m.dt, w.vert_force, s.vert_pos, s.vert_vel, w.vert_acc)
+    else:
+        _integrate_serial(m.vert_free, m.vert_mass, explicit, m.dt, w.vert_force, s.vert_pos, s.vert_vel, w.vert_acc)
+    return 0  # OK
+
+
 @kernel(inline="always")
 def membrane_advance(m, s, w, c, t, step, par=True):
     """Step phases 2-5: integrate, project, check. Returns a status code. `par`: as
     `membrane_forces`.
     # Model: m   # Data in: w.vert_force   # Data out: s.vert_pos, s.vert_vel, s.scal, s.status
     """
-    pos, vel = s.vert_pos, s.vert_vel
+    pos = s.vert_pos
     # the projection's direction where the step starts
     if m.volume_shake and m.term_on[T_VOLUME]:
         if par is not None and m.parallel:
             volume_direction_parallel(m.ring_ptr, m.ring_vert, m.vert_weight, pos, w.dirn)
         else:
             volume_direction_serial(m.ring_ptr, m.ring_vert, m.vert_weight, pos, w.dirn)
-    code = implicit_step(m, s, c.value, step, w.solver, w.vert_acc)  # implicit Euler (hybrid.implicit), else EXPLICIT
-    if code == EXPLICIT:
-        if par is not None and m.parallel:
-            _integrate_parallel(m.vert_free, m.vert_mass, m.integrator == 0, m.dt, w.vert_force, pos, vel, w.vert_acc)
-        else:
-            _integrate_serial(m.vert_free, m.vert_mass, m.integrator == 0, m.dt, w.vert_force, pos, vel, w.vert_acc)
-    elif code != OK:
+    code = integrate(m, s, w, c, step, par, w.solver)
+    if code != OK:
         return code
     code = _after_integration(m, s, w, c, t, step, par)
     if code == OK and m.term_on[T_VOLUME]:  # implicit Euler's solve carried part of the pressure

@@ -55,6 +55,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import HybridError
+from ..integrators import is_implicit
 from ..outputs import write_text as _write_text
 from ..sweep import sweep
 from .convergence_report import MAX_EXTRAPOLATED_LEVELS, REPEAT_BELOW_S, cost, finest_change, markdown, plot
@@ -114,7 +115,7 @@ def base_step(scene, overrides, level) -> tuple[float, int]:
     from ..model import auto_dt
 
     m = _model(scene, overrides, level, None)
-    if m.scene.integrator == "implicit_euler":  # not bounded by stability: its own step ("auto": 4x symplectic's)
+    if is_implicit(m.scene.integrator):  # not bounded by stability: its own step ("auto": 4x symplectic's)
         return m.dt_s, m.nvert
     return min(m.dt_s, auto_dt(m.dt_stable_s)), m.nvert
 

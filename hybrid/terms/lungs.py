@@ -42,6 +42,7 @@ from enum import IntEnum
 import numpy as np
 
 from ..errors import SceneError
+from ..integrators import IMPLICIT_EULER_ID
 from ..kernel import kernel
 from ..mesh.cavity import open_edges, thoracic_cavity
 from .base import Term, force, param
@@ -94,8 +95,6 @@ P_REF = 11
 NPAR = 14
 #: the lungs' recoil curves (`Lungs.recoil_curve`)
 RECOIL_CURVES = ("linear", "sigmoid")
-#: `MembraneArrays.integrator` of implicit Euler (`hybrid.implicit.IMPLICIT_ID`, which checks it)
-IMPLICIT_EULER = 2
 
 
 @kernel(inline="always")
@@ -384,7 +383,7 @@ def lungs_step_force(m, s, w, c):
     s.lung[L_AIRWAY] = pao
     # implicit Euler adds the membrane points' share in its solve (`hybrid.implicit.implicit_forces`)
     add_cavity_pressure(
-        m.lung_face, ref, load, s.vert_pos, wall, w.vert_force, w.lung_wall_force, m.integrator != IMPLICIT_EULER
+        m.lung_face, ref, load, s.vert_pos, wall, w.vert_force, w.lung_wall_force, m.integrator != IMPLICIT_EULER_ID
     )
     hold = s.lung[L_HOLD] if occluded else 0.0  # the occlusion's last pressure, to the bodies (as the abdomen's)
     if hold != 0.0:
