@@ -109,12 +109,14 @@ LOOP_BUILD_ESTIMATE_S = {"serial": 21, "parallel": 38, "implicit": 114}
 
 def _load_and_run(args, scene, drawer=None) -> int:
     from .model import compile_scene
+    from .outputs import check_out_folder
     from .provenance import run_provenance
     from .run import claim_folder, default_out, run_steps
     from .simulation import Simulation
 
     duration = scene.duration_s if args.duration is None else args.duration
     out = _out_arg(args.out) if args.out is not None else default_out(scene.name)
+    check_out_folder(out)  # before anything compiles (the folder is claimed after the checks)
     try:
         sim = Simulation(compile_scene(scene))
     except HybridError as exc:

@@ -354,7 +354,7 @@ def compile_notice(
     10 s), which a busy machine slows but does not falsify (the wall time is shown
     beside it; past the estimate it says so instead of a full bar); at the end of the
     block the wall and CPU time it took. Nothing at all when every kernel came from the
-    cache. `cpu_clock`: the process's CPU seconds (compiling is this process's main
+    cache, nor when the block raises after compiles it never announced. `cpu_clock`: the process's CPU seconds (compiling is this process's main
     thread; the others wait); `line_every_s`: the wall seconds between lines off a terminal."""
     import sys
     import threading
@@ -433,12 +433,18 @@ def compile_notice(
 
     listener = Notice()
     event.register("numba:compile", listener)
+    failed = False
     try:
         yield
+    except BaseException:
+        failed = True
+        raise
     finally:
         event.unregister("numba:compile", listener)
         done.set()
-        if state["t0"] is not None:
+        # a block that fails after small compiles it never announced (a scene's helpers, then
+        # a refused --out) ends in its error's one line, not a compile line before it
+        if state["t0"] is not None and (state["said"] or not failed):
             write(
                 ("\n" if tty else "") + f"hybrid: compiled in {state['spent']:.1f} s ({state['cpu']:.1f} s of CPU); "
                 f"later runs load the kernels from {CACHE_DIR}\n"

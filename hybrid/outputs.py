@@ -23,6 +23,7 @@ from .errors import HybridError
 
 __all__ = [
     "out_folder",
+    "check_out_folder",
     "replaced",
     "replacing",
     "write_text",
@@ -59,6 +60,24 @@ def out_folder(out: Path) -> Path:
             f"--out: expected a folder that can be created and written, received {str(out)!r} ({exc.strerror or exc})"
         ) from None
     return out
+
+
+def check_out_folder(out: Path) -> None:
+    """Refuse, without creating anything, an output folder that cannot be created or
+    written: the nearest part of `out` that exists must be a folder this process may
+    write into. `hybrid run` asks before it builds anything, so that a bad --out is
+    refused at once, not after the scene's kernels compile; `out_folder` checks by
+    doing when the run claims the folder. The same message as out_folder's."""
+    probe = out.absolute()
+    while not os.path.lexists(probe) and probe != probe.parent:
+        probe = probe.parent
+    if not probe.is_dir():
+        reason = "Not a directory"
+    elif not os.access(probe, os.W_OK | os.X_OK):
+        reason = "Permission denied"
+    else:
+        return
+    raise HybridError(f"--out: expected a folder that can be created and written, received {str(out)!r} ({reason})")
 
 
 class OutputError(HybridError, OSError):

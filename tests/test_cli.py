@@ -139,6 +139,24 @@ def test_study_subcommand_reaches_the_studies(tmp_path):
     assert len(lines) == 1 and "nosuchstudy" in lines[0], proc.stderr
 
 
+def test_an_output_folder_that_cannot_be_written_is_refused_before_anything_compiles(tmp_path, monkeypatch, capsys):
+    """On a first run the scene's helpers would compile (and the compile notice speak)
+    before the folder was claimed: the folder is checked first, without creating it."""
+    import hybrid.model
+
+    def no_compile(scene):
+        raise AssertionError("compile_scene called before --out was checked")
+
+    monkeypatch.setattr(hybrid.model, "compile_scene", no_compile)
+    blocker = tmp_path / "a_file"
+    blocker.write_text("")
+    assert main(["run", "membrane_demo", "--out", str(blocker / "out" / "deeper")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--out: expected a folder that can be created and written" in err[0], err
+    assert "Not a directory" in err[0]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a_file"]  # nothing created
+
+
 def test_a_file_system_error_during_a_run_is_one_line_with_status_74(tmp_path, monkeypatch, capsys):
     import errno
     import importlib

@@ -372,3 +372,25 @@ def test_the_compile_notice_announces_only_the_compiles_its_estimate_names():
     lines = stream.getvalue().splitlines()
     assert lines[0] == "hybrid: compiling kernels for this scene, first run only, about 30 s of CPU", lines
     assert lines[-1].startswith("hybrid: compiled in ") and len(lines) == 2
+
+
+def test_a_block_that_fails_after_unannounced_compiles_leaves_its_error_the_only_line():
+    """An error (a refused --out after the scene's helpers compiled) is the command's one
+    line: no end line for compiles never announced; an announced compile still ends in its
+    line, failed or not."""
+    from numba.core import event
+
+    def estimate(dispatcher, arg_types):
+        return 30 if dispatcher == "loop" else None
+
+    for dispatcher, lines_expected in (("helper", 0), ("loop", 2)):
+        stream = _Stream(False)
+        with pytest.raises(ValueError, match="refused"):
+            with compile_notice(estimate, stream, tick_s=0.005):
+                with event.trigger_event("numba:compile", data={"dispatcher": dispatcher, "args": ()}):
+                    pass
+                raise ValueError("refused")
+        lines = stream.getvalue().splitlines()
+        assert len(lines) == lines_expected, (dispatcher, lines)
+        if lines:
+            assert lines[-1].startswith("hybrid: compiled in ")
