@@ -69,10 +69,10 @@ def _figure_process(args):
 
 
 def _compile_estimate(scene):
-    """The compile notice's estimate (`hybrid.kernel.compile_notice`): a first run's whole
-    compile when the step loop has no cached build; once it has one, only the compile of
-    another build of the loop (implicit Euler's, the multi-core one) is announced, and a
-    scene's few small helpers are said only at the end."""
+    """The compile notice's estimate (`hybrid.kernel.compile_notice`), given when the step
+    loop compiles: a first run's whole compile when the loop has no cached build; once it
+    has one, that other build's (implicit Euler's, the multi-core one). A scene's few small
+    helpers are said only at the end."""
     from .loop import loop_build, run_steps
 
     implicit = is_implicit(scene.integrator)
@@ -80,11 +80,13 @@ def _compile_estimate(scene):
     whole = COMPILE_ESTIMATE_S["implicit" if implicit else "rigid" if scene.rigid is not None else "membrane"]
 
     def estimate(dispatcher, arg_types):
+        # announced when the loop compiles: the scene's helpers before it (a second at most)
+        # are counted and said at the end, so that a refusal between them is one line
+        if dispatcher is not run_steps:
+            return None
         if first:
             return whole
-        if dispatcher is run_steps and arg_types is not None:  # another build of the loop
-            return LOOP_BUILD_ESTIMATE_S[loop_build(arg_types)]
-        return None
+        return LOOP_BUILD_ESTIMATE_S[loop_build(arg_types)] if arg_types is not None else None
 
     return estimate
 

@@ -160,3 +160,19 @@ def test_a_sweeps_first_task_ends_before_the_others_start():
     assert [r[0] for r in res] == list(range(5))
     assert res[0][2] <= min(r[1] for r in res[1:])
     assert os.getpid() not in {r[3] for r in res}  # every task in a worker
+
+
+def test_a_first_run_refused_after_its_scene_is_built_is_one_line(tmp_path):
+    """A refusal that needs the built scene (here the step count, which needs its dt) comes
+    after the scene's helpers compile: on an empty cache the notice waits for the loop, so
+    the error stays the command's one line (it was the third of three: "about 32 s of CPU",
+    "compiled in 0.2 s", then the error)."""
+    cache = tmp_path / "cache"
+    cache.mkdir()
+    env = dict(os.environ, PYTHONPATH=str(ROOT), NUMBA_CACHE_DIR=str(cache))
+    argv = ["run", "membrane_demo", "--duration", "1e7", "--no-record", "--out", str(tmp_path / "o")]
+    proc = subprocess.run([sys.executable, "-m", "hybrid", *argv], capture_output=True, text=True, env=env, timeout=900)
+    assert proc.returncode == 2
+    lines = proc.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("hybrid: error: --duration"), proc.stderr
+    assert any(cache.iterdir())  # premise: the scene's helpers did compile into the empty cache
