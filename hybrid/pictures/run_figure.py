@@ -48,6 +48,7 @@ def draw(series: dict, *, title: str = ""):
     panel's series (`hybrid.outputs.figure_series`), "panels" ((series, label, log) in
     order), "about" and "diagrams" (the Campbell and Konno-Mead series, or None)."""
     from matplotlib.figure import Figure
+    from matplotlib.ticker import NullFormatter
 
     a, panels, diagrams = series, series["panels"], series["diagrams"]
     konno = diagrams is not None and np.isfinite(diagrams["abdomen_volume_change_l"]).any()
@@ -68,6 +69,9 @@ def draw(series: dict, *, title: str = ""):
             ax.legend(fontsize=7, loc="best", ncol=len(key))
         elif log:
             ax.semilogy(a["t_s"], np.maximum(a[key], 1e-17))
+            # labels at the decades only: within a decade matplotlib labels the minor ticks,
+            # "1.08 x 10^-15" wide, over the panel's own label
+            ax.yaxis.set_minor_formatter(NullFormatter())
         else:
             ax.plot(a["t_s"], a[key])
         ax.set_ylabel(label, fontsize=8)
