@@ -43,21 +43,21 @@ INTEGRATORS = (
         EXPLICIT_EULER_ID,
         False,
         False,
-        "the paper's: the new position from the step's starting velocity",
+        "the paper's integrator, position and velocity both advanced from the step's start",
     ),
     Integrator(
         "symplectic_euler",
         SYMPLECTIC_EULER_ID,
         False,
         False,
-        "the new velocity first, then the position with it; keeps an undamped spring bounded",
+        "the velocity advanced first, then the position with the new velocity; keeps an undamped spring bounded",
     ),
     Integrator(
         "implicit_euler",
         IMPLICIT_EULER_ID,
         True,
         True,
-        "backward Euler: the forces at the step's end, by Newton's method",
+        "backward Euler, the forces taken at the step's end and solved for by Newton's method; stable at any step",
     ),
 )
 NAMES = tuple(i.name for i in INTEGRATORS)

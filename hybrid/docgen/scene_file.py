@@ -13,6 +13,7 @@ import typing
 from .. import regions as R
 from .. import scenefile
 from .. import schedule as S
+from ..integrators import INTEGRATORS
 from ..scene import Masses, MeshSpec, RibPair, Ribs, Rigid, RigidLink, Scene
 from ..terms.base import CONSTRAINT_TYPES, FORCE_TYPES, FORMULATIONS
 
@@ -415,6 +416,15 @@ def render() -> str:
         "`dt_s` left out: the MJCF's own timestep (`<option timestep>`) for a scene with a rigid part,",
         "else 1e-3 s. MuJoCo keeps the MJCF's own integrator unless `rigid.integrator` sets it; the",
         "summary's `rigid` table records the step and integrator used and where each came from.",
+        "",
+        "`integrator`, the membrane's (`hybrid.integrators`, the one list):",
+        "",
+        *[
+            f"- `{i.name}`: {i.about}"
+            + (' (formulation "continuum" only: it needs the forces\' Hessian)' if i.needs_hessian else "")
+            + "."
+            for i in INTEGRATORS
+        ],
         "",
         '`formulation` says how the membrane\'s parameters are meant. "paper" is the per-point model of Promayon,',
         "Baconnier & Puech (1997) kept exactly (its stiffnesses act on points, so their meaning",
