@@ -58,9 +58,9 @@ def _cmd_run(args) -> int:
 
 def _figure_process(args):
     """As a command, the run's figure is drawn by a process of its own started now
-    (`hybrid.pictures.run_figure.FigureProcess`): it imports matplotlib, 0.45 s of a warm
-    run's 1.9, on the other core while this one imports, checks and steps. Not for main()
-    called in a program, which keeps its own matplotlib from one figure to the next."""
+    (`hybrid.pictures.run_figure.FigureProcess`): it imports matplotlib, about a third of
+    a short warm run, on the other core while this one imports, checks and steps. Not for
+    main() called in a program, which keeps its own matplotlib from one figure to the next."""
     if not args.own_process or "matplotlib.figure" in sys.modules:
         return contextlib.nullcontext(None)
     from .pictures.run_figure import FigureProcess

@@ -4,9 +4,10 @@ Konno-Mead diagram (docs/outputs.md).
 
 This module imports numpy and matplotlib only, so that it also runs as a process of its
 own (`python run_figure.py`): `hybrid run` starts it first thing, it imports matplotlib
-(about 0.45 s) while the run imports, checks and steps, and then turns the series it
-reads from its standard input (a pickle) into PNG bytes on its standard output. The
-process writes no file: `hybrid.outputs.plot_trace` writes what it returns.
+(about a third of a short warm run) while the run imports, checks and steps, and then
+turns the series it reads from its standard input (a pickle) into PNG bytes on its
+standard output. The process writes no file: `hybrid.outputs.plot_trace` writes what it
+returns.
 """
 
 from __future__ import annotations
@@ -137,7 +138,7 @@ class FigureProcess:
     draws in its own process, where an error says what it is); `close()` ends it when
     no figure is drawn. A context manager: the process never outlives it."""
 
-    #: s: the longest wait for the process's figure (it draws one in about 0.3 s)
+    #: s: the longest wait for the process's figure (a figure takes it well under a second)
     TIMEOUT_S = 120.0
 
     def __init__(self) -> None:
