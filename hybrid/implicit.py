@@ -86,7 +86,6 @@ from .implicit_work import (
     I_RESIDUAL,
     I_SOLVED,
     I_WORST,
-    IMPLICIT_ID,
     IMPLICIT_NOT_CONVERGED,
     ImplicitWork,
     Info,
@@ -112,7 +111,6 @@ from .terms.tangents import (
 )
 
 __all__ = [
-    "IMPLICIT_ID",
     "IMPLICIT_NOT_CONVERGED",
     "ImplicitWork",
     "Info",

@@ -13,7 +13,6 @@ from .integrators import IMPLICIT_EULER_ID
 from .terms.tangents import NCACHE, NFIB_CACHE, NPF_CACHE
 
 __all__ = [
-    "IMPLICIT_ID",
     "IMPLICIT_NOT_CONVERGED",
     "Info",
     "NewtonRows",
@@ -22,8 +21,6 @@ __all__ = [
     "implicit_work",
 ]
 
-#: `MembraneArrays.integrator` of implicit Euler (`hybrid.integrators`)
-IMPLICIT_ID = IMPLICIT_EULER_ID
 #: the step status of a Newton solve that did not converge (beside hybrid.step.StepStatus)
 IMPLICIT_NOT_CONVERGED = 4
 
@@ -145,7 +142,7 @@ def implicit_work(arrays, wall_pos=None, wall_vel=None) -> ImplicitWork | None:
     """The work arrays of a model that steps with implicit Euler, else None. wall_pos,
     wall_vel: the state's lungs' wall (`MembraneState.lung_wall_pos`, `lung_wall_vel`), the
     same arrays (the solve reads the wall where the rigid phase put it)."""
-    if arrays.integrator != IMPLICIT_ID:
+    if arrays.integrator != IMPLICIT_EULER_ID:
         return None
     n = arrays.vert_rest.shape[0]
     nfree = int(np.count_nonzero(np.asarray(arrays.vert_free)))

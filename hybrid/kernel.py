@@ -354,8 +354,9 @@ def compile_notice(
     10 s), which a busy machine slows but does not falsify (the wall time is shown
     beside it; past the estimate it says so instead of a full bar); at the end of the
     block the wall and CPU time it took. Nothing at all when every kernel came from the
-    cache, nor when the block raises after compiles it never announced. `cpu_clock`: the process's CPU seconds (compiling is this process's main
-    thread; the others wait); `line_every_s`: the wall seconds between lines off a terminal."""
+    cache, nor when the block raises after compiles it never announced. `cpu_clock`: the
+    process's CPU seconds (compiling is this process's main thread; the others wait);
+    `line_every_s`: the wall seconds between lines off a terminal."""
     import sys
     import threading
 

@@ -22,18 +22,15 @@ from . import schedule as _sched
 from .body import MAX_BODY_M as MAX_BODY_M  # re-exported: tests and MeshSpec's docs name it here
 from .body import build_mesh, point_masses
 from .errors import SceneError
-from .integrators import BY_NAME, EXPLICIT_EULER_ID
-from .integrators import INTEGRATORS as _INTEGRATORS
+from .integrators import BY_NAME, EXPLICIT_EULER_ID, INTEGRATORS, NAMES
 from .kernel import use_parallel
 from .mesh import Mesh
-from .scene import DEFAULT_DT_S, FORMULATIONS, INTEGRATORS, Scene
+from .scene import DEFAULT_DT_S, FORMULATIONS, Scene
 from .stability import max_stable_dt
 from .terms import CONSTRAINT_TYPES, FORCE_TYPES, TERM_CLASSES, TERMS, Build, Volume
 from .terms.base import check_value
 
 __all__ = ["TERMS", "MembraneArrays", "Model", "compile_scene", "build_mesh"]
-
-INTEGRATOR_ID = {i.name: i.id for i in _INTEGRATORS}
 
 # What the compiled step reads besides the terms' own arrays (hybrid.terms),
 # name -> meaning; MembraneArrays is these, then every term class's arrays.
@@ -147,7 +144,7 @@ class Model:
         _check_dt(dt_s)
         integ = self.arrays.integrator if integrator is None else _integrator_id(integrator, self.scene.formulation)
         arrays = self.arrays._replace(dt=float(dt_s), integrator=integ)
-        scene = dataclasses.replace(self.scene, dt_s=float(dt_s), integrator=INTEGRATORS[integ])
+        scene = dataclasses.replace(self.scene, dt_s=float(dt_s), integrator=INTEGRATORS[integ].name)
         dt_stable = _stable_dt(arrays, self.vert_stiffness, self.vert_viscosity)
         return Model(
             scene,
@@ -191,7 +188,7 @@ def _check_duration(duration, dt):
 
 def _integrator_id(name, formulation):
     if name not in BY_NAME:
-        raise SceneError(f"integrator: expected one of {list(INTEGRATORS)}, received {name!r}")
+        raise SceneError(f"integrator: expected one of {list(NAMES)}, received {name!r}")
     if BY_NAME[name].needs_hessian and formulation != "continuum":
         # the paper's shape memory and muscle derive from no energy: no Hessian to solve with
         raise SceneError(
@@ -275,7 +272,7 @@ def compile_scene(scene: Scene) -> Model:
         raise SceneError(f"scene: expected a hybrid.scene.Scene, received {type(scene).__name__}")
     if isinstance(scene.dt_s, str) and scene.dt_s == "auto":
         probe = _compile(dataclasses.replace(scene, dt_s=None))
-        if _INTEGRATORS[probe.arrays.integrator].implicit:  # no stability bound of its own
+        if INTEGRATORS[probe.arrays.integrator].implicit:  # no stability bound of its own
             explicit = probe.with_dt(probe.dt_s, "symplectic_euler").dt_stable_s
             return _compile(dataclasses.replace(scene, dt_s=auto_dt_implicit(explicit)))
         return _compile(dataclasses.replace(scene, dt_s=auto_dt(probe.dt_stable_s)))
@@ -417,9 +414,9 @@ def _stable_dt(arrays: MembraneArrays, vert_stiffness: np.ndarray, vert_viscosit
     damp = arrays.damp_coef if vert_viscosity is None else arrays.damp_coef + vert_viscosity
     # points with neither stiffness nor damping move freely: no step limit
     free = (arrays.vert_free > 0) & ((vert_stiffness > 0) | (damp > 0))
-    if not np.any(free) or _INTEGRATORS[arrays.integrator].implicit:  # backward Euler: any step
+    if not np.any(free) or INTEGRATORS[arrays.integrator].implicit:  # backward Euler: any step
         return math.inf
-    integ = _INTEGRATORS[arrays.integrator].name
+    integ = INTEGRATORS[arrays.integrator].name
     h = max_stable_dt(arrays.vert_mass[free], vert_stiffness[free], damp[free], integ, h_hi=10.0)
     h_min = float(h.min())
     damped = free & (arrays.damp_coef > 0)

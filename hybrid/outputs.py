@@ -56,10 +56,12 @@ def out_folder(out: Path) -> Path:
         with tempfile.TemporaryFile(dir=out):
             pass
     except OSError as exc:
-        raise HybridError(
-            f"--out: expected a folder that can be created and written, received {str(out)!r} ({exc.strerror or exc})"
-        ) from None
+        raise _unwritable(out, exc.strerror or str(exc)) from None
     return out
+
+
+def _unwritable(out: Path, reason: str) -> HybridError:
+    return HybridError(f"--out: expected a folder that can be created and written, received {str(out)!r} ({reason})")
 
 
 def check_out_folder(out: Path) -> None:
@@ -77,7 +79,7 @@ def check_out_folder(out: Path) -> None:
         reason = "Permission denied"
     else:
         return
-    raise HybridError(f"--out: expected a folder that can be created and written, received {str(out)!r} ({reason})")
+    raise _unwritable(out, reason)
 
 
 class OutputError(HybridError, OSError):

@@ -26,14 +26,13 @@ import numpy as np
 from numba import literal_unroll, prange
 
 from .implicit import (
-    IMPLICIT_ID,
     ImplicitWork,
     implicit_pressure,
     implicit_start_forces,
     implicit_step,
     implicit_work,
 )
-from .integrators import EXPLICIT_EULER_ID
+from .integrators import EXPLICIT_EULER_ID, IMPLICIT_EULER_ID
 from .kernel import CHUNK_VERTS, chunk_count, kernel, kernel_twin
 from .model import MembraneArrays
 from .schedule import KIND_PYTHON, schedule_eval
@@ -257,7 +256,7 @@ def membrane_forces(m, s, w, c, t, par=True):
     eval_schedules(m.sched, c.user, t, c.value)
     on = m.term_on
     # implicit Euler: the terms it treats implicitly once, kept for its solve (`implicit_start_forces`)
-    implicit = m.integrator == IMPLICIT_ID
+    implicit = m.integrator == IMPLICIT_EULER_ID
     _pointwise_forces(m, s, w, par, implicit)
     if on[T_MEMBRANE] and not implicit:
         if par is not None and m.parallel:

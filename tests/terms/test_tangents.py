@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from hybrid import Damping, HalfSpace, Masses, Membrane, MuscleFibres, Scene
-from hybrid.implicit import IMPLICIT_ID, implicit_forces, implicit_work, newton_caches, newton_product, newton_rows
+from hybrid.implicit import implicit_forces, implicit_work, newton_caches, newton_product, newton_rows
+from hybrid.integrators import IMPLICIT_EULER_ID
 from hybrid.mesh import irregular_sphere
 from hybrid.model import compile_scene
 from hybrid.terms.fibres import MIN_STRETCH, add_muscle_fibres
@@ -220,7 +221,7 @@ def test_the_newton_matrix_against_finite_differences_of_the_implicit_forces(mod
         newton_product(a, a, face, fib, pf, h, False, u, y)
         return y
 
-    work = implicit_work(a._replace(integrator=IMPLICIT_ID))  # the lungs' arrays it reads (none here)
+    work = implicit_work(a._replace(integrator=IMPLICIT_EULER_ID))  # the lungs' arrays it reads (none here)
 
     def forces(y, w):
         f = np.zeros_like(y)
