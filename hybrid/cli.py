@@ -19,7 +19,7 @@ from pathlib import Path
 
 from .errors import HybridError
 from .integrators import is_implicit
-from .kernel import compile_notice, has_cached_build, prune_old_caches
+from .kernel import compile_notice, has_cached_build, measured_compile_s, prune_old_caches, record_compile_s
 
 __all__ = ["main"]
 
@@ -52,7 +52,8 @@ def _cmd_run(args) -> int:
         if args.dt is not None:
             scene = dataclasses.replace(scene, dt_s=args.dt)
         # a first run (nothing in the compile cache) says so before it compiles
-        with compile_notice(_compile_estimate(scene)):
+        estimate, on_compiled = _compile_estimate(scene)
+        with compile_notice(estimate, on_compiled=on_compiled):
             return _load_and_run(args, scene, drawer)
 
 
@@ -69,44 +70,50 @@ def _figure_process(args):
 
 
 def _compile_estimate(scene):
-    """The compile notice's estimate (`hybrid.kernel.compile_notice`), given when the step
-    loop compiles: a first run's whole compile when the loop has no cached build; once it
-    has one, that other build's (implicit Euler's, the multi-core one). A scene's few small
-    helpers are said only at the end."""
+    """The compile notice's estimate (`hybrid.kernel.compile_notice`), given when the step loop
+    compiles: a first run's whole compile, else that other build's (implicit, multi-core). It is
+    this machine's last compiles of that kind (`hybrid.kernel.measured_compile_s`), else the
+    package's figure; on_compiled records the compile announced."""
     from .loop import loop_build, run_steps
 
     implicit = is_implicit(scene.integrator)
     first = not has_cached_build(run_steps)
-    whole = COMPILE_ESTIMATE_S["implicit" if implicit else "rigid" if scene.rigid is not None else "membrane"]
+    announced = []
 
     def estimate(dispatcher, arg_types):
         # announced when the loop compiles: the scene's helpers before it (a second at most)
         # are counted and said at the end, so that a refusal between them is one line
-        if dispatcher is not run_steps:
+        if dispatcher is not run_steps or (not first and arg_types is None):
             return None
         if first:
-            return whole
-        return LOOP_BUILD_ESTIMATE_S[loop_build(arg_types)] if arg_types is not None else None
+            kind = "first run, " + ("implicit" if implicit else "rigid" if scene.rigid is not None else "membrane")
+        else:
+            kind = "loop build, " + loop_build(arg_types)
+        announced.append(kind)
+        return measured_compile_s(kind) or COMPILE_ESTIMATE_S[kind]
 
-    return estimate
+    def on_compiled(cpu_s):
+        if announced:
+            record_compile_s(announced[0], cpu_s)
+
+    return estimate, on_compiled
 
 
-#: the CPU seconds a first run's compile takes (nothing cached), membrane only, with a rigid
-#: part, or under implicit Euler: measured by the notice itself ("compiled in ... s of CPU")
-#: on an empty NUMBA_CACHE_DIR, --duration 0.01 or 0.02 --no-record, on a 2-core machine at a
-#: load about 1: `hybrid run membrane_demo` 33.1, 30.4 s; `hybrid run` (breathing) 39.5, 33.5,
-#: 37.6, 45.8 s; `hybrid run breathing_lungs --set integrator=implicit_euler --set dt_s=0.01`
-#: 142 s (once; `breathing` so, without lungs, 122 s). CPU seconds are steadier than wall
-#: seconds on a busy machine, not constant (cores shared with other programs run slower);
-#: re-measure when the kernels change
-COMPILE_ESTIMATE_S = {"membrane": 32, "rigid": 38, "implicit": 142}
-
-#: the CPU seconds another build of the one step loop takes once a first run has cached one
-#: (`hybrid.loop.loop_build`), measured the same way: the serial build after the implicit
-#: one, `hybrid run` (breathing) 22.9, 19.4 s; the multi-core one after those, `hybrid run
-#: membrane_demo --set mesh.level=6` 38.0 s (once); the implicit one after the serial one,
-#: the implicit `breathing_lungs` above, 114 s (once)
-LOOP_BUILD_ESTIMATE_S = {"serial": 21, "parallel": 38, "implicit": 114}
+#: a compile's CPU seconds on a machine that has recorded none: a first run's (membrane only,
+#: with a rigid part, implicit Euler), another build of the step loop once one is cached
+#: (`hybrid.loop.loop_build`). Measured by the notice on an empty NUMBA_CACHE_DIR, 2 cores at a
+#: load of 0.5-1.8, --duration 0.02 --no-record, twice: `hybrid run membrane_demo` 24.5, 22.9;
+#: `hybrid run` 25.8, 23.6; `hybrid run breathing_lungs --set integrator=implicit_euler --set
+#: dt_s=0.01` 75.7, 75.6; then `hybrid run` after it 10.4, 11.4; the implicit one after `hybrid
+#: run` 58.2, 57.4; `membrane_demo --set mesh.level=6 --set dt_s=1e-4` after all 20.0 (once)
+COMPILE_ESTIMATE_S = {
+    "first run, membrane": 24,
+    "first run, rigid": 25,
+    "first run, implicit": 76,
+    "loop build, serial": 11,
+    "loop build, parallel": 20,
+    "loop build, implicit": 58,
+}
 
 
 def _load_and_run(args, scene, drawer=None) -> int:

@@ -66,6 +66,8 @@ __all__ = [
     "kernel_sources",
     "prune_old_caches",
     "compile_notice",
+    "measured_compile_s",
+    "record_compile_s",
     "has_cached_build",
     "numba_info",
 ]
@@ -202,6 +204,60 @@ def prune_old_caches(
         except OSError:  # in use or gone meanwhile: another process's business
             continue
     return removed
+
+
+#: the CPU seconds of this machine's last compiles, by kind (`record_compile_s`), beside the
+#: version folders: a new version's first run is announced with what the last one took here
+COMPILE_RECORD = "compile_cpu_s.json"
+#: compiles kept per kind; their median is the estimate (a busy machine's compile is slower)
+COMPILE_RECORD_KEEP = 3
+
+
+def _compile_record(base: str | None) -> Path:
+    return Path(Path(CACHE_DIR).parent if base is None else base) / COMPILE_RECORD
+
+
+def measured_compile_s(kind: str, base: str | None = None) -> float | None:
+    """The median CPU seconds of the last compiles of `kind` recorded in the cache folder
+    `base` (CACHE_DIR's parent), None if there is none (or the record cannot be read)."""
+    import json
+    import statistics
+
+    try:
+        times = json.loads(_compile_record(base).read_text(encoding="utf-8")).get(kind)
+        return float(statistics.median(times)) if times else None
+    except (OSError, ValueError, TypeError, AttributeError, statistics.StatisticsError):
+        return None
+
+
+def record_compile_s(kind: str, cpu_s: float, base: str | None = None) -> None:
+    """Add a compile of `kind` that took cpu_s CPU seconds to the record (the last
+    COMPILE_RECORD_KEEP kept); replaced in one step, so that a reader sees the old record or the
+    new; a record that cannot be read starts afresh, one that cannot be written is left."""
+    import json
+    import tempfile
+
+    path = _compile_record(base)
+    try:
+        record = json.loads(path.read_text(encoding="utf-8"))
+        if not isinstance(record, dict):
+            record = {}
+    except (OSError, ValueError):
+        record = {}
+    times = record.get(kind) if isinstance(record.get(kind), list) else []
+    record[kind] = [*times, round(float(cpu_s), 2)][-COMPILE_RECORD_KEEP:]
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".compile_cpu_s.")
+    except OSError:  # a read-only cache folder: the estimate stays the package's
+        return
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            json.dump(record, f)
+        os.replace(tmp, path)
+    except OSError:  # a full disk: the old record stays
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
 
 
 def _prepare_numba() -> None:
@@ -342,7 +398,13 @@ def has_cached_build(dispatcher) -> bool:
 
 @contextlib.contextmanager
 def compile_notice(
-    estimate_cpu_s, stream=None, *, tick_s: float = 1.0, line_every_s: float = 10.0, cpu_clock=time.process_time
+    estimate_cpu_s,
+    stream=None,
+    *,
+    on_compiled=None,
+    tick_s: float = 1.0,
+    line_every_s: float = 10.0,
+    cpu_clock=time.process_time,
 ):
     """Say when kernels compile within the block: at the first compile (numba's
     "numba:compile" event fires only when no build is cached, before compiling), one
@@ -356,7 +418,9 @@ def compile_notice(
     block the wall and CPU time it took. Nothing at all when every kernel came from the
     cache, nor when the block raises after compiles it never announced. `cpu_clock`: the
     process's CPU seconds (compiling is this process's main thread; the others wait);
-    `line_every_s`: the wall seconds between lines off a terminal."""
+    `line_every_s`: the wall seconds between lines off a terminal; `on_compiled`: called with
+    the CPU seconds of an announced compile when the block ends without an error (the
+    estimate's record, `record_compile_s`)."""
     import sys
     import threading
 
@@ -450,3 +514,5 @@ def compile_notice(
                 ("\n" if tty else "") + f"hybrid: compiled in {state['spent']:.1f} s ({state['cpu']:.1f} s of CPU); "
                 f"later runs load the kernels from {CACHE_DIR}\n"
             )
+        if state["said"] and not failed and on_compiled is not None:
+            on_compiled(state["cpu"])

@@ -6,6 +6,7 @@ the first run's notice, its progress counted in the CPU seconds compiling took."
 
 from __future__ import annotations
 
+import contextlib
 import io
 import os
 import re
@@ -394,3 +395,72 @@ def test_a_block_that_fails_after_unannounced_compiles_leaves_its_error_the_only
         assert len(lines) == lines_expected, (dispatcher, lines)
         if lines:
             assert lines[-1].startswith("hybrid: compiled in ")
+
+
+def test_the_compile_record_keeps_this_machines_last_three_compiles(tmp_path):
+    """The estimate of a kind is the median of its last three compiles; a record that cannot be
+    read is started afresh; a folder that cannot be written leaves the estimate as it was."""
+    from hybrid.kernel import COMPILE_RECORD, measured_compile_s, record_compile_s
+
+    assert measured_compile_s("first run, rigid", base=tmp_path) is None
+    for cpu_s in (40.0, 10.0, 30.0, 20.0):  # the first falls out: median of 10, 30, 20
+        record_compile_s("first run, rigid", cpu_s, base=tmp_path)
+    assert measured_compile_s("first run, rigid", base=tmp_path) == 20.0
+    assert measured_compile_s("first run, implicit", base=tmp_path) is None
+    record_compile_s("first run, implicit", 70.0, base=tmp_path)
+    assert measured_compile_s("first run, rigid", base=tmp_path) == 20.0  # one kind does not touch another
+    assert [p.name for p in tmp_path.iterdir()] == [COMPILE_RECORD]  # no temporary file left
+
+    (tmp_path / COMPILE_RECORD).write_text("[1, 2", encoding="utf-8")  # cut short
+    assert measured_compile_s("first run, rigid", base=tmp_path) is None
+    record_compile_s("first run, rigid", 5.0, base=tmp_path)
+    assert measured_compile_s("first run, rigid", base=tmp_path) == 5.0
+
+    blocked = tmp_path / "a_file"
+    blocked.write_text("", encoding="utf-8")
+    record_compile_s("first run, rigid", 5.0, base=blocked / "cache")  # a folder inside a file: left
+    assert measured_compile_s("first run, rigid", base=blocked / "cache") is None
+
+
+def test_the_compile_notice_hands_on_the_cpu_of_an_announced_compile_that_ended_well():
+    """on_compiled gets the CPU seconds compiling took (not the time between compiles), only
+    for a compile the notice announced and a block that ended without an error."""
+    from numba.core import event
+
+    def estimate(dispatcher, arg_types):
+        return 30 if dispatcher == "loop" else None
+
+    for dispatcher, fails, expected in (("loop", False, [7.0]), ("loop", True, []), ("helper", False, [])):
+        cpu, got = {"s": 0.0}, []
+        with contextlib.suppress(ValueError):
+            with compile_notice(
+                estimate, _Stream(False), on_compiled=got.append, tick_s=0.005, cpu_clock=lambda: cpu["s"]
+            ):
+                with event.trigger_event("numba:compile", data={"dispatcher": dispatcher, "args": ()}):
+                    cpu["s"] += 7.0
+                cpu["s"] += 50.0  # not compiling
+                if fails:
+                    raise ValueError("refused")
+        assert got == expected, (dispatcher, fails)
+
+
+def test_a_first_runs_estimate_is_what_this_machine_measured_last(tmp_path, monkeypatch):
+    """The command line announces a compile with the median of this machine's last compiles of
+    its kind, else the package's figure, and records the one it announced."""
+    import hybrid.cli as cli
+    import hybrid.kernel as k
+    from hybrid.loop import run_steps
+    from hybrid.resolve import resolve_scene
+
+    monkeypatch.setattr(k, "CACHE_DIR", str(tmp_path / "numba-0123456789abcdef"))
+    monkeypatch.setattr(cli, "has_cached_build", lambda dispatcher: False)  # a first run
+    scene = resolve_scene("breathing")  # coupled to its ribs: "first run, rigid"
+    estimate, on_compiled = cli._compile_estimate(scene)
+    assert estimate("helper", ()) is None
+    assert estimate(run_steps, ()) == cli.COMPILE_ESTIMATE_S["first run, rigid"]
+    on_compiled(9.0)
+    assert k.measured_compile_s("first run, rigid") == 9.0
+    k.record_compile_s("first run, rigid", 13.0)
+    estimate, _ = cli._compile_estimate(scene)
+    assert estimate(run_steps, ()) == 11.0  # the median of 9 and 13
+    assert k.measured_compile_s("first run, membrane") is None
