@@ -217,17 +217,26 @@ def _compile_record(base: str | None) -> Path:
     return Path(Path(CACHE_DIR).parent if base is None else base) / COMPILE_RECORD
 
 
+def _read_compile_record(path: Path) -> dict:
+    """The record's kinds and their CPU seconds; {} for a record absent or unreadable."""
+    import json
+
+    try:
+        record = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return {}
+    if not isinstance(record, dict):
+        return {}
+    return {k: v for k, v in record.items() if isinstance(v, list) and all(isinstance(t, float | int) for t in v)}
+
+
 def measured_compile_s(kind: str, base: str | None = None) -> float | None:
     """The median CPU seconds of the last compiles of `kind` recorded in the cache folder
     `base` (CACHE_DIR's parent), None if there is none (or the record cannot be read)."""
-    import json
     import statistics
 
-    try:
-        times = json.loads(_compile_record(base).read_text(encoding="utf-8")).get(kind)
-        return float(statistics.median(times)) if times else None
-    except (OSError, ValueError, TypeError, AttributeError, statistics.StatisticsError):
-        return None
+    times = _read_compile_record(_compile_record(base)).get(kind)
+    return float(statistics.median(times)) if times else None
 
 
 def record_compile_s(kind: str, cpu_s: float, base: str | None = None) -> None:
@@ -238,14 +247,8 @@ def record_compile_s(kind: str, cpu_s: float, base: str | None = None) -> None:
     import tempfile
 
     path = _compile_record(base)
-    try:
-        record = json.loads(path.read_text(encoding="utf-8"))
-        if not isinstance(record, dict):
-            record = {}
-    except (OSError, ValueError):
-        record = {}
-    times = record.get(kind) if isinstance(record.get(kind), list) else []
-    record[kind] = [*times, round(float(cpu_s), 2)][-COMPILE_RECORD_KEEP:]
+    record = _read_compile_record(path)
+    record[kind] = [*record.get(kind, []), round(float(cpu_s), 2)][-COMPILE_RECORD_KEEP:]
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".compile_cpu_s.")
