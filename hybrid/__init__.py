@@ -54,6 +54,7 @@ from .scene import (
     PassiveFibres,
     Prescribed,
     Pressure,
+    RestingTension,
     RibPair,
     Ribs,
     Rigid,
@@ -106,6 +107,7 @@ __all__ = [
     "MuscleFibres",
     "PassiveFibres",
     "Lungs",
+    "RestingTension",
     # region selectors
     "All",
     "Border",

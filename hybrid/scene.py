@@ -33,6 +33,7 @@ from .terms import (
     PassiveFibres,
     Prescribed,
     Pressure,
+    RestingTension,
     ShapeMemory,
     SoftVolume,
     Volume,
@@ -66,6 +67,7 @@ __all__ = [
     "MuscleFibres",
     "PassiveFibres",
     "Lungs",
+    "RestingTension",
 ]
 
 INTEGRATORS = NAMES  # hybrid.integrators

@@ -19,6 +19,7 @@ from .membrane import Membrane
 from .muscle import Muscle
 from .passive_fibres import PassiveFibres
 from .pointwise import Damping, Gravity
+from .resting_tension import RestingTension
 from .shape_memory import ShapeMemory
 from .springs import AppliedForce, Attraction, MassSpring
 from .volume import Pressure, SoftVolume, Volume
@@ -49,6 +50,7 @@ __all__ = [
     "MuscleFibres",
     "PassiveFibres",
     "Lungs",
+    "RestingTension",
 ]
 
 order_terms(
@@ -70,6 +72,7 @@ order_terms(
         KeepIn,
         Volume,
         Lungs,
+        RestingTension,
     )
 )
 
