@@ -162,3 +162,15 @@ def test_ribs_placed_beside_the_spine_and_forward(torso):
         assert head[0] >= ribs.radius_m and front[0] >= ribs.radius_m
         assert front[1] < head[1] - 0.05
         assert pair.half_width_m > max(head[0], front[0])
+
+
+def test_the_dome_holds_the_laplace_tension_of_its_resting_pressure(torso):
+    import hybrid
+    from hybrid.anatomy.trunk_scene import ABDOMEN_RESTING_TENSION_N_PER_M, RESTING_PDI_PA
+
+    fit, _ = torso
+    scene = hybrid.load_scene(fit.scene_path)
+    t = {f.name: f.tension_n_per_m for f in scene.forces if f.toml_type == "resting_tension"}
+    # T = P R / 2 on a dome of radius 0.08-0.15 m at P = 5 cmH2O: 20-37 N/m
+    assert RESTING_PDI_PA * 0.08 / 2 < t["dome_resting_tension"] < RESTING_PDI_PA * 0.15 / 2
+    assert t["abdomen_resting_tension"] == ABDOMEN_RESTING_TENSION_N_PER_M

@@ -8,6 +8,9 @@ cartilages, up to `FRONT_DEG` off the anterior midline) to a front pair of ribs,
 and back to a lower pair, one free column of points between them, at the anterior midline
 and beside the spine (two bodies holding neighbouring points would tear the sheet across
 one triangle). Material and rib parameters are that scene's, each with its source there.
+Unlike that scene's sphere, the fitted surface has flat and shallow parts that a stress-free
+membrane lets bend without stretching: the dome and the abdominal wall hold a tension at rest
+(`RestingTension`: the dome's from Laplace's law, the wall's a calibration).
 """
 
 from __future__ import annotations
@@ -18,11 +21,20 @@ from hybrid import regions as R
 from hybrid.errors import MeshError
 from hybrid.scene import Masses, MeshSpec, RibPair, Ribs, Rigid, RigidLink, Scene
 from hybrid.schedule import Breathing
-from hybrid.terms import Damping, Membrane, MuscleFibres, Nailed, PassiveFibres, Volume
+from hybrid.terms import Damping, Membrane, MuscleFibres, Nailed, PassiveFibres, RestingTension, Volume
 
 from .surface import Loft
 
-__all__ = ["FRONT_DEG", "TENDON_RISE", "trunk_scene", "sectors"]
+__all__ = [
+    "FRONT_DEG",
+    "TENDON_RISE",
+    "RESTING_PDI_PA",
+    "ABDOMEN_RESTING_TENSION_N_PER_M",
+    "trunk_scene",
+    "sectors",
+    "dome_radius_m",
+    "dome_resting_tension",
+]
 
 #: the band's front part, linked to the front pair, reaches this far off the anterior
 #: midline (deg; the costal cartilages of the lower ribs)
@@ -32,6 +44,33 @@ FRONT_DEG = 40.0
 TENDON_RISE = 0.6
 #: the ribs added: capsule radius (m), as `myotorso_breathing`
 RIB_RADIUS_M = 0.006
+#: the transdiaphragmatic pressure the relaxed dome holds at rest (Pa): the lungs' resting
+#: recoil, pleural pressure -5 cmH2O at FRC (textbooks; docs/lungs.md), across a
+#: dome whose abdominal side is at atmospheric pressure (an assumption: no checked source for
+#: the gastric pressure at rest)
+RESTING_PDI_PA = 5.0 * 98.0665
+
+
+#: the abdominal wall's tension at rest (N/m): calibration, not a source (none at hand for the
+#: wall's resting tone): without it the wall, stress-free, kept a fold after each breath (the
+#: surface 2.2 mm RMS off its rest shape at the end of expiration), with it 0.15 mm
+ABDOMEN_RESTING_TENSION_N_PER_M = 10.0
+
+
+def dome_radius_m(points: np.ndarray) -> float:
+    """The radius (m) of the sphere fitted to the dome's points (n, 3) m by least squares
+    (|x|^2 = 2 c . x + k, linear in the centre c and k)."""
+    a = np.c_[2.0 * points, np.ones(len(points))]
+    sol = np.linalg.lstsq(a, np.sum(points**2, axis=1), rcond=None)[0]
+    return float(np.sqrt(sol[3] + sol[:3] @ sol[:3]))
+
+
+def dome_resting_tension(points: np.ndarray) -> float:
+    """The tension (N/m) of the relaxed dome at rest, by Laplace's law on its fitted sphere:
+    T = P R / 2, P = `RESTING_PDI_PA`. Without it the stress-free dome and abdominal wall
+    bend without stretching (a flat or shallow sheet has no first-order stiffness): the
+    fitted trunk's apex sank under a fraction of the drive and stayed down after it."""
+    return RESTING_PDI_PA * dome_radius_m(points) / 2.0
 
 
 def _idx(points) -> R.Indices:
@@ -158,6 +197,12 @@ def trunk_scene(
             toward_m=tuple(float(x) for x in apex),
             tension_n_per_m=Breathing(period_s=4.0, inspiration_fraction=0.4, peak=20.0),
             force_length_width=0.67,
+        ),
+        RestingTension(
+            name="dome_resting_tension", region="dome", tension_n_per_m=round(dome_resting_tension(lf.vert[dome]), 2)
+        ),
+        RestingTension(
+            name="abdomen_resting_tension", region="abdomen", tension_n_per_m=ABDOMEN_RESTING_TENSION_N_PER_M
         ),
         Damping(region="moving", drag_n_s_per_m3=200.0),
     )
