@@ -10,17 +10,14 @@ merely linearised (a linear step leaves an O(phi^2) error of ~1e-8 here).
 
 Every volume below is recomputed independently of the compiled step: the
 step gathers its volume from the one-ring fans (hybrid.terms.volume), the
-checks use the per-face formula of hybrid.mesh.volume (numpy), trimesh, or
-the small per-face kernel `_face_volume` of this file.
+checks use the per-face formula of hybrid.mesh.volume (numpy) or trimesh.
 """
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
-from numba import njit
 
-from hybrid.loop import membrane_only, run_steps
 from hybrid.mesh import uv_sphere
 from hybrid.mesh import volume as face_volume
 from hybrid.mesh import volume_gradient as face_volume_gradient
@@ -40,7 +37,7 @@ from hybrid.scene import (
     Volume,
 )
 from hybrid.simulation import Simulation
-from hybrid.step import S_PRESSURE, membrane_forces, new_control, new_state, new_work, step_par
+from hybrid.step import S_PRESSURE, membrane_forces, new_control, new_state, new_work
 
 VOLUME_RTOL = 1e-12  # the issue's bound; see the module docstring for why it is reachable
 
@@ -90,50 +87,13 @@ def test_volume_exact_every_step_80_point_sphere(integrator):
     assert abs(face_volume(free.vert_pos, face) - v0) / v0 > 1e-3
 
 
-@njit(error_model="numpy")
-def _face_volume(face, pos):
-    """V = 1/6 sum_f a . (b x c), corners relative to the mean position (m^3).
-    Deliberately the per-face formula, not the step's per-fan gather."""
-    n = pos.shape[0]
-    cx = cy = cz = 0.0
-    for i in range(n):
-        cx += pos[i, 0]
-        cy += pos[i, 1]
-        cz += pos[i, 2]
-    cx /= n
-    cy /= n
-    cz /= n
-    v = 0.0
-    for f in range(face.shape[0]):
-        a, b, c = face[f, 0], face[f, 1], face[f, 2]
-        ax, ay, az = pos[a, 0] - cx, pos[a, 1] - cy, pos[a, 2] - cz
-        bx, by, bz = pos[b, 0] - cx, pos[b, 1] - cy, pos[b, 2] - cz
-        qx, qy, qz = pos[c, 0] - cx, pos[c, 1] - cy, pos[c, 2] - cz
-        v += ax * (by * qz - bz * qy) + ay * (bz * qx - bx * qz) + az * (bx * qy - by * qx)
-    return v / 6.0
-
-
-@njit(error_model="numpy")
-def _steps_checking_volume(arrays, state, work, control, frames, rig, nstep, step0, face, v0, err, par):
-    """nstep single compiled steps (the very loop Simulation.step runs, one step
-    per call, with the model's `par`: `hybrid.step.step_par`), recording |V - V0| / V0 after each into err[step0 + k].
-    Not cached on disk: a cache would not notice changes in the core's kernels."""
-    stop = np.zeros(1, np.int64)
-    for k in range(nstep):
-        stop[0] = step0 + k + 1
-        if run_steps(arrays, state, work, control, stop, step0 + k, frames, rig, par) != 1:
-            return k
-        err[step0 + k] = abs(_face_volume(face, state.vert_pos) - v0) / v0
-    return nstep
-
-
 def test_volume_exact_every_step_icosphere_10242():
     """icosphere(5): 10,242 points, 3,000 steps, V checked after every one of them
-    (in a compiled loop around the compiled step), after every chunk of 100
+    (a frame of the compiled loop after each step), after every chunk of 100
     with numpy and trimesh, and for 200 more steps through the public step(1).
-    The chunks alternate the serial and the multi-core builds of the step (each
-    as `Simulation` runs it, `hybrid.step.step_par`), so both
-    keep the volume exact over the run."""
+    The chunks alternate the serial and the multi-core builds of the step (a
+    `Simulation` fixed to each, the state handed over), so both keep the volume
+    exact over the run."""
     # 4 kg on 10,242 points: m ~ 3.9e-4 kg. Shape memory k = 3000 N/m gives a
     # per-point bound 2/omega ~ 7e-4 s for symplectic Euler (the model reports
     # ~4.7e-4 s with the damping): dt = 2e-4 s is stable with margin.
@@ -144,34 +104,30 @@ def test_volume_exact_every_step_icosphere_10242():
     face = np.ascontiguousarray(mesh.face_vert)
     v0 = face_volume(mesh.vert_pos, face)
     assert abs(v0 - mesh.to_trimesh().volume) <= 1e-13 * v0
-    sim = Simulation(model)
+    # one Simulation per build; each chunk restarts the other's state bit for bit (set_state)
+    sims = {par: Simulation(model, build="parallel" if par else "serial") for par in (False, True)}
     # 0.6 s simulated. Beside other busy processes (the suite's other worker) the multi-core
     # build is the slower here: 15 ms of CPU a step measured on a loaded machine, 0.7 ms serial
     nstep, chunk = 3_000, 100
     err = np.full(nstep, np.nan)
     err_chunk = []
     pressure = []
-    builds = {par: model.arrays._replace(parallel=par) for par in (False, True)}
+    frames = sims[False].frames_buffer(chunk)
+    sim = sims[False]
     for c in range(nstep // chunk):
-        arrays = builds[c % 2 == 1]
-        done = _steps_checking_volume(
-            arrays,
-            sim.state,
-            sim.work,
-            sim.control.arrays,
-            sim.frames_buffer(1).arrays(),
-            membrane_only(),
-            chunk,
-            c * chunk,
-            face,
-            v0,
-            err,
-            step_par(arrays),
-        )
-        assert done == chunk, f"step failed at {c * chunk + done}: status {sim.state.status}"
-        sim.steps_done += done
+        if c:
+            state = sim.get_state()
+            sim = sims[c % 2 == 1]
+            sim.set_state(state)
+        # every step a frame: its points, whose volume numpy computes face by face
+        sim.step_frames(np.arange(c * chunk + 1, (c + 1) * chunk + 1), frames)
+        assert frames.count == chunk
+        err[c * chunk : (c + 1) * chunk] = [abs(face_volume(p, face) - v0) / v0 for p in frames.pos]
         err_chunk.append(abs(face_volume(sim.vert_pos, face) - v0) / v0)
         pressure.append(sim.pressure)
+    # each build ran its half of the chunks, and no other
+    assert sims[False].builds.summary()["parallel_steps"] == sims[True].builds.summary()["serial_steps"] == 0
+    assert sims[False].builds.summary()["serial_steps"] == sims[True].builds.summary()["parallel_steps"] == nstep // 2
     assert not np.isnan(err).any()
     assert err.max() <= VOLUME_RTOL, f"worst step {err.argmax()}: {err.max():.3g}"
     assert max(err_chunk) <= VOLUME_RTOL
