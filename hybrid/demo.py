@@ -11,6 +11,7 @@ from . import scenefile
 from .regions import Difference, HalfSpace
 from .scene import Damping, Gravity, Lungs, Masses, MeshSpec, Muscle, Nailed, Scene, ShapeMemory, Volume
 from .schedule import Breathing
+from .terms.lungs import ADULT_LUNGS
 
 __all__ = ["membrane_demo", "breathing_lungs"]
 
@@ -63,8 +64,6 @@ def breathing_lungs() -> Scene:
     lungs = Lungs(
         floor=Difference(base="diaphragm", minus="rib_band"),
         wall_height_m=0.12,
-        lung_compliance_l_per_cmh2o=0.2,
-        resting_recoil_cmh2o=5.0,
-        airway_resistance_cmh2o_s_per_l=1.5,
+        **ADULT_LUNGS,
     )
     return dataclasses.replace(base, name="breathing_lungs", forces=(*base.forces, lungs))

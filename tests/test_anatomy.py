@@ -174,3 +174,29 @@ def test_the_dome_holds_the_laplace_tension_of_its_resting_pressure(torso):
     # T = P R / 2 on a dome of radius 0.08-0.15 m at P = 5 cmH2O: 20-37 N/m
     assert RESTING_PDI_PA * 0.08 / 2 < t["dome_resting_tension"] < RESTING_PDI_PA * 0.15 / 2
     assert t["abdomen_resting_tension"] == ABDOMEN_RESTING_TENSION_N_PER_M
+
+
+def test_the_fitted_trunk_breathes_air_over_its_dome(torso):
+    """The fitted scene's lungs fill the cavity over the dome (its floor, not the rib band: the
+    zone of apposition is the abdomen's wall) up to the fitted thoracic cavity's top plane, with
+    the adult lungs' cited parameters; at rest the pleural pressure is the resting recoil's
+    negative, and the cavity's volume is the divergence theorem's over the floor and the wall."""
+    import hybrid
+    from hybrid.terms.lungs import ADULT_LUNGS, CMH2O_PA, L_PLEURAL, L_VOLUME, P_V0
+
+    fit, _ = torso
+    scene = hybrid.load_scene(fit.scene_path)
+    (lungs,) = [f for f in scene.forces if f.toml_type == "lungs"]
+    assert lungs.floor == "dome"
+    assert {k: getattr(lungs, k) for k in ADULT_LUNGS} == ADULT_LUNGS
+    sim = hybrid.load(fit.scene_path)
+    v0 = sim.model.arrays.lung_par[P_V0]
+    # a cavity between the dome and the top plane: at least the fitted thorax.obj's 2 L less
+    # the dome's rise under it, at most an adult's total lung capacity (4.07 + 1.19 L, CT)
+    assert 1e-3 < v0 < 5.3e-3
+    sim.step(20)
+    lung = sim.get_state().lung
+    # 20 steps (1 ms) from rest: the volume moves by far less than 1 mL, the recoil by less than
+    # E dV = 5 cmH2O/L x 1 mL
+    assert abs(lung[L_VOLUME] - v0) < 1e-6
+    assert lung[L_PLEURAL] == pytest.approx(-ADULT_LUNGS["resting_recoil_cmh2o"] * CMH2O_PA, abs=0.005 * CMH2O_PA)

@@ -10,7 +10,9 @@ and beside the spine (two bodies holding neighbouring points would tear the shee
 one triangle). Material and rib parameters are that scene's, each with its source there.
 Unlike that scene's sphere, the fitted surface has flat and shallow parts that a stress-free
 membrane lets bend without stretching: the dome and the abdominal wall hold a tension at rest
-(`RestingTension`: the dome's from Laplace's law, the wall's a calibration).
+(`RestingTension`: the dome's from Laplace's law, the wall's a calibration). The lungs
+(`Lungs`, the adult parameters of `hybrid.terms.lungs.ADULT_LUNGS`) fill the cavity over the
+dome up to the fitted thoracic cavity's top plane.
 """
 
 from __future__ import annotations
@@ -21,7 +23,8 @@ from hybrid import regions as R
 from hybrid.errors import MeshError
 from hybrid.scene import Masses, MeshSpec, RibPair, Ribs, Rigid, RigidLink, Scene
 from hybrid.schedule import Breathing
-from hybrid.terms import Damping, Membrane, MuscleFibres, Nailed, PassiveFibres, RestingTension, Volume
+from hybrid.terms import Damping, Lungs, Membrane, MuscleFibres, Nailed, PassiveFibres, RestingTension, Volume
+from hybrid.terms.lungs import ADULT_LUNGS
 
 from .surface import Loft
 
@@ -205,6 +208,14 @@ def trunk_scene(
             name="abdomen_resting_tension", region="abdomen", tension_n_per_m=ABDOMEN_RESTING_TENSION_N_PER_M
         ),
         Damping(region="moving", drag_n_s_per_m3=200.0),
+        # the lungs fill the cavity over the dome, up to the fitted thoracic cavity's top plane
+        # (thorax.obj's); the rib band, the zone of apposition, is the abdomen's wall, not theirs
+        Lungs(
+            name="lungs",
+            floor="dome",
+            wall_height_m=round(float(lf.extra["wall_z"][-1].max() - np.mean(lf.z_top)), 4),
+            **ADULT_LUNGS,
+        ),
     )
     constraints = (Nailed(name="spine", region="spine"), Nailed(name="pelvis", region="pelvis"), Volume())
     rigid = Rigid(

@@ -49,6 +49,7 @@ from .base import Term, force, param
 
 __all__ = [
     "Lungs",
+    "ADULT_LUNGS",
     "CMH2O_PA",
     "LungSlot",
     "NLUNG",
@@ -93,6 +94,15 @@ P_E, P_K1, P_K2, P_RECOIL, P_V0 = 0, 1, 2, 3, 4
 P_CURVE, P_SA, P_SB, P_SC, P_SD, P_VREST = 5, 6, 7, 8, 9, 10
 P_REF = 11
 NPAR = 14
+#: an adult's lungs and airway, each from a source, none fitted: lung compliance 0.2 L/cmH2O
+#: (Guyton, Textbook of Medical Physiology), resting recoil 5 cmH2O (pleural pressure -5 cmH2O
+#: at rest, physiology textbooks), airway resistance 1.5 cmH2O s/L (DuBois et al. 1956, J Clin
+#: Invest 35:327); the packaged scenes with lungs take them as `Lungs(**ADULT_LUNGS, ...)`
+ADULT_LUNGS = {
+    "lung_compliance_l_per_cmh2o": 0.2,
+    "resting_recoil_cmh2o": 5.0,
+    "airway_resistance_cmh2o_s_per_l": 1.5,
+}
 #: the lungs' recoil curves (`Lungs.recoil_curve`)
 RECOIL_CURVES = ("linear", "sigmoid")
 
