@@ -37,6 +37,18 @@ BASE = Scene(
 )
 
 
+def forces_at(model, pos, t: float = 0.0):
+    """The force pass of `model` with its points at `pos` (m), time t (s): (forces (nvert, 3) N,
+    the state after the pass, for its readouts such as the pressure)."""
+    from hybrid.step import membrane_forces, new_control, new_state, new_work
+
+    state = new_state(model.arrays)
+    state.vert_pos[:] = pos
+    work = new_work(model.arrays, state)
+    membrane_forces(model.arrays, state, work, new_control(model.arrays), t)
+    return work.vert_force.copy(), state
+
+
 def base_scene(**changes) -> Scene:
     return dataclasses.replace(BASE, **changes)
 

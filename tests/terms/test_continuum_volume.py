@@ -9,24 +9,22 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import forces_at
 
 from hybrid.mesh import icosphere, uv_sphere, vertex_area
 from hybrid.mesh import volume as face_volume
 from hybrid.model import compile_scene
 from hybrid.scene import Damping, Masses, Pressure, Scene, SoftVolume
 from hybrid.simulation import Simulation
-from hybrid.step import S_PRESSURE, membrane_forces, new_control, new_state, new_work
+from hybrid.step import S_PRESSURE
 
 R = 0.1
 MESHES = {"icosphere": lambda: icosphere(2, R), "uv_sphere": lambda: uv_sphere(R, 24, 12)}
 
 
 def _forces(model, pos):
-    state = new_state(model.arrays)
-    state.vert_pos[:] = pos
-    work = new_work(model.arrays, state)
-    membrane_forces(model.arrays, state, work, new_control(model.arrays), 0.0)
-    return work.vert_force.copy(), float(state.scal[S_PRESSURE])
+    force, state = forces_at(model, pos)
+    return force, float(state.scal[S_PRESSURE])
 
 
 def _check_gradient(model, energy, pos, rng, nprobe=12):

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import forces_at
 
 from hybrid.errors import SceneError
 from hybrid.mesh import Mesh, icosphere, uv_sphere
@@ -13,7 +14,6 @@ from hybrid.model import compile_scene
 from hybrid.regions import Ball, HalfSpace
 from hybrid.scene import Masses, MuscleFibres, Scene
 from hybrid.schedule import Breathing, evaluate
-from hybrid.step import membrane_forces, new_control, new_state, new_work
 from hybrid.terms.fibres import add_muscle_fibres, fibre_shares
 from hybrid.terms.tangents import fibre_energy
 
@@ -32,11 +32,7 @@ def _model(mesh, tension=40.0):
 
 
 def _forces(model, pos, t=0.0):
-    state = new_state(model.arrays)
-    state.vert_pos[:] = pos
-    work = new_work(model.arrays, state)
-    membrane_forces(model.arrays, state, work, new_control(model.arrays), t)
-    return work.vert_force.copy()
+    return forces_at(model, pos, t)[0]
 
 
 @pytest.mark.parametrize("family", LEVELS)

@@ -6,12 +6,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import forces_at
 
 from hybrid.errors import SceneError
 from hybrid.mesh import fibonacci_sphere, ring_sphere, uv_sphere
 from hybrid.model import compile_scene
 from hybrid.scene import Masses, PassiveFibres, Scene
-from hybrid.step import membrane_forces, new_control, new_state, new_work
 from hybrid.terms.passive_fibres import passive_fibres_energy
 
 R = 0.1
@@ -30,11 +30,7 @@ def _model(mesh, **direction):
 
 
 def _forces(model, pos):
-    state = new_state(model.arrays)
-    state.vert_pos[:] = pos
-    work = new_work(model.arrays, state)
-    membrane_forces(model.arrays, state, work, new_control(model.arrays), 0.0)
-    return work.vert_force.copy()
+    return forces_at(model, pos)[0]
 
 
 def _area(mesh):

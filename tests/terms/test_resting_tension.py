@@ -6,11 +6,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import forces_at
 
 from hybrid.mesh import ring_sphere
 from hybrid.model import compile_scene
 from hybrid.scene import Masses, RestingTension, Scene
-from hybrid.step import membrane_forces, new_control, new_state, new_work
 from hybrid.terms.membrane import add_membrane_serial, lame_moduli, membrane_rest
 from hybrid.terms.resting_tension import add_resting_tension, area_gradients
 
@@ -18,11 +18,7 @@ T = 25.0  # N/m
 
 
 def _forces(model, pos):
-    state = new_state(model.arrays)
-    state.vert_pos[:] = pos
-    work = new_work(model.arrays, state)
-    membrane_forces(model.arrays, state, work, new_control(model.arrays), 0.0)
-    return work.vert_force.copy()
+    return forces_at(model, pos)[0]
 
 
 def test_area_gradient_is_the_finite_difference():
