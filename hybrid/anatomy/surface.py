@@ -20,8 +20,11 @@ Each point below the dome keeps `clearance_m` inside the skeleton's inner face w
 bone lies in its cell (the spine, the sacrum and the pelvis as well as the ribs). A point's
 height along its meridian only increases and, below the dome, its meridian lies in its own
 half-plane about the axis; near the poles every other column is dropped where the rings
-close in. `hybrid.anatomy.fit` checks the result: closed, oriented, no two triangles
-crossing (`hybrid.mesh.intersect`).
+close in. Where a ring steps round a vertebral body its long edge is split by points on it
+(`_split_long`), and rings of any counts are stitched by their nearest points (`_stitch`):
+the triangles stay near equilateral (quality 0.15 at worst on myo-sim's torso, 0.06 with
+one edge across each step). `hybrid.anatomy.fit` checks the result: closed, oriented, no
+two triangles crossing (`hybrid.mesh.intersect`).
 """
 
 from __future__ import annotations
@@ -47,6 +50,8 @@ WALL_BULGE = 0.1
 _DOME_GAP_M = 0.001
 #: the thoracic cavity's top plane under the rib cage's lowest top (m)
 TOP_MARGIN_M = 0.02
+#: a ring's edge longer than this many of the loft's spacings is split (`_split_long`)
+LONG_EDGE = 2.0
 
 
 def _periodic_fill(v: np.ndarray) -> np.ndarray:
@@ -220,13 +225,19 @@ def loft(
         cols[k] = cols[k] if len(cols[k]) >= len(cols[k + 1]) // 2 else _every(n, len(cols[k + 1]) // 2)
     bottom_pt = env.frame.point(0.0, z_floor, 0.0)
     apex_pt = centre + (z_apex - fr.origin @ fr.cranial) * fr.cranial
-    vert = np.concatenate([bottom_pt[None], *[p[c] for p, c in zip(pts, cols)], apex_pt[None]])
-    start = np.cumsum([1] + [len(c) for c in cols])
-    rings = [start[k] + np.arange(len(cols[k])) for k in range(nring)]
+    # every ring's long edges split; rings of any counts stitched by their nearest points
+    ring_u, ring_p = [], []
+    for k in range(nring):
+        u, p = _split_long(pts[k], cols[k], n, h)
+        ring_u.append(u)
+        ring_p.append(p)
+    vert = np.concatenate([bottom_pt[None], *ring_p, apex_pt[None]])
+    start = np.cumsum([1] + [len(u) for u in ring_u])
+    rings = [start[k] + np.arange(len(ring_u[k])) for k in range(nring)]
     bottom, apex = 0, int(start[-1])
     face = np.concatenate(
         [_fan(bottom, rings[0], up=False)]
-        + [_strip(rings[k], rings[k + 1]) for k in range(nring - 1)]
+        + [_stitch(rings[k], rings[k + 1], vert) for k in range(nring - 1)]
         + [_fan(apex, rings[-1], up=True)]
     )
     if _signed_volume(vert, face) < 0:
@@ -250,7 +261,7 @@ def loft(
         zoa_area_share=share,
         columns=n,
         extra={
-            "ring_columns": cols,
+            "ring_columns": ring_u,
             "wall_z": wall_z,
             "wall_r": wall_r,
             "inner": inner,
@@ -305,32 +316,58 @@ def _ring_columns(n: int, spacing_m: float, meridian_m: float) -> np.ndarray:
     return _every(n, m)
 
 
+def _split_long(ring: np.ndarray, cols: np.ndarray, n: int, h: float) -> tuple:
+    """(u, points) of a ring: its points `ring` (n, 3) at columns `cols`, each edge longer
+    than `LONG_EDGE` x h split into edges about h long by points on it (u: the column
+    coordinate, fractional between columns). Where the ring steps round a bone that juts
+    in toward the axis (the vertebral bodies), neighbouring columns lie at far different
+    distances from it and one edge spans the step (80-90 mm on myo-sim's lumbar spine, the
+    rings 8-12 mm apart: triangles of quality 0.06): points on it leave the surface where
+    it was and make its triangles near equilateral."""
+    us, ps = [], []
+    for i, j in enumerate(cols):
+        jn = int(cols[(i + 1) % len(cols)])
+        a, b = ring[j], ring[jn]
+        un = jn if jn > j else jn + n
+        us.append(float(j))
+        ps.append(a)
+        length = float(np.linalg.norm(b - a))
+        if length > LONG_EDGE * h:
+            k = int(np.ceil(length / h)) - 1
+            for t in np.arange(1, k + 1) / (k + 1):
+                us.append(float(j + t * (un - j)))
+                ps.append(a + t * (b - a))
+    return np.asarray(us), np.asarray(ps)
+
+
 def _fan(pole: int, ring: np.ndarray, *, up: bool) -> np.ndarray:
     nxt = np.roll(ring, -1)
     return np.stack([ring, nxt, np.full(len(ring), pole)] if up else [np.full(len(ring), pole), nxt, ring], axis=1)
 
 
-def _strip(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """The triangles between ring lo and the ring above it, hi (as many points, or half or
-    twice as many on the same columns), oriented as quads (lo_j, lo_j+1, hi_j+1, hi_j)."""
+def _stitch(lo: np.ndarray, hi: np.ndarray, vert: np.ndarray) -> np.ndarray:
+    """The triangles between ring lo and the ring above it, hi (point indices into `vert`,
+    each from column 0 round the axis, of any counts), oriented as quads (lo_j, lo_j+1,
+    hi_j+1, hi_j): from column 0 on, the ring whose next point gives the shorter new edge
+    across the strip advances (the greedy rule of contour stitching, Christiansen & Sederberg
+    1978, Comput Graph 12:187), so that where a ring's step round a bone moves by a column
+    from one ring to the next its points still join their nearest."""
     a, b = len(lo), len(hi)
+    i = j = 0
     out = []
-    if a == b:
-        for j in range(a):
-            jn = (j + 1) % a
-            out += [(lo[j], lo[jn], hi[jn]), (lo[j], hi[jn], hi[j])]
-    elif b * 2 == a:  # hi coarser
-        for j in range(b):
-            f0, f1, f2 = lo[2 * j], lo[2 * j + 1], lo[(2 * j + 2) % a]
-            c0, c1 = hi[j], hi[(j + 1) % b]
-            out += [(f0, f1, c0), (f1, c1, c0), (f1, f2, c1)]
-    elif a * 2 == b:  # lo coarser
-        for j in range(a):
-            c0, c1 = lo[j], lo[(j + 1) % a]
-            f0, f1, f2 = hi[2 * j], hi[2 * j + 1], hi[(2 * j + 2) % b]
-            out += [(c0, f1, f0), (c0, c1, f1), (c1, f2, f1)]
-    else:
-        raise MeshError(f"expected rings of equal or halved point counts, received {a} and {b}")
+    while i < a or j < b:
+        if i == a or j == b:
+            go_lo = i < a
+        else:
+            go_lo = np.linalg.norm(vert[lo[(i + 1) % a]] - vert[hi[j]]) < np.linalg.norm(
+                vert[hi[(j + 1) % b]] - vert[lo[i]]
+            )
+        if go_lo:
+            out.append((lo[i], lo[(i + 1) % a], hi[j % b]))
+            i += 1
+        else:
+            out.append((lo[i % a], hi[(j + 1) % b], hi[j]))
+            j += 1
     return np.asarray(out, np.int64)
 
 
@@ -363,10 +400,11 @@ def thoracic_cavity_surface(env: Envelope, lf: Loft) -> tuple:
     w_ring = [d_ring[0]] + [d_apex + 1 + k * n + np.arange(n) for k in range(n_up)]
     top = d_apex + 1 + n_up * n
     dome = np.concatenate(
-        [_strip(d_ring[k], d_ring[k + 1]) for k in range(len(d_ring) - 1)] + [_fan(d_apex, d_ring[-1], up=True)]
+        [_stitch(d_ring[k], d_ring[k + 1], vert) for k in range(len(d_ring) - 1)] + [_fan(d_apex, d_ring[-1], up=True)]
     )
     faces = [dome[:, [0, 2, 1]]]  # the dome as in the membrane, reversed
-    faces += [_strip(w_ring[k], w_ring[k + 1]) for k in range(n_up)] + [_fan(top, w_ring[-1], up=True)]
+    faces += [_stitch(w_ring[k], w_ring[k + 1], vert) for k in range(n_up)]
+    faces += [_fan(top, w_ring[-1], up=True)]
     face = np.concatenate(faces).astype(np.int64)
     if _signed_volume(vert, face) < 0:
         face = face[:, [0, 2, 1]]

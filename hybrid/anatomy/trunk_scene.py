@@ -76,6 +76,15 @@ def dome_resting_tension(points: np.ndarray) -> float:
     return RESTING_PDI_PA * dome_radius_m(points) / 2.0
 
 
+def _on(u: np.ndarray, columns, n: int) -> np.ndarray:
+    """Which of a ring's points, at column coordinates u (fractional between columns: a
+    point on a split edge, `hybrid.anatomy.surface`), lie on the run of neighbouring columns
+    `columns`: a point on a column of it, or on an edge between two of its columns."""
+    cs = np.asarray(columns, np.int64)
+    lo, hi = np.floor(u).astype(np.int64) % n, np.ceil(u).astype(np.int64) % n
+    return np.isin(lo, cs) & np.isin(hi, cs)
+
+
 def _idx(points) -> R.Indices:
     return R.Indices(indices=tuple(int(i) for i in np.unique(np.asarray(points, np.int64))))
 
@@ -152,7 +161,7 @@ def trunk_scene(
     floor = np.concatenate([lf.points_of({"floor"}), [lf.bottom]])
     spine_cols = np.asarray(lf.extra["spine_columns"], np.int64)
     cols = lf.extra["ring_columns"]
-    low = [r[np.isin(c, spine_cols)] for r, c, k in zip(lf.rings, cols, kinds) if k in ("floor", "wall", "zoa")]
+    low = [r[_on(c, spine_cols, lf.columns)] for r, c, k in zip(lf.rings, cols, kinds) if k in ("floor", "wall", "zoa")]
     strip = np.concatenate(low) if low else np.zeros(0, np.int64)
     regions: dict = {
         "pelvis": _idx(floor),
@@ -167,14 +176,14 @@ def trunk_scene(
         "fixed": R.Union_(parts=("spine", "pelvis")),
         "moving": R.Difference(base="all", minus="fixed"),
     }
-    ring_of_band = [lf.rings[margin]] + [r for r, k in zip(lf.rings, kinds) if k == "zoa"]
-    if any(len(r) != lf.columns for r in ring_of_band):
+    band_rings = [margin] + [k for k, kd in enumerate(kinds) if kd == "zoa"]
+    if any(not np.isin(np.arange(lf.columns), cols[k]).all() for k in band_rings):
         raise MeshError("expected the rib band's rings to hold every column, received a thinned ring")
     pairs, links = [], []
-    for (part, side), cols in sectors(lf).items():
-        if not cols:
+    for (part, side), sector in sectors(lf).items():
+        if not sector:
             continue
-        pts = np.concatenate([r[np.asarray(cols)] for r in ring_of_band])
+        pts = np.concatenate([lf.rings[k][_on(cols[k], sector, lf.columns)] for k in band_rings])
         regions[f"ribs_{part}_{side}_points"] = _idx(pts)
         links.append(
             RigidLink(region=f"ribs_{part}_{side}_points", body=f"ribs_{part}_{side}", name=f"ribs_{part}_{side}")
