@@ -14,15 +14,17 @@ floor's lowest point up to the dome's apex, through the same stations on every c
   Dis 119:31: a quarter to a third of it during quiet breathing upright);
 - the dome: rings shrinking, as a quarter ellipse, from the zone's top toward the apex
   over the centre of the zone's top ring, `dome_rise_m` above the zone's highest point,
-  each point drawn in under the thoracic cavity's wall.
+  rounding toward circles as they rise (`DOME_ROUND_POWER`), each point drawn in under the
+  thoracic cavity's wall.
 
 Each point below the dome keeps `clearance_m` inside the skeleton's inner face wherever a
 bone lies in its cell (the spine, the sacrum and the pelvis as well as the ribs). A point's
 height along its meridian only increases and, below the dome, its meridian lies in its own
 half-plane about the axis; near the poles every other column is dropped where the rings
-close in. Where a ring steps round a vertebral body its long edge is split by points on it
+close in, and the floor's and the dome's rings lose points where they run close to the axis
+(`_thin`). Where a ring steps round a vertebral body its long edge is split by points on it
 (`_split_long`), and rings of any counts are stitched by their nearest points (`_stitch`):
-the triangles stay near equilateral (quality 0.15 at worst on myo-sim's torso, 0.06 with
+the triangles stay near equilateral (quality 0.33 at worst on myo-sim's torso, 0.06 with
 one edge across each step). `hybrid.anatomy.fit` checks the result: closed, oriented, no
 two triangles crossing (`hybrid.mesh.intersect`).
 """
@@ -52,6 +54,13 @@ _DOME_GAP_M = 0.001
 TOP_MARGIN_M = 0.02
 #: a ring's edge longer than this many of the loft's spacings is split (`_split_long`)
 LONG_EDGE = 2.0
+#: how far (m) a point dropped from a ring (`_thin`) may lie off the edge that replaces it
+THIN_SAG_M = 0.001
+#: a dome ring is drawn toward the circle of its points' mean distance from the dome's
+#: centre line by its rise fraction to this power: the notch the zone's top ring makes round
+#: the vertebral bodies fades out toward the apex, where scaled copies of it crowded the
+#: rings' points together behind the centre line
+DOME_ROUND_POWER = 4
 
 
 def _periodic_fill(v: np.ndarray) -> np.ndarray:
@@ -211,7 +220,11 @@ def loft(
         t = i / n_dome
         zd = z_top + rise * np.sin(0.5 * np.pi * t)
         flat = top_ring - ((top_ring - fr.origin) @ fr.cranial)[:, None] * fr.cranial
-        ring = centre + np.cos(0.5 * np.pi * t) * (flat - centre) + (zd - fr.origin @ fr.cranial)[:, None] * fr.cranial
+        rel = flat - centre
+        rho = np.maximum(np.linalg.norm(rel, axis=1), 1e-9)
+        w = np.sin(0.5 * np.pi * t) ** DOME_ROUND_POWER  # its rise fraction's power
+        rel = rel * ((1.0 - w) + w * float(rho.mean()) / rho)[:, None]
+        ring = centre + np.cos(0.5 * np.pi * t) * rel + (zd - fr.origin @ fr.cranial)[:, None] * fr.cranial
         ring = _inside(env, wall_z, wall_r, ring, centre, zd)
         stations.append(("dome", float(np.sin(0.5 * np.pi * t)), zd, None))
         pts.append(ring)
@@ -225,10 +238,21 @@ def loft(
         cols[k] = cols[k] if len(cols[k]) >= len(cols[k + 1]) // 2 else _every(n, len(cols[k + 1]) // 2)
     bottom_pt = env.frame.point(0.0, z_floor, 0.0)
     apex_pt = centre + (z_apex - fr.origin @ fr.cranial) * fr.cranial
+    # each column's spacing between rings (the meridian's), per ring
+    below = [np.broadcast_to(bottom_pt, pts[0].shape), *pts[:-1]]
+    above = [*pts[1:], np.broadcast_to(apex_pt, pts[-1].shape)]
+    merid = [
+        0.5 * (np.linalg.norm(p - b, axis=1) + np.linalg.norm(a - p, axis=1)) for p, b, a in zip(pts, below, above)
+    ]
+    # the floor's and the dome's rings thinned where they run close to the axis; the wall's
+    # and the zone's keep every column (the spine's strip and the ribs' sectors are columns);
     # every ring's long edges split; rings of any counts stitched by their nearest points
     ring_u, ring_p = [], []
     for k in range(nring):
-        u, p = _split_long(pts[k], cols[k], n, h)
+        c = cols[k]
+        if stations[k][0] in ("floor", "dome"):
+            c = _thin(pts[k], c, merid[k])
+        u, p = _split_long(pts[k], c, n, h)
         ring_u.append(u)
         ring_p.append(p)
     vert = np.concatenate([bottom_pt[None], *ring_p, apex_pt[None]])
@@ -314,6 +338,33 @@ def _ring_columns(n: int, spacing_m: float, meridian_m: float) -> np.ndarray:
     while m % 2 == 0 and m // 2 >= 6 and spacing_m * n / (m // 2) <= meridian_m:
         m //= 2
     return _every(n, m)
+
+
+def _seg_dist(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
+    """The distance (m) of point p from the segment ab."""
+    ab = b - a
+    t = float(np.clip((p - a) @ ab / max(float(ab @ ab), 1e-300), 0.0, 1.0))
+    return float(np.linalg.norm(p - (a + t * ab)))
+
+
+def _thin(ring: np.ndarray, cols: np.ndarray, meridian: np.ndarray) -> np.ndarray:
+    """The columns `cols` of a ring (its points `ring` (n, 3) at every column) less those
+    whose two kept neighbours lie within the meridian's spacing (`meridian` (n,) m) of each
+    other while the point is within `THIN_SAG_M` of the segment between them: where a ring
+    runs close to the axis (the sacrum's front, the dome's top) its spacing falls far under
+    the meridian's, and the slivers there would set the stable step."""
+    cols = np.asarray(cols)
+    if len(cols) <= 6:
+        return cols
+    keep = [int(cols[0])]
+    for i in range(1, len(cols)):
+        j, nxt = int(cols[i]), int(cols[(i + 1) % len(cols)])
+        a, b = ring[keep[-1]], ring[nxt]
+        few = len(cols) - i - 1 + len(keep) < 6  # dropping it would leave fewer than 6
+        if not few and np.linalg.norm(b - a) <= meridian[j] and _seg_dist(ring[j], a, b) <= THIN_SAG_M:
+            continue
+        keep.append(j)
+    return np.asarray(keep)
 
 
 def _split_long(ring: np.ndarray, cols: np.ndarray, n: int, h: float) -> tuple:
