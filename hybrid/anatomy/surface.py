@@ -7,7 +7,8 @@ floor's lowest point up to the dome's apex, through the same stations on every c
   to the pelvic inlet (the sacral promontory's height);
 - the abdominal wall: from the inlet up to the costal margin (each column's lowest rib
   point) at the margin's distance from the axis, bulging `WALL_BULGE` halfway (the wall holds
-  no bone to follow);
+  no bone to follow), leaving the top of a bone that held it in (the iliac crest, the
+  sacral promontory) at no more than `SHELF_SLOPE` outward per height;
 - the zone of apposition: up the rib cage's inner face from the costal margin, over the
   same fraction of each column's rib cage height; the fraction is solved for so that the
   zone covers `zoa_area_share` of the rib cage's inner surface (Mead 1979, Am Rev Respir
@@ -24,7 +25,7 @@ half-plane about the axis; near the poles every other column is dropped where th
 close in, and the floor's and the dome's rings lose points where they run close to the axis
 (`_thin`). Where a ring steps round a vertebral body its long edge is split by points on it
 (`_split_long`), and rings of any counts are stitched by their nearest points (`_stitch`):
-the triangles stay near equilateral (quality 0.33 at worst on myo-sim's torso, 0.06 with
+the triangles stay near equilateral (quality 0.37 at worst on myo-sim's torso, 0.06 with
 one edge across each step). `hybrid.anatomy.fit` checks the result: closed, oriented, no
 two triangles crossing (`hybrid.mesh.intersect`).
 """
@@ -56,6 +57,11 @@ TOP_MARGIN_M = 0.02
 LONG_EDGE = 2.0
 #: how far (m) a point dropped from a ring (`_thin`) may lie off the edge that replaces it
 THIN_SAG_M = 0.001
+#: the steepest outward slope (m per m of height) of the abdominal wall above the top edge
+#: of a bone that held the ring below it in (`loft`)
+SHELF_SLOPE = 2.0
+#: a ring's point nearer than this (m) to its clearance inside a vertebra is held by the spine
+_SPINE_TOL_M = 0.001
 #: a dome ring is drawn toward the circle of its points' mean distance from the dome's
 #: centre line by its rise fraction to this power: the notch the zone's top ring makes round
 #: the vertebral bodies fades out toward the apex, where scaled copies of it crowded the
@@ -204,7 +210,16 @@ def loft(
         stations.append(("floor", 0.0, zf, rf))
     for i in range(1, n_wall + 1):
         zw = z_in + (z_cm - z_in) * i / n_wall
-        stations.append(("wall", 0.0, zw, np.array([float(wall(j, zw[j])[0]) for j in range(n)])))
+        rw = np.array([float(wall(j, zw[j])[0]) for j in range(n)])
+        # above the top edge of a bone that held the ring below in (the iliac crest, the
+        # sacral promontory) the wall leaves it at no more than `SHELF_SLOPE` outward per
+        # height: straight out, the step (40 mm over one ring on myo-sim's hip bones) gave
+        # slivers. Not at the vertebral bodies: their sides are steps round every ring
+        # (`_split_long`), and the gutters beside them hold much of the abdomen's volume
+        _, _, zb, rb = stations[-1]
+        free = np.array([float(env.spine_at(j, zb[j])[0]) - clearance_m > rb[j] + _SPINE_TOL_M for j in range(n)])
+        rw = np.where(free, np.minimum(rw, rb + SHELF_SLOPE * (zw - zb)), rw)
+        stations.append(("wall", 0.0, zw, rw))
     for i in range(1, n_zoa + 1):
         zz = z_cm + (z_top - z_cm) * i / n_zoa
         stations.append(("zoa", 0.0, zz, np.array([float(inner(j, zz[j])[0]) for j in range(n)])))
