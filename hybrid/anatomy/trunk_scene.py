@@ -171,6 +171,11 @@ def trunk_scene(
         "pelvis": _idx(floor),
         "rib_band": _idx(band),
         "dome": _idx(dome),
+        # the lungs' floor: the dome and the zone's top ring, so that the cavity's border (faces
+        # with two of their points in it, `hybrid.regions.faces_of`) runs on the rib band's points
+        # alone, which the ribs carry, at every mesh level; on the dome's own faces it zigzags
+        # between the band and the dome's first ring, half of it carried at level 0, a sixth at 1
+        "lung_floor": _idx(np.concatenate([dome, lf.rings[max(k for k, kd in enumerate(kinds) if kd == "zoa")]])),
         "diaphragm": R.Union_(parts=("rib_band", "dome")),
         "abdomen": R.Difference(base="all", minus="diaphragm"),
         "tendon": _idx(tendon),
@@ -224,9 +229,10 @@ def trunk_scene(
         Damping(region="moving", drag_n_s_per_m3=200.0),
         # the lungs fill the cavity over the dome, up to the fitted thoracic cavity's top plane
         # (thorax.obj's); the rib band, the zone of apposition, is the abdomen's wall, not theirs
+        # (but its top ring, where the dome leaves the ribs: `lung_floor`)
         Lungs(
             name="lungs",
-            floor="dome",
+            floor="lung_floor",
             wall_height_m=round(float(lf.extra["wall_z"][-1].max() - np.mean(lf.z_top)), 4),
             **ADULT_LUNGS,
         ),
