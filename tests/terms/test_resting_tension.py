@@ -1,6 +1,8 @@
 """A sheet's tension at rest (hybrid.terms.resting_tension): nothing at rest and no net force,
-the force minus the gradient of T A(x) - F0 . x, and a flat sheet's first-order stiffness
-against a push across it, which a stress-free membrane lacks (its force grows as the cube)."""
+the force minus the gradient of the prestress's work T/2 sum_f A0_f |F_f|^2 - F0 . x (F_f each
+triangle's deformation gradient), a stiffness that is positive semi-definite (the sheet's area,
+the first version's energy, was not), and a flat sheet's first-order stiffness against a push
+across it, which a stress-free membrane lacks (its force grows as the cube)."""
 
 from __future__ import annotations
 
@@ -12,7 +14,7 @@ from hybrid.mesh import ring_sphere
 from hybrid.model import compile_scene
 from hybrid.scene import Masses, RestingTension, Scene
 from hybrid.terms.membrane import add_membrane_serial, lame_moduli, membrane_rest
-from hybrid.terms.resting_tension import add_resting_tension, area_gradients
+from hybrid.terms.resting_tension import add_resting_tension, cot_weights
 
 T = 25.0  # N/m
 
@@ -21,49 +23,70 @@ def _forces(model, pos):
     return forces_at(model, pos)[0]
 
 
-def test_area_gradient_is_the_finite_difference():
+def test_cotangents_are_the_angles():
     p = np.random.default_rng(3).normal(size=(6, 3, 3))
-
-    def area(q):
-        return 0.5 * np.linalg.norm(np.cross(q[:, 1] - q[:, 0], q[:, 2] - q[:, 0]), axis=1)
-
-    num = np.zeros_like(p)
     for a in range(3):
-        for k in range(3):
-            d = np.zeros_like(p)
-            d[:, a, k] = 1e-6
-            num[:, a, k] = (area(p + d) - area(p - d)) / 2e-6
-    assert np.abs(area_gradients(p) - num).max() < 1e-8
+        u, v = p[:, (a + 1) % 3] - p[:, a], p[:, (a + 2) % 3] - p[:, a]
+        angle = np.arccos(np.sum(u * v, axis=1) / np.linalg.norm(u, axis=1) / np.linalg.norm(v, axis=1))
+        assert cot_weights(p)[:, a] == pytest.approx(1.0 / np.tan(angle), rel=1e-12, abs=1e-12)
 
 
-def test_nothing_at_rest_no_net_force_and_minus_the_energy_gradient():
-    mesh = ring_sphere(300, 0.1)
-    model = compile_scene(
-        Scene(mesh=mesh, masses=Masses(total_kg=1.0), forces=(RestingTension(tension_n_per_m=T),)),
+def _dirichlet(x, x0, face):
+    """sum_f A0_f |F_f|^2 / 2: F_f maps triangle f's rest edges onto its edges at x (in its rest
+    plane's frame: the pseudo-inverse of the rest edges)."""
+    total = 0.0
+    for f in face:
+        rest = np.c_[x0[f[1]] - x0[f[0]], x0[f[2]] - x0[f[0]]]
+        now = np.c_[x[f[1]] - x[f[0]], x[f[2]] - x[f[0]]]
+        grad = now @ np.linalg.pinv(rest)
+        total += 0.25 * np.linalg.norm(np.cross(rest[:, 0], rest[:, 1])) * np.sum(grad * grad)
+    return total
+
+
+def _model():
+    return compile_scene(
+        Scene(mesh=ring_sphere(300, 0.1), masses=Masses(total_kg=1.0), forces=(RestingTension(tension_n_per_m=T),)),
     )
+
+
+def test_nothing_at_rest_no_net_force_and_minus_the_prestress_work_gradient():
+    model = _model()
     x0 = model.mesh.vert_pos.copy()
+    face = model.mesh.face_vert
     assert np.abs(_forces(model, x0)).max() < 1e-12
     x = x0 + 0.01 * np.random.default_rng(0).normal(size=x0.shape)
     f = _forces(model, x)
     assert np.abs(f.sum(axis=0)).max() < 1e-10 * np.abs(f).sum()
-    # W(x) = T A(x) - F0 . x, F0 = T grad A(x0): F = -grad W, checked on one point
-    face = model.mesh.face_vert
-    f0 = np.zeros_like(x0)
-    g0 = area_gradients(x0[face])
-    for a in range(3):
-        np.add.at(f0, face[:, a], T * g0[:, a])
+    # W(x) = T sum A0 |F|^2 / 2 - F0 . x with F0 its gradient at rest: F = -grad W, on three points
+    # by central differences (W is quadratic: the difference is exact but for rounding)
+    w0 = np.zeros_like(x0)
+    for i in (5, 17, 222):
+        for k in range(3):
+            d = np.zeros_like(x0)
+            d[i, k] = 1e-6
+            w0[i, k] = T * (_dirichlet(x0 + d, x0, face) - _dirichlet(x0 - d, x0, face)) / 2e-6
+            num = -(T * (_dirichlet(x + d, x0, face) - _dirichlet(x - d, x0, face)) / 2e-6 - w0[i, k])
+            assert f[i, k] == pytest.approx(num, rel=1e-6, abs=1e-9)
 
-    def energy(y):
-        p = y[face]
-        return T * 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1).sum() - np.sum(f0 * y)
 
-    i = 17
-    num = np.zeros(3)
-    for k in range(3):
-        d = np.zeros_like(x)
-        d[i, k] = 1e-7
-        num[k] = -(energy(x + d) - energy(x - d)) / 2e-7
-    assert f[i] == pytest.approx(num, rel=1e-5, abs=1e-9)
+def test_the_stiffness_is_positive_semi_definite():
+    """The force is linear in the displacement, K u = -F(x0 + u): K's eigenvalues are >= 0 (the
+    first version's energy, T times the area, had -1.5 N/m in the sheet's plane on this sphere,
+    which a soft membrane does not cover: a mesh-scale instability that grew with refinement)."""
+    model = _model()
+    x0 = model.mesh.vert_pos
+    n = x0.size
+    stiff = np.zeros((n, n))
+    for j in range(n):
+        u = np.zeros(n)
+        u[j] = 1e-3
+        stiff[:, j] = -_forces(model, x0 + u.reshape(-1, 3)).ravel() / 1e-3
+    assert np.abs(stiff - stiff.T).max() < 1e-9 * np.abs(stiff).max()
+    eig = np.linalg.eigvalsh(stiff)
+    # rounding: the forces are sums of T cot |edge| terms, about 1e-16 relative of the largest
+    assert eig[0] > -1e-9 * eig[-1]
+    # and not a zero matrix: out-of-plane stiffness of order T
+    assert eig[-1] > T
 
 
 def _flat_sheet(n=9, size_m=0.2):
@@ -81,7 +104,9 @@ def _flat_sheet(n=9, size_m=0.2):
 
 def test_a_taut_flat_sheet_resists_a_push_across_it_to_first_order():
     pos, face, centre = _flat_sheet()
-    par = np.c_[np.full(len(face), T), T * area_gradients(pos[face]).reshape(len(face), 9)]
+    p = pos[face]
+    edges = np.stack([p[:, (a + 2) % 3] - p[:, (a + 1) % 3] for a in range(3)], axis=1)
+    par = np.c_[0.5 * T * cot_weights(p), edges.reshape(len(face), 9)]
 
     def push(w):  # the force across the sheet on its centre, pushed out by w (m)
         x = pos.copy()
