@@ -5,7 +5,7 @@ The step's free points take v+ = v + dv, x+ = x + h v+ with
     M dv = h (f_i(x+, v+) + f_e),
 
 f_i the forces treated implicitly (the continuum membrane with its Kelvin-Voigt
-viscosity, muscle fibres, passive fibres, drag) and f_e the others at the step's start
+viscosity, muscle fibres, passive fibres, resting tension, drag) and f_e the others at the step's start
 (gravity, applied loads, pressure loads, ...: the step's force pass minus f_i
 there), plus, with a volume constraint, the last step's pressure on the
 volume gradient. Nailed, prescribed and linked points keep their positions
@@ -94,10 +94,11 @@ from .implicit_work import (
     newton_rows,
 )
 from .kernel import CHUNK_VERTS, kernel
-from .switches import T_DAMPING, T_LUNGS, T_MEMBRANE, T_MUSCLE_FIBRES, T_PASSIVE_FIBRES, T_VOLUME
+from .switches import T_DAMPING, T_LUNGS, T_MEMBRANE, T_MUSCLE_FIBRES, T_PASSIVE_FIBRES, T_RESTING_TENSION, T_VOLUME
 from .terms.fibres import add_muscle_fibres
 from .terms.membrane import add_membrane_serial, membrane_energy
 from .terms.passive_fibres import add_passive_fibres
+from .terms.resting_tension import add_resting_tension, resting_tension_energy, resting_tension_product
 from .terms.tangents import (
     fibre_cached_product,
     fibre_energy,
@@ -137,7 +138,7 @@ FORCING = 0.5  # the linear solve: to this fraction of the residual, and of what
 @kernel
 def implicit_forces(m, tri, sched_val, x, v, out, w):
     """out = the forces implicit Euler treats implicitly at (x, v): membrane (with its
-    viscosity), muscle fibres, passive fibres, drag, the lungs' pleural load; of the
+    viscosity), muscle fibres, passive fibres, resting tension, drag, the lungs' pleural load; of the
     triangles `tri` (m itself: all of them; `NewtonRows`: those with a free corner, whole on
     the free points).
     # Model: m, tri   # Data in: sched_val (schedules at t), x (m), v (m/s), w.lung_wall_pos, w.lung_wall_vel
@@ -153,6 +154,8 @@ def implicit_forces(m, tri, sched_val, x, v, out, w):
         add_muscle_fibres(tri.fib_vert, tri.fib_par, tri.fib_sched, sched_val, x, out)
     if on[T_PASSIVE_FIBRES]:
         add_passive_fibres(tri.pf_vert, tri.pf_par, x, out)
+    if on[T_RESTING_TENSION]:
+        add_resting_tension(tri.rt_vert, tri.rt_par, x, out)
     if on[T_DAMPING]:
         for i in range(out.shape[0]):
             c = m.damp_coef[i]
@@ -205,7 +208,7 @@ def newton_product(m, rows, face, fib, pf, h, project, u, y):
     (all of the model's: the Newton matrix; `newton_rows`: its free points' rows): the
     matrix at the positions the caches face, fib, pf were taken at (`newton_caches`);
     the Hessian projected per element when `project`.
-    # Model: m.vert_mass (nvert,) kg, m.damp_coef (nvert,) kg/s, m.term_on; rows: mem_vert, mem_par, fib_vert, pf_vert
+    # Model: m.vert_mass (nvert,) kg, m.damp_coef (nvert,) kg/s, m.term_on; rows: mem_vert, mem_par, fib_vert, pf_vert, rt_vert, rt_par
     # Data in: face, fib, pf (`newton_caches`), h (s), project, u (nvert, 3)
     # Data out: y (nvert, 3), kg times u's unit
     """
@@ -220,6 +223,8 @@ def newton_product(m, rows, face, fib, pf, h, project, u, y):
         fibre_cached_product(rows.fib_vert, fib, project, h * h, u, y)
     if on[T_PASSIVE_FIBRES]:
         passive_fibres_cached_product(rows.pf_vert, pf, project, h * h, u, y)
+    if on[T_RESTING_TENSION]:  # positive semi-definite per triangle: the same projected or not
+        resting_tension_product(rows.rt_vert, rows.rt_par, h * h, u, y)
 
 
 @kernel
@@ -339,7 +344,7 @@ def _residual(m, sched_val, pos, vel, h, w):
 def _merit(m, sched_val, h, dv, w):
     """The incremental potential at dv (w.x_try, w.v_try taken there: `_trial`), whose
     dv-gradient is minus h res: 1/2 dv M dv - h f_e . dv + E(x_try) + h/2 sum c |v_try|^2
-    + h R(x_kv, v_try), E the membrane's and fibres' energies, R the viscosity's
+    + h R(x_kv, v_try), E the membrane's, fibres' and resting tension's energies, R the viscosity's
     dissipation function at the positions x_kv where the Newton iteration started (the
     gradient there exact).
     # Model: m (vert_free, vert_mass kg, damp_coef kg/s, term_on, kv_on), w.rows
@@ -364,6 +369,8 @@ def _merit(m, sched_val, h, dv, w):
         total += fibre_energy(tri.fib_vert, tri.fib_par, tri.fib_sched, sched_val, w.x_try)
     if on[T_PASSIVE_FIBRES]:
         total += passive_fibres_energy_kernel(tri.pf_vert, tri.pf_par, w.x_try)
+    if on[T_RESTING_TENSION]:
+        total += resting_tension_energy(tri.rt_vert, tri.rt_par, w.x_try)
     if on[T_LUNGS]:
         total += lung_potential(m, sched_val, h, w)
     return total

@@ -24,7 +24,8 @@ from typing import NamedTuple
 import numpy as np
 
 from .kernel import kernel
-from .terms import Damping, Membrane, MuscleFibres, PassiveFibres
+from .terms import Damping, Membrane, MuscleFibres, PassiveFibres, RestingTension
+from .terms.resting_tension import resting_tension_blocks
 from .terms.tangent_blocks import fibre_tangent_blocks, membrane_tangent_blocks, passive_fibres_tangent_blocks
 
 __all__ = [
@@ -51,6 +52,7 @@ __all__ = [
 # and 1.8: 14.7 at level 8)
 SSOR_OMEGA = 1.4
 T_MEMBRANE, T_FIBRES, T_PASSIVE, T_DAMPING = Membrane.id, MuscleFibres.id, PassiveFibres.id, Damping.id
+T_RESTING_TENSION = RestingTension.id
 
 
 class NewtonMatrix(NamedTuple):
@@ -62,7 +64,7 @@ class NewtonMatrix(NamedTuple):
     points are held: vectors of every point left half of each cache line unused, and the
     triangular solves took 0.38 against 0.30 ms at level 8). free (nfree,): the free
     points; row_ptr (nfree + 1,), col (nblocks,) sorted in each row, from the diagonal
-    block on (col >= row); mem_slot, fib_slot, pf_slot (nrows, 9): the block of each
+    block on (col >= row); mem_slot, fib_slot, pf_slot, rt_slot (nrows, 9): the block of each
     element's corner pair (m, n), m <= n, at 3 m + n (the block of the smaller to the
     larger row), -1 with a fixed corner and for m > n; amat (nblocks, 9): the blocks
     (row-major); pdiag (nvert, 9): each point's diagonal block with K projected (by
@@ -78,6 +80,7 @@ class NewtonMatrix(NamedTuple):
     mem_slot: np.ndarray
     fib_slot: np.ndarray
     pf_slot: np.ndarray
+    rt_slot: np.ndarray
     amat: np.ndarray
     pdiag: np.ndarray
     sdiag: np.ndarray
@@ -87,7 +90,7 @@ class NewtonMatrix(NamedTuple):
     ediag: np.ndarray
 
 
-def newton_matrix(nvert: int, vert_free, mem_vert, fib_vert, pf_vert) -> NewtonMatrix:
+def newton_matrix(nvert: int, vert_free, mem_vert, fib_vert, pf_vert, rt_vert) -> NewtonMatrix:
     """The pattern of the blocks coupling free points through the given triangles' (nf, 3) corners."""
     free = np.flatnonzero(np.asarray(vert_free) != 0).astype(np.int64)
     nf = free.size
@@ -98,7 +101,7 @@ def newton_matrix(nvert: int, vert_free, mem_vert, fib_vert, pf_vert) -> NewtonM
     # -1 with a fixed corner and for m > n
     upper = np.arange(9) // 3 <= np.arange(9) % 3
     pair_keys = []
-    for t in (mem_vert, fib_vert, pf_vert):
+    for t in (mem_vert, fib_vert, pf_vert, rt_vert):
         t = row_of[np.asarray(t, np.int64).reshape(-1, 3)]
         i, j = np.repeat(t, 3, axis=1), np.tile(t, (1, 3))
         key = np.minimum(i, j) * nf + np.maximum(i, j)
@@ -130,8 +133,8 @@ def assemble(m, rows, face, fib, pf, h, mat):
     projected, from the tangent caches of `rows` (`hybrid.implicit.newton_caches`); mat.sdiag,
     mat.dinv, mat.gchol, mat.ediag. One thread in both builds (threads summing into shared blocks
     would change their last bits from one build to the other).
-    # Model: m (vert_mass kg, damp_coef kg/s, term_on); rows (NewtonRows): mem_vert, mem_par, fib_vert, pf_vert;
-    #        mat's pattern: free, row_ptr, mem_slot, fib_slot, pf_slot
+    # Model: m (vert_mass kg, damp_coef kg/s, term_on); rows (NewtonRows): mem_vert, mem_par, fib_vert, pf_vert, rt_vert, rt_par;
+    #        mat's pattern: free, row_ptr, mem_slot, fib_slot, pf_slot, rt_slot
     # Data in: face, fib, pf (the tangent caches), h (s)
     # Data out: mat.amat (nblocks, 9) kg, mat.pdiag (nvert, 9) kg (the free points' rows), mat.sdiag (nfree, 9) kg,
     #           mat.dinv (nfree, 9) 1/kg, mat.gchol (nfree, 6) kg^1/2, mat.ediag (nfree, 9) kg
@@ -154,6 +157,8 @@ def assemble(m, rows, face, fib, pf, h, mat):
         fibre_tangent_blocks(rows.fib_vert, fib, h * h, mat.fib_slot, amat, pdiag)
     if on[T_PASSIVE]:
         passive_fibres_tangent_blocks(rows.pf_vert, pf, h * h, mat.pf_slot, amat, pdiag)
+    if on[T_RESTING_TENSION]:
+        resting_tension_blocks(rows.rt_vert, rows.rt_par, h * h, mat.rt_slot, amat, pdiag)
     for f in range(free.shape[0]):
         i = free[f]
         d, b, g, e, da = mat.sdiag[f], mat.dinv[f], mat.gchol[f], mat.ediag[f], amat[ptr[f]]

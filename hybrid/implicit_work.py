@@ -59,7 +59,7 @@ class Info(IntEnum):
 
 
 class NewtonRows(NamedTuple):
-    """The membrane's, muscle fibres' and passive fibres' rows (`MembraneArrays`) and the
+    """The membrane's, muscle fibres', passive fibres' and resting tension's rows (`MembraneArrays`) and the
     surface's faces (face_vert) of the triangles with a free corner: the others add only
     to fixed points, whose rows the solve leaves out, so its residuals, products, blocks
     and volume gradient skip them (at level 8 of the breathing scene a fifth of the
@@ -72,6 +72,8 @@ class NewtonRows(NamedTuple):
     fib_sched: np.ndarray
     pf_vert: np.ndarray
     pf_par: np.ndarray
+    rt_vert: np.ndarray
+    rt_par: np.ndarray
     face_vert: np.ndarray
 
 
@@ -83,6 +85,7 @@ def newton_rows(arrays) -> NewtonRows:
         (arrays.mem_vert, arrays.mem_par),
         (arrays.fib_vert, arrays.fib_par, arrays.fib_sched),
         (arrays.pf_vert, arrays.pf_par),
+        (arrays.rt_vert, arrays.rt_par),
     ):
         keep = free[tri.reshape(-1, 3)].any(axis=1)
         out += [np.ascontiguousarray(a[keep]) for a in (tri, *more)]
@@ -154,7 +157,7 @@ def implicit_work(arrays, wall_pos=None, wall_vel=None) -> ImplicitWork | None:
         face=np.zeros((rows.mem_vert.shape[0], NCACHE)),
         fib=np.zeros((rows.fib_vert.shape[0], NFIB_CACHE)),
         pf=np.zeros((rows.pf_vert.shape[0], NPF_CACHE)),
-        mat=newton_matrix(n, arrays.vert_free, rows.mem_vert, rows.fib_vert, rows.pf_vert),
+        mat=newton_matrix(n, arrays.vert_free, rows.mem_vert, rows.fib_vert, rows.pf_vert, rows.rt_vert),
         info=np.zeros(len(Info)),
         lung_wall_pos=arrays.lung_wall.copy() if wall_pos is None else wall_pos,
         lung_wall_vel=np.zeros_like(arrays.lung_wall) if wall_vel is None else wall_vel,

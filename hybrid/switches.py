@@ -24,6 +24,7 @@ from .terms import (
     PassiveFibres,
     Prescribed,
     Pressure,
+    RestingTension,
     ShapeMemory,
     SoftVolume,
     Volume,
@@ -38,6 +39,7 @@ T_SHAPE_MEMORY, T_MEMBRANE, T_APPLIED, T_ATTRACTION = ShapeMemory.id, Membrane.i
 T_MASS_SPRING, T_MUSCLE, T_SOFT_VOLUME, T_PRESSURE = MassSpring.id, Muscle.id, SoftVolume.id, Pressure.id
 T_MUSCLE_FIBRES, T_PASSIVE_FIBRES, T_LUNGS = MuscleFibres.id, PassiveFibres.id, Lungs.id
 T_PRESCRIBED, T_KEEP_IN, T_VOLUME = Prescribed.id, KeepIn.id, Volume.id
+T_RESTING_TENSION = RestingTension.id
 
 
 def step_par(arrays: MembraneArrays):

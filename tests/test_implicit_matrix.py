@@ -6,7 +6,7 @@ omega; on a small irregular mesh with every tangent term and points that are not
 import numpy as np
 import pytest
 
-from hybrid import Damping, HalfSpace, Masses, Membrane, MuscleFibres, PassiveFibres, Scene
+from hybrid import Damping, HalfSpace, Masses, Membrane, MuscleFibres, PassiveFibres, RestingTension, Scene
 from hybrid.implicit import newton_caches, newton_product, newton_rows
 from hybrid.implicit_matrix import SSOR_OMEGA, assemble, matrix_product, newton_matrix, sgs_sweep
 from hybrid.mesh import irregular_sphere
@@ -31,6 +31,7 @@ def assembled():
                 MuscleFibres(
                     HalfSpace((0.0, 0.0, -0.03), (0.0, 0.0, 1.0)), 40.0, toward_m=(0.0, 0.0, R), force_length_width=0.5
                 ),
+                RestingTension(tension_n_per_m=25.0, region=HalfSpace((0.0, 0.0, 0.0), (0.0, 0.0, 1.0))),
                 Damping(drag_n_s_per_m3=30.0),
             ),
         )
@@ -45,7 +46,7 @@ def assembled():
     face, fib = np.zeros((rows.mem_vert.shape[0], NCACHE)), np.zeros((rows.fib_vert.shape[0], NFIB_CACHE))
     pf = np.zeros((rows.pf_vert.shape[0], NPF_CACHE))
     newton_caches(a, rows, sv, x, face, fib, pf)
-    mat = newton_matrix(n, a.vert_free, rows.mem_vert, rows.fib_vert, rows.pf_vert)
+    mat = newton_matrix(n, a.vert_free, rows.mem_vert, rows.fib_vert, rows.pf_vert, rows.rt_vert)
     assemble(a, rows, face, fib, pf, H, mat)
     return a, rows, face, fib, pf, mat
 

@@ -33,10 +33,19 @@ import numpy as np
 
 from .. import checks
 from ..errors import SceneError
+from ..integrators import IMPLICIT_EULER_ID
 from ..kernel import kernel
 from .base import Rows, Term, force, param
 
-__all__ = ["RestingTension", "add_resting_tension", "cot_weights", "NPAR"]
+__all__ = [
+    "RestingTension",
+    "add_resting_tension",
+    "resting_tension_energy",
+    "resting_tension_product",
+    "resting_tension_blocks",
+    "cot_weights",
+    "NPAR",
+]
 
 # rt_par columns: k_a = T cot(theta_a) / 2 (N/m) for corners a = 0, 1, 2, then the rest edge
 # opposite each corner, x0_c - x0_b (m, 3 each)
@@ -71,12 +80,71 @@ def add_resting_tension(rt_vert, rt_par, vert_pos, vert_force):
                 vert_force[ic, j] -= d
 
 
+@kernel
+def resting_tension_energy(rt_vert, rt_par, vert_pos):
+    """The work whose minus gradient `add_resting_tension` adds: sum over triangles and
+    corners of k_a |d_a|^2 / 2 (J), the prestress's work less its rest force's, up to a constant.
+    # Model: rt_vert (n, 3) int32, rt_par (n, NPAR)   # Data in: vert_pos (nvert, 3) m   # Data out: returns J
+    """
+    total = 0.0
+    for f in range(rt_vert.shape[0]):
+        for a in range(3):
+            ib, ic = rt_vert[f, (a + 1) % 3], rt_vert[f, (a + 2) % 3]
+            dd = 0.0
+            for j in range(3):
+                d = vert_pos[ic, j] - vert_pos[ib, j] - rt_par[f, 3 + 3 * a + j]
+                dd += d * d
+            total += 0.5 * rt_par[f, a] * dd
+    return total
+
+
+@kernel
+def resting_tension_product(rt_vert, rt_par, kx, u, y):
+    """y += kx K u, K = -dF/dx the term's stiffness (constant: T times the rest cotangent
+    Laplacian, each triangle's part positive semi-definite).
+    # Model: rt_vert (n, 3) int32, rt_par (n, NPAR)   # Data in: kx (s^2 in the Newton matrix), u (nvert, 3)
+    # Data out: y (nvert, 3), added to
+    """
+    for f in range(rt_vert.shape[0]):
+        for a in range(3):
+            ib, ic = rt_vert[f, (a + 1) % 3], rt_vert[f, (a + 2) % 3]
+            k = kx * rt_par[f, a]
+            for j in range(3):
+                d = k * (u[ic, j] - u[ib, j])
+                y[ib, j] -= d
+                y[ic, j] += d
+
+
+@kernel
+def resting_tension_blocks(rt_vert, rt_par, kx, slot, amat, pdiag):
+    """amat[slot] += the blocks of kx K (each a multiple of the identity); pdiag[corner] += the
+    diagonal ones (each triangle's part is positive semi-definite: its projection is itself).
+    # Model: rt_vert, rt_par   # Data in: kx, slot (n, 9) int64 (`hybrid.implicit_matrix.NewtonMatrix`)
+    # Data out: amat (nblocks, 9), pdiag (nvert, 9) row-major blocks, added to
+    """
+    for f in range(rt_vert.shape[0]):
+        for a in range(3):
+            b, c = (a + 1) % 3, (a + 2) % 3
+            k = kx * rt_par[f, a]
+            for m, n, v in ((b, b, k), (c, c, k), (min(b, c), max(b, c), -k)):
+                s = slot[f, 3 * m + n]
+                if s < 0:
+                    continue
+                for r in (0, 4, 8):
+                    amat[s, r] += v
+                if m == n:
+                    for r in (0, 4, 8):
+                        pdiag[rt_vert[f, m], r] += v
+
+
 @kernel(inline="always")
 def resting_tension_step_force(m, s, w, c):
-    """The step's call (`Term.step_force`).
-    # Model: m.rt_vert, m.rt_par   # Data in: s.vert_pos   # Data out: w.vert_force (added to)
+    """The step's call (`Term.step_force`); under implicit Euler the Newton solve takes the
+    force instead (`hybrid.implicit.implicit_forces`).
+    # Model: m.rt_vert, m.rt_par, m.integrator   # Data in: s.vert_pos   # Data out: w.vert_force (added to)
     """
-    add_resting_tension(m.rt_vert, m.rt_par, s.vert_pos, w.vert_force)
+    if m.integrator != IMPLICIT_EULER_ID:
+        add_resting_tension(m.rt_vert, m.rt_par, s.vert_pos, w.vert_force)
 
 
 @force("resting_tension")
@@ -84,9 +152,8 @@ class RestingTension(Term):
     """An isotropic tension `tension_n_per_m` (N/m) the triangles of `region` hold at
     rest, balanced there by the loads that hold the rest shape (module docstring): the
     prestress T I of the membrane's law, its force less its rest value, nothing at rest, and
-    the sheet gains the (positive semi-definite) stress stiffness of a taut membrane. Its force
-    is taken at the step's start under every integrator (implicit Euler: not in the Newton
-    solve)."""
+    the sheet gains the (positive semi-definite) stress stiffness of a taut membrane. Implicit
+    Euler takes it in its Newton solve, its constant stiffness in the Newton matrix."""
 
     formulations = ("continuum",)
     # rt_vert (n, 3) int32: each triangle; rt_par (n, NPAR): k_a per corner, then the rest edges
@@ -106,8 +173,9 @@ class RestingTension(Term):
         k = 0.5 * t * cot_weights(p)
         edges = np.stack([p[:, (a + 2) % 3] - p[:, (a + 1) % 3] for a in range(3)], axis=1)
         par = np.concatenate([k, edges.reshape(len(tri), 9)], axis=1)
-        # stable-step estimate: the stiffness's diagonal at each point, the sum of |k_a| over its edges
+        # stable-step estimate: a row-sum (Gershgorin) bound of the stiffness, as the membrane's:
+        # each edge's |k_a| on the diagonal and again off it
         for a in range(3):
             for c in ((a + 1) % 3, (a + 2) % 3):
-                np.add.at(b.vert_stiffness, tri[:, c], np.abs(k[:, a]))
+                np.add.at(b.vert_stiffness, tri[:, c], 2.0 * np.abs(k[:, a]))
         b.add_rows(rt_vert=tri, rt_par=par)

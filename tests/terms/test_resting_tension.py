@@ -14,7 +14,12 @@ from hybrid.mesh import ring_sphere
 from hybrid.model import compile_scene
 from hybrid.scene import Masses, RestingTension, Scene
 from hybrid.terms.membrane import add_membrane_serial, lame_moduli, membrane_rest
-from hybrid.terms.resting_tension import add_resting_tension, cot_weights
+from hybrid.terms.resting_tension import (
+    add_resting_tension,
+    cot_weights,
+    resting_tension_energy,
+    resting_tension_product,
+)
 
 T = 25.0  # N/m
 
@@ -87,6 +92,31 @@ def test_the_stiffness_is_positive_semi_definite():
     assert eig[0] > -1e-9 * eig[-1]
     # and not a zero matrix: out-of-plane stiffness of order T
     assert eig[-1] > T
+
+
+def test_implicit_eulers_energy_and_product_are_the_forces():
+    """What the Newton solve reads (`hybrid.implicit`): the energy whose minus gradient is the
+    force (central differences, exact for a quadratic but for rounding) and the product K u =
+    -(F(x + u) - F(x)) (exact: the force is linear)."""
+    model = _model()
+    a = model.arrays
+    x0 = model.mesh.vert_pos
+    rng = np.random.default_rng(1)
+    x = x0 + 0.01 * rng.normal(size=x0.shape)
+    f = np.zeros_like(x)
+    add_resting_tension(a.rt_vert, a.rt_par, x, f)
+    assert resting_tension_energy(a.rt_vert, a.rt_par, x0) == 0.0  # nothing stored at rest
+    for i, k in ((5, 0), (17, 2), (222, 1)):
+        d = np.zeros_like(x)
+        d[i, k] = 1e-6
+        de = resting_tension_energy(a.rt_vert, a.rt_par, x + d) - resting_tension_energy(a.rt_vert, a.rt_par, x - d)
+        assert -de / 2e-6 == pytest.approx(f[i, k], rel=1e-6, abs=1e-9)
+    u = rng.normal(size=x.shape)
+    ku = np.zeros_like(u)
+    resting_tension_product(a.rt_vert, a.rt_par, 1.0, u, ku)
+    fu = np.zeros_like(x)
+    add_resting_tension(a.rt_vert, a.rt_par, x + u, fu)
+    assert np.abs(ku + (fu - f)).max() <= 1e-12 * np.abs(ku).max()
 
 
 def _flat_sheet(n=9, size_m=0.2):

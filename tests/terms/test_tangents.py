@@ -5,7 +5,7 @@ mesh deformed at random, and the membrane's projection to positive semi-definite
 import numpy as np
 import pytest
 
-from hybrid import Damping, HalfSpace, Masses, Membrane, MuscleFibres, Scene
+from hybrid import Damping, HalfSpace, Masses, Membrane, MuscleFibres, RestingTension, Scene
 from hybrid.implicit import implicit_forces, implicit_work, newton_caches, newton_product, newton_rows
 from hybrid.integrators import IMPLICIT_EULER_ID
 from hybrid.mesh import irregular_sphere
@@ -39,6 +39,7 @@ def model():
             forces=(
                 Membrane(800.0, poisson_ratio=0.3, damping_time_s=0.02),
                 MuscleFibres(HalfSpace((0.0, 0.0, 0.0), (0.0, 0.0, 1.0)), TENSION, toward_m=(0.0, 0.0, R)),
+                RestingTension(tension_n_per_m=25.0, region=HalfSpace((0.0, 0.0, -0.02), (0.0, 0.0, 1.0))),
                 Damping(drag_n_s_per_m3=30.0),
             ),
         )
@@ -202,7 +203,7 @@ def test_triangles_collapsed_along_their_fibres_pull_in_proportion(model, width)
 
 
 def test_the_newton_matrix_against_finite_differences_of_the_implicit_forces(model):
-    """M + h^2 K + h C with every term (membrane, its viscosity, fibres, drag),
+    """M + h^2 K + h C with every term (membrane, its viscosity, fibres, resting tension, drag),
     unprojected, against M - h^2 dF/dx - h dF/dv: dF/dx at v = 0 (where the
     viscous force's dependence on x, which the Newton matrix leaves out, vanishes)."""
     a = model.arrays
@@ -376,6 +377,7 @@ def test_the_newton_rows_skip_only_triangles_of_fixed_points():
                 Membrane(800.0, damping_time_s=0.02),
                 PassiveFibres(modulus_n_per_m=600.0, around_axis=(0.0, 0.0, 1.0)),
                 MuscleFibres(HalfSpace((0.0, 0.0, -0.03), (0.0, 0.0, 1.0)), TENSION, toward_m=(0.0, 0.0, R)),
+                RestingTension(tension_n_per_m=25.0),
                 Damping(drag_n_s_per_m3=30.0),
             ),
         )
@@ -384,9 +386,10 @@ def test_the_newton_rows_skip_only_triangles_of_fixed_points():
     rows = newton_rows(a)
     free = a.vert_free != 0
     assert 0 < free.sum() < free.size
-    kept = [getattr(rows, name).shape[0] for name in ("mem_vert", "fib_vert", "pf_vert")]
-    every = [getattr(a, name).shape[0] for name in ("mem_vert", "fib_vert", "pf_vert")]
-    assert min(kept) > 0 and sum(kept) < sum(every), (kept, every)
+    names = ("mem_vert", "fib_vert", "pf_vert", "rt_vert")
+    kept = [getattr(rows, name).shape[0] for name in names]
+    every = [getattr(a, name).shape[0] for name in names]
+    assert min(kept) > 0 and all(k < e for k, e in zip(kept, every)), (kept, every)
     x = a.vert_rest + 0.01 * np.random.default_rng(15).standard_normal(a.vert_rest.shape)
     u = np.random.default_rng(16).standard_normal(x.shape)
     sv = np.full((a.sched.kind.shape[0], 3), TENSION)
