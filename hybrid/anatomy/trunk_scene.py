@@ -158,6 +158,7 @@ def trunk_scene(
     mid = float(fr.origin @ fr.left)
     kinds = lf.kind
     margin = max(k for k, kd in enumerate(kinds) if kd == "wall")  # the costal margin ring
+    band_rings = [margin] + [k for k, kd in enumerate(kinds) if kd == "zoa"]  # up to the zone's top ring
     band = np.concatenate([lf.rings[margin], lf.points_of({"zoa"})])
     dome = np.concatenate([lf.points_of({"dome"}), [lf.apex]])
     tendon = np.concatenate([r for r, k, s in zip(lf.rings, kinds, lf.dome_rise) if k == "dome" and s >= TENDON_RISE])
@@ -175,7 +176,7 @@ def trunk_scene(
         # with two of their points in it, `hybrid.regions.faces_of`) runs on the rib band's points
         # alone, which the ribs carry, at every mesh level; on the dome's own faces it zigzags
         # between the band and the dome's first ring, half of it carried at level 0, a sixth at 1
-        "lung_floor": _idx(np.concatenate([dome, lf.rings[max(k for k, kd in enumerate(kinds) if kd == "zoa")]])),
+        "lung_floor": _idx(np.concatenate([dome, lf.rings[band_rings[-1]]])),
         "diaphragm": R.Union_(parts=("rib_band", "dome")),
         "abdomen": R.Difference(base="all", minus="diaphragm"),
         "tendon": _idx(tendon),
@@ -185,7 +186,6 @@ def trunk_scene(
         "fixed": R.Union_(parts=("spine", "pelvis")),
         "moving": R.Difference(base="all", minus="fixed"),
     }
-    band_rings = [margin] + [k for k, kd in enumerate(kinds) if kd == "zoa"]
     if any(not np.isin(np.arange(lf.columns), cols[k]).all() for k in band_rings):
         raise MeshError("expected the rib band's rings to hold every column, received a thinned ring")
     pairs, links = [], []
