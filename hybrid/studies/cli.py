@@ -85,8 +85,8 @@ def build_study_parser() -> argparse.ArgumentParser:
                 "--metric",
                 action="append",
                 metavar="NAME",
-                help="a trace series whose largest value is studied (repeatable; default: those of "
-                "rib_lift_mm, apex_descent_mm, pressure_pa, swept_volume_ml the scene has)",
+                help="a trace series whose largest value is studied, or NAME:min its smallest (repeatable; "
+                "default: those of rib_lift_mm, apex_descent_mm, pressure_pa, swept_volume_ml the scene has)",
             )
             s.add_argument(
                 "--levels",

@@ -16,7 +16,9 @@ Grid       mesh levels K (`mesh.level`: about 80 x 2^K points of a generator, th
            independent (`hybrid.sweep`: the local cores or a Dask cluster) and
            simulates `duration_s` (default 4 s, one breath of the packaged scenes).
 Metrics    each the largest value of a trace series over the run (`hybrid.run`,
-           docs/metrics.md): by default those of the rib lift, apex descent, peak
+           docs/metrics.md), or its smallest as `NAME:min` (a pressure that falls:
+           `pleural_pressure_cmh2o:min`, the end-inspiratory pleural pressure of a
+           breath): by default those of the rib lift, apex descent, peak
            pressure and the diaphragm's swept volume that the scene has (all four on
            the breathing trunk, on any mesh).
 Time       at each level, Richardson extrapolation of the three steps (two when
@@ -120,6 +122,16 @@ def base_step(scene, overrides, level) -> tuple[float, int]:
     return min(m.dt_s, auto_dt(m.dt_stable_s)), m.nvert
 
 
+#: a metric's statistic of its series: NAME (its largest value) or NAME:STAT
+STATS = ("max", "min")
+
+
+def series_of(metric: str) -> tuple[str, str]:
+    """(series, statistic) of a metric: "NAME" -> (NAME, "max"), "NAME:min" -> (NAME, "min")."""
+    name, _, stat = metric.partition(":")
+    return name, stat or "max"
+
+
 def _check_metrics(scene, overrides, level, metrics) -> tuple:
     """The metrics are series the scene reports (`hybrid.run.scene_parts`), checked on
     one step of the coarsest level, so that a wrong --metric is refused at once;
@@ -128,14 +140,17 @@ def _check_metrics(scene, overrides, level, metrics) -> tuple:
     from ..run import run as run_scene
     from ..simulation import Simulation
 
-    unknown = [k for k in metrics or () if k not in METRIC_KEYS]
+    unknown = [k for k in metrics or () if series_of(k)[0] not in METRIC_KEYS]
     if unknown:
         raise HybridError(f"--metric: expected series among {list(METRIC_KEYS)}, received {unknown}")
+    bad = [k for k in metrics or () if series_of(k)[1] not in STATS]
+    if bad:
+        raise HybridError(f"--metric: expected NAME or NAME:min (its smallest value), received {bad}")
     model = _model(scene, overrides, level, None)
     table = run_scene(Simulation(model), model.dt_s)["summary"]["metrics"]
     if metrics is None:  # apex_descent_mm: every membrane has a highest point
         return tuple(k for k in DEFAULT_METRICS if k in table)
-    missing = [k for k in metrics if k not in table]
+    missing = [k for k in metrics if series_of(k)[0] not in table]
     if missing:
         raise HybridError(
             f"--metric: scene {model.scene.name!r} has no series {missing}; expected some of {sorted(table)}"
@@ -144,7 +159,7 @@ def _check_metrics(scene, overrides, level, metrics) -> tuple:
 
 
 def simulate(scene, overrides, level, dt, duration_s, metrics, repeats=REPEATS) -> dict:
-    """One run of the grid (a sweep task): {"values": {metric: its max}, "wall_s",
+    """One run of the grid (a sweep task): {"values": {metric: its max or min}, "wall_s",
     "cpu_s" (the least over "repeats" runs), "cpu_s_spread", "nvert", "status"}."""
     from ..run import RunFailed
     from ..run import run as run_scene
@@ -169,13 +184,13 @@ def simulate(scene, overrides, level, dt, duration_s, metrics, repeats=REPEATS) 
     while summary["status"] == "ok" and cpus[0] < REPEAT_BELOW_S and len(cpus) < repeats:
         cpus.append(one(duration_s)[1])
     table = summary["metrics"]
-    missing = [k for k in metrics if k not in table]
+    missing = [k for k in metrics if series_of(k)[0] not in table]
     if missing:
         raise HybridError(
             f"--metric: scene {model.scene.name!r} has no series {missing}; expected some of {sorted(table)}"
         )
     return {
-        "values": {k: table[k]["max"] for k in metrics},
+        "values": {k: table[series_of(k)[0]][series_of(k)[1]] for k in metrics},
         "wall_s": summary["wall_s"],
         "cpu_s": min(cpus),
         "cpu_s_spread": (max(cpus) - min(cpus)) / max(min(cpus), 1e-300),

@@ -290,6 +290,29 @@ def test_convergence_refuses_an_unknown_metric_in_one_line(tmp_path, capsys):
     assert code == 2 and err.count("\n") == 1 and "snore_mm" in err and "apex_descent_mm" in err
 
 
+def test_a_metric_may_take_its_series_smallest_value(tmp_path, capsys):
+    """NAME:min studies the series' smallest value (a pressure that falls), the run's own minimum;
+    another statistic is refused in one line."""
+    from hybrid.model import compile_scene
+    from hybrid.resolve import resolve_scene
+    from hybrid.run import run as run_scene
+    from hybrid.simulation import Simulation
+    from hybrid.studies.convergence import simulate
+
+    name = "pleural_pressure_cmh2o"
+    res = simulate("breathing_lungs", [], 0, None, 0.3, (name, f"{name}:min"), repeats=1)
+    table = run_scene(Simulation(compile_scene(resolve_scene("breathing_lungs", overrides=["mesh.level=0"]))), 0.3)[
+        "summary"
+    ]["metrics"][name]
+    assert res["values"] == {name: table["max"], f"{name}:min": table["min"]}
+    assert table["min"] < table["max"] < 0.0  # it fell with the inspiration, below the atmosphere's
+    code = main_study(
+        ["convergence", "breathing_lungs", "--out", str(tmp_path / "x"), "--small", "--metric", f"{name}:median"]
+    )
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "NAME:min" in err and "median" in err
+
+
 def test_a_mesh_read_from_a_file_refines_by_splitting_its_faces(tmp_path, capsys):
     """The study's levels on a file mesh: faces split into four a level, the spacing halved."""
     from hybrid.model import compile_scene
