@@ -119,3 +119,36 @@ def test_regions_of_geometry_on_a_smooth_file_surface_are_taken_on_the_file_s_me
     assert not ball.mesh.refinement.carry_geometry
     z = ball.mesh.vert_pos[ball.regions["top"], 2]
     assert (z >= 0.02).all()  # the half-space itself, on every point of the finer sphere
+
+
+def test_the_apex_of_a_refined_file_mesh_is_the_same_point_at_every_level(tmp_path):
+    """The apex (`hybrid.observers.metrics.apex_vertex`, whose vertical the dome's descent is
+    measured on) is the highest of the file's points, which keep their places at every level:
+    on a box, the smooth surface through its points bulges above its flat top, so that new
+    points stand higher than the file's, and the highest point of each level would be another."""
+    from hybrid.model import compile_scene
+    from hybrid.observers.metrics import apex_vertex
+
+    box = trimesh.creation.box(extents=(0.2, 0.16, 0.1))
+    hybrid.mesh.Mesh.from_arrays(np.asarray(box.vertices, float), np.asarray(box.faces, np.int64)).save(
+        tmp_path / "box.obj"
+    )
+    places = []
+    for level in (0, 1, 2):
+        model = compile_scene(
+            Scene(
+                formulation="continuum",
+                mesh=MeshSpec(path=str(tmp_path / "box.obj"), level=level),
+                masses=Masses(total_kg=1.0),
+                forces=(Membrane(youngs_modulus_n_per_m=100.0),),
+                constraints=(Volume(),),
+                dt_s=1e-4,
+            )
+        )
+        pos = model.mesh.vert_pos
+        apex = apex_vertex(model)
+        assert apex < len(box.vertices)  # one of the file's points
+        places.append(pos[apex])
+        if level:
+            assert pos[:, 2].max() > pos[apex, 2] + 1e-3  # m: a new point stands higher
+    assert np.array_equal(places[0], places[1]) and np.array_equal(places[0], places[2])
