@@ -24,7 +24,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .kernel import kernel
-from .terms import Damping, Membrane, MuscleFibres, PassiveFibres, RestingTension
+from .switches import T_DAMPING, T_MEMBRANE, T_MUSCLE_FIBRES, T_PASSIVE_FIBRES, T_RESTING_TENSION
 from .terms.resting_tension import resting_tension_blocks
 from .terms.tangent_blocks import fibre_tangent_blocks, membrane_tangent_blocks, passive_fibres_tangent_blocks
 
@@ -51,8 +51,6 @@ __all__ = [
 # 10 ms, tol 1e-3, 4.1 -> 3.7; level 4 at 10 ms, tol 1e-6, 8.4 -> 9.1 (1.2: 13.0; 1.6: 11.9
 # and 1.8: 14.7 at level 8)
 SSOR_OMEGA = 1.4
-T_MEMBRANE, T_FIBRES, T_PASSIVE, T_DAMPING = Membrane.id, MuscleFibres.id, PassiveFibres.id, Damping.id
-T_RESTING_TENSION = RestingTension.id
 
 
 class NewtonMatrix(NamedTuple):
@@ -153,9 +151,9 @@ def assemble(m, rows, face, fib, pf, h, mat):
             amat[ptr[f], r] = pdiag[i, r]
     if on[T_MEMBRANE]:
         membrane_tangent_blocks(rows.mem_vert, rows.mem_par, face, h * h, h, mat.mem_slot, amat, pdiag)
-    if on[T_FIBRES]:
+    if on[T_MUSCLE_FIBRES]:
         fibre_tangent_blocks(rows.fib_vert, fib, h * h, mat.fib_slot, amat, pdiag)
-    if on[T_PASSIVE]:
+    if on[T_PASSIVE_FIBRES]:
         passive_fibres_tangent_blocks(rows.pf_vert, pf, h * h, mat.pf_slot, amat, pdiag)
     if on[T_RESTING_TENSION]:
         resting_tension_blocks(rows.rt_vert, rows.rt_par, h * h, mat.rt_slot, amat, pdiag)
