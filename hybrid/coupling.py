@@ -29,7 +29,7 @@ import mujoco
 import numpy as np
 
 from .errors import RigidError, SimulationDiverged
-from .loop import CtrlArrays, LinkArrays, MjViews, RigidPack, WallArrays, WrenchHistory, carry_wall
+from .loop import CtrlArrays, LinkArrays, MjViews, RigidPack, SlideArrays, WallArrays, WrenchHistory, carry_wall
 from .rigid import CoupledRigid, mj_step_ctypes
 from .sites import site_vel_kernel
 from .step import S_TIME, T_GRAVITY, MembraneState
@@ -121,11 +121,19 @@ class Coupling:
             np.zeros((nc, 3)),
             np.zeros((nc, 3)),
         )
+        self._slides = SlideArrays(
+            sys.slide_vert,
+            sys.slide_site_id,
+            sys.slide_site_body,
+            sys.slide_stiffness,
+            np.zeros((sys.slide_vert.size, 3)),
+        )
         d = sys.data
         self._mj = MjViews(
             *sys.pointers(),
             *_MJ_FUNCTIONS,
             d.site_xpos,
+            d.site_xmat,
             d.xipos,
             d.xfrc_applied,
             d.cvel,
@@ -140,7 +148,6 @@ class Coupling:
         self._qpos_hist.clear()
         state.vert_pos[self.link_vert] = sys.site_pos()
         state.vert_vel[self.link_vert] = sys.site_vel()
-        self._place_wall(state)
         self._place_wall(state)
 
     def _place_wall(self, state: MembraneState) -> None:
@@ -162,7 +169,7 @@ class Coupling:
         record = bool(self.record_wrenches)
         hist = WrenchHistory(np.empty((nstep, mjm.nbody, 6)), np.empty((nstep, mjm.nq))) if record else self._no_hist
         self._mj_time = self.system.data.time
-        return RigidPack(True, self._links, self._ctrls, self._mj, self._wall, self._rk4(), record, hist)
+        return RigidPack(True, self._links, self._ctrls, self._mj, self._wall, self._slides, self._rk4(), record, hist)
 
     def finish(self, rig: RigidPack, state: MembraneState, step0: int, done: int) -> None:
         """After the loop ran `done` steps from step0 with `rig`: keep the recorded wrenches,
@@ -208,6 +215,11 @@ class Coupling:
         """(n, 3) N: the force sent to each linked point's site in the last step (a copy),
         in site order (`link_vert`)."""
         return self._force.copy()
+
+    def slide_forces(self) -> np.ndarray:
+        """(ns, 3) N: each sliding point's plane's force on it in the last step (a copy), in
+        `slide_vert` order; its body took the opposite, at the point."""
+        return self._slides.force.copy()
 
     def wrench_history(self) -> np.ndarray:
         """(nstep, nbody, 6) [N, N m]: `xfrc_applied` of every recorded step."""

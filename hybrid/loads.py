@@ -10,6 +10,8 @@ step (an observer: never inside the step, nothing changed):
   pressure force p grad_i V (`Coupling.link_forces`), without the correction for
   the linked point's own weight (that weight is on the body's mass, not a load of
   the membrane);
+- a body that sliding points lean on (`RigidLink.slide_stiffness_n_per_m3`) receives the
+  opposite of each plane's force on its point, at the point (`Coupling.slide_forces`);
 - a nailed region receives what its nail holds: the forces on its points that the
   nail cancels, each point's membrane force of the last step plus, under the exact
   volume constraint, p grad_i V of the last projection; the nail's reaction is minus
@@ -41,7 +43,8 @@ __all__ = ["Loads", "LoadGroup", "LoadsObserver", "topics"]
 
 class LoadGroup:
     """The points whose forces one part of the skeleton takes: kind "body" (a linked
-    body: rows, its rows in the coupling's link order) or "nail" (a nailed region)."""
+    body: rows, its rows in the coupling's link order, then slide_rows, its sliding points)
+    or "nail" (a nailed region)."""
 
     def __init__(
         self,
@@ -53,6 +56,7 @@ class LoadGroup:
         centre_m: np.ndarray | None = None,
     ):
         self.kind, self.name, self.vert, self.rows = kind, name, vert, rows
+        self.slide_rows = np.zeros(0, np.int64)  # a body's sliding points, in `slide_vert` order, after rows
         self.body_id, self.centre_m = body_id, centre_m
 
     @property
@@ -77,13 +81,19 @@ class Loads:
         self.exact_volume = bool(model.arrays.term_on[Volume.id])
         self.groups: list[LoadGroup] = []
         self.joints: list[tuple[str, int]] = []
+        held = []  # the points the skeleton holds (linked and nailed; a sliding point is free)
         if sim.rigid is not None:
             system = sim.rigid.system
             site_body = np.asarray(system.site_body)
-            for b in dict.fromkeys(site_body.tolist()):
-                rows = np.nonzero(site_body == b)[0]
+            slide_body = np.asarray(system.slide_site_body)
+            for b in dict.fromkeys([*site_body.tolist(), *slide_body.tolist()]):
+                rows, slide_rows = np.nonzero(site_body == b)[0], np.nonzero(slide_body == b)[0]
                 name = sim.mj_model.body(b).name or f"body{b}"
-                self.groups.append(LoadGroup("body", name, sim.rigid.link_vert[rows], rows, body_id=int(b)))
+                vert = np.concatenate([sim.rigid.link_vert[rows], system.slide_vert[slide_rows]]).astype(np.int64)
+                group = LoadGroup("body", name, vert, rows, body_id=int(b))
+                group.slide_rows = slide_rows
+                self.groups.append(group)
+                held.append(sim.rigid.link_vert[rows])
             self.joints = [(n, int(sim.mj_model.joint(n).id)) for n in system.controls.load_joints]
         rest = model.mesh.vert_pos
         for _k, term in enumerate(model.scene.constraints):
@@ -97,7 +107,7 @@ class Loads:
                 )
                 idx = np.asarray(idx, np.int64)
                 self.groups.append(LoadGroup("nail", term.name, idx, centre_m=rest[idx].mean(axis=0)))
-        held = [g.vert for g in self.groups]
+                held.append(idx)
         self.held = np.unique(np.concatenate(held)).astype(np.int64) if held else np.zeros(0, np.int64)
         self.closed = bool(model.mesh.closed)
         # the faces round the held points: their fans give V's gradient there (a closed fan's
@@ -135,12 +145,14 @@ class Loads:
         s = self.sim.state
         p = float(s.scal[S_PRESSURE])
         out = {}
-        link_force = None
+        link_force = slide_force = None
         for g in self.groups:
             if g.kind == "body":
                 if link_force is None:
                     link_force = self.sim.rigid.link_forces() - self._extra
-                out[g.label] = link_force[g.rows]
+                    slide_force = self.sim.rigid.slide_forces()
+                # a sliding point loads its body with the opposite of its plane's force on it
+                out[g.label] = np.concatenate([link_force[g.rows], -slide_force[g.slide_rows]])
             else:
                 f = np.array(self.sim.work.vert_force[g.vert])
                 if self.exact_volume:

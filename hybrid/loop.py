@@ -62,6 +62,7 @@ from .terms.volume import face_volume
 __all__ = [
     "LinkArrays",
     "WallArrays",
+    "SlideArrays",
     "CtrlArrays",
     "MjViews",
     "WrenchHistory",
@@ -133,6 +134,20 @@ class WallArrays(NamedTuple):
     vel: np.ndarray
 
 
+class SlideArrays(NamedTuple):
+    """The ns sliding points (`RigidLink.slide_stiffness_n_per_m3`), each held to the plane
+    of its site: the plane through the site, normal to the site's z axis (`site_xmat`).
+    Read: vert (ns,) int32, the membrane points; site_id, site_body (ns,) int64;
+    stiffness (ns,) N/m. Scratch: force (ns, 3) N, the planes' forces on the points in the
+    last step (their bodies took the opposite)."""
+
+    vert: np.ndarray
+    site_id: np.ndarray
+    site_body: np.ndarray
+    stiffness: np.ndarray
+    force: np.ndarray
+
+
 class CtrlArrays(NamedTuple):
     """The actuators a scene drives (`rigid.ctrl`): act (nc,) int64, their ids;
     sched, their schedules (`hybrid.schedule.ScheduleTable`, row j for act[j]);
@@ -151,7 +166,8 @@ class MjViews(NamedTuple):
     fn_step2 (int): the addresses of `mj_step`, `mj_step1`, `mj_step2` of the library the
     bindings use (`hybrid.rigid.mj_step_ctypes`); and views of the
     `MjData`'s own arrays (valid as long as it lives), written by MuJoCo's step:
-    site_xpos (nsite, 3) m; xipos (nbody, 3) m, the bodies' centres of mass;
+    site_xpos (nsite, 3) m; site_xmat (nsite, 9), the sites' orientations (row-major);
+    xipos (nbody, 3) m, the bodies' centres of mass;
     xfrc_applied (nbody, 6) [N, N m]; cvel (nbody, 6) [rad/s, m/s]; subtree_com
     (nbody, 3) m; qpos (nq,); xpos (nbody, 3) m and xquat (nbody, 4) (w, x, y, z),
     the bodies' poses; ctrl (nu,), the actuators' controls."""
@@ -162,6 +178,7 @@ class MjViews(NamedTuple):
     fn_step1: int
     fn_step2: int
     site_xpos: np.ndarray
+    site_xmat: np.ndarray
     xipos: np.ndarray
     xfrc_applied: np.ndarray
     cvel: np.ndarray
@@ -184,7 +201,7 @@ class WrenchHistory(NamedTuple):
 class RigidPack(NamedTuple):
     """The rigid half of a coupled loop (`hybrid.coupling.Coupling` makes it): coupled:
     bool, a rigid part to step (False: `membrane_only`, every array empty); links, ctrls,
-    mj, wall (above); rk4: bool, MuJoCo integrates with RK4 (step with `mj_step`);
+    mj, wall, slides (above); rk4: bool, MuJoCo integrates with RK4 (step with `mj_step`);
     record: bool, keep each step's wrenches and qpos in hist."""
 
     coupled: bool
@@ -192,6 +209,7 @@ class RigidPack(NamedTuple):
     ctrls: CtrlArrays
     mj: MjViews
     wall: WallArrays
+    slides: SlideArrays
     rk4: bool
     record: bool
     hist: WrenchHistory
@@ -294,10 +312,16 @@ def rigid_phase(m, s, w, t, row, rig):
     for j in range(wall.site_body.shape[0]):  # a body the wall alone loads: its row rewritten each step
         for a in range(6):
             xfrc[wall.site_body[j], a] = 0.0
+    slides = rig.slides
+    for j in range(slides.site_body.shape[0]):  # likewise a body that sliding points alone load
+        for a in range(6):
+            xfrc[slides.site_body[j], a] = 0.0
     point_wrench_kernel(mj.site_xpos, mj.xipos, site_id, links.site_body, link_force, xfrc)
     if wall.point.shape[0]:  # the lungs' wall: its load added to the bodies that carry it
         _gather_rows(wall.point, w.lung_wall_force, wall.force)
         add_point_wrench_kernel(mj.site_xpos, mj.xipos, wall.site_id, wall.site_body, wall.weight, wall.force, xfrc)
+    if slides.vert.shape[0]:
+        slide_forces(slides, mj.site_xpos, mj.site_xmat, mj.xipos, pos, frc, xfrc)
     for j in range(ctrls.act.shape[0]):
         if not ctrls.user[j]:
             schedule_eval(ctrls.sched, j, t, ctrls.val)
@@ -324,6 +348,34 @@ def rigid_phase(m, s, w, t, row, rig):
     if wall.point.shape[0]:
         site_vel_kernel(mj.site_xpos, mj.cvel, mj.subtree_com, wall.site_id, wall.site_body, wall.site_root, wall.vel)
         carry_wall(wall, mj.site_xpos, s.lung_wall_pos, s.lung_wall_vel)
+
+
+@kernel
+def slide_forces(slides, site_xpos, site_xmat, xipos, pos, vert_force, xfrc):
+    """Each sliding point held to its plane: gap g = (x - x_site) . n, n the site's z axis; the
+    force -k g n on the point, and its reaction k g n on the body at the point itself (the line of
+    action through the point along n: the virtual work of the pair is exact as the point slides).
+    # Model: slides.vert, .site_id, .site_body, .stiffness
+    # Data in: site_xpos (nsite, 3) m, site_xmat (nsite, 9), xipos (nbody, 3) m, pos (nvert, 3) m
+    # Data out: vert_force (nvert, 3) N and xfrc (nbody, 6) [N, N m] (added to); slides.force (ns, 3) N
+    """
+    for j in range(slides.vert.shape[0]):
+        i, sid, b = slides.vert[j], slides.site_id[j], slides.site_body[j]
+        nx, ny, nz = site_xmat[sid, 2], site_xmat[sid, 5], site_xmat[sid, 8]
+        dx, dy, dz = pos[i, 0] - site_xpos[sid, 0], pos[i, 1] - site_xpos[sid, 1], pos[i, 2] - site_xpos[sid, 2]
+        f = -slides.stiffness[j] * (dx * nx + dy * ny + dz * nz)
+        fx, fy, fz = f * nx, f * ny, f * nz
+        slides.force[j, 0], slides.force[j, 1], slides.force[j, 2] = fx, fy, fz
+        vert_force[i, 0] += fx
+        vert_force[i, 1] += fy
+        vert_force[i, 2] += fz
+        rx, ry, rz = pos[i, 0] - xipos[b, 0], pos[i, 1] - xipos[b, 1], pos[i, 2] - xipos[b, 2]
+        xfrc[b, 0] -= fx
+        xfrc[b, 1] -= fy
+        xfrc[b, 2] -= fz
+        xfrc[b, 3] -= ry * fz - rz * fy
+        xfrc[b, 4] -= rz * fx - rx * fz
+        xfrc[b, 5] -= rx * fy - ry * fx
 
 
 @kernel
@@ -411,13 +463,15 @@ def membrane_only() -> RigidPack:
     i64, f3 = np.zeros(0, np.int64), np.zeros((0, 3))
     # read-only as a rigid part's (`hybrid.rigid.CoupledRigid`): the same types, the same compiled loop
     fixed = _read_only(np.zeros(0, np.int64))
-    links = LinkArrays(_read_only(np.zeros(0, np.int32)), fixed, fixed, fixed, f3, f3, f3)
+    fixed_i32, fixed_f = _read_only(np.zeros(0, np.int32)), _read_only(np.zeros(0))
+    links = LinkArrays(fixed_i32, fixed, fixed, fixed, f3, f3, f3)
     ctrls = CtrlArrays(fixed, stack_schedules(())[0], np.zeros(0, np.uint8), np.zeros(3))
-    mj = MjViews(
-        0, 0, 0, 0, 0, f3, f3, np.zeros((0, 6)), np.zeros((0, 6)), f3, np.zeros(0), f3, np.zeros((0, 4)), np.zeros(0)
-    )
+    f6, f9 = np.zeros((0, 6)), np.zeros((0, 9))
+    mj = MjViews(0, 0, 0, 0, 0, f3, f9, f3, f6, f6, f3, np.zeros(0), f3, np.zeros((0, 4)), np.zeros(0))
     wall = WallArrays(i64, np.zeros(0), f3, i64, i64, i64, f3, f3)
-    return RigidPack(False, links, ctrls, mj, wall, False, False, WrenchHistory(np.zeros((0, 0, 6)), np.zeros((0, 0))))
+    slides = SlideArrays(fixed_i32, fixed, fixed, fixed_f, f3)
+    hist = WrenchHistory(np.zeros((0, 0, 6)), np.zeros((0, 0)))
+    return RigidPack(False, links, ctrls, mj, wall, slides, False, False, hist)
 
 
 def _read_only(a: np.ndarray) -> np.ndarray:

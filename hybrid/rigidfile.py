@@ -31,6 +31,8 @@ __all__ = [
 RIGID_KEYS = tuple(f.name for f in dataclasses.fields(Rigid))
 #: the keys that hold lists of names (bodies, joint name patterns, or joint names)
 NAME_LISTS = ("fix", "weld", "hold", "lock", "load_joints")
+_LINK_KEYS = ("body", "name", "region", "slide_stiffness_n_per_m3")
+_SLIDE_FIELD = next(f for f in dataclasses.fields(RigidLink) if f.name == "slide_stiffness_n_per_m3")
 _KINDED = {f.name: f for f in dataclasses.fields(Rigid) if "kind" in f.metadata}
 #: the keys of [rigid.ribs] and of each [[rigid.ribs.pairs]] table
 RIBS_KEYS = tuple(f.name for f in dataclasses.fields(Ribs))
@@ -61,17 +63,23 @@ def rigid_from_table(source: str, rig, selector, schedule, field_value) -> Rigid
     lk = []
     for k, tbl in enumerate(links):
         p = f"rigid.links[{k}]"
-        unknown = [x for x in tbl if x not in ("region", "body", "name")]
+        unknown = [x for x in tbl if x not in _LINK_KEYS]
         if unknown:
-            _fail(f"{source}: {p}.{unknown[0]}", "unknown key; valid keys here: ['body', 'name', 'region']")
+            _fail(f"{source}: {p}.{unknown[0]}", f"unknown key; valid keys here: {list(_LINK_KEYS)}")
         for req in ("region", "body"):
             if req not in tbl:
-                _fail(f"{source}: {p}", f"missing required key {req!r}; valid keys here: ['body', 'name', 'region']")
+                _fail(f"{source}: {p}", f"missing required key {req!r}; valid keys here: {list(_LINK_KEYS)}")
+        slide = {}
+        if "slide_stiffness_n_per_m3" in tbl:
+            slide["slide_stiffness_n_per_m3"] = field_value(
+                f"{p}.slide_stiffness_n_per_m3", _SLIDE_FIELD, tbl["slide_stiffness_n_per_m3"]
+            )
         lk.append(
             RigidLink(
                 region=selector(f"{p}.region", tbl["region"]),
                 body=checks.text(f"{source}: {p}.body", tbl["body"]),
                 name=checks.text(f"{source}: {p}.name", tbl.get("name", tbl["body"])),
+                **slide,
             )
         )
     kw = {
@@ -164,7 +172,15 @@ def rigid_to_table(r: Rigid, selector_to, schedule_to) -> dict:
         "mjcf": str(r.mjcf),
         "prefix": r.prefix,
         "add_link_mass": r.add_link_mass,
-        "links": [{"region": selector_to(k.region), "body": k.body, "name": k.name} for k in r.links],
+        "links": [
+            {
+                "region": selector_to(k.region),
+                "body": k.body,
+                "name": k.name,
+                **({"slide_stiffness_n_per_m3": k.slide_stiffness_n_per_m3} if k.slide_stiffness_n_per_m3 else {}),
+            }
+            for k in r.links
+        ],
         "fix_root": r.fix_root,
         **{key: list(getattr(r, key)) for key in NAME_LISTS},
     }

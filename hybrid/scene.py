@@ -150,11 +150,20 @@ class Masses:
 
 @dataclass(frozen=True)
 class RigidLink:
-    """Points of `region` attached to MuJoCo body `body` (paper 3.5)."""
+    """Points of `region` attached to MuJoCo body `body` (paper 3.5).
+
+    With `slide_stiffness_n_per_m3` 0 (the default) each point follows its site on the body.
+    Above 0 each point slides: it stays a free membrane point, held to the plane tangent to
+    the membrane at its rest position, which the body carries, by a normal force of this
+    stiffness times the point's share of the surface (the gap g along the plane's normal n
+    gives -k g n on the point and its reaction on the body at the point); free in the plane,
+    as the diaphragm's zone of apposition slides along the inner rib cage. The stiffness is a
+    penalty: a load of pressure p on the sheet leaves a gap of p / stiffness."""
 
     region: object
     body: str
     name: str = "rigid_link"
+    slide_stiffness_n_per_m3: float = param("nonneg", 0.0, hi=checks.MAX_STIFFNESS_N_PER_M * 1e3)
 
 
 @dataclass(frozen=True)

@@ -25,6 +25,10 @@ CASES = {
     "implicit Euler, no MuJoCo": (lambda: _breathing("integrator=implicit_euler", "dt_s=0.01", rigid=False), 12),
     "symplectic Euler, MuJoCo": (lambda: _breathing(), 40),
     "paper scene, MuJoCo": (lambda: hybrid.load_scene("breathing_paper"), 40),
+    "symplectic Euler, MuJoCo, sliding links": (
+        lambda: _breathing(*(f"rigid.links.{n}.slide_stiffness_n_per_m3=1e7" for n in ("rib_left", "rib_right"))),
+        40,
+    ),
     "implicit Euler, MuJoCo": (lambda: _breathing("integrator=implicit_euler", "dt_s=0.01"), 12),
 }
 

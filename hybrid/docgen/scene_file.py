@@ -139,6 +139,7 @@ _LINKS = {
     "region": ("-", "*required*", "a selector (see Regions)"),
     "body": ("-", "*required*", "the name of a body of the MJCF model"),
     "name": ("-", "the body's name", "a string (what --without and --set refer to)"),
+    "slide_stiffness_n_per_m3": ("N/m^3", "0", "a number >= 0: 0, the points follow the body; above, they slide on it"),
 }
 # the selectors' fields' units and values (a field not here: its unit from its name)
 _SELECTOR_FIELDS = {

@@ -87,8 +87,8 @@ def lung_part_faces(model: Model) -> tuple:
     """The faces whose swept volumes are the lung volume change's parts: the cavity's floor
     (the membrane's faces under the lungs, in the membrane's orientation), then the membrane's
     other faces, the abdomen's boundary off the floor, split into the abdominal rib cage (every
-    corner linked to a rigid body: the zone of apposition the ribs hold) and the abdomen (the
-    rest; nailed faces sweep nothing)."""
+    corner linked to a rigid body, or sliding on one: the zone of apposition the ribs hold) and
+    the abdomen (the rest; nailed faces sweep nothing)."""
     n = model.nvert
     lung_face = model.arrays.lung_face
     floor = np.ascontiguousarray(lung_face[(lung_face < n).all(axis=1)][:, ::-1])
@@ -97,6 +97,7 @@ def lung_part_faces(model: Model) -> tuple:
     off = face[[tuple(sorted(f)) not in under for f in face.tolist()]]
     linked = np.zeros(n, bool)
     linked[model.link_vert] = True
+    linked[model.slide_vert] = True
     held = linked[off].all(axis=1)
     return floor, off[held], off[~held]
 

@@ -22,6 +22,7 @@ import numpy as np
 
 from hybrid import regions as _regions
 from hybrid.errors import RigidError, SceneError
+from hybrid.mesh.geometry import vertex_area
 from hybrid.scene import KeepIn, Nailed, Prescribed, Rigid, RigidLink, Scene
 from hybrid.terms.base import claim_points
 
@@ -149,6 +150,7 @@ def build_rigid(
 
     owner: dict[int, int] = {}  # vertex -> link index
     link_body_of: dict[int, str] = {}
+    slide_of: dict[int, float] = {}  # sliding vertex -> its link's stiffness (N/m^3)
     for k, link in enumerate(rig.links):
         what = f"rigid.links[{k}]"
         if not isinstance(link, RigidLink):
@@ -166,11 +168,17 @@ def build_rigid(
                 f"{what}.region: vertices {twice[:8]} are already linked by "
                 f"rigid.links[{owner[twice[0]]}]; expected each point linked to one body"
             )
+        slide_k = link.slide_stiffness_n_per_m3
+        if not (isinstance(slide_k, (int, float)) and np.isfinite(slide_k) and slide_k >= 0):
+            raise SceneError(f"{what}.slide_stiffness_n_per_m3: expected a finite number >= 0, received {slide_k!r}")
         for i in idx:
             owner[int(i)] = k
-            link_body_of[int(i)] = body
-    link_vert = np.array(sorted(owner), dtype=np.int32)
-    _check_not_constrained(scene, mesh, regions, link_vert)
+            link_body_of[int(i)] = body  # a sliding point's body carries the lungs' wall over it too
+            if slide_k > 0:
+                slide_of[int(i)] = float(slide_k)
+    link_vert = np.array(sorted(set(owner) - set(slide_of)), dtype=np.int32)
+    slide_vert = np.array(sorted(slide_of), dtype=np.int32)
+    _check_not_constrained(scene, mesh, regions, np.union1d(link_vert, slide_vert))
 
     # Body poses at qpos0 (to place the sites) and compiled inertias (to add masses).
     model0 = compile_spec(spec, label)
@@ -183,6 +191,7 @@ def build_rigid(
             f"choose another prefix than {rig.prefix!r}"
         )
     local = add_sites(spec, model0, body_names, mesh.vert_pos[link_vert], site_names, controls.key_id)
+    slides = _slide_sites(spec, model0, rig.prefix, mesh, slide_vert, slide_of, link_body_of, controls.key_id)
 
     wall = _carried_sites(spec, model0, rig.prefix, carried, link_body_of, controls.key_id)
 
@@ -205,8 +214,48 @@ def build_rigid(
         controls=controls,
         ribs=ribs,
         wall=wall,
+        slides=slides,
     )
     return system, link_vert
+
+
+def _slide_sites(spec, model0, prefix: str, mesh, slide_vert, slide_of: dict, body_of: dict, key_id: int) -> dict:
+    """A site per sliding point (`RigidLink.slide_stiffness_n_per_m3`) on its body, at the
+    point's rest position, its z axis the membrane's rest normal there (the plane's normal,
+    turned by the body as it moves: `site_xmat`'s third column), named
+    f"{prefix}hybrid_slide_{i}". Returns {"site_names", "vert" (ns,) int32, "stiffness" (ns,)
+    N/m: the link's stiffness times the point's share of the rest surface}."""
+    vert = np.asarray(slide_vert, np.int32)
+    names = [f"{prefix}hybrid_slide_{int(i)}" for i in vert]
+    taken = _taken_sites(spec, names)
+    if taken:
+        raise RigidError(f"rigid.prefix: site name(s) {taken[:3]} already exist; choose another prefix than {prefix!r}")
+    if not vert.size:
+        return {"site_names": names, "vert": vert, "stiffness": np.zeros(0)}
+    pos, face = np.asarray(mesh.vert_pos, float), np.asarray(mesh.face_vert, np.int64)
+    cross = np.cross(pos[face[:, 1]] - pos[face[:, 0]], pos[face[:, 2]] - pos[face[:, 0]])
+    normal = np.zeros_like(pos)  # area-weighted vertex normals: the faces' cross products summed
+    for c in range(3):
+        np.add.at(normal, face[:, c], cross)
+    n = normal[vert] / np.linalg.norm(normal[vert], axis=1)[:, None]
+    bodies = [body_of[int(i)] for i in vert]
+    add_sites(spec, model0, bodies, pos[vert], names, key_id)
+    data0 = start_data(model0, key_id)
+    for j, (b, name) in enumerate(zip(bodies, names)):
+        rot = data0.xmat[model0.body(b).id].reshape(3, 3)
+        spec.site(name).quat = _quat_z_to(rot.T @ n[j]).tolist()
+    stiffness = np.array([slide_of[int(i)] for i in vert]) * vertex_area(pos, face)[vert]
+    return {"site_names": names, "vert": vert, "stiffness": stiffness}
+
+
+def _quat_z_to(n: np.ndarray) -> np.ndarray:
+    """The unit quaternion (w, x, y, z) turning the z axis onto unit vector n (the shortest turn)."""
+    z = np.array([0.0, 0.0, 1.0])
+    axis, c = np.cross(z, n), float(z @ n)
+    if c < -1.0 + 1e-12:  # n = -z: half a turn about x
+        return np.array([0.0, 1.0, 0.0, 0.0])
+    q = np.array([1.0 + c, *axis])
+    return q / np.linalg.norm(q)
 
 
 def _carried_sites(spec, model0, prefix: str, carried, link_body_of: dict, key_id: int) -> dict | None:

@@ -254,6 +254,7 @@ class CoupledRigid(RigidSystem):
         controls: Controls | None = None,
         ribs=None,
         wall: dict | None = None,
+        slides: dict | None = None,
     ):
         super().__init__(spec, site_names, timestep=timestep)
         self.controls = Controls() if controls is None else controls
@@ -281,7 +282,18 @@ class CoupledRigid(RigidSystem):
         self.wall_site_id = np.array([mjm.site(n).id for n in w["site_names"]], np.int64)
         self.wall_site_body = mjm.site_bodyid[self.wall_site_id].astype(np.int64)
         self.wall_site_root = mjm.body_rootid[self.wall_site_body].astype(np.int64)
+        #: the sliding points (`RigidLink.slide_stiffness_n_per_m3`): slide_vert (ns,) int32, their
+        #: vertices; slide_stiffness (ns,) N/m; their planes' sites: slide_site_id, slide_site_body (ns,)
+        sl = slides or {"site_names": [], "vert": np.zeros(0, np.int32), "stiffness": np.zeros(0)}
+        self.slide_vert = np.asarray(sl["vert"], np.int32)
+        self.slide_stiffness = np.asarray(sl["stiffness"], float)
+        self.slide_site_id = np.array([mjm.site(n).id for n in sl["site_names"]], np.int64)
+        self.slide_site_body = mjm.site_bodyid[self.slide_site_id].astype(np.int64)
         for arr in (
+            self.slide_vert,
+            self.slide_stiffness,
+            self.slide_site_id,
+            self.slide_site_body,
             self.link_vert,
             self.link_mass,
             self.mass_added,
