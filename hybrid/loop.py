@@ -37,7 +37,7 @@ from numba.extending import intrinsic
 
 from .kernel import kernel
 from .schedule import schedule_eval, stack_schedules
-from .sites import add_point_wrench_kernel, point_wrench_kernel, site_vel_kernel
+from .sites import add_point_wrench_kernel, add_wrench_at, point_wrench_kernel, site_vel_kernel
 from .step import (
     F_ALVEOLAR,
     F_FLOW,
@@ -309,13 +309,9 @@ def rigid_phase(m, s, w, t, row, rig):
         for a in range(3):
             link_force[j, a] = frc[i, a] + p * grad[i, a] + links.extra_force[j, a]
     wall = rig.wall
-    for j in range(wall.site_body.shape[0]):  # a body the wall alone loads: its row rewritten each step
-        for a in range(6):
-            xfrc[wall.site_body[j], a] = 0.0
     slides = rig.slides
-    for j in range(slides.site_body.shape[0]):  # likewise a body that sliding points alone load
-        for a in range(6):
-            xfrc[slides.site_body[j], a] = 0.0
+    _zero_rows(wall.site_body, xfrc)  # a body the wall or sliding points alone load: its row rewritten each step
+    _zero_rows(slides.site_body, xfrc)
     point_wrench_kernel(mj.site_xpos, mj.xipos, site_id, links.site_body, link_force, xfrc)
     if wall.point.shape[0]:  # the lungs' wall: its load added to the bodies that carry it
         _gather_rows(wall.point, w.lung_wall_force, wall.force)
@@ -369,13 +365,17 @@ def slide_forces(slides, site_xpos, site_xmat, xipos, pos, vert_force, xfrc):
         vert_force[i, 0] += fx
         vert_force[i, 1] += fy
         vert_force[i, 2] += fz
-        rx, ry, rz = pos[i, 0] - xipos[b, 0], pos[i, 1] - xipos[b, 1], pos[i, 2] - xipos[b, 2]
-        xfrc[b, 0] -= fx
-        xfrc[b, 1] -= fy
-        xfrc[b, 2] -= fz
-        xfrc[b, 3] -= ry * fz - rz * fy
-        xfrc[b, 4] -= rz * fx - rx * fz
-        xfrc[b, 5] -= rx * fy - ry * fx
+        add_wrench_at(pos, i, xipos, b, -fx, -fy, -fz, xfrc)
+
+
+@kernel
+def _zero_rows(rows, out):
+    """out[rows[j]] = 0.
+    # Model: rows (n,) int64   # Data in: none   # Data out: out (m, k)
+    """
+    for j in range(rows.shape[0]):
+        for a in range(out.shape[1]):
+            out[rows[j], a] = 0.0
 
 
 @kernel

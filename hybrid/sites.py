@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from .kernel import jit
 
-__all__ = ["point_wrench_kernel", "add_point_wrench_kernel", "site_vel_kernel"]
+__all__ = ["point_wrench_kernel", "add_point_wrench_kernel", "add_wrench_at", "site_vel_kernel"]
 
 
 @jit(_nrt=False, inline="always")
@@ -26,7 +26,15 @@ def _add_wrench(site_xpos, xipos, s, b, fx, fy, fz, xfrc):  # pragma: no cover
     """xfrc[b] += [F, (site_xpos_s - xipos_b) x F], F = (fx, fy, fz) N at site s.
     # Model: none   # Data in: site_xpos (nsite, 3) m, xipos (nbody, 3) m   # Data out: xfrc[b] [N, N m]
     """
-    rx, ry, rz = _site_offset(site_xpos, s, xipos, b)
+    add_wrench_at(site_xpos, s, xipos, b, fx, fy, fz, xfrc)
+
+
+@jit(_nrt=False, inline="always")
+def add_wrench_at(points, s, xipos, b, fx, fy, fz, xfrc):  # pragma: no cover
+    """xfrc[b] += [F, (points_s - xipos_b) x F], F = (fx, fy, fz) N at point s of points.
+    # Model: none   # Data in: points (n, 3) m, xipos (nbody, 3) m   # Data out: xfrc[b] [N, N m]
+    """
+    rx, ry, rz = _site_offset(points, s, xipos, b)
     xfrc[b, 0] += fx
     xfrc[b, 1] += fy
     xfrc[b, 2] += fz

@@ -22,7 +22,7 @@ import numpy as np
 
 from hybrid import regions as _regions
 from hybrid.errors import RigidError, SceneError
-from hybrid.mesh.geometry import vertex_area
+from hybrid.mesh.geometry import cross_rows, scatter_corners, vertex_area
 from hybrid.scene import KeepIn, Nailed, Prescribed, Rigid, RigidLink, Scene
 from hybrid.terms.base import claim_points
 
@@ -233,11 +233,9 @@ def _slide_sites(spec, model0, prefix: str, mesh, slide_vert, slide_of: dict, bo
     if not vert.size:
         return {"site_names": names, "vert": vert, "stiffness": np.zeros(0)}
     pos, face = np.asarray(mesh.vert_pos, float), np.asarray(mesh.face_vert, np.int64)
-    cross = np.cross(pos[face[:, 1]] - pos[face[:, 0]], pos[face[:, 2]] - pos[face[:, 0]])
-    normal = np.zeros_like(pos)  # area-weighted vertex normals: the faces' cross products summed
-    for c in range(3):
-        np.add.at(normal, face[:, c], cross)
-    n = normal[vert] / np.linalg.norm(normal[vert], axis=1)[:, None]
+    cross = cross_rows(pos[face[:, 1]] - pos[face[:, 0]], pos[face[:, 2]] - pos[face[:, 0]])
+    normal = scatter_corners(face, cross, cross, cross, len(pos))[vert]  # area-weighted vertex normals
+    n = normal / np.linalg.norm(normal, axis=1)[:, None]
     bodies = [body_of[int(i)] for i in vert]
     add_sites(spec, model0, bodies, pos[vert], names, key_id)
     data0 = start_data(model0, key_id)
