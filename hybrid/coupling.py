@@ -115,6 +115,7 @@ class Coupling:
             sys.wall_point,
             sys.wall_weight,
             sys.wall_rest,
+            sys.wall_site_rest,
             sys.wall_site_id,
             sys.wall_site_body,
             sys.wall_site_root,

@@ -118,15 +118,17 @@ class LinkArrays(NamedTuple):
 class WallArrays(NamedTuple):
     """The lungs' wall points the rigid bodies carry (`hybrid.terms.lungs`), nc of them:
     point (nc,) int64, their index in the wall (`MembraneState.lung_wall_pos`); weight (nc,),
-    the share of their body's motion each follows (the rest stays at rest: a point between
-    its rib and the cage's fixed top); rest (nc, 3) m; site_id, site_body, site_root (nc,)
-    int64, their sites on their bodies. The wall's pleural load reaches each body as
-    weight x force at the site: the transpose of how the point follows it (virtual work).
+    the share of their site's displacement each follows (the rest stays at rest: a point between
+    its rib and the cage's fixed top); rest (nc, 3) m; site_rest (nc, 3) m, where their sites
+    start; site_id, site_body, site_root (nc,) int64, their sites on their bodies. The wall's
+    pleural load reaches each body as weight x force at the site: the transpose of how the
+    point follows it (virtual work).
     Scratch: force (nc, 3) N, their loads; vel (nc, 3) m/s, the sites' velocities."""
 
     point: np.ndarray
     weight: np.ndarray
     rest: np.ndarray
+    site_rest: np.ndarray
     site_id: np.ndarray
     site_body: np.ndarray
     site_root: np.ndarray
@@ -391,8 +393,8 @@ def _gather_rows(rows, src, out):
 @kernel
 def carry_wall(wall, site_xpos, wall_pos, wall_vel):
     """The carried wall points where their bodies put them: p = p_rest + sum_e w_e (x_site_e -
-    p_rest), v = sum_e w_e v_site_e over the point's bodies e (linear blend skinning; wall.vel
-    holds the sites' velocities).
+    x_site_e,rest), v = sum_e w_e v_site_e over the point's bodies e (a blend of the sites'
+    displacements; wall.vel holds the sites' velocities).
     # Model: wall (WallArrays)   # Data in: site_xpos (nsite, 3) m, wall.vel (nc, 3) m/s
     # Data out: wall_pos (nwall, 3) m, wall_vel (nwall, 3) m/s (the carried rows)
     """
@@ -406,7 +408,7 @@ def carry_wall(wall, site_xpos, wall_pos, wall_vel):
         share = wall.weight[j]
         sid = wall.site_id[j]
         for a in range(3):
-            wall_pos[p, a] += share * (site_xpos[sid, a] - wall.rest[j, a])
+            wall_pos[p, a] += share * (site_xpos[sid, a] - wall.site_rest[j, a])
             wall_vel[p, a] += share * wall.vel[j, a]
 
 
@@ -468,7 +470,7 @@ def membrane_only() -> RigidPack:
     ctrls = CtrlArrays(fixed, stack_schedules(())[0], np.zeros(0, np.uint8), np.zeros(3))
     f6, f9 = np.zeros((0, 6)), np.zeros((0, 9))
     mj = MjViews(0, 0, 0, 0, 0, f3, f9, f3, f6, f6, f3, np.zeros(0), f3, np.zeros((0, 4)), np.zeros(0))
-    wall = WallArrays(i64, np.zeros(0), f3, i64, i64, i64, f3, f3)
+    wall = WallArrays(i64, np.zeros(0), f3, f3, i64, i64, i64, f3, f3)
     slides = SlideArrays(fixed_i32, fixed, fixed, fixed_f, f3)
     hist = WrenchHistory(np.zeros((0, 0, 6)), np.zeros((0, 0)))
     return RigidPack(False, links, ctrls, mj, wall, slides, False, False, hist)

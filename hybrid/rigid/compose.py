@@ -193,7 +193,7 @@ def build_rigid(
     local = add_sites(spec, model0, body_names, mesh.vert_pos[link_vert], site_names, controls.key_id)
     slides = _slide_sites(spec, model0, rig.prefix, mesh, slide_vert, slide_of, link_body_of, controls.key_id)
 
-    wall = _carried_sites(spec, model0, rig.prefix, carried, link_body_of, controls.key_id)
+    wall = _carried_sites(spec, model0, rig.prefix, carried, mesh.vert_pos, link_body_of, controls.key_id)
 
     link_mass = np.asarray(vert_mass, float)[link_vert]
     mass_added = np.zeros(link_vert.size, bool)
@@ -256,12 +256,19 @@ def _quat_z_to(n: np.ndarray) -> np.ndarray:
     return q / np.linalg.norm(q)
 
 
-def _carried_sites(spec, model0, prefix: str, carried, link_body_of: dict, key_id: int) -> dict | None:
-    """Sites for the carried points (`build_rigid`): those over linked membrane points on their
-    body by their weight; with a body pattern, the points strictly between the border and the
-    top (weight in (0, 1)) also on the nearest matching body (by its centre of mass where the
-    model starts) by one minus their weight. Returns {"site_names", "point" (nc,) the carried
-    points' indices (a point may appear twice), "weight" (nc,), "rest" (nc, 3) m}, or None."""
+def _carried_sites(
+    spec, model0, prefix: str, carried, vert_pos: np.ndarray, link_body_of: dict, key_id: int
+) -> dict | None:
+    """Sites for the carried points (`build_rigid`): a point over a linked (or sliding) membrane
+    point follows `weight` of the displacement of that point's body at the membrane point's rest
+    position (its site there): the wall between a rib and the fixed top follows the rib's
+    border as a share of it, and does not swing with the rib's turn extended up to its own
+    height (which took a point above the hinge inward as the rib rose). With a body pattern, the
+    points strictly between the border and the top (weight in (0, 1)) also follow the nearest
+    matching body (by its centre of mass where the model starts) by one minus their weight, at
+    their own position (a rib at their height carries them). Returns {"site_names", "point"
+    (nc,) the carried points' indices (a point may appear twice), "weight" (nc,), "rest" (nc, 3)
+    m the points' rest positions, "site_rest" (nc, 3) m their sites'}, or None."""
     if carried is None:
         return None
     pos, under, weight, pattern = carried
@@ -270,6 +277,7 @@ def _carried_sites(spec, model0, prefix: str, carried, link_body_of: dict, key_i
     names = [f"{prefix}hybrid_wall_{j}" for j in point]
     bodies = [link_body_of[int(under[j])] for j in point]
     shares = [float(weight[j]) for j in point]
+    at = [np.asarray(vert_pos[int(under[j])], float) for j in point]
     if pattern is not None:
         all_bodies = [model0.body(i).name for i in range(1, model0.nbody)]
         chosen = [b for b in all_bodies if fnmatch.fnmatchcase(b, pattern)]
@@ -285,9 +293,17 @@ def _carried_sites(spec, model0, prefix: str, carried, link_body_of: dict, key_i
             names.append(f"{prefix}hybrid_wall_up_{int(j)}")
             bodies.append(near)
             shares.append(1.0 - float(weight[j]))
-    add_sites(spec, model0, bodies, pos[point], names, key_id)
+            at.append(pos[j])
+    site_rest = np.asarray(at, float).reshape(-1, 3)
+    add_sites(spec, model0, bodies, site_rest, names, key_id)
     idx = np.asarray(point, np.int64)
-    return {"site_names": names, "point": idx, "weight": np.asarray(shares, float), "rest": pos[idx]}
+    return {
+        "site_names": names,
+        "point": idx,
+        "weight": np.asarray(shares, float),
+        "rest": pos[idx],
+        "site_rest": site_rest,
+    }
 
 
 def _link_body(spec: mujoco.MjSpec, name) -> str | None:

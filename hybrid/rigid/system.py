@@ -273,12 +273,20 @@ class CoupledRigid(RigidSystem):
         self.ribs = ribs
         #: the lungs' wall points the bodies carry (`hybrid.terms.lungs`): wall_point (nc,) their
         #: indices in the wall, wall_weight (nc,) the share of their body's motion, wall_rest
-        #: (nc, 3) m, and their sites: wall_site_id, wall_site_body, wall_site_root (nc,)
-        w = wall or {"site_names": [], "point": np.zeros(0, np.int64), "weight": np.zeros(0), "rest": np.zeros((0, 3))}
+        #: (nc, 3) m, and their sites: wall_site_id, wall_site_body, wall_site_root (nc,),
+        #: wall_site_rest (nc, 3) m where each site starts
+        w = wall or {
+            "site_names": [],
+            "point": np.zeros(0, np.int64),
+            "weight": np.zeros(0),
+            "rest": np.zeros((0, 3)),
+            "site_rest": np.zeros((0, 3)),
+        }
         mjm = self._model
         self.wall_point = np.asarray(w["point"], np.int64)
         self.wall_weight = np.asarray(w["weight"], float)
         self.wall_rest = np.ascontiguousarray(w["rest"], float).reshape(-1, 3)
+        self.wall_site_rest = np.ascontiguousarray(w["site_rest"], float).reshape(-1, 3)
         self.wall_site_id = np.array([mjm.site(n).id for n in w["site_names"]], np.int64)
         self.wall_site_body = mjm.site_bodyid[self.wall_site_id].astype(np.int64)
         self.wall_site_root = mjm.body_rootid[self.wall_site_body].astype(np.int64)
