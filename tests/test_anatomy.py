@@ -188,6 +188,35 @@ def test_ribs_placed_beside_the_spine_and_forward(torso):
         assert pair.half_width_m > max(head[0], front[0])
 
 
+def test_each_rib_pair_hinges_at_its_vertebrae_and_slopes_down_to_the_front(torso):
+    """The front pair (the costal cartilages of ribs 7-8) hinges at the mean height of T7 and T8,
+    the side pair (ribs 9-10) at T9 and T10, read from the skeleton's named vertebrae; each rib's
+    front is lower than its head, as real lower ribs are. A spine without named thoracic
+    vertebrae keeps the hinge at its band's height."""
+    import hybrid
+    from hybrid.anatomy.trunk_scene import RIB_VERTEBRAE, rib_head_height
+    from hybrid.rigid.skeleton import read_skeleton, thoracic_level
+
+    fit, _ = torso
+    centres = read_skeleton("myo_sim:myotorso").thoracic()
+    assert sorted(centres) == list(range(1, 13))
+    assert centres[7][2] > centres[8][2] > centres[9][2] > centres[10][2]  # T7 above T10
+    pairs = {p.name: p for p in hybrid.load_scene(fit.scene_path).rigid.ribs.pairs}
+    for part, levels in RIB_VERTEBRAE.items():
+        pair = pairs[f"ribs_{part}"]
+        want = np.mean([centres[k][2] for k in levels])  # the model's cranial axis is +z
+        assert pair.head_m[2] == pytest.approx(want, abs=1e-12)
+        assert pair.front_m[2] < pair.head_m[2] - 0.01
+    assert thoracic_level("torso_geom_6_thoracic7_s") == 7 and thoracic_level("T12") == 12
+    assert thoracic_level("lumbar1") is None and thoracic_level("thoracic13") is None
+
+    class _Loft:  # the fallback: the band's own mean height
+        extra = {"frame": type("F", (), {"cranial": np.array([0.0, 0.0, 1.0])})()}
+
+    band = np.array([[0.0, 0.0, 1.0], [0.0, 0.0, 1.2]])
+    assert rib_head_height("front", _Loft(), band, {7: np.zeros(3)}) == pytest.approx(1.1)
+
+
 def test_the_dome_holds_the_laplace_tension_of_its_resting_pressure(torso):
     import hybrid
     from hybrid.anatomy.trunk_scene import ABDOMEN_RESTING_TENSION_N_PER_M, RESTING_PDI_PA

@@ -201,6 +201,7 @@ def fit_trunk(
         spine_pts=sp,
         clearance_m=clearance_m,
         fix_root=sk.free_root,
+        vertebrae=sk.thoracic(),
     )
     pen = {}
     for role in ("rib_cage", "pelvis", "spine"):
@@ -238,5 +239,9 @@ def fit_trunk(
             "costal margin highest": float(lf.z_cm.max()),
             "zone top highest": float(lf.z_top.max()),
             "dome apex": lf.z_apex,
+            **{
+                f"{p.name} hinge": float((np.asarray(p.head_m) - fr.origin) @ fr.cranial)
+                for p in scene.rigid.ribs.pairs
+            },
         },
     )

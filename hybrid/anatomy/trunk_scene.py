@@ -37,6 +37,8 @@ __all__ = [
     "RESTING_PDI_PA",
     "ABDOMEN_RESTING_TENSION_N_PER_M",
     "ZONE_SLIDE_N_PER_M3",
+    "RIB_VERTEBRAE",
+    "rib_head_height",
     "trunk_scene",
     "sectors",
     "dome_radius_m",
@@ -51,6 +53,13 @@ FRONT_DEG = 40.0
 TENDON_RISE = 0.6
 #: the ribs added: capsule radius (m), as `myotorso_breathing`
 RIB_RADIUS_M = 0.006
+#: the ribs each added pair stands for (anatomy, not a calibration: the costal margin is the
+#: cartilages of ribs 7-10, the front's those of ribs 7-8; each rib's head articulates with
+#: its own vertebra): the pair's hinge is at the mean height of those thoracic vertebrae, so
+#: that the ribs slope down from the spine to the front as real ones do (a rib rising then
+#: moves its front forward and out). A model whose spine does not name them keeps the
+#: hinge at the band's height (level ribs).
+RIB_VERTEBRAE = {"front": (7, 8), "side": (9, 10)}
 #: the transdiaphragmatic pressure the relaxed dome holds at rest (Pa): the lungs' resting
 #: recoil, pleural pressure -5 cmH2O at FRC (textbooks; docs/lungs.md), across a
 #: dome whose abdominal side is at atmospheric pressure (an assumption: no checked source for
@@ -120,9 +129,21 @@ def sectors(lf: Loft) -> dict:
     }
 
 
-def _pair(name, lf: Loft, band_pts: np.ndarray, spine_pts: np.ndarray, mid: float, clearance_m: float) -> RibPair:
+def rib_head_height(part: str, lf: Loft, band_pts: np.ndarray, vertebrae: dict) -> float:
+    """The height (m along cranial) of the hinge of the pair `part` ("front", "side"): the mean
+    of its ribs' vertebrae (`RIB_VERTEBRAE`; vertebrae {level: centre (3,) m}), else the mean
+    of its band points (n, 3) m."""
     fr = lf.extra["frame"]
-    z = float(np.mean(band_pts @ fr.cranial))
+    levels = RIB_VERTEBRAE[part]
+    if all(k in vertebrae for k in levels):
+        return float(np.mean([vertebrae[k] @ fr.cranial for k in levels]))
+    return float(np.mean(band_pts @ fr.cranial))
+
+
+def _pair(
+    name, lf: Loft, band_pts: np.ndarray, spine_pts: np.ndarray, mid: float, clearance_m: float, z: float
+) -> RibPair:
+    fr = lf.extra["frame"]
     sz = spine_pts @ fr.cranial
     near = spine_pts[np.abs(sz - z) < 0.01]
     if not len(near):
@@ -159,10 +180,13 @@ def trunk_scene(
     spine_pts: np.ndarray,
     clearance_m: float,
     fix_root: bool = False,
+    vertebrae: dict | None = None,
 ) -> Scene:
     """The `Scene` of the lofted surface `lf` (module docstring), its mesh read from
     `mesh_file` (relative to the scene's folder), its rigid part `mjcf`, the ribs added on
-    `rib_body`."""
+    `rib_body`, hinged at the heights of their `vertebrae` ({level: centre (3,) m}, the
+    skeleton's thoracic vertebrae: `rib_head_height`)."""
+    vertebrae = vertebrae or {}
     fr = lf.extra["frame"]
     mid = float(fr.origin @ fr.left)
     kinds = lf.kind
@@ -213,7 +237,8 @@ def trunk_scene(
         )
         if side == "left":  # the ribs placed by the sector's own columns
             whole = np.concatenate([lf.rings[k][np.isin(cols[k], sector)] for k in band_rings])
-            pairs.append(_pair(f"ribs_{part}", lf, lf.vert[whole], spine_pts, mid, clearance_m))
+            z_head = rib_head_height(part, lf, lf.vert[whole], vertebrae)
+            pairs.append(_pair(f"ribs_{part}", lf, lf.vert[whole], spine_pts, mid, clearance_m, z_head))
     apex = lf.vert[lf.apex]
     axis_pt = fr.axis(lf.z_in)  # the hoops' axis: the cavity's, straight through the abdomen
     forces = (

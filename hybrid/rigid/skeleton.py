@@ -21,7 +21,7 @@ from hybrid.errors import RigidError
 from .controls import start_data
 from .mjcf import compile_spec
 
-__all__ = ["ROLES", "Bone", "Skeleton", "read_skeleton", "skeleton_of_spec"]
+__all__ = ["ROLES", "Bone", "Skeleton", "read_skeleton", "skeleton_of_spec", "thoracic_level"]
 
 #: role -> the words a bone's geom or mesh name holds (a regular expression, case-insensitive);
 #: in this order: the first role whose words match takes the bone
@@ -36,6 +36,21 @@ _WANT = {
     "spine": "a spine (mesh geoms named with lumbar, thoracic, vertebra, spine, L1..L5 or T1..T12)",
     "pelvis": "a pelvis (mesh geoms named with pelvis, sacrum, ilium, ischium, pubis or coxa)",
 }
+
+
+#: a thoracic vertebra's number in its geom's or mesh's name ("thoracic7", "T7")
+_THORACIC = re.compile(r"thoracic_?([0-9]{1,2})(?![0-9])|(?<![a-z])t([0-9]{1,2})(?![0-9])", re.IGNORECASE)
+
+
+def thoracic_level(*names: str) -> int | None:
+    """The thoracic vertebra (1-12) a bone's names say it is, or None."""
+    for n in names:
+        m = _THORACIC.search(n or "")
+        if m:
+            level = int(m.group(1) or m.group(2))
+            if 1 <= level <= 12:
+                return level
+    return None
 
 
 @dataclass
@@ -66,6 +81,15 @@ class Skeleton:
         """The vertices (n, 3) m of every bone of `role`."""
         parts = [b.vert for b in self.of(role)]
         return np.concatenate(parts) if parts else np.zeros((0, 3))
+
+    def thoracic(self) -> dict:
+        """{level: the vertebra's centre (3,) m} for the spine's bones named T1..T12."""
+        out = {}
+        for b in self.of("spine"):
+            level = thoracic_level(b.geom, b.mesh)
+            if level is not None:
+                out[level] = b.vert.mean(axis=0)
+        return out
 
     def bodies(self, role: str) -> list:
         """The bodies that carry bones of `role`, in model order, each once."""
