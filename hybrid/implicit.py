@@ -5,7 +5,8 @@ The step's free points take v+ = v + dv, x+ = x + h v+ with
     M dv = h (f_i(x+, v+) + f_e),
 
 f_i the forces treated implicitly (the continuum membrane with its Kelvin-Voigt
-viscosity, muscle fibres, passive fibres, resting tension, drag) and f_e the others at the step's start
+viscosity, muscle fibres, passive fibres, resting tension, drag, the sliding links' planes
+at the step's end: `hybrid.terms.slide_planes`) and f_e the others at the step's start
 (gravity, applied loads, pressure loads, ...: the step's force pass minus f_i
 there), plus, with a volume constraint, the last step's pressure on the
 volume gradient. Nailed, prescribed and linked points keep their positions
@@ -99,6 +100,7 @@ from .terms.fibres import add_muscle_fibres
 from .terms.membrane import add_membrane_serial, membrane_energy
 from .terms.passive_fibres import add_passive_fibres
 from .terms.resting_tension import add_resting_tension, resting_tension_energy, resting_tension_product
+from .terms.slide_planes import add_plane_forces, plane_energy, plane_product
 from .terms.tangents import (
     fibre_cached_product,
     fibre_energy,
@@ -136,13 +138,14 @@ FORCING = 0.5  # the linear solve: to this fraction of the residual, and of what
 
 
 @kernel
-def implicit_forces(m, tri, sched_val, x, v, out, w):
+def implicit_forces(m, tri, sched_val, x, v, out, w, planes=None):
     """out = the forces implicit Euler treats implicitly at (x, v): membrane (with its
     viscosity), muscle fibres, passive fibres, resting tension, drag, the lungs' pleural load; of the
     triangles `tri` (m itself: all of them; `NewtonRows`: those with a free corner, whole on
-    the free points).
-    # Model: m, tri   # Data in: sched_val (schedules at t), x (m), v (m/s), w.lung_wall_pos, w.lung_wall_vel
-    # Data out: out (N)   # Scratch: w.lung_wall_f
+    the free points); and the sliding links' planes when given (the solve's: the step's start
+    has their force from the rigid phase, `hybrid.loop.slide_forces`).
+    # Model: m, tri, planes (`SlidePlanes`) or None   # Data in: sched_val (schedules at t), x (m), v (m/s)
+    # Data in: w.lung_wall_pos, w.lung_wall_vel, planes.origin, .normal   # Data out: out (N)   # Scratch: w.lung_wall_f
     """
     for i in range(out.shape[0]):
         for a in range(3):
@@ -163,6 +166,8 @@ def implicit_forces(m, tri, sched_val, x, v, out, w):
                 out[i, a] -= c * v[i, a]
     if on[T_LUNGS]:
         add_lung_forces(m, sched_val, x, v, out, w)
+    if planes is not None:
+        add_plane_forces(planes, x, out)
 
 
 @kernel
@@ -171,7 +176,8 @@ def implicit_start_forces(m, sched_val, x, v, imp, vert_force):
     vert_force (which the force pass left without them, kept as the explicit forces in
     imp.f_expl). Returns False when imp is None (another integrator: the None prunes
     this). `implicit_step` reads imp.f_expl: the explicit forces at the step's start,
-    before the linked points move to their new sites.
+    before the linked points move to their new sites. The sliding planes' force at the start
+    comes later, from the rigid phase (`hybrid.loop.slide_forces`), into vert_force alone.
     # Model: m   # Data in: sched_val, x (m), v (m/s)   # Data out: imp.f, imp.f_expl (N)
     # Data in/out: vert_force (N)
     """
@@ -203,13 +209,13 @@ def newton_caches(m, rows, sched_val, x, face, fib, pf):
 
 
 @kernel
-def newton_product(m, rows, face, fib, pf, h, project, u, y):
+def newton_product(m, rows, face, fib, pf, h, project, u, y, planes=None):
     """y = (M + h^2 K + h C) u on every point (no rows zeroed) with the triangles `rows`
     (all of the model's: the Newton matrix; `newton_rows`: its free points' rows): the
     matrix at the positions the caches face, fib, pf were taken at (`newton_caches`);
-    the Hessian projected per element when `project`.
+    the Hessian projected per element when `project`; with the sliding links' planes when given.
     # Model: m.vert_mass (nvert,) kg, m.damp_coef (nvert,) kg/s, m.term_on; rows: mem_vert, mem_par, fib_vert, pf_vert, rt_vert, rt_par
-    # Data in: face, fib, pf (`newton_caches`), h (s), project, u (nvert, 3)
+    # Data in: face, fib, pf (`newton_caches`), h (s), project, u (nvert, 3), planes (`SlidePlanes`) or None
     # Data out: y (nvert, 3), kg times u's unit
     """
     on = m.term_on
@@ -225,6 +231,8 @@ def newton_product(m, rows, face, fib, pf, h, project, u, y):
         passive_fibres_cached_product(rows.pf_vert, pf, project, h * h, u, y)
     if on[T_RESTING_TENSION]:  # positive semi-definite per triangle: the same projected or not
         resting_tension_product(rows.rt_vert, rows.rt_par, h * h, u, y)
+    if planes is not None:  # positive semi-definite: the same projected or not
+        plane_product(planes, h * h, u, y)
 
 
 @kernel
@@ -234,7 +242,7 @@ def _product(m, w, h, project, u, y, rank_c=0.0, rank_g=None):
     on every point: w.full_u is zero on the fixed ones); plus c g (g . u) when rank_g is given
     and c is not 0.
     # Model: w.mat's pattern (free, row_ptr, col); projected: m (vert_mass, damp_coef, term_on), w.rows
-    # Data in: project, u (nfree, 3); assembled: w.mat.amat; projected: w.face, w.fib, w.pf, h (s)
+    # Data in: project, u (nfree, 3); assembled: w.mat.amat; projected: w.face, w.fib, w.pf, w.planes, h (s)
     # Data in: rank_c (kg/m^4), rank_g (nfree, 3) m^2 or None (`hybrid.implicit_lungs.lung_rank_one`)
     # Data out: y (nfree, 3)   # Scratch: w.full_u, w.full_y (nvert, 3) (projected)
     """
@@ -242,7 +250,7 @@ def _product(m, w, h, project, u, y, rank_c=0.0, rank_g=None):
         matrix_product(w.mat, u, y)
     else:
         scatter(w.mat.free, u, w.full_u)
-        newton_product(m, w.rows, w.face, w.fib, w.pf, h, True, w.full_u, w.full_y)
+        newton_product(m, w.rows, w.face, w.fib, w.pf, h, True, w.full_u, w.full_y, w.planes)
         gather(w.mat.free, 1.0, w.full_y, y)
     if rank_g is not None and rank_c != 0.0:
         add_rank_one(rank_c, rank_g, u, y)
@@ -310,14 +318,14 @@ def _trial(m, pos, vel, h, dv, w):
 def _residual(m, sched_val, pos, vel, h, w):
     """At dv: x_try, v_try, f = f_i(x_try, v_try), res = f + f_expl - M dv / h (0 on fixed
     points). Returns (|res|, |f| + |f_expl| + |M dv / h|, the vertex of the largest residual).
-    # Model: m (vert_free, vert_mass kg, term_on, kv_on, damp_coef kg/s), w.rows (the triangles of f_i)
+    # Model: m (vert_free, vert_mass kg, term_on, kv_on, damp_coef kg/s), w.rows (the triangles of f_i), w.planes
     # Data in: sched_val (the inputs at t), pos (nvert, 3) m, vel (nvert, 3) m/s, h (s), w.dv m/s, w.f_expl N
     # Data out: w.x_try m, w.v_try m/s (`_trial`), w.f, w.res (nvert, 3) N; returns (N, N, a vertex)
     """
     dv, xt, vt, res = w.dv, w.x_try, w.v_try, w.res
     free = m.vert_free
     _trial(m, pos, vel, h, dv, w)
-    implicit_forces(m, w.rows, sched_val, xt, vt, w.f, w)
+    implicit_forces(m, w.rows, sched_val, xt, vt, w.f, w, w.planes)
     rr = ff = ee = mm = 0.0
     worst, big = 0, -1.0
     for i in range(pos.shape[0]):
@@ -344,10 +352,10 @@ def _residual(m, sched_val, pos, vel, h, w):
 def _merit(m, sched_val, h, dv, w):
     """The incremental potential at dv (w.x_try, w.v_try taken there: `_trial`), whose
     dv-gradient is minus h res: 1/2 dv M dv - h f_e . dv + E(x_try) + h/2 sum c |v_try|^2
-    + h R(x_kv, v_try), E the membrane's, fibres' and resting tension's energies, R the viscosity's
+    + h R(x_kv, v_try), E the membrane's, fibres', resting tension's and sliding planes' energies, R the viscosity's
     dissipation function at the positions x_kv where the Newton iteration started (the
     gradient there exact).
-    # Model: m (vert_free, vert_mass kg, damp_coef kg/s, term_on, kv_on), w.rows
+    # Model: m (vert_free, vert_mass kg, damp_coef kg/s, term_on, kv_on), w.rows, w.planes
     # Data in: sched_val (the inputs at t), h (s), dv (nvert, 3) m/s, w.f_expl N, w.x_try m, w.v_try m/s, w.x_kv m
     # Data out: returns J
     """
@@ -373,6 +381,8 @@ def _merit(m, sched_val, h, dv, w):
         total += resting_tension_energy(tri.rt_vert, tri.rt_par, w.x_try)
     if on[T_LUNGS]:
         total += lung_potential(m, sched_val, h, w)
+    if w.planes.vert.shape[0]:
+        total += plane_energy(w.planes, w.x_try)
     return total
 
 
@@ -441,7 +451,7 @@ def implicit_step(m, s, sched_val, step, imp, vert_acc):
             for a in range(3):
                 w.x_kv[i, a] = w.x_try[i, a]
         newton_caches(m, w.rows, sched_val, w.x_try, w.face, w.fib, w.pf)
-        assemble(m, w.rows, w.face, w.fib, w.pf, h, w.mat)
+        assemble(m, w.rows, w.face, w.fib, w.pf, h, w.mat, w.planes)
         # the exact Hessian, its negative curvature ending the conjugate gradients early
         # (truncated Newton); when met at once, the Hessian projected per element instead
         gather(rows_of, h, w.res, w.cg_r)

@@ -26,6 +26,7 @@ import numpy as np
 from .kernel import kernel
 from .switches import T_DAMPING, T_MEMBRANE, T_MUSCLE_FIBRES, T_PASSIVE_FIBRES, T_RESTING_TENSION
 from .terms.resting_tension import resting_tension_blocks
+from .terms.slide_planes import plane_blocks
 from .terms.tangent_blocks import fibre_tangent_blocks, membrane_tangent_blocks, passive_fibres_tangent_blocks
 
 __all__ = [
@@ -126,14 +127,15 @@ def newton_matrix(nvert: int, vert_free, mem_vert, fib_vert, pf_vert, rt_vert) -
 
 
 @kernel
-def assemble(m, rows, face, fib, pf, h, mat):
+def assemble(m, rows, face, fib, pf, h, mat, planes=None):
     """mat.amat = M + h^2 K + h C on the free points, mat.pdiag its diagonal blocks with K
-    projected, from the tangent caches of `rows` (`hybrid.implicit.newton_caches`); mat.sdiag,
+    projected, from the tangent caches of `rows` (`hybrid.implicit.newton_caches`) and the sliding
+    links' planes when given (`hybrid.terms.slide_planes.SlidePlanes`: diagonal blocks); mat.sdiag,
     mat.dinv, mat.gchol, mat.ediag. One thread in both builds (threads summing into shared blocks
     would change their last bits from one build to the other).
     # Model: m (vert_mass kg, damp_coef kg/s, term_on); rows (NewtonRows): mem_vert, mem_par, fib_vert, pf_vert, rt_vert, rt_par;
     #        mat's pattern: free, row_ptr, mem_slot, fib_slot, pf_slot, rt_slot
-    # Data in: face, fib, pf (the tangent caches), h (s)
+    # Data in: face, fib, pf (the tangent caches), h (s), planes.normal
     # Data out: mat.amat (nblocks, 9) kg, mat.pdiag (nvert, 9) kg (the free points' rows), mat.sdiag (nfree, 9) kg,
     #           mat.dinv (nfree, 9) 1/kg, mat.gchol (nfree, 6) kg^1/2, mat.ediag (nfree, 9) kg
     """
@@ -157,6 +159,8 @@ def assemble(m, rows, face, fib, pf, h, mat):
         passive_fibres_tangent_blocks(rows.pf_vert, pf, h * h, mat.pf_slot, amat, pdiag)
     if on[T_RESTING_TENSION]:
         resting_tension_blocks(rows.rt_vert, rows.rt_par, h * h, mat.rt_slot, amat, pdiag)
+    if planes is not None:
+        plane_blocks(planes, h * h, ptr, amat, pdiag)
     for f in range(free.shape[0]):
         i = free[f]
         d, b, g, e, da = mat.sdiag[f], mat.dinv[f], mat.gchol[f], mat.ediag[f], amat[ptr[f]]

@@ -10,6 +10,7 @@ import numpy as np
 
 from .implicit_matrix import NewtonMatrix, newton_matrix
 from .integrators import IMPLICIT_EULER_ID
+from .terms.slide_planes import SlidePlanes, slide_planes
 from .terms.tangents import NCACHE, NFIB_CACHE, NPF_CACHE
 
 __all__ = [
@@ -107,7 +108,9 @@ class ImplicitWork(NamedTuple):
     (`hybrid.implicit_matrix`); info (len(Info),): the `Info` slots; the lungs' (empty
     without them): lung_wall_pos, lung_wall_vel, the state's own wall arrays (not copies),
     which the solve holds fixed; lung_wall_f (nwall, 3), lung_g (nvert, 3), lung_gf, lung_gh
-    (nfree, 3): the compartment's rank-one term (`hybrid.implicit_lungs.lung_rank_one`)."""
+    (nfree, 3): the compartment's rank-one term (`hybrid.implicit_lungs.lung_rank_one`); planes:
+    the sliding links' planes (`hybrid.terms.slide_planes`, empty without them), which the
+    rigid phase places each step."""
 
     dv: np.ndarray
     x_try: np.ndarray
@@ -139,12 +142,17 @@ class ImplicitWork(NamedTuple):
     lung_g: np.ndarray
     lung_gf: np.ndarray
     lung_gh: np.ndarray
+    planes: SlidePlanes
 
 
-def implicit_work(arrays, wall_pos=None, wall_vel=None) -> ImplicitWork | None:
+def implicit_work(
+    arrays, wall_pos=None, wall_vel=None, slide_vert=None, slide_stiffness_n_per_m=None
+) -> ImplicitWork | None:
     """The work arrays of a model that steps with implicit Euler, else None. wall_pos,
     wall_vel: the state's lungs' wall (`MembraneState.lung_wall_pos`, `lung_wall_vel`), the
-    same arrays (the solve reads the wall where the rigid phase put it)."""
+    same arrays (the solve reads the wall where the rigid phase put it); slide_vert (ns,),
+    slide_stiffness_n_per_m (ns,) N/m: the sliding points (`Model.slide_vert`), in the rigid
+    part's order."""
     if arrays.integrator != IMPLICIT_EULER_ID:
         return None
     n = arrays.vert_rest.shape[0]
@@ -165,4 +173,5 @@ def implicit_work(arrays, wall_pos=None, wall_vel=None) -> ImplicitWork | None:
         lung_g=np.zeros((n, 3)),
         lung_gf=np.zeros((nfree, 3)),
         lung_gh=np.zeros((nfree, 3)),
+        planes=slide_planes(arrays.vert_free, slide_vert, slide_stiffness_n_per_m),
     )

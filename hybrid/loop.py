@@ -57,6 +57,7 @@ from .step import (
 )
 from .terms import Lungs
 from .terms.lungs import L_ALVEOLAR, L_PLEURAL, L_VOLUME, P_REF, cavity_volume_rate
+from .terms.slide_planes import carry_planes
 from .terms.volume import face_volume
 
 __all__ = [
@@ -298,7 +299,7 @@ def rigid_phase(m, s, w, t, row, rig):
     # Data out: MuJoCo's state (through rig.mj.data_ptr), rig.mj.xfrc_applied,
     #           rig.mj.ctrl[rig.ctrls.act] (the rows the user does not set); the linked
     #           points' s.vert_pos, s.vert_vel; the carried wall's s.lung_wall_pos, s.lung_wall_vel;
-    #           rig.hist.xfrc[row], .qpos[row] when rig.record
+    #           rig.hist.xfrc[row], .qpos[row] when rig.record; implicit Euler's w.solver.planes (placed)
     # Scratch:  rig.links.force, .vel, rig.ctrls.val, rig.wall.force, .vel
     """
     links, ctrls, mj, hist = rig.links, rig.ctrls, rig.mj, rig.hist
@@ -346,6 +347,7 @@ def rigid_phase(m, s, w, t, row, rig):
     if wall.point.shape[0]:
         site_vel_kernel(mj.site_xpos, mj.cvel, mj.subtree_com, wall.site_id, wall.site_body, wall.site_root, wall.vel)
         carry_wall(wall, mj.site_xpos, s.lung_wall_pos, s.lung_wall_vel)
+    carry_planes(slides.site_id, mj.site_xpos, mj.site_xmat, w.solver)  # implicit Euler's: the planes it solves with
 
 
 @kernel
@@ -353,6 +355,9 @@ def slide_forces(slides, site_xpos, site_xmat, xipos, pos, vert_force, xfrc):
     """Each sliding point held to its plane: gap g = (x - x_site) . n, n the site's z axis; the
     force -k g n on the point, and its reaction k g n on the body at the point itself (the line of
     action through the point along n: the virtual work of the pair is exact as the point slides).
+    Under implicit Euler the point's force here is the step's readout only (`StepWork.vert_force`;
+    its solve copied the explicit forces before and takes the plane's itself at the step's end:
+    `hybrid.terms.slide_planes`), the body's reaction the force the last solve ended with.
     # Model: slides.vert, .site_id, .site_body, .stiffness
     # Data in: site_xpos (nsite, 3) m, site_xmat (nsite, 9), xipos (nbody, 3) m, pos (nvert, 3) m
     # Data out: vert_force (nvert, 3) N and xfrc (nbody, 6) [N, N m] (added to); slides.force (ns, 3) N

@@ -145,7 +145,6 @@ class Model:
         integ = self.arrays.integrator if integrator is None else _integrator_id(integrator, self.scene.formulation)
         arrays = self.arrays._replace(dt=float(dt_s), integrator=integ)
         scene = dataclasses.replace(self.scene, dt_s=float(dt_s), integrator=INTEGRATORS[integ].name)
-        _check_slides_solved(self.rigid, integ)
         dt_stable = _stable_dt(arrays, self.vert_stiffness, self.vert_viscosity)
         return Model(
             scene,
@@ -166,6 +165,11 @@ class Model:
     def slide_vert(self) -> np.ndarray:
         """(ns,) int32: the points that slide on their bodies (`RigidLink.slide_stiffness_n_per_m3`)."""
         return self.rigid.slide_vert if self.rigid is not None else np.zeros(0, np.int32)
+
+    @property
+    def slide_stiffness_n_per_m(self) -> np.ndarray:
+        """(ns,) N/m: each sliding point's plane stiffness (the link's N/m^3 times its area), `slide_vert`'s order."""
+        return self.rigid.slide_stiffness if self.rigid is not None else np.zeros(0)
 
     def region_faces(self, name: str) -> np.ndarray:
         """The faces of the named region, by the rule the terms use (`hybrid.regions.faces_of`)."""
@@ -190,18 +194,6 @@ def _check_duration(duration, dt):
     checks.positive("duration_s", duration, checks.MAX_DURATION_S, " s")
     if duration < dt:
         raise SceneError(f"duration_s: expected at least one step of dt_s = {dt:g} s, received {duration:g} s")
-
-
-def _check_slides_solved(rigid, integrator: int) -> None:
-    """Refuse sliding links under an integrator that solves each step (implicit Euler): the
-    planes' stiffness is not in its Newton solve, and taken explicitly it would be stable only
-    at the explicit step."""
-    if rigid is not None and rigid.slide_vert.size and INTEGRATORS[integrator].implicit:
-        raise SceneError(
-            f"integrator: expected 'symplectic_euler' or 'explicit_euler' for a scene with sliding links "
-            f"(rigid.links with slide_stiffness_n_per_m3 > 0, {rigid.slide_vert.size} points), received "
-            f"{INTEGRATORS[integrator].name!r}, whose solve does not yet hold the planes"
-        )
 
 
 def _integrator_id(name, formulation):
@@ -347,7 +339,6 @@ def _compile(scene: Scene) -> Model:
 
         rigid, b.link_vert = build_rigid(scene, mesh, regions, vert_mass, carried=b.carried)
         b.vert_free[b.link_vert] = 0
-        _check_slides_solved(rigid, integrator)
         # a sliding point's plane holds it as a spring along the normal (the stable step's estimate)
         np.add.at(b.vert_stiffness, rigid.slide_vert, rigid.slide_stiffness)
     # the step: the scene's, else the MJCF's own (a rigid part), else the default

@@ -89,7 +89,8 @@ class Simulation:
     def reset(self) -> None:
         """Back to rest at t = 0."""
         self.state = new_state(self.model.arrays)
-        self.work = new_work(self.model.arrays, self.state)  # the step's scratch and its solver's arrays
+        m = self.model  # the step's scratch and its solver's arrays
+        self.work = new_work(m.arrays, self.state, m.slide_vert, m.slide_stiffness_n_per_m)
         self.steps_done = 0
         self.failed: Exception | None = None
         if self.rigid is not None:

@@ -191,8 +191,9 @@ def new_state(arrays: MembraneArrays) -> MembraneState:
     )
 
 
-def new_work(arrays: MembraneArrays, state: MembraneState) -> StepWork:
-    """The step's work arrays for the model's arrays, with its solver's (for `state`'s wall)."""
+def new_work(arrays: MembraneArrays, state: MembraneState, slide_vert=None, slide_stiffness_n_per_m=None) -> StepWork:
+    """The step's work arrays for the model's arrays, with its solver's (for `state`'s wall and
+    the sliding points slide_vert (ns,), slide_stiffness_n_per_m (ns,) N/m: `Model.slide_vert`)."""
     n = arrays.vert_rest.shape[0]
     return StepWork(
         vert_force=np.zeros((n, 3)),
@@ -203,7 +204,7 @@ def new_work(arrays: MembraneArrays, state: MembraneState) -> StepWork:
         cubic=np.zeros(2),
         lung_wall_force=np.zeros_like(arrays.lung_wall),
         lung_scratch=np.zeros((5, n if arrays.lung_face.shape[0] else 0, 3)),
-        solver=implicit_work(arrays, state.lung_wall_pos, state.lung_wall_vel),
+        solver=implicit_work(arrays, state.lung_wall_pos, state.lung_wall_vel, slide_vert, slide_stiffness_n_per_m),
     )
 
 
