@@ -5,6 +5,10 @@ margin's ring linked to them, the zone of apposition above it sliding on them (e
 to the plane tangent to it at rest, which its rib carries: `RigidLink.slide_stiffness_n_per_m3`),
 as the diaphragm's apposed fibres slide along the inner rib cage as the dome descends; the
 spine's strip and the pelvic floor nailed, and the breathing terms of `myotorso_breathing`.
+Each rib pair hinges at the height of its ribs' vertebrae (`RIB_VERTEBRAE`), so that the ribs slope
+down to the front; where the spine names T4 to T8, an upper pair (ribs 4-5, the pulmonary rib cage)
+carries the lungs' wall above the border and holds the rib cage's inspiratory muscles, driven each
+breath with the diaphragm.
 
 The band is parted as in `models/scenes/myotorso_breathing.toml`: its front (the costal
 cartilages, up to `FRONT_DEG` off the anterior midline) to a front pair of ribs, its sides
@@ -19,6 +23,8 @@ dome up to the fitted thoracic cavity's top plane.
 """
 
 from __future__ import annotations
+
+import dataclasses
 
 import numpy as np
 
@@ -38,7 +44,12 @@ __all__ = [
     "ABDOMEN_RESTING_TENSION_N_PER_M",
     "ZONE_SLIDE_N_PER_M3",
     "RIB_VERTEBRAE",
+    "UPPER_FRONT_VERTEBRA",
+    "RIB_MUSCLE_GEAR_N_M",
+    "RIB_MUSCLE_ACTIVATION",
+    "DIAPHRAGM_DRIVE_N_PER_M",
     "rib_head_height",
+    "vertebra_height",
     "trunk_scene",
     "sectors",
     "dome_radius_m",
@@ -59,7 +70,23 @@ RIB_RADIUS_M = 0.006
 #: that the ribs slope down from the spine to the front as real ones do (a rib rising then
 #: moves its front forward and out). A model whose spine does not name them keeps the
 #: hinge at the band's height (level ribs).
-RIB_VERTEBRAE = {"front": (7, 8), "side": (9, 10)}
+RIB_VERTEBRAE = {"front": (7, 8), "side": (9, 10), "upper": (4, 5)}
+#: the upper pair (ribs 4-5, the pulmonary rib cage, under pleural pressure only, carrying the
+#: lungs' wall above the border: `Lungs.wall_bodies`): its front, the ribs' sternal ends, level
+#: with this fractional vertebra (surface anatomy: the sternal angle, rib 2, lies level with the
+#: T4-T5 disc and the xiphisternal joint, rib 7, with T9; the ribs between taken evenly spaced, an
+#: assumption: ribs 4 and 5 at 6.3 and 7.2); built where the spine names T4 to T8
+UPPER_FRONT_VERTEBRA = 4.5 + (9.0 - 4.5) * (np.mean(RIB_VERTEBRAE["upper"]) - 2.0) / 5.0
+#: the rib cage's inspiratory muscles (parasternal intercostals, scalenes) on the upper pair: a motor
+#: of this gear on each hinge (N m at activation 1) and the activation's peak in each breath (the
+#: `breathing` waveform of the diaphragm's drive): chosen, neither sourced nor calibrated (no source at
+#: hand for the torque they put on a rib pair)
+RIB_MUSCLE_GEAR_N_M = 1.0
+RIB_MUSCLE_ACTIVATION = 0.6
+#: the diaphragm's drive, its muscle fibres' peak tension in each breath (N/m): calibration, the one
+#: parameter set to a target: a tidal volume of 0.50 L (an adult's quiet breath, 0.4-0.6 L) on
+#: myo-sim's torso at mesh level 0 (0.496 L measured at 44 N/m; 0.466 L at 40)
+DIAPHRAGM_DRIVE_N_PER_M = 44.0
 #: the transdiaphragmatic pressure the relaxed dome holds at rest (Pa): the lungs' resting
 #: recoil, pleural pressure -5 cmH2O at FRC (textbooks; docs/lungs.md), across a
 #: dome whose abdominal side is at atmospheric pressure (an assumption: no checked source for
@@ -140,9 +167,19 @@ def rib_head_height(part: str, lf: Loft, band_pts: np.ndarray, vertebrae: dict) 
     return float(np.mean(band_pts @ fr.cranial))
 
 
-def _pair(
-    name, lf: Loft, band_pts: np.ndarray, spine_pts: np.ndarray, mid: float, clearance_m: float, z: float
-) -> RibPair:
+def vertebra_height(level: float, lf: Loft, vertebrae: dict) -> float | None:
+    """The height (m along cranial) of a fractional thoracic `level`, between the centres of
+    the vertebrae on either side ({level: centre (3,) m}); None if either is missing."""
+    fr = lf.extra["frame"]
+    lo, hi = int(np.floor(level)), int(np.ceil(level))
+    if lo not in vertebrae or hi not in vertebrae:
+        return None
+    z_lo, z_hi = float(vertebrae[lo] @ fr.cranial), float(vertebrae[hi] @ fr.cranial)
+    return z_lo + (level - lo) * (z_hi - z_lo)
+
+
+def _head(lf: Loft, spine_pts: np.ndarray, mid: float, z: float) -> np.ndarray:
+    """A left rib's costovertebral joint (3,) m: beside the spine's points near height z."""
     fr = lf.extra["frame"]
     sz = spine_pts @ fr.cranial
     near = spine_pts[np.abs(sz - z) < 0.01]
@@ -150,7 +187,35 @@ def _pair(
         near = spine_pts[np.argsort(np.abs(sz - z))[:50]]
     width = float(np.max(np.abs(near @ fr.left - mid)))
     centre = near.mean(axis=0)
-    head = centre + (mid - centre @ fr.left + 0.75 * width) * fr.left + (z - centre @ fr.cranial) * fr.cranial
+    return centre + (mid - centre @ fr.left + 0.75 * width) * fr.left + (z - centre @ fr.cranial) * fr.cranial
+
+
+def _upper_pair(lf: Loft, front_pair: RibPair, side_pair: RibPair, spine_pts, mid: float, vertebrae: dict):
+    """The upper pair (`UPPER_FRONT_VERTEBRA`), its front over the front pair's at the height of
+    its ribs' sternal ends, as wide as the side pair; None where the spine lacks the vertebrae."""
+    fr = lf.extra["frame"]
+    levels = RIB_VERTEBRAE["upper"]
+    z_front = vertebra_height(UPPER_FRONT_VERTEBRA, lf, vertebrae)
+    if z_front is None or not all(k in vertebrae for k in levels):
+        return None
+    z_head = rib_head_height("upper", lf, np.zeros((0, 3)), vertebrae)
+    low_front = np.asarray(front_pair.front_m, float)
+    front = low_front + (z_front - low_front @ fr.cranial) * fr.cranial
+    head = _head(lf, spine_pts, mid, z_head)
+    return dataclasses.replace(
+        side_pair,
+        name="ribs_upper",
+        head_m=tuple(float(x) for x in head),
+        front_m=tuple(float(x) for x in front),
+        muscle_gear_n_m=RIB_MUSCLE_GEAR_N_M,
+    )
+
+
+def _pair(
+    name, lf: Loft, band_pts: np.ndarray, spine_pts: np.ndarray, mid: float, clearance_m: float, z: float
+) -> RibPair:
+    fr = lf.extra["frame"]
+    head = _head(lf, spine_pts, mid, z)
     lateral = band_pts @ fr.left - mid
     ok = band_pts[lateral >= 2 * RIB_RADIUS_M]
     tip = ok[int(np.argmax(ok @ fr.anterior))]
@@ -239,6 +304,14 @@ def trunk_scene(
             whole = np.concatenate([lf.rings[k][np.isin(cols[k], sector)] for k in band_rings])
             z_head = rib_head_height(part, lf, lf.vert[whole], vertebrae)
             pairs.append(_pair(f"ribs_{part}", lf, lf.vert[whole], spine_pts, mid, clearance_m, z_head))
+    by_name = {p.name: p for p in pairs}
+    upper = None
+    if "ribs_front" in by_name and "ribs_side" in by_name:
+        upper = _upper_pair(lf, by_name["ribs_front"], by_name["ribs_side"], spine_pts, mid, vertebrae)
+    ctrl: dict = {}
+    if upper is not None:
+        pairs.append(upper)
+        ctrl = {"ribs_upper_*_muscle": Breathing(period_s=4.0, inspiration_fraction=0.4, peak=RIB_MUSCLE_ACTIVATION)}
     apex = lf.vert[lf.apex]
     axis_pt = fr.axis(lf.z_in)  # the hoops' axis: the cavity's, straight through the abdomen
     forces = (
@@ -256,7 +329,7 @@ def trunk_scene(
             name="muscle",
             region="muscle",
             toward_m=tuple(float(x) for x in apex),
-            tension_n_per_m=Breathing(period_s=4.0, inspiration_fraction=0.4, peak=20.0),
+            tension_n_per_m=Breathing(period_s=4.0, inspiration_fraction=0.4, peak=DIAPHRAGM_DRIVE_N_PER_M),
             force_length_width=0.67,
         ),
         RestingTension(
@@ -273,6 +346,7 @@ def trunk_scene(
             name="lungs",
             floor="lung_floor",
             wall_height_m=round(float(lf.extra["wall_z"][-1].max() - np.mean(lf.z_top)), 4),
+            wall_bodies="ribs_upper_*" if upper is not None else None,
             **ADULT_LUNGS,
         ),
     )
@@ -284,6 +358,7 @@ def trunk_scene(
         add_link_mass=True,
         lock=("*",),
         fix_root=fix_root,
+        ctrl=ctrl,
         ribs=Ribs(
             body=rib_body,
             pairs=tuple(pairs),
