@@ -37,6 +37,17 @@ BASE = Scene(
 )
 
 
+def dense_matrix(n, product):
+    """The (3n, 3n) matrix of a product product(u, y) (y = A u on (n, 3) arrays), column by column."""
+    out = np.zeros((3 * n, 3 * n))
+    for j in range(3 * n):
+        u, y = np.zeros((n, 3)), np.zeros((n, 3))
+        u.flat[j] = 1.0
+        product(u, y)
+        out[:, j] = y.ravel()
+    return out
+
+
 def forces_at(model, pos, t: float = 0.0):
     """The force pass of `model` with its points at `pos` (m), time t (s): (forces (nvert, 3) N,
     the state after the pass, for its readouts such as the pressure)."""

@@ -5,6 +5,7 @@ omega; on a small irregular mesh with every tangent term and points that are not
 
 import numpy as np
 import pytest
+from helpers import dense_matrix
 
 from hybrid import Damping, HalfSpace, Masses, Membrane, MuscleFibres, PassiveFibres, RestingTension, Scene
 from hybrid.implicit import newton_caches, newton_product, newton_rows
@@ -60,16 +61,6 @@ def setup():
     return a, rows, face, fib, pf, mat
 
 
-def dense(n, product):
-    out = np.zeros((3 * n, 3 * n))
-    for j in range(3 * n):
-        u, y = np.zeros((n, 3)), np.zeros((n, 3))
-        u.flat[j] = 1.0
-        product(u, y)
-        out[:, j] = y.ravel()
-    return out
-
-
 def blocks_of(mat, n, blocks):
     """The whole matrix of the upper blocks (each also its transpose's), on every point."""
     out = np.zeros((3 * n, 3 * n))
@@ -99,7 +90,8 @@ def test_the_assembled_blocks_are_the_element_products(setup):
     n = a.vert_rest.shape[0]
     free = np.repeat(a.vert_free != 0, 3)
     want, proj = (
-        dense(n, lambda u, y: newton_product(a, rows, face, fib, pf, H, project, u, y)) for project in (False, True)
+        dense_matrix(n, lambda u, y: newton_product(a, rows, face, fib, pf, H, project, u, y))
+        for project in (False, True)
     )
     for m_ in (want, proj):
         m_[~free, :] = 0.0
@@ -109,7 +101,7 @@ def test_the_assembled_blocks_are_the_element_products(setup):
     one = np.kron(np.eye(n), np.ones((3, 3)))
     assert np.abs(want - one * want).max() > 1e-3 * scale  # the blocks couple points
     product = on_every_point(mat, lambda u, y: matrix_product(mat, u, y))
-    assert np.abs(dense(n, product) - want).max() <= 1e-12 * scale
+    assert np.abs(dense_matrix(n, product) - want).max() <= 1e-12 * scale
     pdiag = np.stack([proj[3 * i : 3 * i + 3, 3 * i : 3 * i + 3].ravel() for i in range(n)])
     exact_diag = np.stack([want[3 * i : 3 * i + 3, 3 * i : 3 * i + 3].ravel() for i in range(n)])
     assert np.abs(pdiag - exact_diag).max() > 0.0  # the projection changes some

@@ -6,6 +6,7 @@ that is not integrated (no row)."""
 
 import numpy as np
 import pytest
+from helpers import dense_matrix
 
 from hybrid import Damping, Masses, Membrane, RestingTension, Scene
 from hybrid.implicit import _merit, _trial, implicit_forces, implicit_work, newton_caches, newton_product
@@ -55,16 +56,6 @@ def rel_error(a, b):
     return np.abs(a - b).max() / np.abs(b).max()
 
 
-def matrix_of(n, product):
-    out = np.zeros((3 * n, 3 * n))
-    for j in range(3 * n):
-        u, y = np.zeros((n, 3)), np.zeros((n, 3))
-        u.flat[j] = 1.0
-        product(u, y)
-        out[:, j] = y.ravel()
-    return out
-
-
 def finite_difference(fun, x, eps):
     out = np.zeros((x.size, x.size))
     for j in range(x.size):
@@ -102,8 +93,8 @@ def test_the_newton_matrix_with_a_plane_against_finite_differences_of_the_implic
             implicit_forces(a, a, sv, y, w, f, work)
         return f
 
-    newton = matrix_of(n, lambda u, y: newton_product(a, a, face, fib, pf, H, False, u, y, planes))
-    without = matrix_of(n, lambda u, y: newton_product(a, a, face, fib, pf, H, False, u, y))
+    newton = dense_matrix(n, lambda u, y: newton_product(a, a, face, fib, pf, H, False, u, y, planes))
+    without = dense_matrix(n, lambda u, y: newton_product(a, a, face, fib, pf, H, False, u, y))
     mass = np.diag(np.repeat(a.vert_mass, 3))
     expected = mass - H * H * finite_difference(lambda y: forces(y, zero), x, 1e-7)
     expected -= H * finite_difference(lambda w: forces(x, w), v, 1e-4)
