@@ -277,6 +277,38 @@ def test_the_wall_follows_its_ribs_and_hands_them_its_load_through_the_blend():
     assert np.abs(wall_f).sum() > 1e-3 * np.abs(cpl.link_forces()).sum()  # the wall's share is there
 
 
+def test_a_wall_between_two_ribs_follows_each_at_the_rib_beside_it():
+    """With `wall_bodies`, a wall point between the border and the top also follows the upper rib
+    nearest to it by one minus its weight: the displacement of that rib's point nearest to it, on
+    the rib's capsule axes (the site there), so that the point moves as the rib beside it does."""
+    import mujoco
+
+    from hybrid.studies.respiratory import upper_rib_scene
+
+    scene = upper_rib_scene(hybrid.load_scene("breathing_lungs", overrides=["mesh.level=0"]), 0.5)
+    sim = hybrid.load(scene)
+    sys_, m, d = sim.rigid.system, sim.mj_model, sim.mj_data
+    up = np.array(["hybrid_wall_up_" in m.site(i).name for i in sys_.wall_site_id])
+    assert up.sum() > 0
+    assert {m.body(int(b)).name for b in sys_.wall_site_body[up]} == {"upper_ribs_left", "upper_ribs_right"}
+    for site_rest, body in zip(sys_.wall_site_rest[up], sys_.wall_site_body[up]):
+        gap = np.inf  # the site's distance to its body's capsule axes where the model starts
+        for g in np.flatnonzero(m.geom_bodyid == body):
+            if m.geom_type[g] == mujoco.mjtGeom.mjGEOM_CAPSULE:
+                axis, c, half = d.geom_xmat[g].reshape(3, 3)[:, 2], d.geom_xpos[g], m.geom_size[g, 1]
+                q = c + np.clip((site_rest - c) @ axis, -half, half) * axis
+                gap = min(gap, float(np.linalg.norm(q - site_rest)))
+        assert gap < 1e-9
+    sim.step(400)
+    disp = d.site_xpos[sys_.wall_site_id] - sys_.wall_site_rest
+    moved = np.zeros_like(sim.state.lung_wall_pos)
+    np.add.at(moved, sys_.wall_point, sys_.wall_weight[:, None] * disp)
+    carried = np.unique(sys_.wall_point)
+    want = sim.model.arrays.lung_wall[carried] + moved[carried]
+    assert np.max(np.abs(sim.state.lung_wall_pos[carried] - want)) < 1e-14
+    assert np.abs(disp[up]).max() > 1e-4  # the upper ribs moved the wall
+
+
 def test_implicit_euler_holds_the_lungs_in_its_solve():
     """The breathing trunk with lungs by implicit Euler (the compartment's rank-one stiffness in
     the Newton solve) at 10x the explicit step against symplectic Euler at 1 ms: both first order

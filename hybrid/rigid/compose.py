@@ -265,8 +265,9 @@ def _carried_sites(
     border as a share of it, and does not swing with the rib's turn extended up to its own
     height (which took a point above the hinge inward as the rib rose). With a body pattern, the
     points strictly between the border and the top (weight in (0, 1)) also follow the nearest
-    matching body (by its centre of mass where the model starts) by one minus their weight, at
-    their own position (a rib at their height carries them). Returns {"site_names", "point"
+    matching body (by its centre of mass where the model starts) by one minus their weight: the
+    displacement of that body's point nearest to them (on its capsules' axes: the rib beside them;
+    their own position for a body without capsules). Returns {"site_names", "point"
     (nc,) the carried points' indices (a point may appear twice), "weight" (nc,), "rest" (nc, 3)
     m the points' rest positions, "site_rest" (nc, 3) m their sites'}, or None."""
     if carried is None:
@@ -286,14 +287,15 @@ def _carried_sites(
                 f"forces['lungs'].wall_bodies: no body of the rigid model matches {pattern!r}; "
                 f"{close_names(pattern, all_bodies, 'body')}"
             )
-        com = start_data(model0, key_id).xipos[[model0.body(b).id for b in chosen]]
+        data0 = start_data(model0, key_id)
+        com = data0.xipos[[model0.body(b).id for b in chosen]]
         for j in np.flatnonzero((weight > 0) & (weight < 1)):
             near = chosen[int(np.argmin(np.linalg.norm(com - pos[j], axis=1)))]
             point.append(int(j))
             names.append(f"{prefix}hybrid_wall_up_{int(j)}")
             bodies.append(near)
             shares.append(1.0 - float(weight[j]))
-            at.append(pos[j])
+            at.append(_nearest_on_capsules(model0, data0, model0.body(near).id, pos[j]))
     site_rest = np.asarray(at, float).reshape(-1, 3)
     add_sites(spec, model0, bodies, site_rest, names, key_id)
     idx = np.asarray(point, np.int64)
@@ -304,6 +306,23 @@ def _carried_sites(
         "rest": pos[idx],
         "site_rest": site_rest,
     }
+
+
+def _nearest_on_capsules(model, data, body: int, p: np.ndarray) -> np.ndarray:
+    """The point of the body's capsules' axes nearest to p (3,) m, where the model starts (a rib
+    drawn as capsules: the rib's point beside a wall point); p itself for a body without capsules."""
+    best, best_d = np.asarray(p, float), np.inf
+    for g in np.flatnonzero(model.geom_bodyid == body):
+        if model.geom_type[g] != mujoco.mjtGeom.mjGEOM_CAPSULE:
+            continue
+        axis = data.geom_xmat[g].reshape(3, 3)[:, 2]
+        half = float(model.geom_size[g, 1])
+        c = data.geom_xpos[g]
+        q = c + np.clip((p - c) @ axis, -half, half) * axis
+        d = float(np.linalg.norm(q - p))
+        if d < best_d:
+            best, best_d = q, d
+    return best
 
 
 def _link_body(spec: mujoco.MjSpec, name) -> str | None:
