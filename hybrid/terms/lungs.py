@@ -419,7 +419,8 @@ class Lungs(Term):
     sigmoid_inflection_cmh2o c, sigmoid_width_cmh2o d of V = a + b / (1 + exp(-(P - c) / d)),
     P the transpulmonary pressure); wall_bodies: a body name or pattern of the rigid model (the
     upper ribs, `rigid.ribs`), None for none: the wall's rings between the border and the top
-    follow the nearest such body by the share the border's rib leaves (the pulmonary rib cage);
+    follow the nearest such body by the share the border's rib leaves, each ring point the
+    displacement of the body's point beside it (the pulmonary rib cage);
     airway_occluded: a schedule, the airway closed where
     it is 1 (>= 0.5), open where 0: the lung volume when it closes is then held exactly
     (`project_occluded`), as in the occlusion and twitch manoeuvres."""
