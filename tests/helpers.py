@@ -48,6 +48,17 @@ def dense_matrix(n, product):
     return out
 
 
+def central_differences(fun, x, eps):
+    """d fun / d x (x.size x x.size) by central differences of step eps."""
+    out = np.zeros((x.size, x.size))
+    for j in range(x.size):
+        xp, xm = x.copy(), x.copy()
+        xp.flat[j] += eps
+        xm.flat[j] -= eps
+        out[:, j] = ((fun(xp) - fun(xm)) / (2.0 * eps)).ravel()
+    return out
+
+
 def forces_at(model, pos, t: float = 0.0):
     """The force pass of `model` with its points at `pos` (m), time t (s): (forces (nvert, 3) N,
     the state after the pass, for its readouts such as the pressure)."""

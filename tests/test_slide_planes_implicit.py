@@ -6,7 +6,7 @@ that is not integrated (no row)."""
 
 import numpy as np
 import pytest
-from helpers import dense_matrix
+from helpers import central_differences, dense_matrix
 
 from hybrid import Damping, Masses, Membrane, RestingTension, Scene
 from hybrid.implicit import _merit, _trial, implicit_forces, implicit_work, newton_caches, newton_product
@@ -56,16 +56,6 @@ def rel_error(a, b):
     return np.abs(a - b).max() / np.abs(b).max()
 
 
-def finite_difference(fun, x, eps):
-    out = np.zeros((x.size, x.size))
-    for j in range(x.size):
-        xp, xm = x.copy(), x.copy()
-        xp.flat[j] += eps
-        xm.flat[j] -= eps
-        out[:, j] = ((fun(xp) - fun(xm)) / (2.0 * eps)).ravel()
-    return out
-
-
 def caches(a, x):
     face = np.zeros((a.mem_vert.shape[0], NCACHE))
     fib, pf = np.zeros((0, NFIB_CACHE)), np.zeros((0, NPF_CACHE))
@@ -96,8 +86,8 @@ def test_the_newton_matrix_with_a_plane_against_finite_differences_of_the_implic
     newton = dense_matrix(n, lambda u, y: newton_product(a, a, face, fib, pf, H, False, u, y, planes))
     without = dense_matrix(n, lambda u, y: newton_product(a, a, face, fib, pf, H, False, u, y))
     mass = np.diag(np.repeat(a.vert_mass, 3))
-    expected = mass - H * H * finite_difference(lambda y: forces(y, zero), x, 1e-7)
-    expected -= H * finite_difference(lambda w: forces(x, w), v, 1e-4)
+    expected = mass - H * H * central_differences(lambda y: forces(y, zero), x, 1e-7)
+    expected -= H * central_differences(lambda w: forces(x, w), v, 1e-4)
     assert rel_error(newton - mass, expected - mass) <= 1e-6
     # the planes' part is there, and is h^2 k n n^T on their points' diagonal blocks alone
     plane = np.zeros_like(newton)
