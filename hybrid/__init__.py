@@ -12,7 +12,8 @@ The public API for scripted experiments:
 A `Scene` is plain dataclasses (its terms, region selectors and schedules are
 all here): change a field with `dataclasses.replace` and load it again to
 repeat the run with other parameters; `sim.model.with_dt(h)` changes the step
-without compiling anything else; `sim.set_state(...)` starts from another state.
+without compiling anything else; `sim.set_state(...)` starts from another state; `hybrid.load(..., solver=hybrid.ImplicitEuler())`
+steps with another solver (`sim.solver` says which).
 `hybrid.read` (an MCAP recording) and `hybrid.sweep` (runs in parallel) are the
 observers' side. Everything else lives in the submodules, which may change.
 """
@@ -66,6 +67,7 @@ from .scene import (
 )
 from .schedule import Breathing, Constant, Function, Table
 from .simulation import Simulation
+from .solvers import ExplicitEuler, ImplicitEuler, Solver, SymplecticEuler
 from .state import State
 from .sweep import sweep
 
@@ -79,6 +81,11 @@ __all__ = [
     "Simulation",
     "State",
     "Control",
+    # the membrane's solvers (Simulation(model, solver=...))
+    "Solver",
+    "SymplecticEuler",
+    "ExplicitEuler",
+    "ImplicitEuler",
     "run",
     "read",
     "sweep",
@@ -149,10 +156,15 @@ def load_scene(
 
 
 def load(
-    source: str | Path | Scene = "breathing", *, overrides: Sequence[str] = (), without: Sequence[str] = ()
+    source: str | Path | Scene = "breathing",
+    *,
+    overrides: Sequence[str] = (),
+    without: Sequence[str] = (),
+    solver: Solver | None = None,
 ) -> Simulation:
-    """A ready-to-step simulation of a source, as `load_scene` takes it."""
-    return Simulation(compile_scene(load_scene(source, overrides=overrides, without=without)))
+    """A ready-to-step simulation of a source, as `load_scene` takes it, stepping with
+    `solver` (`hybrid.ImplicitEuler(tol=1e-8)`, ...; None: the scene's `integrator`)."""
+    return Simulation(compile_scene(load_scene(source, overrides=overrides, without=without)), solver=solver)
 
 
 def _read(path, *, t_s=None, topics=None, strict: bool = True) -> dict:

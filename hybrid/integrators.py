@@ -5,7 +5,9 @@ The step's phase 2 (`hybrid.step.membrane_advance`) integrates with implicit Eul
 Newton solve (`hybrid.implicit.implicit_step`) when the step's work holds that solver's
 arrays (`StepWork.solver`, made only for an implicit integrator: `hybrid.implicit_work`),
 else with the explicit pair (`hybrid.step._integrate`, the id saying which of the two).
-Adding an integrator takes its entry here and its branch there.
+Each entry has its solver object, the one a program passes to `Simulation`
+(`hybrid.solvers`: its settings and its work arrays). Adding an integrator takes its
+entry here, its branch there and its class in `hybrid.solvers`.
 """
 
 from __future__ import annotations

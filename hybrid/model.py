@@ -139,12 +139,30 @@ class Model:
     def dt_s(self) -> float:
         return self.arrays.dt
 
-    def with_dt(self, dt_s: float, integrator: str | None = None) -> Model:
-        """The same model with another time step (no file is read again)."""
+    def with_dt(
+        self,
+        dt_s: float,
+        integrator: str | None = None,
+        *,
+        implicit_tol: float | None = None,
+        implicit_max_iter: int | None = None,
+    ) -> Model:
+        """The same model with another time step, and with another integrator or implicit
+        Euler's Newton settings where given (no file is read again; `hybrid.solvers`' objects
+        come here). Each value is checked as the scene's key of that name."""
         _check_dt(dt_s)
         integ = self.arrays.integrator if integrator is None else _integrator_id(integrator, self.scene.formulation)
-        arrays = self.arrays._replace(dt=float(dt_s), integrator=integ)
         scene = dataclasses.replace(self.scene, dt_s=float(dt_s), integrator=INTEGRATORS[integ].name)
+        if implicit_tol is not None:
+            scene = dataclasses.replace(scene, implicit_tol=implicit_tol)
+        if implicit_max_iter is not None:
+            scene = dataclasses.replace(scene, implicit_max_iter=implicit_max_iter)
+        arrays = self.arrays._replace(
+            dt=float(dt_s),
+            integrator=integ,
+            implicit_tol=_scene_value(scene, "implicit_tol"),
+            implicit_max_iter=_scene_value(scene, "implicit_max_iter"),
+        )
         dt_stable = _stable_dt(arrays, self.vert_stiffness, self.vert_viscosity)
         return Model(
             scene,

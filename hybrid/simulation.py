@@ -21,6 +21,7 @@ from .errors import ArgumentError, SceneError, SimulationDiverged
 from .implicit import Info
 from .loop import Frames, kinetic_energy_of, membrane_only, run_steps
 from .model import TERMS, Model
+from .solvers import SOLVERS, Solver, solver_of
 from .state import State
 from .step import (
     S_ORIGIN,
@@ -54,11 +55,25 @@ class Simulation:
     each other as the run goes and runs the faster (`hybrid.builds.BuildChoice`,
     for models that may run in parallel); "serial" or "parallel" fixes it. The
     two agree to the bit. `sim.builds.summary()` says what ran.
+
+    `solver`: the membrane's solver (`hybrid.solvers`: `SymplecticEuler()`,
+    `ExplicitEuler()`, `ImplicitEuler(tol, max_iter)`), None for the scene's own
+    (`integrator` and its settings). `sim.model` is then the model stepping with it, and
+    `sim.solver` says which runs. Nothing is compiled again: every solver is a branch of
+    the one compiled loop.
     """
 
-    def __init__(self, model: Model, build: str = "auto"):
+    def __init__(self, model: Model, build: str = "auto", solver: Solver | None = None):
         _check_model(model)
+        if solver is not None:
+            if not isinstance(solver, Solver):
+                raise ArgumentError(
+                    f"solver: expected a hybrid solver ({', '.join(c.__name__ + '()' for c in SOLVERS.values())}) "
+                    f"or None, received {_described(solver)}"
+                )
+            model = solver.model_for(model)
         self.model = model
+        self.solver = solver_of(model)
         self.builds = BuildChoice(model.arrays.parallel, build)
         # the model's arrays with each build's flag: what the compiled calls take
         self._arrays = {p: model.arrays._replace(parallel=p) for p in (False, True)}
@@ -89,8 +104,8 @@ class Simulation:
     def reset(self) -> None:
         """Back to rest at t = 0."""
         self.state = new_state(self.model.arrays)
-        m = self.model  # the step's scratch and its solver's arrays
-        self.work = new_work(m.arrays, self.state, m.slide_vert, m.slide_stiffness_n_per_m)
+        # the step's scratch, holding its solver's own arrays
+        self.work = new_work(self.model.arrays, self.state, self.solver.new_work(self.model, self.state))
         self.steps_done = 0
         self.failed: Exception | None = None
         if self.rigid is not None:

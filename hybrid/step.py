@@ -30,7 +30,6 @@ from .implicit import (
     implicit_pressure,
     implicit_start_forces,
     implicit_step,
-    implicit_work,
 )
 from .integrators import EXPLICIT_EULER_ID, IMPLICIT_EULER_ID
 from .kernel import CHUNK_VERTS, chunk_count, kernel, kernel_twin
@@ -191,9 +190,9 @@ def new_state(arrays: MembraneArrays) -> MembraneState:
     )
 
 
-def new_work(arrays: MembraneArrays, state: MembraneState, slide_vert=None, slide_stiffness_n_per_m=None) -> StepWork:
-    """The step's work arrays for the model's arrays, with its solver's (for `state`'s wall and
-    the sliding points slide_vert (ns,), slide_stiffness_n_per_m (ns,) N/m: `Model.slide_vert`)."""
+def new_work(arrays: MembraneArrays, state: MembraneState, solver: ImplicitWork | None = None) -> StepWork:
+    """The step's work arrays for the model's arrays, holding `solver`, the solver's own
+    (`hybrid.solvers.Solver.new_work`: None for the explicit pair)."""
     n = arrays.vert_rest.shape[0]
     return StepWork(
         vert_force=np.zeros((n, 3)),
@@ -204,7 +203,7 @@ def new_work(arrays: MembraneArrays, state: MembraneState, slide_vert=None, slid
         cubic=np.zeros(2),
         lung_wall_force=np.zeros_like(arrays.lung_wall),
         lung_scratch=np.zeros((5, n if arrays.lung_face.shape[0] else 0, 3)),
-        solver=implicit_work(arrays, state.lung_wall_pos, state.lung_wall_vel, slide_vert, slide_stiffness_n_per_m),
+        solver=solver,
     )
 
 

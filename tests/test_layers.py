@@ -25,7 +25,7 @@ LAYERS = (
     ("step", ("step", "switches", "readouts", "implicit", "implicit_work", "implicit_matrix", "implicit_lungs")),
     ("step loop", ("loop",)),
     ("coupled step", ("coupling",)),
-    ("simulation", ("simulation", "builds", "control", "state", "diagnosis", "anatomy", "anatomy.*")),
+    ("simulation", ("simulation", "solvers", "builds", "control", "state", "diagnosis", "anatomy", "anatomy.*")),
     (
         "observers",
         (

@@ -1,0 +1,92 @@
+"""The membrane's solvers as objects (`hybrid.solvers`): a solver passed to `Simulation` steps
+exactly as the scene key of its name would, owns its work arrays, and bad ones are refused."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+import hybrid
+from hybrid import ExplicitEuler, ImplicitEuler, Simulation, SymplecticEuler, compile_scene, load_scene
+from hybrid.errors import ArgumentError
+from hybrid.implicit import Info
+from hybrid.integrators import NAMES
+from hybrid.solvers import SOLVERS, solver_of
+
+
+def _run(sim: Simulation, n: int) -> dict:
+    sim.step(n)
+    out = {"pos": sim.vert_pos.copy(), "vel": sim.vert_vel.copy(), "t": sim.time, "p": sim.pressure}
+    if sim.rigid is not None:
+        out["qpos"] = sim.mj_data.qpos.copy()
+        out["qvel"] = sim.mj_data.qvel.copy()
+    return out
+
+
+def _same(a: dict, b: dict) -> None:
+    assert a.keys() == b.keys()
+    for k in a:  # the same compiled code on the same numbers: equal to the bit
+        assert np.array_equal(a[k], b[k]), k
+
+
+def test_every_integrator_of_the_registry_has_its_solver():
+    assert tuple(SOLVERS) == NAMES
+    for name, cls in SOLVERS.items():
+        assert cls().name == name
+        assert cls().implicit == (name == "implicit_euler")
+
+
+@pytest.mark.parametrize(
+    "key, solver",
+    [("implicit_euler", ImplicitEuler(tol=1e-7, max_iter=40)), ("symplectic_euler", SymplecticEuler())],
+    ids=["implicit", "symplectic"],
+)
+def test_a_solver_passed_to_the_coupled_simulation_steps_as_its_scene_key(key, solver):
+    """The breathing trunk (membrane and MuJoCo) at one step: the scene compiled with
+    `integrator = key` against the scene compiled with the other integrator and given `solver`."""
+    dt = ["dt_s=2e-4"]
+    other = "symplectic_euler" if key == "implicit_euler" else "implicit_euler"
+    as_key = load_scene("breathing", overrides=[f"integrator={key}", "implicit_tol=1e-7", "implicit_max_iter=40", *dt])
+    given = Simulation(compile_scene(load_scene("breathing", overrides=[f"integrator={other}", *dt])), solver=solver)
+    assert given.solver == solver
+    assert given.model.scene.integrator == key
+    _same(_run(Simulation(compile_scene(as_key)), 60), _run(given, 60))
+
+
+def test_a_solver_passed_to_a_membrane_only_simulation_steps_as_its_scene_key():
+    scene = load_scene("membrane_demo")
+    explicit = dataclasses.replace(scene, integrator="explicit_euler")
+    sim = hybrid.load("membrane_demo", solver=ExplicitEuler())
+    assert sim.rigid is None and sim.solver == ExplicitEuler()
+    _same(_run(Simulation(compile_scene(explicit)), 200), _run(sim, 200))
+
+
+def test_the_simulation_says_which_solver_runs_and_only_an_implicit_one_has_work_arrays():
+    model = compile_scene(load_scene("breathing", overrides=["integrator=implicit_euler", "implicit_tol=1e-5"]))
+    own = Simulation(model)
+    assert own.solver == ImplicitEuler(tol=1e-5, max_iter=50) == solver_of(model)
+    assert own.work.solver is not None
+    sym = Simulation(model, solver=SymplecticEuler())
+    assert sym.solver == SymplecticEuler() and sym.work.solver is None
+    # the model steps with it: the step kept, its stability bound symplectic Euler's (finite)
+    assert sym.model.dt_s == model.dt_s and np.isfinite(sym.model.dt_stable_s) and model.dt_stable_s == np.inf
+    assert sym.model.arrays.integrator == SymplecticEuler().model_for(model).arrays.integrator
+    tight = Simulation(model, solver=ImplicitEuler(tol=1e-9, max_iter=70))
+    assert (tight.model.arrays.implicit_tol, tight.model.arrays.implicit_max_iter) == (1e-9, 70)
+    own.step(20)
+    tight.step(20)  # the solver's tolerance reaches its solve: more Newton iterations for less residual
+    newton = [s.work.solver.info[Info.NEWTON_TOTAL] for s in (own, tight)]
+    assert 0 < newton[0] < newton[1]
+
+
+def test_bad_solvers_are_refused_in_one_line_naming_them():
+    with pytest.raises(ArgumentError, match=r"^ImplicitEuler\.tol: expected .* received -1$"):
+        ImplicitEuler(tol=-1)
+    with pytest.raises(ArgumentError, match=r"^ImplicitEuler\.max_iter: expected .* received 2\.5$"):
+        ImplicitEuler(max_iter=2.5)
+    model = compile_scene(load_scene("membrane_demo"))
+    with pytest.raises(ArgumentError, match=r"^solver: expected a hybrid solver .* received str 'implicit'$"):
+        Simulation(model, solver="implicit")
+    # the paper's forces derive from no energy: no Hessian for Newton's method
+    with pytest.raises(ArgumentError, match=r"^solver: ImplicitEuler\(.*\) needs formulation 'continuum'.*'paper'"):
+        Simulation(model, solver=ImplicitEuler())
