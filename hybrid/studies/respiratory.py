@@ -45,6 +45,7 @@ from ..resolve import resolve_scene
 from ..scene import Lungs, RibPair, Ribs
 from ..schedule import Breathing, Constant, Table
 from ..terms.fibres import MuscleFibres
+from ..terms.lungs import CMH2O_PA
 from .stability.report import write_json
 
 __all__ = ["run", "passive_compliance", "relaxation", "quiet_breathing", "twitch", "paradox", "upper_rib_scene"]
@@ -120,7 +121,7 @@ def passive_compliance(scene, step_cmh2o: float, duration_s: float) -> dict:
     dppl = float(np.mean(a["pleural_pressure_cmh2o"][late]) - a["pleural_pressure_cmh2o"][0])
     lungs = _lungs_of(scene)
     law = lungs.lung_compliance_l_per_cmh2o or (1.0 / lungs.lung_elastance_cmh2o_per_l)
-    return {
+    out = {
         "step_cmh2o": step_cmh2o,
         "volume_change_l": dv,
         "pleural_pressure_change_cmh2o": dppl,
@@ -129,6 +130,33 @@ def passive_compliance(scene, step_cmh2o: float, duration_s: float) -> dict:
         "chest_wall_compliance_l_per_cmh2o": dv / dppl,
         "lung_compliance_l_per_cmh2o": dv / (step_cmh2o - dppl),
         "law_lung_compliance_l_per_cmh2o": law,
+    }
+    out.update(_compartments(a, late, dppl))
+    return out
+
+
+def _compartments(a: dict, late: np.ndarray, dppl: float) -> dict:
+    """The chest wall's compartments (Konno & Mead) in a passive step: the rib cage's under the
+    pleural pressure's change, the abdomen's under its own (the gastric pressure), and the
+    occluded twitch's dPes / dPdi that two such compartments imply (below)."""
+    if "rib_cage_pulmonary_volume_change_l" not in a:  # no rigid part: no rib cage
+        return {}
+    volume = {k: float(np.mean(a[f"{k}_volume_change_l"][late])) for k in ("rib_cage_pulmonary", "rib_cage_abdominal")}
+    volume["abdomen"] = float(np.mean(a["abdomen_volume_change_l"][late]))
+    dpga = float(np.mean(a["pressure_pa"][late]) - a["pressure_pa"][0]) / CMH2O_PA
+    c_rc = (volume["rib_cage_pulmonary"] + volume["rib_cage_abdominal"]) / dppl
+    c_ab = volume["abdomen"] / dpga
+    return {
+        "gastric_pressure_change_cmh2o": dpga,
+        "compartment_volume_change_l": volume,
+        "rib_cage_compliance_l_per_cmh2o": c_rc,
+        "abdomen_compliance_l_per_cmh2o": c_ab,
+        # an occluded twitch holds the lung's volume: the rib cage's change C_rc dPes matches the
+        # abdomen's -C_ab dPga, so dPes / dPdi = C_ab / (C_ab + C_rc) when the diaphragm acts on the
+        # rib cage through the pleural pressure alone (its insertional and appositional pulls left
+        # out: Konno & Mead's two compartments; Konno & Mead 1968 find the abdomen about as compliant
+        # as the rib cage in quiet breathing, which makes it about 0.5)
+        "twitch_ratio_two_compartments": c_ab / (c_ab + c_rc),
     }
 
 
@@ -344,6 +372,30 @@ def markdown(res: dict) -> str:
         f"({p['law_lung_compliance_l_per_cmh2o']:g}) |"
         for p in res["passive"]
     )
+    comp = "\n".join(
+        f"| {p['step_cmh2o']:g} | {p['pleural_pressure_change_cmh2o']:+.3f} | {p['gastric_pressure_change_cmh2o']:+.3f} | "
+        f"{1e3 * p['compartment_volume_change_l']['rib_cage_pulmonary']:+.2f} | "
+        f"{1e3 * p['compartment_volume_change_l']['rib_cage_abdominal']:+.2f} | "
+        f"{1e3 * p['compartment_volume_change_l']['abdomen']:+.2f} | {p['rib_cage_compliance_l_per_cmh2o']:.4f} | "
+        f"{p['abdomen_compliance_l_per_cmh2o']:.4f} | {p['twitch_ratio_two_compartments']:.3f} |"
+        for p in res["passive"]
+        if "rib_cage_compliance_l_per_cmh2o" in p
+    )
+    compartments = (
+        f"""
+Its compartments (Konno & Mead): the rib cage's compliance under the pleural pressure's change
+(pulmonary and abdominal rib cage), the abdomen's under its own (gastric) pressure's, and the occluded
+twitch's dPes / dPdi that two such compartments imply, C_ab / (C_ab + C_rc) (the diaphragm's insertional
+and appositional pulls on the ribs left out). Konno & Mead 1968 (J Appl Physiol 24:544) find the abdomen
+about as compliant as the rib cage in quiet breathing (somewhat more supine), which makes it about 0.5.
+
+| step (cmH2O) | dPpl | dPga | pulmonary RC (mL) | abdominal RC (mL) | abdomen (mL) | C_rc (L/cmH2O) | C_ab | twitch ratio implied |
+| --- | --- | --- | --- | --- | --- | --- | --- | --- |
+{comp}
+"""
+        if comp
+        else ""
+    )
     r = res["relaxation"]
     tw = res["twitch"]
     par = res["paradox"]
@@ -371,7 +423,7 @@ Nothing is fitted: every figure is a prediction of the scene's parameters; the b
 | step (cmH2O) | volume (L) | C_rs (L/cmH2O) | C_cw | C_L (the law's) |
 | --- | --- | --- | --- | --- |
 {passive}
-
+{compartments}
 ## Relaxation after a step: tau = R C
 
 Airway resistance {r["airway_resistance_cmh2o_s_per_l"]:g} cmH2O s/L, step {r["step_cmh2o"]:g} cmH2O, implicit Euler
@@ -384,7 +436,7 @@ drag, and the creep of its soft modes, slow on finer meshes): tau / C - R =
 ## Twitch with the airway occluded
 
 The diaphragm alone at {tw["tension_n_per_m"]:g} N/m for {tw["contraction_s"]:g} s: Pdi {tw["pdi_change_cmh2o"]:+.3g} cmH2O,
-Pes {tw["pes_change_cmh2o"]:+.3g} cmH2O, ratio {tw["twitch_pes_over_pdi"]:.3f} (band 0.35-0.55).
+Pes {tw["pes_change_cmh2o"]:+.3g} cmH2O, ratio {tw["twitch_pes_over_pdi"]:.3f} (band 0.35-0.55){_implied(res)}.
 
 ## The paradox of a rib cage without its muscles (hinge angles at end inspiration, mrad)
 
@@ -392,6 +444,13 @@ Pes {tw["pes_change_cmh2o"]:+.3g} cmH2O, ratio {tw["twitch_pes_over_pdi"]:.3f} (
 | --- | --- | --- |
 {par_rows}
 """
+
+
+def _implied(res: dict) -> str:
+    p = res["passive"][0]
+    if "twitch_ratio_two_compartments" not in p:
+        return ""
+    return f"; the passive compartments above imply {p['twitch_ratio_two_compartments']:.3f}"
 
 
 def plot(path: Path, res: dict) -> None:

@@ -58,6 +58,23 @@ def test_the_passive_system_composes_the_law_s_lung_with_a_chest_wall_in_the_adu
         assert 0.05 <= crs <= 0.17 and ccw > crs < cl  # the system is stiffer than each part
 
 
+def test_the_passive_step_splits_into_the_chest_wall_compartments(small):
+    """Konno & Mead's compartments of the passive step: the pulmonary and abdominal rib cage and
+    the abdomen's volume changes add up to the lung's (the swept volumes' identity, to rounding of
+    the sums: 1e-12), the abdomen swells under a rise of its own pressure, and the twitch ratio
+    they imply is C_ab / (C_ab + C_rc) of the compliances reported."""
+    out, r = small
+    for p in r["passive"]:
+        v = p["compartment_volume_change_l"]
+        assert sum(v.values()) == pytest.approx(p["volume_change_l"], rel=1e-12)
+        assert p["gastric_pressure_change_cmh2o"] > 0 and v["abdomen"] > 0
+        c_rc = (v["rib_cage_pulmonary"] + v["rib_cage_abdominal"]) / p["pleural_pressure_change_cmh2o"]
+        c_ab = v["abdomen"] / p["gastric_pressure_change_cmh2o"]
+        assert p["rib_cage_compliance_l_per_cmh2o"] == pytest.approx(c_rc, rel=1e-12)
+        assert p["twitch_ratio_two_compartments"] == pytest.approx(c_ab / (c_ab + c_rc), rel=1e-12)
+    assert "twitch ratio implied" in (out / "respiratory.md").read_text()
+
+
 def test_the_study_reports_the_paradox_the_twitch_and_the_bands(small):
     out, r = small
     par = r["paradox"]
