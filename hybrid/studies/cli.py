@@ -8,7 +8,7 @@
                                                  # mesh families: DIR/verification.json, .md, .png
     hybrid study rigid [SCENE] --out DIR [--small]  # the rigid part against MuJoCo alone and the
                                                  # paper's rigid algorithm: DIR/rigid.json, .md
-    hybrid study respiratory [SCENE] --out DIR [--small] [--level K]
+    hybrid study respiratory [SCENE] --out DIR [--small] [--level K] [--set KEY=VALUE ...]
                                                  # a scene with lungs as a physiologist examines it:
                                                  # DIR/respiratory.json, .md, .png
 
@@ -130,6 +130,13 @@ def build_study_parser() -> argparse.ArgumentParser:
     q.add_argument("--out", required=True, metavar="DIR", help="output folder (created)")
     q.add_argument("--small", action="store_true", help="mesh level 0 and shorter runs (seconds; for tests)")
     q.add_argument("--level", type=int, metavar="K", help="the mesh level (default: the scene's; --small: 0)")
+    q.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="a scene override for every run, as hybrid run --set (e.g. rigid.ribs.sternum_stiffness_n_per_m=50)",
+    )
     return p
 
 
@@ -191,7 +198,7 @@ def _rigid(args) -> None:
 def _respiratory(args) -> None:
     from . import respiratory
 
-    r = respiratory.run(args.out, args.scene, small=args.small, level=args.level)
+    r = respiratory.run(args.out, args.scene, small=args.small, level=args.level, overrides=tuple(args.set))
     rel = r["relaxation"]
     within = sum(bool(b["within"]) for b in r["bands"])
     print(

@@ -48,7 +48,16 @@ from ..terms.fibres import MuscleFibres
 from ..terms.lungs import CMH2O_PA
 from .stability.report import write_json
 
-__all__ = ["run", "passive_compliance", "relaxation", "quiet_breathing", "twitch", "paradox", "upper_rib_scene"]
+__all__ = [
+    "run",
+    "study_scene",
+    "passive_compliance",
+    "relaxation",
+    "quiet_breathing",
+    "twitch",
+    "paradox",
+    "upper_rib_scene",
+]
 
 #: quiet breathing of a supine adult: (low, high) and the source (docs/lungs.md, PHYSIOLOGY)
 BANDS = {
@@ -248,14 +257,20 @@ def twitch(scene) -> dict:
     pdi = a["transdiaphragmatic_pressure_change_cmh2o"]
     k = int(np.argmax(pdi))
     dpes = float(a["pleural_pressure_cmh2o"][k] - a["pleural_pressure_cmh2o"][0])
-    return {
+    out = {
         "tension_n_per_m": peak,
         "contraction_s": TWITCH_S,
         "pdi_change_cmh2o": float(pdi[k]),
         "pes_change_cmh2o": dpes,
+        "gastric_pressure_change_cmh2o": float(a["pressure_pa"][k] - a["pressure_pa"][0]) / CMH2O_PA,
         "lung_volume_change_l": float(np.max(np.abs(a["lung_volume_change_l"]))),
         "twitch_pes_over_pdi": abs(dpes) / float(pdi[k]),
     }
+    if "rib_cage_pulmonary_volume_change_l" in a:  # how the dome's pull moved the walls, at Pdi's peak
+        out["compartment_volume_change_l"] = {
+            p: float(a[f"{p}_volume_change_l"][k]) for p in ("rib_cage_pulmonary", "rib_cage_abdominal", "abdomen")
+        }
+    return out
 
 
 #: the height (m) of the cavity's top with the upper rib pair: its wall's rings then meet the upper
@@ -318,20 +333,28 @@ def paradox(scene) -> dict:
     return out
 
 
-def run(out_dir, source="breathing_lungs", *, small: bool = False, level: int | None = None) -> dict:
-    """The study (module docstring) of the scene `source` at mesh `level` (default: the scene's;
-    --small: level 0 and shorter runs); writes DIR/respiratory.json, .md and .png."""
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    t0 = time.process_time()
-    scene = resolve_scene(source)
+def study_scene(source="breathing_lungs", *, small: bool = False, level: int | None = None, overrides=()):
+    """The scene the study examines: `source` with `overrides` ("KEY=VALUE", as `hybrid run
+    --set`) at mesh `level` (default: the scene's; small: 0). Refused (SceneError, one line)
+    without lungs or with a bad override."""
+    scene = resolve_scene(source, overrides=overrides)
     _lungs_of(scene)
     if small and level is None:
         level = 0
     if level is not None:
         scene = resolve_scene(scene, overrides=(f"mesh.level={level}",))
+    return scene
+
+
+def run(out_dir, source="breathing_lungs", *, small: bool = False, level: int | None = None, overrides=()) -> dict:
+    """The study (module docstring) of the scene `source` with `overrides` at mesh `level`
+    (`study_scene`); writes DIR/respiratory.json, .md and .png."""
+    t0 = time.process_time()
+    scene = study_scene(source, small=small, level=level, overrides=overrides)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
     period = _breath_period(scene)
-    res: dict = {"scene": scene.name, "level": scene.mesh.level, "small": small}
+    res: dict = {"scene": scene.name, "level": scene.mesh.level, "small": small, "overrides": list(overrides)}
     res["passive"] = [passive_compliance(scene, p, 2.0) for p in COMPLIANCE_STEPS_CMH2O]
     res["relaxation"] = relaxation(scene, 15.0 if small else 30.0)
     res["quiet_breathing"] = quiet_breathing(scene, (2 if small else 3) * period)
@@ -409,7 +432,7 @@ about as compliant as the rib cage in quiet breathing (somewhat more supine), wh
     )
     return f"""# Respiratory mechanics of scene {res["scene"]} (mesh level {res["level"]})
 
-Made by `hybrid study respiratory{" --small" if res["small"] else ""}`; {res["runtime_cpu_s"]:.0f} s of CPU.
+Made by `hybrid study respiratory{_command_args(res)}`; {res["runtime_cpu_s"]:.0f} s of CPU.
 Nothing is fitted: every figure is a prediction of the scene's parameters; the bands are an adult's.
 
 ## Against quiet breathing in an adult
@@ -437,13 +460,33 @@ drag, and the creep of its soft modes, slow on finer meshes): tau / C - R =
 
 The diaphragm alone at {tw["tension_n_per_m"]:g} N/m for {tw["contraction_s"]:g} s: Pdi {tw["pdi_change_cmh2o"]:+.3g} cmH2O,
 Pes {tw["pes_change_cmh2o"]:+.3g} cmH2O, ratio {tw["twitch_pes_over_pdi"]:.3f} (band 0.35-0.55){_implied(res)}.
-
+{_twitch_walls(tw)}
 ## The paradox of a rib cage without its muscles (hinge angles at end inspiration, mrad)
 
 | drive | lower ribs | upper ribs |
 | --- | --- | --- |
 {par_rows}
 """
+
+
+def _command_args(res: dict) -> str:
+    """The study's options as the command line gives them (the scene aside)."""
+    return (" --small" if res["small"] else "") + "".join(f" --set {o}" for o in res.get("overrides", ()))
+
+
+def _twitch_walls(tw: dict) -> str:
+    """How the walls moved at Pdi's peak: in a subject the dome descends, the abdomen moves out and
+    the gastric pressure rises (the rib cage drawn in by the pleural pressure's fall)."""
+    if "compartment_volume_change_l" not in tw:
+        return ""
+    v = {k: 1e3 * x for k, x in tw["compartment_volume_change_l"].items()}
+    return (
+        f"At Pdi's peak Pga {tw['gastric_pressure_change_cmh2o']:+.3g} cmH2O; the walls' volume changes "
+        f"(mL): pulmonary rib cage {v['rib_cage_pulmonary']:+.1f}, abdominal rib cage "
+        f"{v['rib_cage_abdominal']:+.1f}, abdomen {v['abdomen']:+.1f} (their sum the lung volume's change, "
+        f"held by the occluded airway); the dome's descent, the last two (Mead & Loring), "
+        f"{v['rib_cage_abdominal'] + v['abdomen']:+.1f} mL.\n"
+    )
 
 
 def _implied(res: dict) -> str:

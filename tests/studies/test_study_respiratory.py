@@ -94,6 +94,38 @@ def test_the_study_reports_the_paradox_the_twitch_and_the_bands(small):
     assert (out / "respiratory.png").stat().st_size > 10_000
 
 
+def test_the_twitch_reports_how_the_walls_moved_under_the_occluded_airway(small):
+    """At Pdi's peak of the occluded twitch the walls' volume changes (pulmonary and abdominal rib
+    cage, abdomen) add up to the lung's, which the occluded airway holds: Mead & Loring's identity
+    with the incompressible abdomen (the dome's descent is the abdominal rib cage's and the
+    abdomen's), to the constraints' rounding (1e-12 L on volumes near 1e-2 L); and Pdi is the
+    gastric less the oesophageal pressure's change."""
+    out, r = small
+    tw = r["twitch"]
+    v = tw["compartment_volume_change_l"]
+    assert abs(sum(v.values())) < 1e-12 < max(abs(x) for x in v.values())
+    assert tw["pdi_change_cmh2o"] == pytest.approx(
+        tw["gastric_pressure_change_cmh2o"] - tw["pes_change_cmh2o"], rel=1e-9
+    )
+    assert "the walls' volume changes" in (out / "respiratory.md").read_text()
+
+
+def test_overrides_reach_the_scene_the_study_examines(tmp_path, capsys):
+    """`--set KEY=VALUE` changes the scene of every run (`study_scene`), and the command names it in
+    the report; a bad override is refused in one line before any run."""
+    from hybrid.scene import Lungs
+    from hybrid.studies.respiratory import study_scene
+
+    scene = study_scene("breathing_lungs", small=True, overrides=("forces.lungs.resting_recoil_cmh2o=6",))
+    (lungs,) = (f for f in scene.forces if isinstance(f, Lungs))
+    assert lungs.resting_recoil_cmh2o == 6.0 and scene.mesh.level == 0
+    out = tmp_path / "bad"
+    assert main_study(["respiratory", "--small", "--out", str(out), "--set", "forces.lungs.no_such_key=1"]) == 2
+    err = capsys.readouterr().err
+    assert "no_such_key" in err and err.count("\n") == 1
+    assert not (out / "respiratory.json").exists()
+
+
 def test_a_scene_without_lungs_is_refused_in_one_line(tmp_path, capsys):
     assert main_study(["respiratory", "membrane_demo", "--small", "--out", str(tmp_path)]) == 2
     err = capsys.readouterr().err
