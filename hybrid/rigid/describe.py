@@ -7,7 +7,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-__all__ = ["describe_model", "describe_spec"]
+__all__ = ["describe_model", "describe_spec", "hinge_qpos"]
 
 _JOINT = {
     int(mujoco.mjtJoint.mjJNT_FREE): "free",
@@ -21,6 +21,19 @@ _INTEGRATOR = {
     int(mujoco.mjtIntegrator.mjINT_IMPLICIT): "implicit",
     int(mujoco.mjtIntegrator.mjINT_IMPLICITFAST): "implicitfast",
 }
+
+
+def hinge_qpos(model: mujoco.MjModel, chosen) -> np.ndarray:
+    """The qpos addresses of the hinge joints of `model`'s bodies whose name `chosen(name)` takes."""
+    hinge = int(mujoco.mjtJoint.mjJNT_HINGE)
+    return np.array(
+        [
+            model.jnt_qposadr[j]
+            for j in range(model.njnt)
+            if int(model.jnt_type[j]) == hinge and chosen(model.body(int(model.jnt_bodyid[j])).name)
+        ],
+        dtype=np.int64,
+    )
 
 
 def _floats(a) -> list:

@@ -32,6 +32,7 @@ default trunk is smaller than an adult's (docs/lungs.md).
 from __future__ import annotations
 
 import dataclasses
+import fnmatch
 import math
 import time
 from pathlib import Path
@@ -312,23 +313,44 @@ def upper_rib_scene(scene, activation: float):
     return dataclasses.replace(scene, rigid=rigid, forces=forces)
 
 
-def paradox(scene) -> dict:
-    """Study 5: the hinge angles (mrad) of the lower and upper ribs' left sides at the end of
-    inspiration (40% of the breath), the diaphragm alone and with the upper ribs' muscles."""
+def paradox(scene, at_s: float | None = None) -> dict:
+    """Study 5: the mean hinge angle change (mrad) of the lower ribs (the bodies the membrane is
+    linked to) and of the upper ribs (those carrying the lungs' wall) at the end of inspiration
+    (40% of the breath; or at `at_s` s), the diaphragm alone and with the upper ribs' muscles. A scene whose
+    lungs' wall already rides on ribs of its own (`Lungs.wall_bodies`: the fitted trunk's upper
+    pair) is examined with those, the diaphragm alone being the scene without its `rigid.ctrl`
+    (None with the muscles when it has none); any other is given an upper rib pair
+    (`upper_rib_scene`)."""
     from .. import load
+    from ..rigid.describe import hinge_qpos
 
-    out = {}
+    own = _lungs_of(scene).wall_bodies
+    if own is not None:
+        upper_pattern = own
+        alone = dataclasses.replace(scene, rigid=dataclasses.replace(scene.rigid, ctrl={}))
+        cases = {"diaphragm_alone": alone, "with_rib_cage_muscles": scene if scene.rigid.ctrl else None}
+    else:
+        upper_pattern = "upper_ribs_*"
+        cases = {
+            label: upper_rib_scene(scene, act)
+            for label, act in (("diaphragm_alone", 0.0), ("with_rib_cage_muscles", 1.0))
+        }
+    out: dict = {}
     period = _breath_period(scene)
-    for label, act in (("diaphragm_alone", 0.0), ("with_rib_cage_muscles", 1.0)):
-        sim = load(upper_rib_scene(scene, act))
+    for label, sc in cases.items():
+        if sc is None:
+            out[label] = None
+            continue
+        sim = load(sc)
         m, d = sim.mj_model, sim.mj_data
-        lower = m.joint("rib_left_hinge").qposadr[0]
-        upper = m.joint("upper_ribs_left_hinge").qposadr[0]
+        lower_bodies = {link.body for link in sc.rigid.links}
+        upper = hinge_qpos(m, lambda name: fnmatch.fnmatchcase(name, upper_pattern))
+        lower = hinge_qpos(m, lambda name: name in lower_bodies and not fnmatch.fnmatchcase(name, upper_pattern))
         q0 = d.qpos.copy()
-        sim.step(int(round(0.4 * period / sim.model.dt_s)))
+        sim.step(int(round((0.4 * period if at_s is None else at_s) / sim.model.dt_s)))
         out[label] = {
-            "lower_rib_angle_mrad": 1e3 * float(d.qpos[lower] - q0[lower]),
-            "upper_rib_angle_mrad": 1e3 * float(d.qpos[upper] - q0[upper]),
+            "lower_rib_angle_mrad": 1e3 * float(np.mean(d.qpos[lower] - q0[lower])),
+            "upper_rib_angle_mrad": 1e3 * float(np.mean(d.qpos[upper] - q0[upper])),
         }
     return out
 
@@ -355,13 +377,19 @@ def run(out_dir, source="breathing_lungs", *, small: bool = False, level: int | 
     out.mkdir(parents=True, exist_ok=True)
     period = _breath_period(scene)
     res: dict = {"scene": scene.name, "level": scene.mesh.level, "small": small, "overrides": list(overrides)}
-    res["passive"] = [passive_compliance(scene, p, 2.0) for p in COMPLIANCE_STEPS_CMH2O]
-    res["relaxation"] = relaxation(scene, 15.0 if small else 30.0)
-    res["quiet_breathing"] = quiet_breathing(scene, (2 if small else 3) * period)
-    res["twitch"] = twitch(scene)
-    res["paradox"] = paradox(scene) if scene.rigid is not None else None
+    parts = {
+        "passive": lambda: [passive_compliance(scene, p, 2.0) for p in COMPLIANCE_STEPS_CMH2O],
+        "relaxation": lambda: relaxation(scene, 15.0 if small else 30.0),
+        "quiet_breathing": lambda: quiet_breathing(scene, (2 if small else 3) * period),
+        "twitch": lambda: twitch(scene),
+        "paradox": lambda: paradox(scene) if scene.rigid is not None else None,
+    }
+    for key, part in parts.items():  # the JSON holds each part as it ends: a study that fails keeps them
+        res[key] = part()
+        res["runtime_cpu_s"] = time.process_time() - t0
+        write_json(out / "respiratory.json", {**res, "complete": False})
     res["bands"] = _band_rows(res)
-    res["runtime_cpu_s"] = time.process_time() - t0
+    res["complete"] = True
     write_json(out / "respiratory.json", res)
     _write_text(out / "respiratory.md", markdown(res))
     plot(out / "respiratory.png", res)

@@ -92,6 +92,7 @@ def test_the_study_reports_the_paradox_the_twitch_and_the_bands(small):
     md = (out / "respiratory.md").read_text()
     assert "tau = R C" in md and "| tidal_volume_l |" in md
     assert (out / "respiratory.png").stat().st_size > 10_000
+    assert r["complete"] is True
 
 
 def test_the_twitch_reports_how_the_walls_moved_under_the_occluded_airway(small):
@@ -124,6 +125,23 @@ def test_overrides_reach_the_scene_the_study_examines(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "no_such_key" in err and err.count("\n") == 1
     assert not (out / "respiratory.json").exists()
+
+
+def test_a_study_that_fails_keeps_the_parts_it_finished(tmp_path, capsys, monkeypatch):
+    """The JSON is written as each part ends: a failure in the last part (here a refusal put in its
+    place) leaves the earlier parts on disk, marked incomplete, and one line on stderr."""
+    from hybrid.errors import SceneError
+    from hybrid.studies import respiratory
+
+    def refuse(scene, at_s=None):
+        raise SceneError("study respiratory: paradox: refused for this test")
+
+    monkeypatch.setattr(respiratory, "paradox", refuse)
+    assert main_study(["respiratory", "--small", "--out", str(tmp_path)]) == 2
+    assert capsys.readouterr().err.count("\n") == 1
+    kept = json.loads((tmp_path / "respiratory.json").read_text())
+    assert kept["complete"] is False and "paradox" not in kept
+    assert kept["twitch"]["pdi_change_cmh2o"] > 0 and len(kept["passive"]) == 2
 
 
 def test_a_scene_without_lungs_is_refused_in_one_line(tmp_path, capsys):
