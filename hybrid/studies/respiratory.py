@@ -9,8 +9,9 @@
 2. **Relaxation, tau = R C.** The same step with the airway resistance raised to
    `RELAXATION_RESISTANCE` (so that the volume's slow mode stands apart from the
    membrane's and the ribs' fast ones) under implicit Euler: the volume's approach to
-   its new equilibrium, fitted by V_inf (1 - a exp(-t / tau)) from `RELAXATION_FIT_FROM_S`
-   on, against R times the compliance of the same run (V_inf over the step).
+   its new equilibrium (less a control run without the step: the scene's own drift),
+   fitted by V_inf (1 - a exp(-t / tau)) from `RELAXATION_FIT_FROM_S` on, against R
+   times the compliance of the same run (V_inf over the step).
 3. **Quiet breathing**: the scene as it is, its last breath's tidal volume, pleural
    pressure at end expiration and at end inspiration, transdiaphragmatic pressure swing,
    dome (apex) descent, rib lift, work of breathing and the first inspiration's volume
@@ -171,18 +172,25 @@ def _compartments(a: dict, late: np.ndarray, dppl: float) -> dict:
 
 
 def relaxation(scene, duration_s: float, r: float = RELAXATION_RESISTANCE) -> dict:
-    """Study 2 at airway resistance r (cmH2O s/L): the fitted time constant against R C."""
+    """Study 2 at airway resistance r (cmH2O s/L): the fitted time constant against R C. The
+    step's response is the run with the step less a control run without it, as an experimenter
+    subtracts a sham: a scene not quite at rest where it starts (the fitted trunk's lungs fill by
+    0.7 mL over 30 s) would otherwise add its own drift to a response of a few mL."""
     from scipy.optimize import curve_fit
 
-    slow = _with(
-        scene,
-        tension=Constant(0.0),
-        airway_resistance_cmh2o_s_per_l=r,
-        rohrer_k2_cmh2o_s2_per_l2=0.0,
-        airway_opening_pressure_cmh2o=_step(RELAXATION_STEP_CMH2O),
-    )
-    a = _trace(slow, duration_s, 0.01, ("integrator=implicit_euler", f"dt_s={RELAXATION_DT_S}"))["trace"].arrays()
-    t, v = a["t_s"], a["lung_volume_change_l"]
+    volumes = []
+    for step in (RELAXATION_STEP_CMH2O, 0.0):
+        slow = _with(
+            scene,
+            tension=Constant(0.0),
+            airway_resistance_cmh2o_s_per_l=r,
+            rohrer_k2_cmh2o_s2_per_l2=0.0,
+            airway_opening_pressure_cmh2o=_step(step),
+        )
+        a = _trace(slow, duration_s, 0.01, ("integrator=implicit_euler", f"dt_s={RELAXATION_DT_S}"))["trace"].arrays()
+        volumes.append(a["lung_volume_change_l"])
+    t, drift = a["t_s"], volumes[1]
+    v = volumes[0] - drift
     fit = t >= RELAXATION_FIT_FROM_S
 
     def law(t_, v_inf, amp, tau):
@@ -205,6 +213,8 @@ def relaxation(scene, duration_s: float, r: float = RELAXATION_RESISTANCE) -> di
         # membrane's drag and its soft modes' creep), if the rest of the departure is theirs
         "chest_wall_resistance_implied_cmh2o_s_per_l": float(tau / compliance - r),
         "fit_residual_rel": float(np.max(np.abs(v[fit] - law(t[fit], v_inf, amp, tau))) / abs(v_inf)),
+        # the control run's lung volume change at the end (L): the scene's own drift, subtracted
+        "control_drift_l": float(drift[-1]),
         "curve": {"t_s": t[:: max(1, len(t) // 400)].tolist(), "volume_l": v[:: max(1, len(t) // 400)].tolist()},
         "fitted": {"v_inf_l": float(v_inf), "amplitude": float(amp)},
     }
@@ -479,7 +489,7 @@ Nothing is fitted: every figure is a prediction of the scene's parameters; the b
 
 Airway resistance {r["airway_resistance_cmh2o_s_per_l"]:g} cmH2O s/L, step {r["step_cmh2o"]:g} cmH2O, implicit Euler
 at {r["dt_s"]:g} s, fitted from {r["fit_from_s"]:g} s: tau {r["tau_fitted_s"]:.4f} s against R C
-{r["tau_rc_s"]:.4f} s (ratio {r["tau_ratio"]:.4f}; the fit's largest residual {r["fit_residual_rel"]:.1e} of the volume).
+{r["tau_rc_s"]:.4f} s (ratio {r["tau_ratio"]:.4f}; the fit's largest residual {r["fit_residual_rel"]:.1e} of the volume){_drift(r)}.
 The departure is what the chest wall's own dissipation adds to the airway's resistance (the membrane's
 drag, and the creep of its soft modes, slow on finer meshes): tau / C - R =
 {r["chest_wall_resistance_implied_cmh2o_s_per_l"]:.3g} cmH2O s/L.
@@ -495,6 +505,13 @@ Pes {tw["pes_change_cmh2o"]:+.3g} cmH2O, ratio {tw["twitch_pes_over_pdi"]:.3f} (
 | --- | --- | --- |
 {par_rows}
 """
+
+
+def _drift(r: dict) -> str:
+    """The control run's drift, subtracted from the step's run (absent from older reports)."""
+    if "control_drift_l" not in r:
+        return ""
+    return f"; the step's run less a control run without it, whose volume drifted {1e3 * r['control_drift_l']:+.3g} mL"
 
 
 def _command_args(res: dict) -> str:
