@@ -396,6 +396,21 @@ def _cases(tmp: Path) -> list[Case]:
             reasonable=False,
         ),
         Case(
+            "lungs_obstructed_implicit",
+            "breathing_lungs at level 0 with an obstructed airway (resistance 1.5 -> 20 cmH2O s/L), "
+            "implicit Euler at 20 ms",
+            lambda: resolve_scene(
+                "breathing_lungs",
+                overrides=(
+                    "mesh.level=0",
+                    "forces.lungs.airway_resistance_cmh2o_s_per_l=20",
+                    "integrator=implicit_euler",
+                    "dt_s=0.02",
+                ),
+            ),
+            small_duration_s=2.0,  # its Newton solve stalls at 1.68 s (100 steps of 80 points: cheap)
+        ),
+        Case(
             "missing_mjcf",
             "breathing scene pointing at an MJCF file that does not exist",
             lambda: dataclasses.replace(
