@@ -80,6 +80,8 @@ from .implicit_work import (
     I_CG_TOTAL,
     I_FORCE,
     I_FORCE_SUM,
+    I_LUNG_IN_SOLVE,
+    I_LUNG_START_VOLUME,
     I_NEWTON,
     I_NEWTON_TOTAL,
     I_PRESSURE,
@@ -97,6 +99,7 @@ from .implicit_work import (
 from .kernel import CHUNK_VERTS, kernel
 from .switches import T_DAMPING, T_LUNGS, T_MEMBRANE, T_MUSCLE_FIBRES, T_PASSIVE_FIBRES, T_RESTING_TENSION, T_VOLUME
 from .terms.fibres import add_muscle_fibres
+from .terms.lungs import L_OCCLUDED, L_VOLUME
 from .terms.membrane import add_membrane_serial, membrane_energy
 from .terms.passive_fibres import add_passive_fibres
 from .terms.resting_tension import add_resting_tension, resting_tension_energy, resting_tension_product
@@ -417,6 +420,11 @@ def implicit_step(m, s, sched_val, step, imp, vert_acc):
     n = pos.shape[0]
     w = imp
     info = w.info
+    # the airway's flow in the solve: the cavity's volume change over the step while it is open
+    # (`hybrid.implicit_lungs`: then the force is the gradient of the line search's potential)
+    if m.term_on[T_LUNGS] != 0 and s.lung[L_OCCLUDED] == 0.0:
+        info[I_LUNG_START_VOLUME] = s.lung[L_VOLUME]
+        info[I_LUNG_IN_SOLVE] = 1.0
     free = m.vert_free
     # the explicit part: the force pass's other terms (w.f_expl, `implicit_start_forces`, taken
     # before the linked points moved to their new sites; not the whole force less w.f, whose
@@ -510,6 +518,7 @@ def implicit_step(m, s, sched_val, step, imp, vert_acc):
             at_roundoff = True
             break
         rn = rn_new
+    info[I_LUNG_IN_SOLVE] = 0.0
     info[I_NEWTON] = it
     ref = max(scale, scale_mean)
     info[I_RESIDUAL] = rn / ref if ref > 0.0 else 0.0

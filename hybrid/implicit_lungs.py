@@ -1,7 +1,9 @@
 """The lungs in implicit Euler's Newton solve (`hybrid.implicit`): their pleural load on the
 dome among the forces the solve treats implicitly, their energy and the airway's dissipation
-in the line search's potential, and their stiffness c g g^T (c = h^2 dP_L/dV + h dR/dQ, g the
-cavity's volume gradient on the free points) in the Newton matrix.
+in the line search's potential (the airway's flow in the solve the volume's change over the
+step, `_flow`: the force is then the potential's gradient), and their stiffness c g g^T
+(c = h^2 dP_L/dV + h dR/dQ, g the cavity's volume gradient on the free points) in the Newton
+matrix.
 
 The stiffness is rank one, which the sparse matrix cannot hold; staggered a step behind, an
 enclosed compartment is the unstable case of partitioned coupling. It joins the conjugate
@@ -16,6 +18,7 @@ Gauss-Seidel preconditioner) and 7.2 of the run's 13.4 s.
 from __future__ import annotations
 
 from .implicit_matrix import gather, half_sweep
+from .implicit_work import I_LUNG_IN_SOLVE, I_LUNG_START_VOLUME
 from .kernel import kernel
 from .terms.lungs import (
     CMH2O_PA,
@@ -31,16 +34,32 @@ from .terms.lungs import (
 __all__ = ["add_lung_forces", "lung_potential", "lung_rank_one"]
 
 
+@kernel(inline="always")
+def _flow(w, vol, rate, h):
+    """The airway's flow (m^3/s) at the cavity's volume vol: in the Newton solve of an open airway
+    the volume's change over the step, (vol - V_start) / h, whose dissipation h K1 Q^2 / 2 then has
+    the force's gradient (the rate g . v at the trial does not: its gradient carries h^2 K1 Q H v
+    more, H the volume's Hessian, which stalled the line search at high airway resistance: 20
+    cmH2O s/L at 20 ms, `hybrid study extremes`); elsewhere (an occluded airway, a call outside
+    a solve) the rate g . v given.
+    # Model: none   # Data in: w.info (LUNG_IN_SOLVE, LUNG_START_VOLUME), vol m^3, rate m^3/s, h s
+    # Data out: returns m^3/s
+    """
+    if w.info[I_LUNG_IN_SOLVE] != 0.0:
+        return (vol - w.info[I_LUNG_START_VOLUME]) / h
+    return rate
+
+
 @kernel
 def add_lung_forces(m, sched_val, x, v, out, w):
     """out += the pleural load on the dome's free points at (x, v): (P_pl + P_L0) grad_i V
     (`hybrid.terms.lungs`), the wall held where the rigid phase put it.
-    # Model: m.lung_face, m.lung_par, m.lung_sched   # Data in: sched_val, x (m), v (m/s), w.lung_wall_pos, w.lung_wall_vel
+    # Model: m.lung_face, m.lung_par, m.lung_sched   # Data in: sched_val, x (m), v (m/s), w.lung_wall_pos, w.lung_wall_vel, w.info (`_flow`)
     # Data in/out: out (N)   # Scratch: w.lung_wall_f
     """
     ref = m.lung_par[P_REF:]
     vol, rate = cavity_volume_rate(m.lung_face, ref, x, v, w.lung_wall_pos, w.lung_wall_vel)
-    _, load = lung_load(m.lung_par, sched_val[m.lung_sched[0], 0] * CMH2O_PA, vol, rate)
+    _, load = lung_load(m.lung_par, sched_val[m.lung_sched[0], 0] * CMH2O_PA, vol, _flow(w, vol, rate, m.dt))
     add_cavity_pressure(m.lung_face, ref, load, x, w.lung_wall_pos, out, w.lung_wall_f, True)
 
 
@@ -48,11 +67,12 @@ def add_lung_forces(m, sched_val, x, v, out, w):
 def lung_potential(m, sched_val, h, w):
     """The lungs' part of the incremental potential at w.x_try, w.v_try (J): E (V - V0)^2 / 2
     (the recoil's energy) - P_ao V, and h times the airway's dissipation K1 Q^2 / 2 + K2 |Q|^3 / 3.
-    # Model: m.lung_face, m.lung_par, m.lung_sched   # Data in: sched_val, h (s), w.x_try, w.v_try, w.lung_wall_*
+    # Model: m.lung_face, m.lung_par, m.lung_sched   # Data in: sched_val, h (s), w.x_try, w.v_try, w.lung_wall_*, w.info
     # Data out: returns J
     """
     par = m.lung_par
     vol, rate = cavity_volume_rate(m.lung_face, par[P_REF:], w.x_try, w.v_try, w.lung_wall_pos, w.lung_wall_vel)
+    rate = _flow(w, vol, rate, h)
     pao = sched_val[m.lung_sched[0], 0] * CMH2O_PA
     total = lung_recoil(par, vol)[2] - pao * vol
     return total + h * (0.5 * par[P_K1] * rate * rate + par[P_K2] * abs(rate) ** 3 / 3.0)
@@ -64,13 +84,14 @@ def lung_rank_one(m, w, h):
     c = h^2 dP_L/dV + h dR/dQ (kg/m^4; R(Q) Q the airway's pressure drop); w.lung_gf = g on the
     free points (the matrix's numbering) and w.lung_gh = C^-1 g (`half_sweep`, of the matrix
     `assemble` left in w.mat), what `split_cg` adds to its product.
-    # Model: m.lung_face, m.lung_par, w.mat (pattern, free)   # Data in: w.x_try, w.v_try, w.mat (assembled)
+    # Model: m.lung_face, m.lung_par, w.mat (pattern, free)   # Data in: w.x_try, w.v_try, w.mat (assembled), w.info
     # Data out: w.lung_gf (nfree, 3) m^2, w.lung_gh (nfree, 3); returns kg/m^4
     # Scratch: w.lung_g (nvert, 3), w.lung_wall_f, w.mat.acc
     """
     par = m.lung_par
     ref = par[P_REF:]
     vol, rate = cavity_volume_rate(m.lung_face, ref, w.x_try, w.v_try, w.lung_wall_pos, w.lung_wall_vel)
+    rate = _flow(w, vol, rate, h)
     c = h * h * lung_recoil(par, vol)[1] + h * (par[P_K1] + 2.0 * par[P_K2] * abs(rate))
     g = w.lung_g
     for i in range(g.shape[0]):

@@ -28,8 +28,11 @@ The resting recoil itself is balanced in the rest shape (the chest wall's and th
 diaphragm's resting stress, which the rest geometry holds): at rest nothing moves.
 Zero elastance, resistance and opening pressure add exactly nothing.
 
-Q in the law is the rate g . v at the step's start (g = dV/dx); the flow a run
-reports is each step's volume change over h, whose sum is the volume change exactly.
+Q in the law: with symplectic and explicit Euler the rate g . v at the step's start
+(g = dV/dx); with implicit Euler the volume's change over the step in its solve
+(`hybrid.implicit_lungs`), and at the step's start, for the ribs' load, the last step's
+(the flow the solve ended with). The flow a run reports is each step's volume change over
+h, whose sum is the volume change exactly.
 Units: the scene's keys in the respiratory physiologist's units (cmH2O, L, s; names
 say which); SI inside (Pa, m^3, s).
 """
@@ -385,6 +388,8 @@ def lungs_step_force(m, s, w, c):
     s.lung[L_OCCLUDED] = 1.0 if occluded else 0.0
     if occluded:  # no air through a closed airway (g . v is the projection's O(h) residue, not a flow)
         rate = 0.0
+    elif m.integrator == IMPLICIT_EULER_ID:  # the flow implicit Euler's last solve ended with (module docstring)
+        rate = (vol - s.lung[L_VOLUME]) / m.dt
     palv, load = lung_load(par, pao, vol, rate)  # load: the pleural pressure's departure from rest
     s.lung[L_VOLUME] = vol
     s.lung[L_RATE] = rate
