@@ -47,9 +47,8 @@ class SlidePlanes(NamedTuple):
 
 def slide_planes(vert_free, vert=None, stiffness_n_per_m=None) -> SlidePlanes:
     """The `SlidePlanes` of the points `vert` (none when None), their planes not yet placed."""
-    vert = (
-        np.zeros(0, np.int32) if vert is None else np.array(vert, np.int32)
-    )  # a copy: writable whatever it came as (one type, one compiled loop)
+    # a copy, writable whatever it came as: the flag is part of the compiled loop's type
+    vert = np.zeros(0, np.int32) if vert is None else np.array(vert, np.int32)
     k = np.zeros(0) if stiffness_n_per_m is None else np.asarray(stiffness_n_per_m, float)
     free = np.asarray(vert_free) != 0
     row_of = np.full(free.size, -1, np.int64)
