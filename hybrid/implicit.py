@@ -61,7 +61,7 @@ import math
 
 import numpy as np
 
-from .implicit_lungs import add_lung_forces, lung_potential, lung_rank_one
+from .implicit_lungs import add_lung_forces, flow_by_rate, flow_by_volume, lung_potential, lung_rank_one
 from .implicit_matrix import (
     add_rank_one,
     assemble,
@@ -80,8 +80,6 @@ from .implicit_work import (
     I_CG_TOTAL,
     I_FORCE,
     I_FORCE_SUM,
-    I_LUNG_IN_SOLVE,
-    I_LUNG_START_VOLUME,
     I_NEWTON,
     I_NEWTON_TOTAL,
     I_PRESSURE,
@@ -99,7 +97,7 @@ from .implicit_work import (
 from .kernel import CHUNK_VERTS, kernel
 from .switches import T_DAMPING, T_LUNGS, T_MEMBRANE, T_MUSCLE_FIBRES, T_PASSIVE_FIBRES, T_RESTING_TENSION, T_VOLUME
 from .terms.fibres import add_muscle_fibres
-from .terms.lungs import L_OCCLUDED, L_VOLUME
+from .terms.lungs import L_RATE, L_VOLUME
 from .terms.membrane import add_membrane_serial, membrane_energy
 from .terms.passive_fibres import add_passive_fibres
 from .terms.resting_tension import add_resting_tension, resting_tension_energy, resting_tension_product
@@ -174,19 +172,24 @@ def implicit_forces(m, tri, sched_val, x, v, out, w, planes=None):
 
 
 @kernel
-def implicit_start_forces(m, sched_val, x, v, imp, vert_force):
+def implicit_start_forces(m, sched_val, x, v, lung, imp, vert_force):
     """Step phase 1's implicit part: imp.f = `implicit_forces` at the step's start, added to
     vert_force (which the force pass left without them, kept as the explicit forces in
     imp.f_expl). Returns False when imp is None (another integrator: the None prunes
     this). `implicit_step` reads imp.f_expl: the explicit forces at the step's start,
     before the linked points move to their new sites. The sliding planes' force at the start
-    comes later, from the rigid phase (`hybrid.loop.slide_forces`), into vert_force alone.
-    # Model: m   # Data in: sched_val, x (m), v (m/s)   # Data out: imp.f, imp.f_expl (N)
+    comes later, from the rigid phase (`hybrid.loop.slide_forces`), into vert_force alone. The
+    lungs' airway flow is the last step's, as the wall's load took it (`lungs_step_force`, which
+    set lung's VOLUME and RATE): all the cavity's points, the linked ones among them, see one load.
+    # Model: m   # Data in: sched_val, x (m), v (m/s), lung (`LungSlot`)   # Data out: imp.f, imp.f_expl (N)
     # Data in/out: vert_force (N)
     """
     if imp is None:
         return False
+    # the last step's start volume, V_n - h Q (within rounding of V_n's)
+    flow_by_volume(m, lung, imp.info, lung[L_VOLUME] - m.dt * lung[L_RATE])
     implicit_forces(m, m, sched_val, x, v, imp.f, imp)
+    flow_by_rate(imp.info)
     for i in range(vert_force.shape[0]):
         for a in range(3):
             imp.f_expl[i, a] = vert_force[i, a]  # the explicit forces, kept exact for the solve
@@ -420,11 +423,7 @@ def implicit_step(m, s, sched_val, step, imp, vert_acc):
     n = pos.shape[0]
     w = imp
     info = w.info
-    # the airway's flow in the solve: the cavity's volume change over the step while it is open
-    # (`hybrid.implicit_lungs`: then the force is the gradient of the line search's potential)
-    if m.term_on[T_LUNGS] != 0 and s.lung[L_OCCLUDED] == 0.0:
-        info[I_LUNG_START_VOLUME] = s.lung[L_VOLUME]
-        info[I_LUNG_IN_SOLVE] = 1.0
+    flow_by_volume(m, s.lung, info, s.lung[L_VOLUME])  # the airway's flow: this step's volume change
     free = m.vert_free
     # the explicit part: the force pass's other terms (w.f_expl, `implicit_start_forces`, taken
     # before the linked points moved to their new sites; not the whole force less w.f, whose
@@ -518,7 +517,7 @@ def implicit_step(m, s, sched_val, step, imp, vert_acc):
             at_roundoff = True
             break
         rn = rn_new
-    info[I_LUNG_IN_SOLVE] = 0.0
+    flow_by_rate(info)
     info[I_NEWTON] = it
     ref = max(scale, scale_mean)
     info[I_RESIDUAL] = rn / ref if ref > 0.0 else 0.0

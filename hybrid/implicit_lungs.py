@@ -18,10 +18,12 @@ Gauss-Seidel preconditioner) and 7.2 of the run's 13.4 s.
 from __future__ import annotations
 
 from .implicit_matrix import gather, half_sweep
-from .implicit_work import I_LUNG_IN_SOLVE, I_LUNG_START_VOLUME
+from .implicit_work import I_LUNG_FLOW_BY_VOLUME, I_LUNG_FLOW_FROM
 from .kernel import kernel
+from .switches import T_LUNGS
 from .terms.lungs import (
     CMH2O_PA,
+    L_OCCLUDED,
     P_K1,
     P_K2,
     P_REF,
@@ -31,22 +33,42 @@ from .terms.lungs import (
     lung_recoil,
 )
 
-__all__ = ["add_lung_forces", "lung_potential", "lung_rank_one"]
+__all__ = ["add_lung_forces", "flow_by_rate", "flow_by_volume", "lung_potential", "lung_rank_one"]
+
+
+@kernel(inline="always")
+def flow_by_volume(m, lung, info, from_volume):
+    """From here until `flow_by_rate`, the airway's flow in the kernels below is a volume change
+    over a step from `from_volume` (m^3), if the scene has lungs and its airway is open: in the
+    Newton solve this step's, from the step's start volume (the force is then the gradient of the
+    line search's potential: the rate g . v at the trial puts h^2 K1 Q H v more in it, H the
+    volume's Hessian, which stalled the line search at high airway resistance, 20 cmH2O s/L at 20
+    ms, `hybrid study extremes`); at the step's start the last step's, the flow the ribs' load takes
+    (`hybrid.terms.lungs.lungs_step_force`).
+    # Model: m.term_on   # Data in: lung (`LungSlot`: OCCLUDED), from_volume m^3   # Data out: info
+    """
+    if m.term_on[T_LUNGS] != 0 and lung[L_OCCLUDED] == 0.0:
+        info[I_LUNG_FLOW_FROM] = from_volume
+        info[I_LUNG_FLOW_BY_VOLUME] = 1.0
+
+
+@kernel(inline="always")
+def flow_by_rate(info):
+    """The airway's flow in the kernels below the rate g . v again (`flow_by_volume`).
+    # Model: none   # Data in: none   # Data out: info
+    """
+    info[I_LUNG_FLOW_BY_VOLUME] = 0.0
 
 
 @kernel(inline="always")
 def _flow(w, vol, rate, h):
-    """The airway's flow (m^3/s) at the cavity's volume vol: in the Newton solve of an open airway
-    the volume's change over the step, (vol - V_start) / h, whose dissipation h K1 Q^2 / 2 then has
-    the force's gradient (the rate g . v at the trial does not: its gradient carries h^2 K1 Q H v
-    more, H the volume's Hessian, which stalled the line search at high airway resistance: 20
-    cmH2O s/L at 20 ms, `hybrid study extremes`); elsewhere (an occluded airway, a call outside
-    a solve) the rate g . v given.
-    # Model: none   # Data in: w.info (LUNG_IN_SOLVE, LUNG_START_VOLUME), vol m^3, rate m^3/s, h s
+    """The airway's flow (m^3/s) at the cavity's volume vol: (vol - from) / h while
+    `flow_by_volume` holds, else the rate g . v given.
+    # Model: none   # Data in: w.info (LUNG_FLOW_BY_VOLUME, LUNG_FLOW_FROM), vol m^3, rate m^3/s, h s
     # Data out: returns m^3/s
     """
-    if w.info[I_LUNG_IN_SOLVE] != 0.0:
-        return (vol - w.info[I_LUNG_START_VOLUME]) / h
+    if w.info[I_LUNG_FLOW_BY_VOLUME] != 0.0:
+        return (vol - w.info[I_LUNG_FLOW_FROM]) / h
     return rate
 
 

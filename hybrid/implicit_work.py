@@ -41,11 +41,11 @@ class Info(IntEnum):
     FORCE_SUM = 9  # N, the step-start force scale F summed over the run's solved steps
     SOLVED = 10  # the run's solved steps
     FORCE = 11  # N, the last step's step-start force scale F
-    # the lungs in the solve (`hybrid.implicit_lungs`): 1 while a step's Newton solve runs with the
-    # airway open, its flow then (V - LUNG_START_VOLUME) / h, the volume's change over the step
-    # (outside the solve the rate g . v; the ribs' load at the step's start takes the last step's flow)
-    LUNG_IN_SOLVE = 12
-    LUNG_START_VOLUME = 13  # m^3, the cavity's volume at the step's start
+    # the airway's flow in the lungs' kernels (`hybrid.implicit_lungs.flow_by_volume`): 1 while it is
+    # a volume change over a step, (V - LUNG_FLOW_FROM) / h (the step's start: the last step's; the
+    # Newton solve: this step's), else 0 (the rate g . v)
+    LUNG_FLOW_BY_VOLUME = 12
+    LUNG_FLOW_FROM = 13  # m^3, the cavity's volume the flow is measured from
 
 
 (
@@ -61,8 +61,8 @@ class Info(IntEnum):
     I_FORCE_SUM,
     I_SOLVED,
     I_FORCE,
-    I_LUNG_IN_SOLVE,
-    I_LUNG_START_VOLUME,
+    I_LUNG_FLOW_BY_VOLUME,
+    I_LUNG_FLOW_FROM,
 ) = (int(k) for k in Info)
 
 

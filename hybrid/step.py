@@ -308,7 +308,7 @@ def membrane_forces(m, s, w, c, t, par=True):
         if tid >= 0 and on[tid]:
             term[1](m, s, w, c)
             s.term_calls[tid] += 1
-    if implicit_start_forces(m, c.value, s.vert_pos, s.vert_vel, w.solver, w.vert_force):
+    if implicit_start_forces(m, c.value, s.vert_pos, s.vert_vel, s.lung, w.solver, w.vert_force):
         for k in (T_MEMBRANE, T_MUSCLE_FIBRES, T_PASSIVE_FIBRES):
             s.term_calls[k] += on[k]
 

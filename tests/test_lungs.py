@@ -461,8 +461,8 @@ def test_in_implicit_euler_s_solve_the_lungs_force_is_the_gradient_of_their_pote
     v = np.where(free[:, None], 0.05 * rng.standard_normal(x0.shape), 0.0)  # m/s
     ref = m.lung_par[P_REF:]
     vol0 = cavity_volume_rate(m.lung_face, ref, x0, v, w.lung_wall_pos, w.lung_wall_vel)[0]
-    w.info[Info.LUNG_IN_SOLVE] = 1.0 if in_solve else 0.0
-    w.info[Info.LUNG_START_VOLUME] = vol0 - 0.3e-3 * h  # a flow of 0.3 L/s besides v's
+    w.info[Info.LUNG_FLOW_BY_VOLUME] = 1.0 if in_solve else 0.0
+    w.info[Info.LUNG_FLOW_FROM] = vol0 - 0.3e-3 * h  # a flow of 0.3 L/s besides v's
 
     def phi(vel):
         w.x_try[:] = x0 + h * vel
@@ -478,7 +478,7 @@ def test_in_implicit_euler_s_solve_the_lungs_force_is_the_gradient_of_their_pote
         u = np.where(free[:, None], rng.standard_normal(x0.shape), 0.0)
         slope = (phi(v + eps * u) - phi(v - eps * u)) / (2 * eps)
         worst = max(worst, abs(slope + h * np.sum(force * u)) / (h * np.linalg.norm(force) * np.linalg.norm(u)))
-    w.info[Info.LUNG_IN_SOLVE] = 0.0
+    w.info[Info.LUNG_FLOW_BY_VOLUME] = 0.0
     if in_solve:
         assert worst <= 1e-7, worst
     else:

@@ -408,7 +408,7 @@ def _cases(tmp: Path) -> list[Case]:
                     "dt_s=0.02",
                 ),
             ),
-            small_duration_s=2.0,  # 100 steps of 80 points: cheap (until 0.12.0 Newton stalled at 1.68 s; now at 2.22 s)
+            small_duration_s=2.0,  # 100 steps of 80 points: cheap (until 0.12.0 Newton stalled at 1.68 s; now at 2.18 s)
         ),
         Case(
             "missing_mjcf",

@@ -30,8 +30,8 @@ Zero elastance, resistance and opening pressure add exactly nothing.
 
 Q in the law: with symplectic and explicit Euler the rate g . v at the step's start
 (g = dV/dx); with implicit Euler the volume's change over the step in its solve
-(`hybrid.implicit_lungs`), and at the step's start, for the ribs' load, the last step's
-(the flow the solve ended with). The flow a run reports is each step's volume change over
+(`hybrid.implicit_lungs`), and at the step's start (the load on the wall and on the linked
+points, which the ribs take) the last step's, the flow the solve ended with. The flow a run reports is each step's volume change over
 h, whose sum is the volume change exactly.
 Units: the scene's keys in the respiratory physiologist's units (cmH2O, L, s; names
 say which); SI inside (Pa, m^3, s).

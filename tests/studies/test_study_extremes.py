@@ -53,7 +53,7 @@ def test_small_extremes_catalogue(tmp_path, capsys, monkeypatch):
     # an obstructed airway (20 cmH2O s/L) under implicit Euler at 20 ms: a case a respiratory
     # researcher runs. Its 2 s run ends stable since the airway's flow in the solve is the volume's
     # change over the step (until 0.12.0 the line search stalled at 1.68 s; the full 4 s run still
-    # stops at 2.22 s in one message, docs/lungs.md)
+    # stops at 2.18 s in one message, docs/lungs.md)
     lungs = rows["lungs_obstructed_implicit"]
     assert lungs["reasonable"] and lungs["outcome"] == "stable", lungs
     assert lungs["volume_rel_error_max"] <= 1e-12, lungs
