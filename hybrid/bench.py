@@ -133,7 +133,7 @@ def implicit_rows(meshes=(None, 5), *, repeats: int = 7, work: float = 4e6) -> l
         nstep = max(20, int(work / n))
         for sim in sims.values():
             sim.step(max(1, nstep // 10))  # warm-up
-        info = sims["implicit_euler"].work.solver.info
+        info = sims["implicit_euler"].solver_work.info
         newton0, cg0, steps0 = info[Info.NEWTON_TOTAL], info[Info.CG_TOTAL], sims["implicit_euler"].steps_done
         times: dict[str, list] = {k: [] for k in sims}
         for _ in range(repeats):

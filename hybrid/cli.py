@@ -74,6 +74,7 @@ def _compile_estimate(scene):
     compiles: a first run's whole compile, else that other build's (implicit, multi-core). It is
     this machine's last compiles of that kind (`hybrid.kernel.measured_compile_s`), else the
     package's figure; on_compiled records the compile announced."""
+    from .implicit import implicit_start_forces, implicit_step
     from .loop import loop_build, run_steps
 
     implicit = is_implicit(scene.integrator)
@@ -81,14 +82,18 @@ def _compile_estimate(scene):
     announced = []
 
     def estimate(dispatcher, arg_types):
-        # announced when the loop compiles: the scene's helpers before it (a second at most)
-        # are counted and said at the end, so that a refusal between them is one line
-        if dispatcher is not run_steps or (not first and arg_types is None):
-            return None
-        if first:
+        # announced when the loop compiles, or implicit Euler's solve (compiled apart, when the
+        # simulation is made): the scene's helpers before them (a second at most) are counted and
+        # said at the end, so that a refusal between them is one line
+        solve = dispatcher is implicit_start_forces or dispatcher is implicit_step
+        if first and (solve or dispatcher is run_steps):
             kind = "first run, " + ("implicit" if implicit else "rigid" if scene.rigid is not None else "membrane")
-        else:
+        elif dispatcher is run_steps and arg_types is not None:
             kind = "loop build, " + loop_build(arg_types)
+        elif solve:
+            kind = "implicit solve"
+        else:
+            return None
         announced.append(kind)
         return measured_compile_s(kind) or COMPILE_ESTIMATE_S[kind]
 
@@ -112,7 +117,7 @@ COMPILE_ESTIMATE_S = {
     "first run, implicit": 76,
     "loop build, serial": 11,
     "loop build, parallel": 20,
-    "loop build, implicit": 58,
+    "implicit solve": 58,
 }
 
 

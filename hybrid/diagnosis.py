@@ -27,7 +27,7 @@ BODY_SPAN_MAX_M = 5.0
 
 def failure(model, s, solver=None) -> Exception:
     """The error a failed step's status in state `s` (a `MembraneState`) stands for, with
-    the advice that helps (`advice`); solver: the step's solver arrays (`StepWork.solver`)."""
+    the advice that helps (`advice`); solver: implicit Euler's arrays (`hybrid.implicit_work.ImplicitWork`), None for the explicit pair."""
     code, step, vert = int(s.status[0]), int(s.status[1]), int(s.status[2])
     h = model.arrays.dt
     t = step * h

@@ -50,9 +50,10 @@ breathing scene at level 6); one that has not after
 implicit_max_iter iterations stops the run (`IMPLICIT_NOT_CONVERGED`), the
 state left at the step's start.
 
-`implicit_step` is called from `hybrid.step.membrane_advance` with the state's
-`implicit` work arrays, None for every other integrator: the None prunes the
-whole solver from those scenes' compiled code.
+`implicit_start_forces` and `implicit_step` are compiled apart from the step loop and called
+at their addresses (`hybrid.kernel.call_at`, `hybrid.step.StepWork.implicit_calls`): one loop
+build serves every solver, and the solve compiles only for a scene that steps with it (the
+explicit integrators hold an empty `ImplicitWork`, and no address).
 """
 
 from __future__ import annotations
@@ -94,6 +95,7 @@ from .implicit_work import (
     implicit_work,
     newton_rows,
 )
+from .integrators import IMPLICIT_EULER_ID
 from .kernel import CHUNK_VERTS, kernel
 from .switches import T_DAMPING, T_LUNGS, T_MEMBRANE, T_MUSCLE_FIBRES, T_PASSIVE_FIBRES, T_RESTING_TENSION, T_VOLUME
 from .terms.fibres import add_muscle_fibres
@@ -175,8 +177,7 @@ def implicit_forces(m, tri, sched_val, x, v, out, w, planes=None):
 def implicit_start_forces(m, sched_val, x, v, lung, imp, vert_force):
     """Step phase 1's implicit part: imp.f = `implicit_forces` at the step's start, added to
     vert_force (which the force pass left without them, kept as the explicit forces in
-    imp.f_expl). Returns False when imp is None (another integrator: the None prunes
-    this). `implicit_step` reads imp.f_expl: the explicit forces at the step's start,
+    imp.f_expl). `implicit_step` reads imp.f_expl: the explicit forces at the step's start,
     before the linked points move to their new sites. The sliding planes' force at the start
     comes later, from the rigid phase (`hybrid.loop.slide_forces`), into vert_force alone. The
     lungs' airway flow is the last step's, as the wall's load took it (`lungs_step_force`, which
@@ -184,8 +185,6 @@ def implicit_start_forces(m, sched_val, x, v, lung, imp, vert_force):
     # Model: m   # Data in: sched_val, x (m), v (m/s), lung (`LungSlot`)   # Data out: imp.f, imp.f_expl (N)
     # Data in/out: vert_force (N)
     """
-    if imp is None:
-        return False
     # the last step's start volume, V_n - h Q (within rounding of V_n's)
     flow_by_volume(m, lung, imp.info, lung[L_VOLUME] - m.dt * lung[L_RATE])
     implicit_forces(m, m, sched_val, x, v, imp.f, imp)
@@ -194,7 +193,6 @@ def implicit_start_forces(m, sched_val, x, v, lung, imp, vert_force):
         for a in range(3):
             imp.f_expl[i, a] = vert_force[i, a]  # the explicit forces, kept exact for the solve
             vert_force[i, a] += imp.f[i, a]
-    return True
 
 
 @kernel
@@ -414,7 +412,7 @@ def implicit_step(m, s, sched_val, step, imp, vert_acc):
     """Step phase 2 for implicit Euler: the free points' new velocities and positions,
     with the divergence check's sums per chunk of points into vert_acc (as
     `hybrid.step._integrate`). Returns 0 (done) or `IMPLICIT_NOT_CONVERGED` (status
-    set, state unchanged). Called by `hybrid.step.integrate` when the step holds imp.
+    set, state unchanged). Called by `hybrid.step.integrate` at its address.
     # Model: m   # Data in: imp.f_expl (the explicit forces at the step's start), sched_val (the inputs at t)
     # Data in/out: s.vert_pos, s.vert_vel, imp   # Data out: vert_acc (chunk_count(nvert), 4), s.status on failure
     """
@@ -562,15 +560,15 @@ def implicit_step(m, s, sched_val, step, imp, vert_acc):
 
 
 @kernel
-def implicit_pressure(imp, projected):
+def implicit_pressure(m, info, projected):
     """The step's pressure (Pa) from the volume projection's `projected` = phi / h^2:
     itself for the other integrators; for implicit Euler plus the pressure its solve
     carried (kept as the next step's).
-    # Model: none   # Data in: projected (Pa), imp.info[CARRIED] (Pa)
-    # Data out: imp.info[PRESSURE] (Pa) for implicit Euler; returns Pa
+    # Model: m.integrator   # Data in: projected (Pa), info[CARRIED] (Pa): `ImplicitWork.info`
+    # Data out: info[PRESSURE] (Pa) for implicit Euler; returns Pa
     """
-    if imp is None:
+    if m.integrator != IMPLICIT_EULER_ID:
         return projected
-    p = imp.info[I_CARRIED] + projected
-    imp.info[I_PRESSURE] = p
+    p = info[I_CARRIED] + projected
+    info[I_PRESSURE] = p
     return p

@@ -20,6 +20,7 @@ __all__ = [
     "newton_rows",
     "ImplicitWork",
     "implicit_work",
+    "no_implicit_work",
 ]
 
 #: the step status of a Newton solve that did not converge (beside hybrid.step.StepStatus)
@@ -155,7 +156,7 @@ class ImplicitWork(NamedTuple):
 def implicit_work(
     arrays, wall_pos=None, wall_vel=None, slide_vert=None, slide_stiffness_n_per_m=None
 ) -> ImplicitWork | None:
-    """The work arrays of a model that steps with implicit Euler, else None. wall_pos,
+    """The work arrays of a model that steps with implicit Euler, else None (`no_implicit_work`). wall_pos,
     wall_vel: the state's lungs' wall (`MembraneState.lung_wall_pos`, `lung_wall_vel`), the
     same arrays (the solve reads the wall where the rigid phase put it); slide_vert (ns,),
     slide_stiffness_n_per_m (ns,) N/m: the sliding points (`Model.slide_vert`), in the rigid
@@ -182,3 +183,22 @@ def implicit_work(
         lung_gh=np.zeros((nfree, 3)),
         planes=slide_planes(arrays.vert_free, slide_vert, slide_stiffness_n_per_m),
     )
+
+
+def no_implicit_work(arrays) -> ImplicitWork:
+    """The `ImplicitWork` of a model that steps with an explicit integrator: every array empty, of
+    the types a model's own would have (`implicit_work`), so that every solver's step loop is one
+    compiled build (`hybrid.loop.run_steps`'s imp); the loop never reads it."""
+    return implicit_work(_emptied(arrays)._replace(integrator=IMPLICIT_EULER_ID))
+
+
+def _emptied(value):
+    """value with each array made empty (its dtype, dimensions and writability kept), through
+    named tuples; any other value as it is."""
+    if isinstance(value, np.ndarray):
+        empty = np.zeros((0,) * value.ndim, value.dtype)
+        empty.flags.writeable = value.flags.writeable
+        return empty
+    if isinstance(value, tuple) and hasattr(value, "_fields"):
+        return type(value)(*(_emptied(v) for v in value))
+    return value

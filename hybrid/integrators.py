@@ -1,10 +1,11 @@
 """The membrane's integrators, one registry: the scene's name of each (`Scene.integrator`),
 the id the compiled step reads (`MembraneArrays.integrator`) and what it needs.
 
-The step's phase 2 (`hybrid.step.membrane_advance`) integrates with implicit Euler's
-Newton solve (`hybrid.implicit.implicit_step`) when the step's work holds that solver's
-arrays (`StepWork.solver`, made only for an implicit integrator: `hybrid.implicit_work`),
-else with the explicit pair (`hybrid.step._integrate`, the id saying which of the two).
+The step's phase 2 (`hybrid.step.integrate`) integrates with implicit Euler's Newton solve
+(`hybrid.implicit.implicit_step`, compiled apart and called at its address, `StepWork.implicit_calls`,
+with its arrays `hybrid.implicit_work.ImplicitWork`, empty for the other integrators) when the
+model's id is implicit Euler's, else with the explicit pair (`hybrid.step._integrate`, the id
+saying which of the two).
 Each entry has its solver object, the one a program passes to `Simulation`
 (`hybrid.solvers`: its settings and its work arrays). Adding an integrator takes its
 entry here, its branch there and its class in `hybrid.solvers`.

@@ -289,7 +289,7 @@ class Frames:
 
 
 @kernel(inline="always")
-def rigid_phase(m, s, w, t, row, rig):
+def rigid_phase(m, s, w, planes, t, row, rig):
     """Step phase 2 (module docstring): forces to the sites, controls, MuJoCo's step,
     the linked points onto their sites.
     # Model:    m (MembraneArrays); rig.links.vert, .site_id, .site_body, .site_root,
@@ -299,7 +299,7 @@ def rigid_phase(m, s, w, t, row, rig):
     # Data out: MuJoCo's state (through rig.mj.data_ptr), rig.mj.xfrc_applied,
     #           rig.mj.ctrl[rig.ctrls.act] (the rows the user does not set); the linked
     #           points' s.vert_pos, s.vert_vel; the carried wall's s.lung_wall_pos, s.lung_wall_vel;
-    #           rig.hist.xfrc[row], .qpos[row] when rig.record; implicit Euler's w.solver.planes (placed)
+    #           rig.hist.xfrc[row], .qpos[row] when rig.record; implicit Euler's planes (`SlidePlanes`, placed)
     # Scratch:  rig.links.force, .vel, rig.ctrls.val, rig.wall.force, .vel
     """
     links, ctrls, mj, hist = rig.links, rig.ctrls, rig.mj, rig.hist
@@ -347,7 +347,7 @@ def rigid_phase(m, s, w, t, row, rig):
     if wall.point.shape[0]:
         site_vel_kernel(mj.site_xpos, mj.cvel, mj.subtree_com, wall.site_id, wall.site_body, wall.site_root, wall.vel)
         carry_wall(wall, mj.site_xpos, s.lung_wall_pos, s.lung_wall_vel)
-    carry_planes(slides.site_id, mj.site_xpos, mj.site_xmat, w.solver)  # implicit Euler's: the planes it solves with
+    carry_planes(slides.site_id, mj.site_xpos, mj.site_xmat, planes)  # implicit Euler's: the planes it solves with
 
 
 @kernel
@@ -418,16 +418,14 @@ def carry_wall(wall, site_xpos, wall_pos, wall_vel):
 
 
 def loop_build(arg_types) -> str:
-    """Which build of `run_steps` its argument types make: "implicit" (the step's work
-    carries implicit Euler's), else "parallel" (the multi-core passes) or "serial".
-    For the compile notice's estimate (`hybrid.cli`)."""
-    if arg_types[2].types[-1] != types.none:  # StepWork.solver
-        return "implicit"
-    return "serial" if arg_types[8] == types.none else "parallel"  # par
+    """Which build of `run_steps` its argument types make: "parallel" (the multi-core passes)
+    or "serial" (every solver steps through either: implicit Euler's solve is compiled apart,
+    `hybrid.step.StepWork`). For the compile notice's estimate (`hybrid.cli`)."""
+    return "serial" if arg_types[9] == types.none else "parallel"  # par
 
 
 @kernel
-def run_steps(m, s, w, c, stops, step0, frames, rig, par=True):
+def run_steps(m, s, w, imp, c, stops, step0, frames, rig, par=True):
     """Steps (module docstring) to each step index of stops, capturing a frame at each
     (a stop at the current step captures it without stepping). Returns the frames
     captured: fewer than stops when a step fails, its status then in s.status
@@ -435,7 +433,8 @@ def run_steps(m, s, w, c, stops, step0, frames, rig, par=True):
     same times however a run is cut into calls (a checkpoint, frames, timed pieces).
     # Model:    m (MembraneArrays); rig (RigidPack): the rigid part, or `membrane_only`'s empty pack
     # Data in:  s (MembraneState) at step step0; c (ControlArrays): the inputs;
-    #           w (StepWork): the step's work arrays and its solver's;
+    #           w (StepWork): the step's work arrays; imp (ImplicitWork): implicit Euler's
+    #           (empty for the explicit integrators);
     #           stops (nframe,) int64 increasing step indices from step0
     # Data out: s, c.value and c.value_next (the scheduled rows), MuJoCo's state after the steps done;
     #           frames (FrameArrays): frame i at stops[i]
@@ -447,10 +446,10 @@ def run_steps(m, s, w, c, stops, step0, frames, rig, par=True):
     for f in range(stops.shape[0]):
         for k in range(stops[f] - done):
             t = origin + (done + k) * h
-            membrane_forces(m, s, w, c, t, par)
+            membrane_forces(m, s, w, imp, c, t, par)
             if rig.coupled:
-                rigid_phase(m, s, w, t, done - step0 + k, rig)
-            if membrane_advance(m, s, w, c, t, done + k, par) != OK:
+                rigid_phase(m, s, w, imp.planes, t, done - step0 + k, rig)
+            if membrane_advance(m, s, w, imp, c, t, done + k, par) != OK:
                 return f
             s.scal[S_TIME] = origin + (done + k + 1) * h
         done = stops[f]

@@ -19,6 +19,7 @@ from .control import Control
 from .diagnosis import advice, failure
 from .errors import ArgumentError, SceneError, SimulationDiverged
 from .implicit import Info
+from .implicit_work import no_implicit_work
 from .loop import Frames, kinetic_energy_of, membrane_only, run_steps
 from .model import TERMS, Model
 from .solvers import SOLVERS, Solver, solver_of
@@ -59,8 +60,8 @@ class Simulation:
     `solver`: the membrane's solver (`hybrid.solvers`: `SymplecticEuler()`,
     `ExplicitEuler()`, `ImplicitEuler(tol, max_iter)`), None for the scene's own
     (`integrator` and its settings). `sim.model` is then the model stepping with it, and
-    `sim.solver` says which runs. Nothing is compiled again: every solver is a branch of
-    the one compiled loop.
+    `sim.solver` says which runs. Every solver steps through the one compiled loop
+    (implicit Euler's solve compiles once, apart from it, for the first model that uses it).
     """
 
     def __init__(self, model: Model, build: str = "auto", solver: Solver | None = None):
@@ -104,8 +105,10 @@ class Simulation:
     def reset(self) -> None:
         """Back to rest at t = 0."""
         self.state = new_state(self.model.arrays)
-        # the step's scratch, holding its solver's own arrays
-        self.work = new_work(self.model.arrays, self.state, self.solver.new_work(self.model, self.state))
+        # the solver's own arrays (an empty set for the explicit pair: one loop build), the step's scratch
+        imp = self.solver.new_work(self.model, self.state)
+        self.solver_work = no_implicit_work(self.model.arrays) if imp is None else imp
+        self.work = new_work(self.model.arrays, self.state, imp)
         self.steps_done = 0
         self.failed: Exception | None = None
         if self.rigid is not None:
@@ -251,6 +254,7 @@ class Simulation:
             arrays,
             self.state,
             self.work,
+            self.solver_work,
             self.control.arrays,
             stops,
             step0,
@@ -335,8 +339,14 @@ class Simulation:
 
     def _raise(self) -> None:
         """Raise the failure the state records (`hybrid.diagnosis.failure`); further steps refuse."""
-        self.failed = failure(self.model, self.state, self.work.solver)
+        self.failed = failure(self.model, self.state, self._implicit_work)
         raise self.failed
+
+    @property
+    def _implicit_work(self):
+        """Implicit Euler's work arrays (`hybrid.implicit_work.ImplicitWork`), None for the
+        explicit integrators (whose step work holds an empty one)."""
+        return self.solver_work if self.solver.implicit else None
 
     def suggest_dt(self) -> float:
         """A time step (s) to try after a divergence: half the linear stability
@@ -348,7 +358,7 @@ class Simulation:
         """A copy of the run's state (`hybrid.State`): `set_state(state)` restarts from it
         bit for bit, in this `Simulation` or another of the same model."""
         s = self.state
-        imp = self.work.solver
+        imp = self._implicit_work
         return State(
             steps_done=int(self.steps_done),
             vert_pos=s.vert_pos.copy(),
@@ -369,7 +379,7 @@ class Simulation:
         s, model = self.state, self.model
         want = {
             "vert_pos": s.vert_pos.shape,
-            "implicit_dv": None if self.work.solver is None else self.work.solver.dv.shape,
+            "implicit_dv": None if self._implicit_work is None else self._implicit_work.dv.shape,
             "mj_state": None if self.rigid is None else self.rigid.mj_state().shape,
         }
         for name, shape in want.items():
@@ -389,9 +399,9 @@ class Simulation:
         if state.lung_wall_pos is not None and state.lung_wall_vel is not None:
             s.lung_wall_pos[:] = state.lung_wall_pos
             s.lung_wall_vel[:] = state.lung_wall_vel
-        if self.work.solver is not None:
-            self.work.solver.dv[:] = state.implicit_dv
-            self.work.solver.info[:] = state.implicit_info
+        if self._implicit_work is not None:
+            self._implicit_work.dv[:] = state.implicit_dv
+            self._implicit_work.info[:] = state.implicit_info
         if self.rigid is not None:
             assert state.mj_state is not None  # its shape checked above
             self.rigid.set_mj_state(state.mj_state)
@@ -464,9 +474,9 @@ class Simulation:
             s.vert_pos[:] = pos
             s.scal[S_PRESSURE] = s.scal[S_PHI] = 0.0
             s.grad[:] = 0.0
-            if self.work.solver is not None:  # implicit Euler's warm start and carried pressure: the old state's
-                self.work.solver.dv[:] = 0.0
-                self.work.solver.info[Info.PRESSURE] = 0.0
+            if self._implicit_work is not None:  # implicit Euler's warm start and carried pressure: the old state's
+                self._implicit_work.dv[:] = 0.0
+                self._implicit_work.info[Info.PRESSURE] = 0.0
         if vel is not None:
             s.vert_vel[:] = vel
         if time_s is not None:

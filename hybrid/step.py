@@ -24,6 +24,7 @@ from typing import NamedTuple
 
 import numpy as np
 from numba import literal_unroll, prange
+from numba.core import types as nb_types
 
 from .implicit import (
     ImplicitWork,
@@ -32,7 +33,7 @@ from .implicit import (
     implicit_step,
 )
 from .integrators import EXPLICIT_EULER_ID, IMPLICIT_EULER_ID
-from .kernel import CHUNK_VERTS, chunk_count, kernel, kernel_twin
+from .kernel import CHUNK_VERTS, call_at, chunk_count, kernel, kernel_address, kernel_twin
 from .model import MembraneArrays
 from .schedule import KIND_PYTHON, schedule_eval
 from .switches import (  # each term's flag in MembraneArrays.term_on and its call counter
@@ -158,10 +159,14 @@ class StepWork(NamedTuple):
     per-point passes' sums over each chunk of points (hybrid.kernel); dirn (nvert, 3), cubic
     (2,): the volume projection's; lung_wall_force (nwall, 3) N: the pleural load on the
     cavity wall (to its bodies); lung_scratch (5, nvert, 3): the occluded airway's
-    projection (empty rows without lungs); solver: the solver's own arrays
-    (`hybrid.implicit_work`): implicit Euler's `ImplicitWork` (its warm start and carried
-    pressure, which a checkpoint keeps, and its Newton work arrays), None for the explicit
-    integrators."""
+    projection (empty rows without lungs); implicit_calls (2,) int64: the addresses of implicit
+    Euler's kernels of phases 1 and 2 (`implicit_start_forces`, `implicit_step`), compiled apart
+    from the loop (`hybrid.kernel.call_at`; 0 for the explicit integrators, which never call
+    them). Implicit Euler's own arrays (`hybrid.implicit_work.ImplicitWork`: its warm start and
+    carried pressure, which a checkpoint keeps, and its Newton work arrays) are an argument of
+    their own, imp, beside this (an empty one for the explicit integrators, `no_implicit_work`:
+    every solver steps through one loop build; inside this tuple every kernel given the step's
+    work would take its hundreds of fields as arguments, 7 s more of a first run's compile)."""
 
     vert_force: np.ndarray
     face_force: np.ndarray
@@ -171,7 +176,7 @@ class StepWork(NamedTuple):
     cubic: np.ndarray
     lung_wall_force: np.ndarray
     lung_scratch: np.ndarray
-    solver: ImplicitWork | None = None
+    implicit_calls: np.ndarray
 
 
 def new_state(arrays: MembraneArrays) -> MembraneState:
@@ -190,20 +195,38 @@ def new_state(arrays: MembraneArrays) -> MembraneState:
     )
 
 
-def new_work(arrays: MembraneArrays, state: MembraneState, solver: ImplicitWork | None = None) -> StepWork:
-    """The step's work arrays for the model's arrays, holding `solver`, the solver's own
-    (`hybrid.solvers.Solver.new_work`: None for the explicit pair)."""
+def new_work(arrays: MembraneArrays, state: MembraneState, imp: ImplicitWork | None = None) -> StepWork:
+    """The step's work arrays for the model's arrays; with implicit Euler's arrays `imp`
+    (`hybrid.solvers.Solver.new_work`, None for the explicit pair) the addresses of its kernels,
+    compiled (or loaded from the cache) now for the types the loop passes."""
     n = arrays.vert_rest.shape[0]
+    vert_force, vert_acc = np.zeros((n, 3)), np.zeros((chunk_count(n), 4))
+    implicit_calls = np.zeros(2, np.int64)
+    if (imp is not None) != (arrays.integrator == IMPLICIT_EULER_ID):
+        raise ValueError(
+            f"new_work: imp: expected implicit Euler's arrays exactly when the model steps with it "
+            f"(integrator id {arrays.integrator}), received {'none' if imp is None else 'them'}"
+        )
+    if imp is not None:
+        sched_val = new_control(arrays).value
+        implicit_calls[0] = kernel_address(
+            implicit_start_forces,
+            nb_types.none,
+            *(arrays, sched_val, state.vert_pos, state.vert_vel, state.lung, imp, vert_force),
+        )
+        implicit_calls[1] = kernel_address(
+            implicit_step, nb_types.int64, *(arrays, state, sched_val, np.int64(0), imp, vert_acc)
+        )
     return StepWork(
-        vert_force=np.zeros((n, 3)),
+        vert_force=vert_force,
         face_force=np.zeros((arrays.mem_vert.shape[0], 6)),
         sm_sums=np.zeros((arrays.sm_vert.shape[0], 9)),
-        vert_acc=np.zeros((chunk_count(n), 4)),
+        vert_acc=vert_acc,
         dirn=np.zeros((n, 3)),
         cubic=np.zeros(2),
         lung_wall_force=np.zeros_like(arrays.lung_wall),
         lung_scratch=np.zeros((5, n if arrays.lung_face.shape[0] else 0, 3)),
-        solver=solver,
+        implicit_calls=implicit_calls,
     )
 
 
@@ -246,7 +269,7 @@ def eval_schedules(sched, user, t, out):
 
 
 @kernel(inline="always")
-def membrane_forces(m, s, w, c, t, par=True):
+def membrane_forces(m, s, w, imp, c, t, par=True):
     """Step phase 1: the force of every term the model has (its flag in m.term_on), at
     time t. `par`: None when the model never runs the multi-core build (`step_par`),
     which is then not even compiled; else m.parallel chooses at run time.
@@ -308,7 +331,8 @@ def membrane_forces(m, s, w, c, t, par=True):
         if tid >= 0 and on[tid]:
             term[1](m, s, w, c)
             s.term_calls[tid] += 1
-    if implicit_start_forces(m, c.value, s.vert_pos, s.vert_vel, s.lung, w.solver, w.vert_force):
+    if implicit:  # `implicit_start_forces`, compiled apart (`StepWork.implicit_calls`)
+        call_at(w.implicit_calls[0], None, (m, c.value, s.vert_pos, s.vert_vel, s.lung, imp, w.vert_force))
         for k in (T_MEMBRANE, T_MUSCLE_FIBRES, T_PASSIVE_FIBRES):
             s.term_calls[k] += on[k]
 
@@ -406,17 +430,16 @@ def _pointwise_forces(m, s, w, par, implicit=False):
     s.term_calls[T_SHAPE_MEMORY] += on[T_SHAPE_MEMORY]
 
 
-@kernel
-def integrate(m, s, w, c, step, par, solver):
+@kernel(inline="always")
+def integrate(m, s, w, imp, c, step, par):
     """Step phase 2 with the model's integrator (`hybrid.integrators`): implicit Euler's
-    Newton solve when the step's work holds its arrays (`solver`, an argument so that a
-    build without them prunes that branch: no solve compiled), else the explicit pair,
+    Newton solve (`implicit_step`, compiled apart: `StepWork.implicit_calls`), else
     explicit or symplectic Euler by the model's id. Returns a status code.
-    # Model: m   # Data in: w.vert_force, c.value   # Data in/out: s.vert_pos, s.vert_vel, solver
+    # Model: m   # Data in: w.vert_force, c.value   # Data in/out: s.vert_pos, s.vert_vel, imp (`ImplicitWork`)
     # Data out: w.vert_acc (the divergence check's sums per chunk), s.status on failure
     """
-    if solver is not None:
-        return implicit_step(m, s, c.value, step, solver, w.vert_acc)
+    if m.integrator == IMPLICIT_EULER_ID:
+        return call_at(w.implicit_calls[1], 0, (m, s, c.value, step, imp, w.vert_acc))
     explicit = m.integrator == EXPLICIT_EULER_ID
     if par is not None and m.parallel:
         _integrate_parallel(m.vert_free, m.vert_mass, explicit, m.dt, w.vert_force, s.vert_pos, s.vert_vel, w.vert_acc)
@@ -426,7 +449,7 @@ def integrate(m, s, w, c, step, par, solver):
 
 
 @kernel(inline="always")
-def membrane_advance(m, s, w, c, t, step, par=True):
+def membrane_advance(m, s, w, imp, c, t, step, par=True):
     """Step phases 2-5: integrate, project, check. Returns a status code. `par`: as
     `membrane_forces`.
     # Model: m   # Data in: w.vert_force   # Data out: s.vert_pos, s.vert_vel, s.scal, s.status
@@ -438,12 +461,12 @@ def membrane_advance(m, s, w, c, t, step, par=True):
             volume_direction_parallel(m.ring_ptr, m.ring_vert, m.vert_weight, pos, w.dirn)
         else:
             volume_direction_serial(m.ring_ptr, m.ring_vert, m.vert_weight, pos, w.dirn)
-    code = integrate(m, s, w, c, step, par, w.solver)
+    code = integrate(m, s, w, imp, c, step, par)
     if code != OK:
         return code
     code = _after_integration(m, s, w, c, t, step, par)
     if code == OK and m.term_on[T_VOLUME]:  # implicit Euler's solve carried part of the pressure
-        s.scal[S_PRESSURE] = implicit_pressure(w.solver, s.scal[S_PRESSURE])
+        s.scal[S_PRESSURE] = implicit_pressure(m, imp.info, s.scal[S_PRESSURE])
     return code
 
 

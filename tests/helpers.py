@@ -62,12 +62,13 @@ def central_differences(fun, x, eps):
 def forces_at(model, pos, t: float = 0.0):
     """The force pass of `model` with its points at `pos` (m), time t (s): (forces (nvert, 3) N,
     the state after the pass, for its readouts such as the pressure)."""
+    from hybrid.implicit_work import no_implicit_work
     from hybrid.step import membrane_forces, new_control, new_state, new_work
 
     state = new_state(model.arrays)
     state.vert_pos[:] = pos
     work = new_work(model.arrays, state)
-    membrane_forces(model.arrays, state, work, new_control(model.arrays), t)
+    membrane_forces(model.arrays, state, work, no_implicit_work(model.arrays), new_control(model.arrays), t)
     return work.vert_force.copy(), state
 
 

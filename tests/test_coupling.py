@@ -108,12 +108,14 @@ def test_without_volume_the_ribs_lift_at_most_a_third(breathing):
 
 def python_coupled_steps(model, nstep):
     """The coupled step written plainly with public pieces (module docstring)."""
+    from hybrid.implicit_work import no_implicit_work
     from hybrid.step import new_state, new_work
 
     system = model.rigid.fork()
     system.reset()
     state = new_state(model.arrays)
     work = new_work(model.arrays, state)
+    imp = no_implicit_work(model.arrays)  # the explicit integrators' (empty)
     link = model.link_vert
     coupling = Coupling(model)  # only for the weight correction of the linked points
     extra = coupling.link_extra_force()
@@ -121,13 +123,13 @@ def python_coupled_steps(model, nstep):
     control = new_control(model.arrays)
     for k in range(nstep):
         t = state.scal[S_TIME]
-        membrane_forces(model.arrays, state, work, control, t)
+        membrane_forces(model.arrays, state, work, imp, control, t)
         force = work.vert_force[link] + state.scal[S_PRESSURE] * state.grad[link] + extra
         system.apply_point_forces(force)
         system.step()
         state.vert_pos[link] = system.site_pos()
         state.vert_vel[link] = system.site_vel()
-        assert membrane_advance(model.arrays, state, work, control, t, k) == OK
+        assert membrane_advance(model.arrays, state, work, imp, control, t, k) == OK
         state.scal[S_TIME] = t + model.arrays.dt
     return state, system
 

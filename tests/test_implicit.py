@@ -66,7 +66,7 @@ def test_a_stiff_membrane_at_ten_times_the_explicit_bound():
     assert worst <= 1e-12
     assert np.array_equal(sim.vert_pos[pelvis], model.arrays.vert_rest[pelvis])
     assert sim.kinetic_energy < 1e-9  # J: settled within 200 steps (0.6 s)
-    assert sim.work.solver.info[Info.NEWTON_TOTAL] > 0  # it did solve (at rest the warm start is the answer)
+    assert sim.solver_work.info[Info.NEWTON_TOTAL] > 0  # it did solve (at rest the warm start is the answer)
 
 
 def test_the_pressure_at_rest_is_the_explicit_steps():
@@ -127,7 +127,7 @@ def test_where_the_exact_hessian_curves_down_the_projected_one_takes_over():
     rest = sim.model.arrays.vert_rest
     sim.set_state(vert_pos=0.8 * rest + 0.005 * np.random.default_rng(0).standard_normal(rest.shape))
     sim.step(5)
-    info = sim.work.solver.info
+    info = sim.solver_work.info
     assert info[Info.PROJECTED_TOTAL] >= 1
     assert info[Info.RESIDUAL] <= 1e-6
 
@@ -247,6 +247,6 @@ def test_serial_and_parallel_builds_agree_to_the_bit():
         sim = Simulation(model, build=build)
         sim.step(40)
         pos[build] = sim.vert_pos.copy()
-        assert sim.work.solver.info[Info.NEWTON_TOTAL] > 0
+        assert sim.solver_work.info[Info.NEWTON_TOTAL] > 0
     assert np.abs(pos["serial"] - model.arrays.vert_rest).max() > 1e-4  # it breathed
     assert np.array_equal(pos["serial"], pos["parallel"])

@@ -59,7 +59,7 @@ def test_a_residual_at_its_round_off_floor_ends_the_solve():
     assert model.arrays.implicit_tol == 1e-6
     sim = hybrid.Simulation(model, build="serial")
     sim.step(3)
-    info = sim.work.solver.info
+    info = sim.solver_work.info
     assert info[Info.NEWTON_TOTAL] < model.arrays.implicit_max_iter
     assert sim.volume_rel_error <= 1e-12
 
@@ -76,7 +76,7 @@ def test_the_newton_tolerance_is_of_the_larger_of_the_forces_and_their_run_mean(
     sim = hybrid.Simulation(
         compile_scene(dataclasses.replace(scene, dt_s=h, integrator="implicit_euler", implicit_tol=tol)), build="serial"
     )
-    info = sim.work.solver.info
+    info = sim.solver_work.info
     force, residual = [], []
     for _ in range(150):  # 4.5 s: a breath and the start of the next
         sim.step(1)

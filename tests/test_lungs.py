@@ -328,7 +328,7 @@ def test_implicit_euler_holds_the_lungs_in_its_solve():
     imp = hybrid.run(sim, 4.0)["summary"]
     for key in ("tidal_volume_l", "apex_descent_mm", "rib_lift_mm"):
         assert imp[key] == pytest.approx(ref[key], rel=0.01), key
-    info = sim.work.solver.info
+    info = sim.solver_work.info
     assert info[Info.NEWTON_TOTAL] <= 454 and info[Info.CG_TOTAL] <= 1913
 
 
@@ -453,7 +453,7 @@ def test_in_implicit_euler_s_solve_the_lungs_force_is_the_gradient_of_their_pote
     ]
     sim = hybrid.load("breathing_lungs", overrides=over)
     sim.step(10)  # breathing: the wall where the rigid phase put it
-    m, w, h = sim.model.arrays, sim.work.solver, sim.model.dt_s
+    m, w, h = sim.model.arrays, sim.solver_work, sim.model.dt_s
     sched = sim.control.arrays.value
     rng = np.random.default_rng(3)
     free = m.vert_free != 0

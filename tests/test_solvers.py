@@ -61,13 +61,13 @@ def test_a_solver_passed_to_a_membrane_only_simulation_steps_as_its_scene_key():
     _same(_run(Simulation(compile_scene(explicit)), 200), _run(sim, 200))
 
 
-def test_the_simulation_says_which_solver_runs_and_only_an_implicit_one_has_work_arrays():
+def test_the_simulation_says_which_solver_runs_and_only_an_implicit_one_fills_its_work_arrays():
     model = compile_scene(load_scene("breathing", overrides=["integrator=implicit_euler", "implicit_tol=1e-5"]))
     own = Simulation(model)
     assert own.solver == ImplicitEuler(tol=1e-5, max_iter=50) == solver_of(model)
-    assert own.work.solver is not None
+    assert own.solver_work.dv.shape == (model.nvert, 3)
     sym = Simulation(model, solver=SymplecticEuler())
-    assert sym.solver == SymplecticEuler() and sym.work.solver is None
+    assert sym.solver == SymplecticEuler() and sym.solver_work.dv.size == 0  # empty, of the same types
     # the model steps with it: the step kept, its stability bound symplectic Euler's (finite)
     assert sym.model.dt_s == model.dt_s and np.isfinite(sym.model.dt_stable_s) and model.dt_stable_s == np.inf
     assert sym.model.arrays.integrator == SymplecticEuler().model_for(model).arrays.integrator
@@ -75,7 +75,7 @@ def test_the_simulation_says_which_solver_runs_and_only_an_implicit_one_has_work
     assert (tight.model.arrays.implicit_tol, tight.model.arrays.implicit_max_iter) == (1e-9, 70)
     own.step(20)
     tight.step(20)  # the solver's tolerance reaches its solve: more Newton iterations for less residual
-    newton = [s.work.solver.info[Info.NEWTON_TOTAL] for s in (own, tight)]
+    newton = [s.solver_work.info[Info.NEWTON_TOTAL] for s in (own, tight)]
     assert 0 < newton[0] < newton[1]
 
 
@@ -106,8 +106,46 @@ def test_a_membrane_scene_and_a_coupled_one_share_the_compiled_loop(solver):
     alone = Simulation(compile_scene(dataclasses.replace(scene, rigid=None)), solver=solver)
     coupled = Simulation(compile_scene(scene), solver=solver)
     assert alone.rigid is None and coupled.rigid is not None  # the premise
-    for part in ("state", "work"):
+    for part in ("state", "work", "solver_work"):
         assert typeof(getattr(alone, part)) == typeof(getattr(coupled, part)), part
     assert typeof(alone.model.arrays) == typeof(coupled.model.arrays)
     assert typeof(alone.control.arrays) == typeof(coupled.control.arrays)
     assert typeof(_MEMBRANE_ONLY) == typeof(coupled.rigid.pack(1))
+
+
+def test_every_solver_steps_through_one_compiled_loop_and_implicit_euler_s_kernels_take_its_types():
+    # implicit Euler's solve is compiled apart and called at its address (`hybrid.kernel.call_at`):
+    # the loop's argument types are the same whichever solver steps (one build, whose compile an
+    # implicit scene after a symplectic one skips), and the solve's kernels were compiled for exactly
+    # the types the loop passes them (another type there would be read wrongly, not refused)
+    from numba import typeof
+
+    from hybrid.implicit import implicit_start_forces, implicit_step
+
+    model = compile_scene(load_scene("breathing", overrides=["mesh.level=0"]))
+    sims = {name: Simulation(model, solver=cls()) for name, cls in SOLVERS.items()}
+    types = {
+        name: tuple(typeof(getattr(sim, p)) for p in ("state", "work", "solver_work")) for name, sim in sims.items()
+    }
+    assert len(set(types.values())) == 1, types
+    imp = sims["implicit_euler"]
+    arrays = typeof(imp.model.arrays)
+    state, work, solver_work = types["implicit_euler"]
+    value = typeof(imp.control.arrays.value)
+    assert (
+        arrays,
+        state,
+        value,
+        typeof(np.int64(0)),
+        solver_work,
+        typeof(imp.work.vert_acc),
+    ) in implicit_step.overloads
+    start = (arrays, value, typeof(imp.state.vert_pos), typeof(imp.state.vert_vel), typeof(imp.state.lung))
+    assert (*start, solver_work, typeof(imp.work.vert_force)) in implicit_start_forces.overloads
+    assert np.all(imp.work.implicit_calls != 0) and np.all(sims["symplectic_euler"].work.implicit_calls == 0)
+    from hybrid.loop import run_steps
+
+    sims["symplectic_euler"].step(2)
+    loops = set(run_steps.signatures)
+    imp.step(2)  # implicit Euler after symplectic Euler: the same loop, no build of its own
+    assert set(run_steps.signatures) == loops and imp.steps_done == 2

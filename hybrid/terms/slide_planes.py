@@ -58,16 +58,13 @@ def slide_planes(vert_free, vert=None, stiffness_n_per_m=None) -> SlidePlanes:
 
 
 @kernel
-def carry_planes(site_id, site_xpos, site_xmat, imp):
-    """imp.planes' origins and normals: the sites' positions and z axes now (after MuJoCo's
-    step). Nothing when imp is None (an explicit integrator: the None prunes this).
+def carry_planes(site_id, site_xpos, site_xmat, p):
+    """The planes p's origins and normals: the sites' positions and z axes now (after MuJoCo's
+    step). Nothing for an explicit integrator, whose planes are empty (`hybrid.implicit_work.no_implicit_work`).
     # Model: site_id (ns,) int64 (`hybrid.loop.SlideArrays`)   # Data in: site_xpos (nsite, 3) m, site_xmat (nsite, 9)
-    # Data out: imp.planes.origin (ns, 3) m, imp.planes.normal (ns, 3)
+    # Data out: p.origin (ns, 3) m, p.normal (ns, 3) (`SlidePlanes`)
     """
-    if imp is None:
-        return
-    p = imp.planes
-    for j in range(site_id.shape[0]):
+    for j in range(p.origin.shape[0]):  # ns, or 0
         sid = site_id[j]
         for a in range(3):
             p.origin[j, a] = site_xpos[sid, a]

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from hybrid.implicit_work import no_implicit_work
 from hybrid.model import compile_scene
 from hybrid.terms.shape_memory import add_shape_memory
 
@@ -30,7 +31,7 @@ def test_step_forces_are_the_terms_added_point_by_point(subdivisions, parallel):
     state.vert_pos[:] = a.vert_rest + rng.normal(scale=1e-3, size=a.vert_rest.shape)
     state.vert_vel[:] = rng.normal(scale=1e-2, size=a.vert_rest.shape)
     work = new_work(a, state)
-    membrane_forces(a, state, work, new_control(a), 0.0)
+    membrane_forces(a, state, work, no_implicit_work(a), new_control(a), 0.0)
     want = np.where(a.vert_free[:, None] > 0, a.vert_mass[:, None] * a.accel[None, :], 0.0)
     want -= a.damp_coef[:, None] * state.vert_vel
     add_shape_memory(

@@ -18,6 +18,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from hybrid.implicit_work import no_implicit_work
 from hybrid.mesh import uv_sphere
 from hybrid.mesh import volume as face_volume
 from hybrid.mesh import volume_gradient as face_volume_gradient
@@ -244,7 +245,7 @@ def test_soft_volume_force_is_the_attraction_to_the_volume_satisfying_points():
         pos = mesh.vert_pos * scale + rng.normal(scale=1e-3, size=mesh.vert_pos.shape)
         state.vert_pos[:] = pos
         work = new_work(model.arrays, state)
-        membrane_forces(model.arrays, state, work, new_control(model.arrays), 0.0)
+        membrane_forces(model.arrays, state, work, no_implicit_work(model.arrays), new_control(model.arrays), 0.0)
         phi, g = _soft_phi(pos, mesh.face_vert, mesh.volume())
         p = state.scal[S_PRESSURE]
         assert np.sign(p) == sign
