@@ -2,7 +2,7 @@
 the id the compiled step reads (`MembraneArrays.integrator`) and what it needs.
 
 The step's phase 2 (`hybrid.step.integrate`) integrates with implicit Euler's Newton solve
-(`hybrid.implicit.implicit_step`, compiled apart and called at its address, `StepWork.implicit_calls`,
+(`hybrid.implicit.implicit_step`, compiled apart and called at its address, `StepWork.calls`,
 with its arrays `hybrid.implicit_work.ImplicitWork`, empty for the other integrators) when the
 model's id is implicit Euler's, else with the explicit pair (`hybrid.step._integrate`, the id
 saying which of the two).

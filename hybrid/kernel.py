@@ -37,19 +37,13 @@ import re
 import shutil
 import time
 import types
-import warnings
 from pathlib import Path
 
 import numba
 from numba import njit
 from numba.core import cgutils
 from numba.core import types as nb_types
-from numba.core.errors import NumbaExperimentalFeatureWarning
 from numba.extending import intrinsic
-
-# the step calls the registry's term kernels as a tuple of functions (`hybrid.terms.STEP_FORCES`),
-# which numba calls an experimental feature; it compiles and caches as any other call
-warnings.filterwarnings("ignore", "First-class function type feature is experimental", NumbaExperimentalFeatureWarning)
 
 __all__ = [
     "CACHE_DIR",

@@ -23,7 +23,7 @@ from enum import IntEnum
 from typing import NamedTuple
 
 import numpy as np
-from numba import literal_unroll, prange
+from numba import prange
 from numba.core import types as nb_types
 
 from .implicit import (
@@ -70,7 +70,6 @@ from .terms.lungs import (
     P_RECOIL,
     P_V0,
     LungSlot,
-    lungs_step_force,
     project_occluded,
 )
 from .terms.membrane import add_membrane_serial, membrane_faces_parallel, membrane_gather_parallel
@@ -159,14 +158,20 @@ class StepWork(NamedTuple):
     per-point passes' sums over each chunk of points (hybrid.kernel); dirn (nvert, 3), cubic
     (2,): the volume projection's; lung_wall_force (nwall, 3) N: the pleural load on the
     cavity wall (to its bodies); lung_scratch (5, nvert, 3): the occluded airway's
-    projection (empty rows without lungs); implicit_calls (2,) int64: the addresses of implicit
-    Euler's kernels of phases 1 and 2 (`implicit_start_forces`, `implicit_step`), compiled apart
-    from the loop (`hybrid.kernel.call_at`; 0 for the explicit integrators, which never call
-    them). Implicit Euler's own arrays (`hybrid.implicit_work.ImplicitWork`: its warm start and
-    carried pressure, which a checkpoint keeps, and its Newton work arrays) are an argument of
-    their own, imp, beside this (an empty one for the explicit integrators, `no_implicit_work`:
-    every solver steps through one loop build; inside this tuple every kernel given the step's
-    work would take its hundreds of fields as arguments, 7 s more of a first run's compile)."""
+    projection (empty rows without lungs); calls (NCALL,) int64: the addresses of the kernels
+    the step calls compiled apart (`hybrid.kernel.call_at`), by slot (`CALL_*`): implicit
+    Euler's phases 1 and 2 (`implicit_start_forces`, `implicit_step`), the occluded airway's
+    projection (`project_occluded`) and the soft volume's force (`soft_volume_step`), 0 where the
+    model never calls it; force_calls (k, 2)
+    int64: the registry's terms with their own step kernel that the model has, (id, address)
+    (`hybrid.terms.STEP_FORCES`). Compiled apart, a kernel compiles only for a model that calls
+    it, and the loop holds none of its code (numba links a callee into each caller and optimizes
+    it again there). Implicit Euler's own arrays (`hybrid.implicit_work.ImplicitWork`: its warm
+    start and carried pressure, which a checkpoint keeps, and its Newton work arrays) are an
+    argument of their own, imp, beside this (an empty one for the explicit integrators,
+    `no_implicit_work`: every solver steps through one loop build; inside this tuple every
+    kernel given the step's work would take its hundreds of fields as arguments, 7 s more of a
+    first run's compile)."""
 
     vert_force: np.ndarray
     face_force: np.ndarray
@@ -176,7 +181,34 @@ class StepWork(NamedTuple):
     cubic: np.ndarray
     lung_wall_force: np.ndarray
     lung_scratch: np.ndarray
-    implicit_calls: np.ndarray
+    calls: np.ndarray
+    force_calls: np.ndarray
+
+
+#: the slots of `StepWork.calls`
+CALL_IMPLICIT_START, CALL_IMPLICIT_STEP, CALL_OCCLUDED, CALL_SOFT_VOLUME = range(4)
+NCALL = 4
+
+
+@kernel
+def soft_volume_step(m, s, w):
+    """The soft volume's force (`hybrid.terms.volume.soft_volume_force`) on the step's points;
+    returns its pressure (Pa). Compiled apart, for the models that have the term (`StepWork.calls`).
+    # Model: m.ring_ptr, m.ring_vert, m.vol0, m.soft_stiff, m.soft_bulk   # Data in: s.vert_pos
+    # Data out: w.vert_force (added to), s.grad   # Scratch: w.cubic, w.vert_acc
+    """
+    return soft_volume_force(
+        m.ring_ptr,
+        m.ring_vert,
+        m.vol0,
+        m.soft_stiff,
+        m.soft_bulk,
+        s.vert_pos,
+        s.grad,
+        w.cubic,
+        w.vert_acc,
+        w.vert_force,
+    )
 
 
 def new_state(arrays: MembraneArrays) -> MembraneState:
@@ -196,38 +228,47 @@ def new_state(arrays: MembraneArrays) -> MembraneState:
 
 
 def new_work(arrays: MembraneArrays, state: MembraneState, imp: ImplicitWork | None = None) -> StepWork:
-    """The step's work arrays for the model's arrays; with implicit Euler's arrays `imp`
-    (`hybrid.solvers.Solver.new_work`, None for the explicit pair) the addresses of its kernels,
-    compiled (or loaded from the cache) now for the types the loop passes."""
+    """The step's work arrays for the model's arrays, with the addresses of the kernels its step
+    calls compiled apart (`StepWork.calls`, `.force_calls`), each compiled (or loaded from the
+    cache) now for the types the loop passes it; implicit Euler's with its arrays `imp`
+    (`hybrid.solvers.Solver.new_work`, None for the explicit pair)."""
     n = arrays.vert_rest.shape[0]
-    vert_force, vert_acc = np.zeros((n, 3)), np.zeros((chunk_count(n), 4))
-    implicit_calls = np.zeros(2, np.int64)
     if (imp is not None) != (arrays.integrator == IMPLICIT_EULER_ID):
         raise ValueError(
             f"new_work: imp: expected implicit Euler's arrays exactly when the model steps with it "
             f"(integrator id {arrays.integrator}), received {'none' if imp is None else 'them'}"
         )
-    if imp is not None:
-        sched_val = new_control(arrays).value
-        implicit_calls[0] = kernel_address(
-            implicit_start_forces,
-            nb_types.none,
-            *(arrays, sched_val, state.vert_pos, state.vert_vel, state.lung, imp, vert_force),
-        )
-        implicit_calls[1] = kernel_address(
-            implicit_step, nb_types.int64, *(arrays, state, sched_val, np.int64(0), imp, vert_acc)
-        )
-    return StepWork(
-        vert_force=vert_force,
+    forces = [(tid, step_force) for tid, step_force in STEP_FORCES if arrays.term_on[tid]]
+    work = StepWork(
+        vert_force=np.zeros((n, 3)),
         face_force=np.zeros((arrays.mem_vert.shape[0], 6)),
         sm_sums=np.zeros((arrays.sm_vert.shape[0], 9)),
-        vert_acc=vert_acc,
+        vert_acc=np.zeros((chunk_count(n), 4)),
         dirn=np.zeros((n, 3)),
         cubic=np.zeros(2),
         lung_wall_force=np.zeros_like(arrays.lung_wall),
         lung_scratch=np.zeros((5, n if arrays.lung_face.shape[0] else 0, 3)),
-        implicit_calls=implicit_calls,
+        calls=np.zeros(NCALL, np.int64),
+        force_calls=np.zeros((len(forces), 2), np.int64),
     )
+    # the example arguments: the types the loop passes (`membrane_forces`, `integrate`, `_after_integration`)
+    control = new_control(arrays)
+    for row, (tid, step_force) in enumerate(forces):
+        work.force_calls[row] = tid, kernel_address(step_force, nb_types.none, arrays, state, work, control)
+    if imp is not None:
+        pos, vel = state.vert_pos, state.vert_vel
+        work.calls[CALL_IMPLICIT_START] = kernel_address(
+            implicit_start_forces, nb_types.none, arrays, control.value, pos, vel, state.lung, imp, work.vert_force
+        )
+        work.calls[CALL_IMPLICIT_STEP] = kernel_address(
+            implicit_step, nb_types.int64, arrays, state, control.value, np.int64(0), imp, work.vert_acc
+        )
+    if arrays.term_on[T_SOFT_VOLUME]:
+        work.calls[CALL_SOFT_VOLUME] = kernel_address(soft_volume_step, nb_types.float64, arrays, state, work)
+    if arrays.term_on[T_LUNGS]:
+        occluded = nb_types.Tuple((nb_types.float64, nb_types.float64, nb_types.boolean))
+        work.calls[CALL_OCCLUDED] = kernel_address(project_occluded, occluded, arrays, state, work, 0.0, True)
+    return work
 
 
 def _lung_start(arrays: MembraneArrays) -> np.ndarray:
@@ -301,18 +342,7 @@ def membrane_forces(m, s, w, imp, c, t, par=True):
         add_muscle(m.mus_vert, m.mus_nbr, m.mus_sched, c.value, s.vert_pos, w.vert_force)
         s.term_calls[T_MUSCLE] += 1
     if on[T_SOFT_VOLUME]:
-        s.scal[S_PRESSURE] = soft_volume_force(
-            m.ring_ptr,
-            m.ring_vert,
-            m.vol0,
-            m.soft_stiff,
-            m.soft_bulk,
-            s.vert_pos,
-            s.grad,
-            w.cubic,
-            w.vert_acc,
-            w.vert_force,
-        )
+        s.scal[S_PRESSURE] = call_at(w.calls[CALL_SOFT_VOLUME], 0.0, (m, s, w))  # `soft_volume_step`
         s.term_calls[T_SOFT_VOLUME] += 1
     if on[T_PRESSURE]:
         add_pressure(m.ring_ptr, m.ring_vert, m.pres_sched, c.value, s.vert_pos, w.vert_force)
@@ -323,16 +353,11 @@ def membrane_forces(m, s, w, imp, c, t, par=True):
     if on[T_PASSIVE_FIBRES] and not implicit:
         add_passive_fibres(m.pf_vert, m.pf_par, s.vert_pos, w.vert_force)
         s.term_calls[T_PASSIVE_FIBRES] += 1
-    if on[T_LUNGS]:
-        lungs_step_force(m, s, w, c)
-        s.term_calls[T_LUNGS] += 1
-    for term in literal_unroll(STEP_FORCES):  # the terms that bring their own kernel (`Term.step_force`)
-        tid = term[0]
-        if tid >= 0 and on[tid]:
-            term[1](m, s, w, c)
-            s.term_calls[tid] += 1
-    if implicit:  # `implicit_start_forces`, compiled apart (`StepWork.implicit_calls`)
-        call_at(w.implicit_calls[0], None, (m, c.value, s.vert_pos, s.vert_vel, s.lung, imp, w.vert_force))
+    for k in range(w.force_calls.shape[0]):  # the model's terms with their own kernel (`Term.step_force`)
+        call_at(w.force_calls[k, 1], None, (m, s, w, c))
+        s.term_calls[w.force_calls[k, 0]] += 1
+    if implicit:  # `implicit_start_forces`, compiled apart (`StepWork.calls`)
+        call_at(w.calls[CALL_IMPLICIT_START], None, (m, c.value, s.vert_pos, s.vert_vel, s.lung, imp, w.vert_force))
         for k in (T_MEMBRANE, T_MUSCLE_FIBRES, T_PASSIVE_FIBRES):
             s.term_calls[k] += on[k]
 
@@ -433,13 +458,13 @@ def _pointwise_forces(m, s, w, par, implicit=False):
 @kernel(inline="always")
 def integrate(m, s, w, imp, c, step, par):
     """Step phase 2 with the model's integrator (`hybrid.integrators`): implicit Euler's
-    Newton solve (`implicit_step`, compiled apart: `StepWork.implicit_calls`), else
+    Newton solve (`implicit_step`, compiled apart: `StepWork.calls`), else
     explicit or symplectic Euler by the model's id. Returns a status code.
     # Model: m   # Data in: w.vert_force, c.value   # Data in/out: s.vert_pos, s.vert_vel, imp (`ImplicitWork`)
     # Data out: w.vert_acc (the divergence check's sums per chunk), s.status on failure
     """
     if m.integrator == IMPLICIT_EULER_ID:
-        return call_at(w.implicit_calls[1], 0, (m, s, c.value, step, imp, w.vert_acc))
+        return call_at(w.calls[CALL_IMPLICIT_STEP], 0, (m, s, c.value, step, imp, w.vert_acc))
     explicit = m.integrator == EXPLICIT_EULER_ID
     if par is not None and m.parallel:
         _integrate_parallel(m.vert_free, m.vert_mass, explicit, m.dt, w.vert_force, s.vert_pos, s.vert_vel, w.vert_acc)
@@ -511,7 +536,7 @@ def _after_integration(m, s, w, c, t, step, par):
         s.term_calls[T_KEEP_IN] += 1
     if on[T_LUNGS] and s.lung[L_OCCLUDED] > 0.0:  # the occluded airway: both volumes
         abdomen = on[T_VOLUME] != 0
-        phi, phi_hold, held = project_occluded(m, s, w, h, abdomen)
+        phi, phi_hold, held = call_at(w.calls[CALL_OCCLUDED], (0.0, 0.0, False), (m, s, w, h, abdomen))
         s.term_calls[T_VOLUME] += abdomen
         if not held:
             s.status[3] = PROJ_NO_ROOT

@@ -53,12 +53,15 @@ try:
     runpy.run_module("hybrid", run_name="__main__", alter_sys=True)
 except SystemExit as stop:
     code = stop.code
-from hybrid import implicit, loop
-from hybrid.terms import membrane, volume
+from hybrid import implicit, loop, step
+from hybrid.terms import lungs, membrane, resting_tension, volume
+apart = (implicit.implicit_step, implicit.implicit_start_forces, lungs.lungs_step_force, lungs.project_occluded,
+         resting_tension.resting_tension_step_force, step.soft_volume_step)
 print(json.dumps({"code": code, "loops": len(loop.run_steps.signatures),
                   "parallel": [len(k.signatures) for k in (membrane.membrane_faces_parallel,
                                volume.volume_direction_parallel)],
-                  "implicit": [len(k.signatures) for k in (implicit.implicit_forces, implicit.newton_caches)]}))
+                  "implicit": [len(k.signatures) for k in (implicit.implicit_forces, implicit.newton_caches)],
+                  "apart": [len(k.signatures) for k in apart]}))
 """
 
 # after the first run, in a new process on its cache: scenes with other terms, a rigid part, the
@@ -120,8 +123,9 @@ def test_a_scene_that_loads_the_cached_loop_announces_no_first_run(first_run, tm
 def test_a_first_run_compiles_the_one_step_loop_once_and_no_build_its_scene_cannot_reach(first_run):
     """Issue 30: on an empty compile cache, `hybrid run` compiles the one step loop once, with
     every term (their flags read at run time: `hybrid.switches`), and not what its scene cannot
-    reach: membrane_demo (80 points, symplectic Euler) neither the multi-core build nor
-    implicit Euler's solve."""
+    reach: membrane_demo (80 points, symplectic Euler, no lungs, resting tension or soft volume)
+    neither the multi-core build, nor implicit Euler's solve, nor the kernels of the terms it lacks
+    that the loop calls at their addresses (`hybrid.step.StepWork`)."""
     proc = first_run["process"]
     assert proc.returncode == 0, proc.stderr[-2000:]
     got = json.loads(proc.stdout.splitlines()[-1])
@@ -129,6 +133,7 @@ def test_a_first_run_compiles_the_one_step_loop_once_and_no_build_its_scene_cann
     assert got["loops"] == 1
     assert got["parallel"] == [0, 0]
     assert got["implicit"] == [0, 0]
+    assert got["apart"] == [0] * 6
 
 
 def test_scenes_with_other_terms_and_a_rigid_part_load_the_first_runs_loop(first_run):

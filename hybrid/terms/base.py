@@ -34,7 +34,6 @@ from .. import checks
 from .. import regions as _regions
 from .. import schedule as _sched
 from ..errors import SceneError
-from ..kernel import kernel
 from ..mesh.validate import few
 
 __all__ = [
@@ -179,19 +178,12 @@ def order_terms(classes) -> None:
             FLAGGED.append(cls)
 
 
-@kernel(inline="always")
-def no_force(m, s, w, c):
-    """The end of `registered_forces`: adds nothing.
-    # Model: none   # Data in: none   # Data out: none
-    """
-
-
 def registered_forces() -> tuple:
     """((id, step_force), ...) of the registered force terms that carry their own
-    `step_force` kernel, in id order, which the step calls in a loop unrolled when it
-    compiles (`hybrid.step.membrane_forces`); ending with (-1, `no_force`), so that the
-    tuple is never empty (numba unrolls no empty tuple)."""
-    return (*((cls.id, cls.step_force) for cls in FLAGGED if cls.step_force is not None), (-1, no_force))
+    `step_force` kernel, in id order: the step calls those its model has, each compiled apart
+    for the model's types and called at its address (`hybrid.step.StepWork.force_calls`), so
+    that a term no scene of the run has is never compiled."""
+    return tuple((cls.id, cls.step_force) for cls in FLAGGED if cls.step_force is not None)
 
 
 class Term:

@@ -369,7 +369,7 @@ def lung_load(par, pao, vol, rate):
     return palv, palv - lung_recoil(par, vol)[0]
 
 
-@kernel(inline="always")
+@kernel
 def lungs_step_force(m, s, w, c):
     """The step's call (`Term.step_force`): the lumped law at the step's start (module
     docstring), its readouts into s.lung, the pleural load on the cavity's points.
@@ -439,8 +439,9 @@ class Lungs(Term):
         "lung_par": lambda n: np.zeros(NPAR),
         "lung_sched": lambda n: np.zeros(2, np.int64),
     }
-    # called by name in the step (`hybrid.step.membrane_forces`): implicit Euler treats their load in
-    # its solve, so the step needs more of them than `Term.step_force` gives
+    # the step's call; implicit Euler's solve takes the load on the dome's points itself
+    # (`hybrid.implicit_lungs`), and an occluded airway's projection is the step's (`project_occluded`)
+    step_force = lungs_step_force
     wall_height_m: float = param("positive", hi=10.0)
     floor: object = param("selector", "diaphragm")
     lung_elastance_cmh2o_per_l: float = param("nonneg", None, hi=1e4)

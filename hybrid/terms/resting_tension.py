@@ -137,7 +137,7 @@ def resting_tension_blocks(rt_vert, rt_par, kx, slot, amat, pdiag):
                         pdiag[rt_vert[f, m], r] += v
 
 
-@kernel(inline="always")
+@kernel
 def resting_tension_step_force(m, s, w, c):
     """The step's call (`Term.step_force`); under implicit Euler the Newton solve takes the
     force instead (`hybrid.implicit.implicit_forces`).
