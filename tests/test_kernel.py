@@ -464,3 +464,28 @@ def test_a_first_runs_estimate_is_what_this_machine_measured_last(tmp_path, monk
     estimate, _ = cli._compile_estimate(scene)
     assert estimate(run_steps, ()) == 11.0  # the median of 9 and 13
     assert k.measured_compile_s("first run, membrane") is None
+
+
+def test_implicit_euler_s_solve_is_announced_alone_once_the_loop_is_cached(tmp_path, monkeypatch):
+    """The solve is compiled apart from the loop (`hybrid.kernel.call_at`), when the simulation is
+    made: with the loop cached its compile is the one announced ("implicit solve"); on an empty
+    cache the first compile, the solve's or the loop's, announces the whole first run."""
+    import dataclasses
+
+    import hybrid.cli as cli
+    import hybrid.kernel as k
+    from hybrid.implicit import implicit_start_forces, implicit_step
+    from hybrid.loop import run_steps
+    from hybrid.resolve import resolve_scene
+
+    monkeypatch.setattr(k, "CACHE_DIR", str(tmp_path / "numba-0123456789abcdef"))
+    scene = dataclasses.replace(resolve_scene("breathing"), integrator="implicit_euler")
+    monkeypatch.setattr(cli, "has_cached_build", lambda dispatcher: True)  # the loop cached
+    estimate, _ = cli._compile_estimate(scene)
+    assert (
+        estimate(implicit_step, ()) == estimate(implicit_start_forces, ()) == cli.COMPILE_ESTIMATE_S["implicit solve"]
+    )
+    assert estimate(run_steps, None) is None and estimate("helper", ()) is None
+    monkeypatch.setattr(cli, "has_cached_build", lambda dispatcher: False)  # an empty cache
+    estimate, _ = cli._compile_estimate(scene)
+    assert estimate(implicit_start_forces, ()) == cli.COMPILE_ESTIMATE_S["first run, implicit"]
