@@ -489,3 +489,39 @@ def test_implicit_euler_s_solve_is_announced_alone_once_the_loop_is_cached(tmp_p
     monkeypatch.setattr(cli, "has_cached_build", lambda dispatcher: False)  # an empty cache
     estimate, _ = cli._compile_estimate(scene)
     assert estimate(implicit_start_forces, ()) == cli.COMPILE_ESTIMATE_S["first run, implicit"]
+
+
+def test_a_kernel_called_at_its_address_is_the_kernel_called_directly():
+    """`call_at` runs the kernel `kernel_address` compiled for the arguments' types: the same
+    result and the same writes as a direct call, a named tuple of arrays among the arguments (as
+    the step passes its packs); a kernel whose result is not the type asked is refused."""
+    from typing import NamedTuple
+
+    from numba import njit
+    from numba.core import types as nb_types
+
+    from hybrid.kernel import call_at, kernel_address
+
+    class Pack(NamedTuple):
+        x: np.ndarray
+        out: np.ndarray
+
+    @njit
+    def callee(p, scale):
+        total = 0.0
+        for i in range(p.x.shape[0]):
+            p.out[i] += scale * p.x[i] ** 2
+            total += p.out[i]
+        return total
+
+    @njit
+    def caller(address, p, scale):
+        return call_at(address, 0.0, (p, scale))
+
+    x = np.linspace(0.0, 1.0, 7)
+    direct, apart = Pack(x, np.ones(7)), Pack(x, np.ones(7))
+    address = kernel_address(callee, nb_types.float64, apart, 2.5)
+    assert caller(address, apart, 2.5) == callee(direct, 2.5)
+    assert np.array_equal(apart.out, direct.out) and not np.array_equal(apart.out, np.ones(7))
+    with pytest.raises(TypeError, match=r"^kernel_address: .*callee returns float64, expected int64$"):
+        kernel_address(callee, nb_types.int64, apart, 2.5)
