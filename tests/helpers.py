@@ -72,6 +72,22 @@ def forces_at(model, pos, t: float = 0.0):
     return work.vert_force.copy(), state
 
 
+def every_row(arrays):
+    """The Newton rows of every triangle of a model's arrays (none left out for fixed corners), of
+    the types implicit Euler's solve passes its kernels (`hybrid.implicit_work.newton_rows`): a test
+    calling those kernels with them loads the solve's compiled build instead of compiling its own."""
+    from hybrid.implicit_work import NewtonRows
+
+    return NewtonRows(*(np.array(getattr(arrays, name)) for name in NewtonRows._fields))
+
+
+def no_planes(arrays):
+    """No sliding planes, of the type implicit Euler's solve passes (`hybrid.terms.slide_planes`)."""
+    from hybrid.terms.slide_planes import slide_planes
+
+    return slide_planes(arrays.vert_free)
+
+
 def base_scene(**changes) -> Scene:
     return dataclasses.replace(BASE, **changes)
 

@@ -5,7 +5,7 @@ omega; on a small irregular mesh with every tangent term and points that are not
 
 import numpy as np
 import pytest
-from helpers import dense_matrix
+from helpers import dense_matrix, no_planes
 
 from hybrid import Damping, HalfSpace, Masses, Membrane, MuscleFibres, PassiveFibres, RestingTension, Scene
 from hybrid.implicit import newton_caches, newton_product, newton_rows
@@ -38,7 +38,9 @@ def assembled():
         )
     ).arrays
     # points below z = -0.06 m not integrated (as linked ones): their rows and columns are not assembled
-    a = a._replace(vert_free=(a.vert_rest[:, 2] >= -0.06).astype(np.uint8))
+    free = (a.vert_rest[:, 2] >= -0.06).astype(np.uint8)
+    free.flags.writeable = False  # as a model's: the solve's own compiled kernels then serve these calls
+    a = a._replace(vert_free=free)
     n = a.vert_rest.shape[0]
     # compressed (negative stress: the projection matters) and stretched triangles
     x = a.vert_rest + 0.01 * np.random.default_rng(4).standard_normal((n, 3))
@@ -48,7 +50,7 @@ def assembled():
     pf = np.zeros((rows.pf_vert.shape[0], NPF_CACHE))
     newton_caches(a, rows, sv, x, face, fib, pf)
     mat = newton_matrix(n, a.vert_free, rows.mem_vert, rows.fib_vert, rows.pf_vert, rows.rt_vert)
-    assemble(a, rows, face, fib, pf, H, mat)
+    assemble(a, rows, face, fib, pf, H, mat, no_planes(a))
     return a, rows, face, fib, pf, mat
 
 
@@ -90,7 +92,7 @@ def test_the_assembled_blocks_are_the_element_products(setup):
     n = a.vert_rest.shape[0]
     free = np.repeat(a.vert_free != 0, 3)
     want, proj = (
-        dense_matrix(n, lambda u, y: newton_product(a, rows, face, fib, pf, H, project, u, y))
+        dense_matrix(n, lambda u, y: newton_product(a, rows, face, fib, pf, H, project, u, y, no_planes(a)))
         for project in (False, True)
     )
     for m_ in (want, proj):
@@ -149,7 +151,7 @@ def test_eisenstats_conjugate_gradients_take_the_same_iterates_as_the_swept_ones
     from hybrid.implicit_matrix import lower_solve, split_cg, upper_solve
 
     def _solve_split(w, target, cg_max):
-        return split_cg(w, target, cg_max)
+        return split_cg(w, target, cg_max, 0.0, w.lung_gf, w.lung_gh)  # the solve's arguments, no rank-one term
 
     a, rows, face, fib, pf, mat = setup
     n = a.vert_rest.shape[0]
@@ -173,7 +175,7 @@ def test_eisenstats_conjugate_gradients_take_the_same_iterates_as_the_swept_ones
     assert b.min() > 0.0
     for iters in (1, 3, 6):
         out = []
-        for solve in (lambda: _solve(a, w, H, False, 0.0, iters), lambda: _solve_split(w, 0.0, iters)):
+        for solve in (lambda: _solve(a, w, H, False, 0.0, iters, 0.0, w.lung_gf), lambda: _solve_split(w, 0.0, iters)):
             w.cg_r[:] = r
             assert solve() == iters
             out.append(w.cg_x.copy())
@@ -218,7 +220,7 @@ def test_a_rank_one_term_in_the_conjugate_gradients_costs_at_most_an_iteration_m
 
     def run(*rank, cg_max=10 * n):
         w.cg_r[:] = r
-        k = split_cg(w, target, cg_max, *rank)
+        k = split_cg(w, target, cg_max, *(rank or (0.0, w.lung_gf, w.lung_gh)))
         return k, w.cg_x.copy()
 
     plain, _ = run()

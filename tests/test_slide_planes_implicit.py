@@ -6,7 +6,7 @@ that is not integrated (no row)."""
 
 import numpy as np
 import pytest
-from helpers import central_differences, dense_matrix
+from helpers import central_differences, dense_matrix, every_row, no_planes
 
 from hybrid import Damping, Masses, Membrane, RestingTension, Scene
 from hybrid.implicit import _merit, _trial, implicit_forces, implicit_work, newton_caches, newton_product
@@ -40,6 +40,7 @@ def setup():
     ).arrays
     free = np.ones(a.vert_rest.shape[0], np.uint8)
     free[[0, 19]] = 0  # sliding point 19 is not integrated: its plane adds no block
+    free.flags.writeable = False  # as a model's: the solve's own compiled kernels then serve these calls
     a = a._replace(vert_free=free, integrator=IMPLICIT_EULER_ID)
     rng = np.random.default_rng(11)
     k = K_N_PER_M * rng.uniform(0.5, 2.0, SLIDING.size)
@@ -59,7 +60,7 @@ def rel_error(a, b):
 def caches(a, x):
     face = np.zeros((a.mem_vert.shape[0], NCACHE))
     fib, pf = np.zeros((0, NFIB_CACHE)), np.zeros((0, NPF_CACHE))
-    newton_caches(a, a, np.zeros((a.sched.kind.shape[0], 3)), x, face, fib, pf)
+    newton_caches(a, every_row(a), np.zeros((a.sched.kind.shape[0], 3)), x, face, fib, pf)
     return face, fib, pf
 
 
@@ -78,13 +79,13 @@ def test_the_newton_matrix_with_a_plane_against_finite_differences_of_the_implic
     def forces(y, w, with_planes=True):
         f = np.zeros_like(y)
         if with_planes:
-            implicit_forces(a, a, sv, y, w, f, work, planes)
+            implicit_forces(a, every_row(a), sv, y, w, f, work, planes)
         else:
-            implicit_forces(a, a, sv, y, w, f, work)
+            implicit_forces(a, every_row(a), sv, y, w, f, work, no_planes(a))
         return f
 
-    newton = dense_matrix(n, lambda u, y: newton_product(a, a, face, fib, pf, H, False, u, y, planes))
-    without = dense_matrix(n, lambda u, y: newton_product(a, a, face, fib, pf, H, False, u, y))
+    newton = dense_matrix(n, lambda u, y: newton_product(a, every_row(a), face, fib, pf, H, False, u, y, planes))
+    without = dense_matrix(n, lambda u, y: newton_product(a, every_row(a), face, fib, pf, H, False, u, y, no_planes(a)))
     mass = np.diag(np.repeat(a.vert_mass, 3))
     expected = mass - H * H * central_differences(lambda y: forces(y, zero), x, 1e-7)
     expected -= H * central_differences(lambda w: forces(x, w), v, 1e-4)
@@ -112,8 +113,8 @@ def test_the_assembled_matrix_and_its_preconditioner_hold_the_planes(setup):
     empty = np.zeros((0, 3), np.int32)
     mat = newton_matrix(n, a.vert_free, a.mem_vert, empty, empty, a.rt_vert)
     bare = newton_matrix(n, a.vert_free, a.mem_vert, empty, empty, a.rt_vert)
-    assemble(a, a, face, fib, pf, H, mat, planes)
-    assemble(a, a, face, fib, pf, H, bare)
+    assemble(a, every_row(a), face, fib, pf, H, mat, planes)
+    assemble(a, every_row(a), face, fib, pf, H, bare, no_planes(a))
     row_of = {int(i): f for f, i in enumerate(mat.free)}
     diag = mat.row_ptr[:-1]
     for j, i in enumerate(planes.vert):

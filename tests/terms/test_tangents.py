@@ -4,6 +4,7 @@ mesh deformed at random, and the membrane's projection to positive semi-definite
 
 import numpy as np
 import pytest
+from helpers import every_row, no_planes
 
 from hybrid import Damping, HalfSpace, Masses, Membrane, MuscleFibres, RestingTension, Scene
 from hybrid.implicit import implicit_forces, implicit_work, newton_caches, newton_product, newton_rows
@@ -215,11 +216,12 @@ def test_the_newton_matrix_against_finite_differences_of_the_implicit_forces(mod
     face = np.zeros((a.mem_vert.shape[0], NCACHE))
     fib = np.zeros((a.fib_vert.shape[0], NFIB_CACHE))
     pf = np.zeros((a.pf_vert.shape[0], NPF_CACHE))
-    newton_caches(a, a, sv, x, face, fib, pf)
+    # every triangle's rows and no planes, of the types the solve passes: its compiled kernels serve
+    newton_caches(a, every_row(a), sv, x, face, fib, pf)
 
     def product(u):
         y = np.zeros_like(u)
-        newton_product(a, a, face, fib, pf, h, False, u, y)
+        newton_product(a, every_row(a), face, fib, pf, h, False, u, y, no_planes(a))
         return y
 
     work = implicit_work(a._replace(integrator=IMPLICIT_EULER_ID))  # the lungs' arrays it reads (none here)
@@ -394,13 +396,13 @@ def test_the_newton_rows_skip_only_triangles_of_fixed_points():
     u = np.random.default_rng(16).standard_normal(x.shape)
     sv = np.full((a.sched.kind.shape[0], 3), TENSION)
     out = []
-    for r in (a, rows):
+    for r in (every_row(a), rows):
         face = np.zeros((r.mem_vert.shape[0], NCACHE))
         fib = np.zeros((r.fib_vert.shape[0], NFIB_CACHE))
         pf = np.zeros((r.pf_vert.shape[0], NPF_CACHE))
         newton_caches(a, r, sv, x, face, fib, pf)
         y = np.zeros_like(u)
-        newton_product(a, r, face, fib, pf, 2e-3, False, u, y)
+        newton_product(a, r, face, fib, pf, 2e-3, False, u, y, no_planes(a))
         out.append(y[free])
     assert np.abs(out[0]).max() > 0.0
     assert np.abs(out[1] - out[0]).max() <= 1e-12 * np.abs(out[0]).max()
