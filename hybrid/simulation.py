@@ -102,6 +102,13 @@ class Simulation:
         )
 
     # ------------------------------------------------------------ state
+    def __setstate__(self, state: dict) -> None:
+        """Unpickled (a Simulation sent to another process): its step work made anew, since it holds
+        the addresses of kernels compiled apart (`hybrid.step.StepWork.calls`), which are this
+        process's, not the sender's. The work is scratch; the state and the solver's arrays are kept."""
+        self.__dict__.update(state)
+        self.work = new_work(self.model.arrays, self.state, self._implicit_work)
+
     def reset(self) -> None:
         """Back to rest at t = 0."""
         self.state = new_state(self.model.arrays)

@@ -149,3 +149,42 @@ def test_every_solver_steps_through_one_compiled_loop_and_implicit_euler_s_kerne
     loops = set(run_steps.signatures)
     imp.step(2)  # implicit Euler after symplectic Euler: the same loop, no build of its own
     assert set(run_steps.signatures) == loops and imp.steps_done == 2
+
+
+def test_a_simulation_sent_to_another_process_steps_as_it_would_have_here(tmp_path):
+    # its step calls kernels at addresses (`hybrid.step.StepWork.calls`), which are the process's
+    # own: unpickled elsewhere it must take that process's (a stale address would crash the step)
+    import pickle
+    import subprocess
+    import sys
+
+    from hybrid import Masses, Membrane, RestingTension, Scene
+    from hybrid.mesh import irregular_sphere
+
+    scene = Scene(
+        mesh=irregular_sphere(120, 0.05, seed=3),
+        masses=Masses(total_kg=0.2),
+        integrator="implicit_euler",
+        dt_s=2e-3,
+        forces=(Membrane(400.0, damping_time_s=0.01), RestingTension(tension_n_per_m=5.0)),
+    )
+    sim = Simulation(compile_scene(scene))
+    sim.state.vert_pos[:] *= 1.01  # out of rest: something to solve
+    (tmp_path / "sim.pickle").write_bytes(pickle.dumps(sim))
+    code = (
+        "import pickle, sys, numpy as np\n"
+        "sim = pickle.loads(open(sys.argv[1], 'rb').read())\n"
+        "sim.step(5)\n"
+        "np.save(sys.argv[2], sim.vert_pos)\n"
+    )
+    out = tmp_path / "pos.npy"
+    proc = subprocess.run(
+        [sys.executable, "-c", code, str(tmp_path / "sim.pickle"), str(out)],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert np.all(sim.work.calls[:2] != 0) and sim.work.force_calls.shape[0] == 1
+    sim.step(5)
+    assert np.array_equal(np.load(out), sim.vert_pos)
