@@ -17,9 +17,10 @@ import math
 import sys
 from pathlib import Path
 
+from .compile_estimate import compile_estimate
 from .errors import HybridError
 from .integrators import is_implicit
-from .kernel import compile_notice, has_cached_build, measured_compile_s, prune_old_caches, record_compile_s
+from .kernel import compile_notice, prune_old_caches
 
 __all__ = ["main"]
 
@@ -52,7 +53,7 @@ def _cmd_run(args) -> int:
         if args.dt is not None:
             scene = dataclasses.replace(scene, dt_s=args.dt)
         # a first run (nothing in the compile cache) says so before it compiles
-        estimate, on_compiled = _compile_estimate(scene)
+        estimate, on_compiled = compile_estimate(scene)
         with compile_notice(estimate, on_compiled=on_compiled):
             return _load_and_run(args, scene, drawer)
 
@@ -67,59 +68,6 @@ def _figure_process(args):
     from .pictures.run_figure import FigureProcess
 
     return FigureProcess()
-
-
-def _compile_estimate(scene):
-    """The compile notice's estimate (`hybrid.kernel.compile_notice`), given when the step loop
-    compiles: a first run's whole compile, else that other build's (implicit, multi-core). It is
-    this machine's last compiles of that kind (`hybrid.kernel.measured_compile_s`), else the
-    package's figure; on_compiled records the compile announced."""
-    from .implicit import implicit_start_forces, implicit_step
-    from .loop import loop_build, run_steps
-
-    implicit = is_implicit(scene.integrator)
-    first = not has_cached_build(run_steps)
-    announced = []
-
-    def estimate(dispatcher, arg_types):
-        # announced when the loop compiles, or implicit Euler's solve (compiled apart, when the
-        # simulation is made): the scene's helpers before them (a second at most) are counted and
-        # said at the end, so that a refusal between them is one line
-        solve = dispatcher is implicit_start_forces or dispatcher is implicit_step
-        if first and (solve or dispatcher is run_steps):
-            kind = "first run, " + ("implicit" if implicit else "rigid" if scene.rigid is not None else "membrane")
-        elif dispatcher is run_steps and arg_types is not None:
-            kind = "loop build, " + loop_build(arg_types)
-        elif solve:
-            kind = "implicit solve"
-        else:
-            return None
-        announced.append(kind)
-        return measured_compile_s(kind) or COMPILE_ESTIMATE_S[kind]
-
-    def on_compiled(cpu_s):
-        if announced:
-            record_compile_s(announced[0], cpu_s)
-
-    return estimate, on_compiled
-
-
-#: a compile's CPU seconds on a machine that has recorded none: a first run's (membrane only,
-#: with a rigid part, implicit Euler), another build of the step loop once one is cached
-#: (`hybrid.loop.loop_build`), implicit Euler's solve (compiled apart) once the loop is. Measured
-#: by the notice on an empty NUMBA_CACHE_DIR, 2 cores at a load of about 2, --duration 0.01 or 0.02
-#: --no-record (0.13.1): `hybrid run membrane_demo` 18.3; `hybrid run` 19.3, 20.2, 19.9; `hybrid run
-#: --set integrator=implicit_euler --set dt_s=0.01` 64.4; the implicit one after `hybrid run` 42.2;
-#: the loop builds as measured for 0.12 (`hybrid run` after an implicit first run 10.4, 11.4;
-#: `membrane_demo --set mesh.level=6 --set dt_s=1e-4` after all 20.0, once)
-COMPILE_ESTIMATE_S = {
-    "first run, membrane": 18,
-    "first run, rigid": 20,
-    "first run, implicit": 64,
-    "loop build, serial": 11,
-    "loop build, parallel": 20,
-    "implicit solve": 42,
-}
 
 
 def _load_and_run(args, scene, drawer=None) -> int:

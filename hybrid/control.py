@@ -23,7 +23,7 @@ import math
 import numpy as np
 
 from .errors import SceneError
-from .step import ControlArrays
+from .step_work import ControlArrays
 
 __all__ = ["Control"]
 

@@ -32,7 +32,8 @@ from .errors import RigidError, SimulationDiverged
 from .loop import CtrlArrays, LinkArrays, MjViews, RigidPack, SlideArrays, WallArrays, WrenchHistory, carry_wall
 from .rigid import CoupledRigid, mj_step_ctypes
 from .sites import site_vel_kernel
-from .step import S_TIME, T_GRAVITY, MembraneState
+from .step import S_TIME, T_GRAVITY
+from .step_work import MembraneState
 
 __all__ = ["Coupling"]
 

@@ -420,7 +420,7 @@ def carry_wall(wall, site_xpos, wall_pos, wall_vel):
 def loop_build(arg_types) -> str:
     """Which build of `run_steps` its argument types make: "parallel" (the multi-core passes)
     or "serial" (every solver steps through either: implicit Euler's solve is compiled apart,
-    `hybrid.step.StepWork`). For the compile notice's estimate (`hybrid.cli`)."""
+    `hybrid.step_work.StepWork`). For the compile notice's estimate (`hybrid.compile_estimate`)."""
     return "serial" if arg_types[9] == types.none else "parallel"  # par
 
 

@@ -29,11 +29,9 @@ from .step import (
     S_PHI,
     S_PRESSURE,
     S_TIME,
-    new_control,
-    new_state,
-    new_work,
     step_par,
 )
+from .step_work import new_control, new_state, new_work
 from .terms.volume import face_volume
 
 __all__ = ["Simulation"]
@@ -104,7 +102,7 @@ class Simulation:
     # ------------------------------------------------------------ state
     def __setstate__(self, state: dict) -> None:
         """Unpickled (a Simulation sent to another process): its step work made anew, since it holds
-        the addresses of kernels compiled apart (`hybrid.step.StepWork.calls`), which are this
+        the addresses of kernels compiled apart (`hybrid.step_work.StepWork.calls`), which are this
         process's, not the sender's. The work is scratch; the state and the solver's arrays are kept."""
         self.__dict__.update(state)
         self.work = new_work(self.model.arrays, self.state, self._implicit_work)

@@ -29,7 +29,7 @@ from .terms.base import check_value
 
 if TYPE_CHECKING:
     from .model import Model
-    from .step import MembraneState
+    from .step_work import MembraneState
 
 __all__ = ["Solver", "ExplicitEuler", "SymplecticEuler", "ImplicitEuler", "SOLVERS", "solver_of"]
 

@@ -63,7 +63,8 @@ def forces_at(model, pos, t: float = 0.0):
     """The force pass of `model` with its points at `pos` (m), time t (s): (forces (nvert, 3) N,
     the state after the pass, for its readouts such as the pressure)."""
     from hybrid.implicit_work import no_implicit_work
-    from hybrid.step import membrane_forces, new_control, new_state, new_work
+    from hybrid.step import membrane_forces
+    from hybrid.step_work import new_control, new_state, new_work
 
     state = new_state(model.arrays)
     state.vert_pos[:] = pos

@@ -26,7 +26,8 @@ from hybrid.errors import SimulationDiverged
 from hybrid.model import compile_scene
 from hybrid.scene import Gravity, Scene
 from hybrid.simulation import Simulation
-from hybrid.step import OK, S_PRESSURE, S_TIME, membrane_advance, membrane_forces, new_control
+from hybrid.step import OK, S_PRESSURE, S_TIME, membrane_advance, membrane_forces
+from hybrid.step_work import new_control
 
 PERIOD_S = 4.0
 
@@ -109,7 +110,7 @@ def test_without_volume_the_ribs_lift_at_most_a_third(breathing):
 def python_coupled_steps(model, nstep):
     """The coupled step written plainly with public pieces (module docstring)."""
     from hybrid.implicit_work import no_implicit_work
-    from hybrid.step import new_state, new_work
+    from hybrid.step_work import new_state, new_work
 
     system = model.rigid.fork()
     system.reset()

@@ -447,21 +447,21 @@ def test_the_compile_notice_hands_on_the_cpu_of_an_announced_compile_that_ended_
 def test_a_first_runs_estimate_is_what_this_machine_measured_last(tmp_path, monkeypatch):
     """The command line announces a compile with the median of this machine's last compiles of
     its kind, else the package's figure, and records the one it announced."""
-    import hybrid.cli as cli
+    import hybrid.compile_estimate as ce
     import hybrid.kernel as k
     from hybrid.loop import run_steps
     from hybrid.resolve import resolve_scene
 
     monkeypatch.setattr(k, "CACHE_DIR", str(tmp_path / "numba-0123456789abcdef"))
-    monkeypatch.setattr(cli, "has_cached_build", lambda dispatcher: False)  # a first run
+    monkeypatch.setattr(ce, "has_cached_build", lambda dispatcher: False)  # a first run
     scene = resolve_scene("breathing")  # coupled to its ribs: "first run, rigid"
-    estimate, on_compiled = cli._compile_estimate(scene)
+    estimate, on_compiled = ce.compile_estimate(scene)
     assert estimate("helper", ()) is None
-    assert estimate(run_steps, ()) == cli.COMPILE_ESTIMATE_S["first run, rigid"]
+    assert estimate(run_steps, ()) == ce.COMPILE_ESTIMATE_S["first run, rigid"]
     on_compiled(9.0)
     assert k.measured_compile_s("first run, rigid") == 9.0
     k.record_compile_s("first run, rigid", 13.0)
-    estimate, _ = cli._compile_estimate(scene)
+    estimate, _ = ce.compile_estimate(scene)
     assert estimate(run_steps, ()) == 11.0  # the median of 9 and 13
     assert k.measured_compile_s("first run, membrane") is None
 
@@ -472,7 +472,7 @@ def test_implicit_euler_s_solve_is_announced_alone_once_the_loop_is_cached(tmp_p
     cache the first compile, the solve's or the loop's, announces the whole first run."""
     import dataclasses
 
-    import hybrid.cli as cli
+    import hybrid.compile_estimate as ce
     import hybrid.kernel as k
     from hybrid.implicit import implicit_start_forces, implicit_step
     from hybrid.loop import run_steps
@@ -480,15 +480,13 @@ def test_implicit_euler_s_solve_is_announced_alone_once_the_loop_is_cached(tmp_p
 
     monkeypatch.setattr(k, "CACHE_DIR", str(tmp_path / "numba-0123456789abcdef"))
     scene = dataclasses.replace(resolve_scene("breathing"), integrator="implicit_euler")
-    monkeypatch.setattr(cli, "has_cached_build", lambda dispatcher: True)  # the loop cached
-    estimate, _ = cli._compile_estimate(scene)
-    assert (
-        estimate(implicit_step, ()) == estimate(implicit_start_forces, ()) == cli.COMPILE_ESTIMATE_S["implicit solve"]
-    )
+    monkeypatch.setattr(ce, "has_cached_build", lambda dispatcher: True)  # the loop cached
+    estimate, _ = ce.compile_estimate(scene)
+    assert estimate(implicit_step, ()) == estimate(implicit_start_forces, ()) == ce.COMPILE_ESTIMATE_S["implicit solve"]
     assert estimate(run_steps, None) is None and estimate("helper", ()) is None
-    monkeypatch.setattr(cli, "has_cached_build", lambda dispatcher: False)  # an empty cache
-    estimate, _ = cli._compile_estimate(scene)
-    assert estimate(implicit_start_forces, ()) == cli.COMPILE_ESTIMATE_S["first run, implicit"]
+    monkeypatch.setattr(ce, "has_cached_build", lambda dispatcher: False)  # an empty cache
+    estimate, _ = ce.compile_estimate(scene)
+    assert estimate(implicit_start_forces, ()) == ce.COMPILE_ESTIMATE_S["first run, implicit"]
 
 
 def test_a_kernel_called_at_its_address_is_the_kernel_called_directly():

@@ -53,10 +53,10 @@ try:
     runpy.run_module("hybrid", run_name="__main__", alter_sys=True)
 except SystemExit as stop:
     code = stop.code
-from hybrid import implicit, loop, step
+from hybrid import implicit, loop
 from hybrid.terms import lungs, membrane, resting_tension, volume
 apart = (implicit.implicit_step, implicit.implicit_start_forces, lungs.lungs_step_force, lungs.project_occluded,
-         resting_tension.resting_tension_step_force, step.soft_volume_step)
+         resting_tension.resting_tension_step_force, volume.soft_volume_step)
 print(json.dumps({"code": code, "loops": len(loop.run_steps.signatures),
                   "parallel": [len(k.signatures) for k in (membrane.membrane_faces_parallel,
                                volume.volume_direction_parallel)],
@@ -125,7 +125,7 @@ def test_a_first_run_compiles_the_one_step_loop_once_and_no_build_its_scene_cann
     every term (their flags read at run time: `hybrid.switches`), and not what its scene cannot
     reach: membrane_demo (80 points, symplectic Euler, no lungs, resting tension or soft volume)
     neither the multi-core build, nor implicit Euler's solve, nor the kernels of the terms it lacks
-    that the loop calls at their addresses (`hybrid.step.StepWork`)."""
+    that the loop calls at their addresses (`hybrid.step_work.StepWork`)."""
     proc = first_run["process"]
     assert proc.returncode == 0, proc.stderr[-2000:]
     got = json.loads(proc.stdout.splitlines()[-1])

@@ -152,7 +152,7 @@ def test_every_solver_steps_through_one_compiled_loop_and_implicit_euler_s_kerne
 
 
 def test_a_simulation_sent_to_another_process_steps_as_it_would_have_here(tmp_path):
-    # its step calls kernels at addresses (`hybrid.step.StepWork.calls`), which are the process's
+    # its step calls kernels at addresses (`hybrid.step_work.StepWork.calls`), which are the process's
     # own: unpickled elsewhere it must take that process's (a stale address would crash the step)
     import pickle
     import subprocess

@@ -11,7 +11,8 @@ from ..model import Model
 from ..readouts import axis_crossing_z, pitch_deg, quat_rot, ring_faces, swept_volumes
 from ..scene import Muscle, MuscleFibres, SoftVolume, Volume
 from ..schedule import Breathing, schedule_eval, stack_schedules
-from ..step import F_ALVEOLAR, F_FLOW, F_KE, F_LUNG_VOLUME, F_PLEURAL, F_PRESSURE, F_TIME, F_VOLUME, ControlArrays
+from ..step import F_ALVEOLAR, F_FLOW, F_KE, F_LUNG_VOLUME, F_PLEURAL, F_PRESSURE, F_TIME, F_VOLUME
+from ..step_work import ControlArrays
 from ..terms import Lungs
 from ..terms.lungs import CMH2O_PA, CMH2O_PER_L, P_E, P_RECOIL, P_V0
 from ..terms.volume import face_volume

@@ -181,7 +181,7 @@ def order_terms(classes) -> None:
 def registered_forces() -> tuple:
     """((id, step_force), ...) of the registered force terms that carry their own
     `step_force` kernel, in id order: the step calls those its model has, each compiled apart
-    for the model's types and called at its address (`hybrid.step.StepWork.force_calls`), so
+    for the model's types and called at its address (`hybrid.step_work.StepWork.force_calls`), so
     that a term no scene of the run has is never compiled."""
     return tuple((cls.id, cls.step_force) for cls in FLAGGED if cls.step_force is not None)
 

@@ -27,6 +27,7 @@ from ..kernel import CHUNK_VERTS, kernel, kernel_twin
 from .base import Rows, Term, constraint, force, param
 
 __all__ = [
+    "soft_volume_step",
     "Volume",
     "SoftVolume",
     "Pressure",
@@ -583,3 +584,24 @@ def add_pressure(ring_ptr, ring_vert, pres_sched, sched_val, vert_pos, vert_forc
         vert_force[i, 0] += c * gx
         vert_force[i, 1] += c * gy
         vert_force[i, 2] += c * gz
+
+
+@kernel
+def soft_volume_step(m, s, w):
+    """The soft volume's force (`soft_volume_force`) on the step's points;
+    returns its pressure (Pa). Compiled apart, for the models that have the term (`hybrid.step_work.StepWork.calls`).
+    # Model: m.ring_ptr, m.ring_vert, m.vol0, m.soft_stiff, m.soft_bulk   # Data in: s.vert_pos
+    # Data out: w.vert_force (added to), s.grad   # Scratch: w.cubic, w.vert_acc
+    """
+    return soft_volume_force(
+        m.ring_ptr,
+        m.ring_vert,
+        m.vol0,
+        m.soft_stiff,
+        m.soft_bulk,
+        s.vert_pos,
+        s.grad,
+        w.cubic,
+        w.vert_acc,
+        w.vert_force,
+    )

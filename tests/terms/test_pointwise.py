@@ -20,7 +20,8 @@ def test_step_forces_are_the_terms_added_point_by_point(subdivisions, parallel):
     import dataclasses
 
     from hybrid.bench import bench_membrane
-    from hybrid.step import membrane_forces, new_control, new_state, new_work
+    from hybrid.step import membrane_forces
+    from hybrid.step_work import new_control, new_state, new_work
 
     model = compile_scene(bench_membrane(subdivisions))
     model = dataclasses.replace(model, arrays=model.arrays._replace(parallel=parallel))

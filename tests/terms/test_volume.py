@@ -38,7 +38,8 @@ from hybrid.scene import (
     Volume,
 )
 from hybrid.simulation import Simulation
-from hybrid.step import S_PRESSURE, membrane_forces, new_control, new_state, new_work
+from hybrid.step import S_PRESSURE, membrane_forces
+from hybrid.step_work import new_control, new_state, new_work
 
 VOLUME_RTOL = 1e-12  # the bound; see the module docstring for why it is reachable
 
