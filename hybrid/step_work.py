@@ -18,7 +18,7 @@ from .model import MembraneArrays
 from .switches import T_LUNGS, T_SOFT_VOLUME
 from .terms import STEP_FORCES, TERMS
 from .terms.lungs import NLUNG, P_RECOIL, P_V0, LungSlot, project_occluded
-from .terms.volume import soft_volume_step
+from .terms.soft_volume import soft_volume_step
 
 __all__ = [
     "MembraneState",

@@ -54,9 +54,9 @@ try:
 except SystemExit as stop:
     code = stop.code
 from hybrid import implicit, loop
-from hybrid.terms import lungs, membrane, resting_tension, volume
+from hybrid.terms import lungs, membrane, resting_tension, soft_volume, volume
 apart = (implicit.implicit_step, implicit.implicit_start_forces, lungs.lungs_step_force, lungs.project_occluded,
-         resting_tension.resting_tension_step_force, volume.soft_volume_step)
+         resting_tension.resting_tension_step_force, soft_volume.soft_volume_step)
 print(json.dumps({"code": code, "loops": len(loop.run_steps.signatures),
                   "parallel": [len(k.signatures) for k in (membrane.membrane_faces_parallel,
                                volume.volume_direction_parallel)],

@@ -21,8 +21,9 @@ from .passive_fibres import PassiveFibres
 from .pointwise import Damping, Gravity
 from .resting_tension import RestingTension
 from .shape_memory import ShapeMemory
+from .soft_volume import SoftVolume
 from .springs import AppliedForce, Attraction, MassSpring
-from .volume import Pressure, SoftVolume, Volume
+from .volume import Pressure, Volume
 
 __all__ = [
     "Term",

@@ -1,6 +1,5 @@
-"""The enclosed volume (paper 4): the exact constant-volume projection, the
-soft (compressible) volume of paper 6.2 or of a bulk modulus, and a uniform
-pressure load.
+"""The enclosed volume (paper 4): the exact constant-volume projection and a uniform
+pressure load (the soft, compressible volume: `hybrid.terms.soft_volume`).
 
 After free integration to X*, X = X* + phi d with d_i = w_i grad_i V(X*), and
 V(X* + phi d) - V0 is a cubic in phi; its real root nearest 0 is found to machine precision;
@@ -21,15 +20,12 @@ from enum import IntEnum
 import numpy as np
 from numba import prange
 
-from .. import checks
 from ..errors import SceneError
 from ..kernel import CHUNK_VERTS, kernel, kernel_twin
 from .base import Rows, Term, constraint, force, param
 
 __all__ = [
-    "soft_volume_step",
     "Volume",
-    "SoftVolume",
     "Pressure",
     "add_pressure",
     "Projection",
@@ -39,7 +35,6 @@ __all__ = [
     "volume_cubic",
     "solve_cubic_near_zero",
     "project_volume",
-    "soft_volume_force",
     "PROJ_OK",
     "PROJ_NO_GRADIENT",
     "PROJ_NO_ROOT",
@@ -55,42 +50,6 @@ class Projection(IntEnum):
 
 
 PROJ_OK, PROJ_NO_GRADIENT, PROJ_NO_ROOT = int(Projection.OK), int(Projection.NO_GRADIENT), int(Projection.NO_ROOT)
-
-
-@force("soft_volume")
-class SoftVolume(Term):
-    """A compressible fill. Give `bulk_modulus_pa` (formulation "continuum"): a
-    fill of bulk modulus K (Pa) at the pressure p = -K (V - V0) / V0, force
-    F_i = p grad_i V, energy K (V - V0)^2 / (2 V0); or `stiffness_n_per_m`
-    (formulation "paper", paper 6.2): each point pulled with that stiffness
-    toward the position the exact volume projection would give it, whose bulk
-    modulus grows with the number of points."""
-
-    # soft_stiff N/m (paper), soft_bulk Pa (continuum): the one given, the other 0
-    arrays = {"soft_stiff": lambda n: 0.0, "soft_bulk": lambda n: 0.0}
-    stiffness_n_per_m: float = param("positive", None, hi=checks.MAX_STIFFNESS_N_PER_M, formulation="paper")
-    bulk_modulus_pa: float = param("positive", None, hi=checks.MAX_MODULUS_PA, formulation="continuum")
-
-    def compile(self, b, what):
-        super().compile(b, what)
-        if (self.stiffness_n_per_m is None) == (self.bulk_modulus_pa is None):
-            raise SceneError(
-                f"{what}: expected exactly one of bulk_modulus_pa or stiffness_n_per_m, received "
-                f"bulk_modulus_pa={self.bulk_modulus_pa!r} stiffness_n_per_m={self.stiffness_n_per_m!r}"
-            )
-        if self.stiffness_n_per_m is not None:
-            b.out["soft_stiff"] = self.value("stiffness_n_per_m", what)
-        else:
-            b.out["soft_bulk"] = self.value("bulk_modulus_pa", what)
-        b.mesh.require_closed(f"{what} (compressible volume) needs a closed surface")
-        b.mesh.require_one_piece(f"{what} (compressible volume) needs a surface bounding one region")
-        b.mesh.require_no_self_crossing(f"{what} (compressible volume) needs a surface bounding one region")
-        b.out["vol0"] = float(b.mesh.volume())
-        if self.bulk_modulus_pa is not None:
-            # the energy's Hessian on the diagonal, K/V0 |grad_i V|^2: each point's
-            # stiffness for the stability estimate
-            g = b.mesh.volume_gradient()
-            b.vert_stiffness += b.out["soft_bulk"] / b.out["vol0"] * np.sum(g * g, axis=1)
 
 
 @force("pressure")
@@ -531,45 +490,6 @@ def project_volume(ring_ptr, ring_vert, vol0, vert_weight, h, vert_pos, vert_vel
 
 
 @kernel
-def soft_volume_force(ring_ptr, ring_vert, vol0, stiff, bulk, vert_pos, grad, cubic, chunk_acc, vert_force):
-    """Compressibility: with a bulk modulus K > 0, the pressure p = -K (V - V0) / V0;
-    otherwise (paper 6.2) the attraction toward the volume-satisfying positions:
-    phi solves V(X + phi grad V(X)) = V0 and each point is pulled toward its
-    target X_i + phi grad_i with stiffness k, a uniform pressure p = k phi (Pa).
-    Either way F_i = p grad_i V. Returns p.
-    # Model: ring_ptr, ring_vert (closed fans), vol0 m^3, stiff N/m, bulk Pa (0: paper 6.2)
-    # Data in: vert_pos
-    # Data out: vert_force; scratch grad, cubic, chunk_acc (chunk_count(nvert), >= 3)
-    """
-    ref = centroid(vert_pos, chunk_acc, None)  # serial: the multi-core build is not compiled for it
-    vol = 0.0
-    c1 = 0.0
-    for i in range(vert_pos.shape[0]):
-        gx, gy, gz = ring_cross_sum(ring_ptr, ring_vert, vert_pos, i)
-        gx /= 6.0
-        gy /= 6.0
-        gz /= 6.0
-        grad[i, 0] = gx
-        grad[i, 1] = gy
-        grad[i, 2] = gz
-        vol += (vert_pos[i, 0] - ref[0]) * gx + (vert_pos[i, 1] - ref[1]) * gy + (vert_pos[i, 2] - ref[2]) * gz
-        c1 += gx * gx + gy * gy + gz * gz
-    if bulk > 0.0:
-        p = -bulk * (vol / 3.0 - vol0) / vol0
-    else:
-        volume_cubic(ring_ptr, ring_vert, ref, vert_pos, grad, chunk_acc, cubic, None)
-        phi, status = solve_cubic_near_zero(vol / 3.0 - vol0, c1, cubic[0], cubic[1])
-        if status != PROJ_OK:
-            return np.nan
-        p = stiff * phi
-    for i in range(grad.shape[0]):
-        vert_force[i, 0] += p * grad[i, 0]
-        vert_force[i, 1] += p * grad[i, 1]
-        vert_force[i, 2] += p * grad[i, 2]
-    return p
-
-
-@kernel
 def add_pressure(ring_ptr, ring_vert, pres_sched, sched_val, vert_pos, vert_force):
     """A uniform pressure load: F_i += p(t) grad_i V, p the sum of the terms' schedules (Pa).
     # Model: ring_ptr, ring_vert (closed fans), pres_sched (nterm,) int64
@@ -584,24 +504,3 @@ def add_pressure(ring_ptr, ring_vert, pres_sched, sched_val, vert_pos, vert_forc
         vert_force[i, 0] += c * gx
         vert_force[i, 1] += c * gy
         vert_force[i, 2] += c * gz
-
-
-@kernel
-def soft_volume_step(m, s, w):
-    """The soft volume's force (`soft_volume_force`) on the step's points;
-    returns its pressure (Pa). Compiled apart, for the models that have the term (`hybrid.step_work.StepWork.calls`).
-    # Model: m.ring_ptr, m.ring_vert, m.vol0, m.soft_stiff, m.soft_bulk   # Data in: s.vert_pos
-    # Data out: w.vert_force (added to), s.grad   # Scratch: w.cubic, w.vert_acc
-    """
-    return soft_volume_force(
-        m.ring_ptr,
-        m.ring_vert,
-        m.vol0,
-        m.soft_stiff,
-        m.soft_bulk,
-        s.vert_pos,
-        s.grad,
-        w.cubic,
-        w.vert_acc,
-        w.vert_force,
-    )
