@@ -17,20 +17,23 @@ def compile_estimate(scene):
     this machine's last compiles of that kind (`hybrid.kernel.measured_compile_s`), else the
     package's figure; on_compiled records the compile announced."""
     from .implicit import implicit_start_forces, implicit_step
-    from .loop import loop_build, run_steps
+    from .loop import loop_build, run_steps, steps_between
 
     implicit = is_implicit(scene.integrator)
-    first = not has_cached_build(run_steps)
+    loop = (run_steps, steps_between)
+    solves = (implicit_start_forces, implicit_step)
+    first = not has_cached_build(steps_between)
     announced = []
 
     def estimate(dispatcher, arg_types):
         # announced when the loop compiles, or implicit Euler's solve (compiled apart, when the
         # simulation is made): the scene's helpers before them (a second at most) are counted and
         # said at the end, so that a refusal between them is one line
-        solve = dispatcher is implicit_start_forces or dispatcher is implicit_step
-        if first and (solve or dispatcher is run_steps):
+        solve = any(dispatcher is k for k in solves)
+        in_loop = any(dispatcher is k for k in loop)
+        if first and (solve or in_loop):
             kind = "first run, " + ("implicit" if implicit else "rigid" if scene.rigid is not None else "membrane")
-        elif dispatcher is run_steps and arg_types is not None:
+        elif in_loop and arg_types is not None:
             kind = "loop build, " + loop_build(arg_types)
         elif solve:
             kind = "implicit solve"

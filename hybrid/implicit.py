@@ -51,7 +51,7 @@ implicit_max_iter iterations stops the run (`IMPLICIT_NOT_CONVERGED`), the
 state left at the step's start.
 
 `implicit_start_forces` and `implicit_step` are compiled apart from the step loop and called
-at their addresses (`hybrid.kernel.call_at`, `hybrid.step_work.StepWork.calls`): one loop
+at their addresses (`hybrid.calls.call_at`, `hybrid.step_work.StepWork.calls`): one loop
 build serves every solver, and the solve compiles only for a scene that steps with it (the
 explicit integrators hold an empty `ImplicitWork`, and no address).
 """

@@ -41,9 +41,6 @@ from pathlib import Path
 
 import numba
 from numba import njit
-from numba.core import cgutils
-from numba.core import types as nb_types
-from numba.extending import intrinsic
 
 __all__ = [
     "CACHE_DIR",
@@ -54,8 +51,6 @@ __all__ = [
     "jit",
     "kernel",
     "kernel_twin",
-    "call_at",
-    "kernel_address",
     "CHUNK_VERTS",
     "PARALLEL_MIN_VERTS",
     "use_parallel",
@@ -342,46 +337,6 @@ def kernel(fn=None, **extra):
             return njit(**{**FLAGS, **extra})(f)
 
     return wrap if fn is None else wrap(fn)
-
-
-@intrinsic
-def call_at(typingctx, address, result, args):
-    """The kernel compiled at `address` (`kernel_address`) called with the tuple `args`; its result,
-    of `result`'s type. The caller is compiled without the kernel's code: numba links a callee's
-    code into each caller and optimizes it again there, so that implicit Euler's whole solve was
-    compiled into the step loop, a loop build of its own (76 s of CPU for a first implicit run).
-    Called this way it compiles once, apart, beside the one loop every solver shares. The
-    kernel must have been compiled for exactly args' types and result's (`kernel_address` takes
-    them from the same arrays); an address of 0 must never be called.
-    # Data in: address (int64), result (a value of the result's type), args (a tuple)   # Data out: returns result's type
-    """
-    result_type = nb_types.unliteral(result)
-    arg_types = tuple(nb_types.unliteral(t) for t in args.types)
-
-    def codegen(context, builder, signature, llargs):
-        fn_type = context.call_conv.get_function_type(result_type, arg_types).as_pointer()
-        fn = builder.inttoptr(llargs[0], fn_type)
-        values = cgutils.unpack_tuple(builder, llargs[2], len(arg_types))
-        status, res = context.call_conv.call_function(builder, fn, result_type, arg_types, values)
-        with cgutils.if_unlikely(builder, status.is_error):
-            context.call_conv.return_status_propagate(builder, status)
-        return res
-
-    return result_type(address, result, args), codegen
-
-
-def kernel_address(dispatcher, result, *example_args) -> int:
-    """The address of `dispatcher` compiled (or loaded from the cache) for the example arguments'
-    types, returning `result` (a numba type), which `call_at` calls. Refuses a kernel whose
-    result is another type (the call would read it wrongly)."""
-    arg_types = tuple(numba.typeof(a) for a in example_args)
-    dispatcher.compile(arg_types)
-    compiled = dispatcher.overloads[arg_types]
-    if nb_types.unliteral(compiled.signature.return_type) != result:
-        raise TypeError(
-            f"kernel_address: {dispatcher.py_func.__qualname__} returns {compiled.signature.return_type}, expected {result}"
-        )
-    return int(compiled.library.get_pointer_to_function(compiled.fndesc.llvm_func_name))
 
 
 def kernel_twin(fn, **extra):

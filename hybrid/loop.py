@@ -30,11 +30,21 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
+import numba
 import numpy as np
 from llvmlite import ir
 from numba import types
 from numba.extending import intrinsic
 
+from .calls import (
+    ADDRESS_ONLY,
+    args_from_memory,
+    args_in_memory,
+    args_type_of,
+    call_at,
+    compile_elsewhere,
+    kernel_address,
+)
 from .kernel import kernel
 from .schedule import schedule_eval, stack_schedules
 from .sites import add_point_wrench_kernel, add_wrench_at, point_wrench_kernel, site_vel_kernel
@@ -55,6 +65,7 @@ from .step import (
     membrane_advance,
     membrane_forces,
 )
+from .step_work import CALL_RIGID, CALL_STEPS
 from .terms import Lungs
 from .terms.lungs import L_ALVEOLAR, L_PLEURAL, L_VOLUME, P_REF, cavity_volume_rate
 from .terms.slide_planes import carry_planes
@@ -75,6 +86,10 @@ __all__ = [
     "run_steps",
     "membrane_only",
     "loop_build",
+    "steps_between",
+    "rigid_between",
+    "loop_calls",
+    "start_loop_compile",
 ]
 
 LUNGS_ID = Lungs.id
@@ -418,10 +433,12 @@ def carry_wall(wall, site_xpos, wall_pos, wall_vel):
 
 
 def loop_build(arg_types) -> str:
-    """Which build of `run_steps` its argument types make: "parallel" (the multi-core passes)
-    or "serial" (every solver steps through either: implicit Euler's solve is compiled apart,
-    `hybrid.step_work.StepWork`). For the compile notice's estimate (`hybrid.compile_estimate`)."""
-    return "serial" if arg_types[9] == types.none else "parallel"  # par
+    """Which build of the step loop (`run_steps`, or the steps it calls, `steps_between`) its
+    argument types make: "parallel" (the multi-core passes) or "serial" (every solver steps through
+    either: implicit Euler's solve is compiled apart, `hybrid.step_work.StepWork`). For the compile
+    notice's estimate (`hybrid.compile_estimate`)."""
+    par = arg_types[9] if len(arg_types) == 10 else arg_types[4]  # `run_steps`'s, `steps_between`'s
+    return "serial" if par == types.none else "parallel"
 
 
 @kernel
@@ -431,6 +448,8 @@ def run_steps(m, s, w, imp, c, stops, step0, frames, rig, par=True):
     captured: fewer than stops when a step fails, its status then in s.status
     (s.status[1]: the failing step's index). Step k runs from t = origin + k h: the
     same times however a run is cut into calls (a checkpoint, frames, timed pieces).
+    The steps between two stops run in `steps_between`, compiled apart and called at its
+    address (`StepWork.calls`), which reads the arrays from this call's frame.
     # Model:    m (MembraneArrays); rig (RigidPack): the rigid part, or `membrane_only`'s empty pack
     # Data in:  s (MembraneState) at step step0; c (ControlArrays): the inputs;
     #           w (StepWork): the step's work arrays; imp (ImplicitWork): implicit Euler's
@@ -440,18 +459,12 @@ def run_steps(m, s, w, imp, c, stops, step0, frames, rig, par=True):
     #           frames (FrameArrays): frame i at stops[i]
     # par:      None: the membrane's serial passes only (`hybrid.step.step_par`)
     """
-    h = m.dt
-    origin = s.scal[S_ORIGIN]
+    args = (m, s, w, imp, c, rig)
+    args_at, args_type = args_in_memory(args), args_type_of(args)
     done = step0
     for f in range(stops.shape[0]):
-        for k in range(stops[f] - done):
-            t = origin + (done + k) * h
-            membrane_forces(m, s, w, imp, c, t, par)
-            if rig.coupled:
-                rigid_phase(m, s, w, imp.planes, t, done - step0 + k, rig)
-            if membrane_advance(m, s, w, imp, c, t, done + k, par) != OK:
-                return f
-            s.scal[S_TIME] = origin + (done + k + 1) * h
+        if call_at(w.calls[CALL_STEPS], OK, (args_at, done, stops[f], step0, par, args_type)) != OK:
+            return f
         done = stops[f]
         capture_frame(m, s, frames.pos[f], frames.scal[f])
         if rig.coupled:
@@ -461,6 +474,89 @@ def run_steps(m, s, w, imp, c, stops, step0, frames, rig, par=True):
                 for a in range(4):
                     frames.body_quat[f, b, a] = rig.mj.xquat[b + 1, a]
     return stops.shape[0]
+
+
+@kernel(**ADDRESS_ONLY)
+def steps_between(args_at, first, last, step0, par, args_type):
+    """Steps first .. last - 1 (module docstring), the arrays (m, s, w, imp, c, rig) read from
+    `run_steps`'s frame (`hybrid.kernel.args_in_memory`); with a rigid part, its phase called
+    at its address (`rigid_between`). Returns a status code: OK, or the failing step's
+    (its index in s.status[1]).
+    # Model:    m (MembraneArrays), rig (RigidPack)   # Data in: args_at (int64), first, last,
+    #           step0 (the first step of `run_steps`'s call: rig.hist's row 0), par, args_type
+    # Data out: as `run_steps`, without its frames
+    """
+    m, s, w = (
+        args_from_memory(args_at, 0, args_type),
+        args_from_memory(args_at, 1, args_type),
+        args_from_memory(args_at, 2, args_type),
+    )
+    imp, c, rig = (
+        args_from_memory(args_at, 3, args_type),
+        args_from_memory(args_at, 4, args_type),
+        args_from_memory(args_at, 5, args_type),
+    )
+    rigid_args = (m, s, w, imp.planes, rig)
+    rigid_at, rigid_type = args_in_memory(rigid_args), args_type_of(rigid_args)
+    h = m.dt
+    origin = s.scal[S_ORIGIN]
+    for k in range(first, last):
+        t = origin + k * h
+        membrane_forces(m, s, w, imp, c, t, par)
+        if rig.coupled:
+            call_at(w.calls[CALL_RIGID], None, (rigid_at, t, k - step0, rigid_type))
+        code = membrane_advance(m, s, w, imp, c, t, k, par)
+        if code != OK:
+            return code
+        s.scal[S_TIME] = origin + (k + 1) * h
+    return OK
+
+
+@kernel(**ADDRESS_ONLY)
+def rigid_between(args_at, t, row, args_type):
+    """`rigid_phase`, its arrays (m, s, w, planes, rig) read from `steps_between`'s frame: the
+    phase that step calls at its address (`StepWork.calls`), compiled for scenes with a rigid part.
+    # Model: m, rig   # Data in: args_at (int64), t (s), row, args_type   # Data out: as `rigid_phase`
+    """
+    m, s, w = (
+        args_from_memory(args_at, 0, args_type),
+        args_from_memory(args_at, 1, args_type),
+        args_from_memory(args_at, 2, args_type),
+    )
+    planes, rig = args_from_memory(args_at, 3, args_type), args_from_memory(args_at, 4, args_type)
+    rigid_phase(m, s, w, planes, t, row, rig)
+
+
+def _steps_args(work, arrays, state, imp, control, rig, par) -> tuple:
+    """Example arguments of `steps_between` as `run_steps` calls it with these arrays."""
+    return 0, 0, 0, 0, par, numba.typeof((arrays, state, work, imp, control, rig))
+
+
+def start_loop_compile(work, arrays, state, imp, control, rig: RigidPack, par):
+    """On a first run, the steps between two stops (`steps_between`, half of the step's compile)
+    compiled for these types by a helper process meanwhile (`hybrid.calls.compile_elsewhere`),
+    for `loop_calls` to wait for; else None."""
+    steps_types = tuple(numba.typeof(a) for a in _steps_args(work, arrays, state, imp, control, rig, par))
+    return compile_elsewhere([(steps_between, steps_types)])
+
+
+def loop_calls(work, arrays, state, imp, control, rig: RigidPack, par, elsewhere=None) -> None:
+    """The addresses of the steps between two stops (`steps_between`) and, with a rigid part,
+    of its phase (`rigid_between`) into `work.calls`, each compiled (or loaded from the cache)
+    now for the types `run_steps` passes them with these arrays. `elsewhere`: the steps being
+    compiled by a helper process (`start_loop_compile`), waited for after this process compiled
+    the rigid phase and `run_steps` itself (which its first call would otherwise compile)."""
+    if rig.coupled:
+        rigid_args = numba.typeof((arrays, state, work, imp.planes, rig))
+        work.calls[CALL_RIGID] = kernel_address(rigid_between, types.none, 0, 0.0, 0, rigid_args)
+    if elsewhere is not None:
+        stops, frames = np.zeros(1, np.int64), Frames(1, 1, 0).arrays()
+        run_steps.compile(
+            tuple(numba.typeof(a) for a in (arrays, state, work, imp, control, stops, 0, frames, rig, par))
+        )
+        elsewhere.wait()
+    steps_args = _steps_args(work, arrays, state, imp, control, rig, par)
+    work.calls[CALL_STEPS] = kernel_address(steps_between, types.int64, *steps_args)
 
 
 def membrane_only() -> RigidPack:

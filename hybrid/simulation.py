@@ -20,7 +20,7 @@ from .diagnosis import advice, failure
 from .errors import ArgumentError, SceneError, SimulationDiverged
 from .implicit import Info
 from .implicit_work import no_implicit_work
-from .loop import Frames, kinetic_energy_of, membrane_only, run_steps
+from .loop import Frames, kinetic_energy_of, loop_calls, membrane_only, run_steps, start_loop_compile
 from .model import TERMS, Model
 from .solvers import SOLVERS, Solver, solver_of
 from .state import State
@@ -31,7 +31,7 @@ from .step import (
     S_TIME,
     step_par,
 )
-from .step_work import new_control, new_state, new_work
+from .step_work import CALL_STEPS, new_control, new_state, new_work, term_addresses
 from .terms.volume import face_volume
 
 __all__ = ["Simulation"]
@@ -100,6 +100,12 @@ class Simulation:
         )
 
     # ------------------------------------------------------------ state
+    def __getstate__(self) -> dict:
+        """Pickled without the helper process compiling its loop, if any (a process of this one)."""
+        state = dict(self.__dict__)
+        state.pop("_loop_elsewhere", None)
+        return state
+
     def __setstate__(self, state: dict) -> None:
         """Unpickled (a Simulation sent to another process): its step work made anew, since it holds
         the addresses of kernels compiled apart (`hybrid.step_work.StepWork.calls`), which are this
@@ -113,11 +119,20 @@ class Simulation:
         # the solver's own arrays (an empty set for the explicit pair: one loop build), the step's scratch
         imp = self.solver.new_work(self.model, self.state)
         self.solver_work = no_implicit_work(self.model.arrays) if imp is None else imp
-        self.work = new_work(self.model.arrays, self.state, imp)
+        self.work = new_work(self.model.arrays, self.state, imp, addresses=False)
         self.steps_done = 0
         self.failed: Exception | None = None
         if self.rigid is not None:
             self.rigid.reset(self.state)
+        if not hasattr(self, "_loop_elsewhere"):  # made: a first run's loop compiles meanwhile elsewhere
+            self._loop_elsewhere = start_loop_compile(*self._loop_types(self.model.arrays))
+        term_addresses(self.work, self.model.arrays, self.state, imp)
+
+    def _loop_types(self, arrays):
+        """What the loop's kernels are compiled for (`hybrid.loop.loop_calls`): these arrays, the
+        state, work, solver's work and inputs, the rigid pack's types and the build's `par`."""
+        rig = _MEMBRANE_ONLY if self.rigid is None else self.rigid.pack(0)
+        return self.work, arrays, self.state, self.solver_work, self.control.arrays, rig, step_par(arrays)
 
     @property
     def mj_model(self):
@@ -255,6 +270,9 @@ class Simulation:
         frames captured."""
         step0 = self.steps_done
         rig = _MEMBRANE_ONLY if self.rigid is None else self.rigid.pack(int(stops[-1]) - step0)
+        if not self.work.calls[CALL_STEPS]:  # the first step: the loop's kernels compiled or loaded
+            loop_calls(*self._loop_types(arrays), getattr(self, "_loop_elsewhere", None))
+            self._loop_elsewhere = None
         count = run_steps(
             arrays,
             self.state,

@@ -25,11 +25,12 @@ from enum import IntEnum
 import numpy as np
 from numba import prange
 
+from .calls import call_at
 from .implicit import (
     implicit_pressure,
 )
 from .integrators import EXPLICIT_EULER_ID, IMPLICIT_EULER_ID
-from .kernel import CHUNK_VERTS, call_at, kernel, kernel_twin
+from .kernel import CHUNK_VERTS, kernel, kernel_twin
 from .schedule import KIND_PYTHON, schedule_eval
 from .step_work import CALL_IMPLICIT_START, CALL_IMPLICIT_STEP, CALL_OCCLUDED, CALL_SOFT_VOLUME
 from .switches import (  # each term's flag in MembraneArrays.term_on and its call counter

@@ -11,9 +11,10 @@ from typing import NamedTuple
 import numpy as np
 from numba.core import types as nb_types
 
+from .calls import kernel_address
 from .implicit import ImplicitWork, implicit_start_forces, implicit_step
 from .integrators import IMPLICIT_EULER_ID
-from .kernel import chunk_count, kernel_address
+from .kernel import chunk_count
 from .model import MembraneArrays
 from .switches import T_LUNGS, T_SOFT_VOLUME
 from .terms import STEP_FORCES, TERMS
@@ -29,8 +30,11 @@ __all__ = [
     "CALL_IMPLICIT_STEP",
     "CALL_OCCLUDED",
     "CALL_SOFT_VOLUME",
+    "CALL_STEPS",
+    "CALL_RIGID",
     "new_state",
     "new_work",
+    "term_addresses",
     "new_control",
 ]
 
@@ -66,10 +70,12 @@ class StepWork(NamedTuple):
     (2,): the volume projection's; lung_wall_force (nwall, 3) N: the pleural load on the
     cavity wall (to its bodies); lung_scratch (5, nvert, 3): the occluded airway's
     projection (empty rows without lungs); calls (NCALL,) int64: the addresses of the kernels
-    the step calls compiled apart (`hybrid.kernel.call_at`), by slot (`CALL_*`): implicit
+    the step calls compiled apart (`hybrid.calls.call_at`), by slot (`CALL_*`): implicit
     Euler's phases 1 and 2 (`implicit_start_forces`, `implicit_step`), the occluded airway's
-    projection (`project_occluded`) and the soft volume's force (`soft_volume_step`), 0 where the
-    model never calls it; force_calls (k, 2)
+    projection (`project_occluded`), the soft volume's force (`soft_volume_step`), the steps
+    between two frames (`hybrid.loop.steps_between`) and the rigid phase (`rigid_between`: both
+    filled at the first step, `hybrid.loop.loop_calls`), 0 where the model never calls it;
+    force_calls (k, 2)
     int64: the registry's terms with their own step kernel that the model has, (id, address)
     (`hybrid.terms.STEP_FORCES`). Compiled apart, a kernel compiles only for a model that calls
     it, and the loop holds none of its code (numba links a callee into each caller and optimizes
@@ -93,8 +99,8 @@ class StepWork(NamedTuple):
 
 
 #: the slots of `StepWork.calls`
-NCALL = 4
-CALL_IMPLICIT_START, CALL_IMPLICIT_STEP, CALL_OCCLUDED, CALL_SOFT_VOLUME = range(NCALL)
+NCALL = 6
+CALL_IMPLICIT_START, CALL_IMPLICIT_STEP, CALL_OCCLUDED, CALL_SOFT_VOLUME, CALL_STEPS, CALL_RIGID = range(NCALL)
 
 
 def new_state(arrays: MembraneArrays) -> MembraneState:
@@ -113,11 +119,14 @@ def new_state(arrays: MembraneArrays) -> MembraneState:
     )
 
 
-def new_work(arrays: MembraneArrays, state: MembraneState, imp: ImplicitWork | None = None) -> StepWork:
+def new_work(
+    arrays: MembraneArrays, state: MembraneState, imp: ImplicitWork | None = None, *, addresses: bool = True
+) -> StepWork:
     """The step's work arrays for the model's arrays, with the addresses of the kernels its step
     calls compiled apart (`StepWork.calls`, `.force_calls`), each compiled (or loaded from the
-    cache) now for the types the loop passes it; implicit Euler's with its arrays `imp`
-    (`hybrid.solvers.Solver.new_work`, None for the explicit pair)."""
+    cache) now for the types the loop passes it (`term_addresses`; later when `addresses` is
+    False); implicit Euler's with its arrays `imp` (`hybrid.solvers.Solver.new_work`, None for
+    the explicit pair)."""
     n = arrays.vert_rest.shape[0]
     if (imp is not None) != (arrays.integrator == IMPLICIT_EULER_ID):
         raise ValueError(
@@ -137,6 +146,14 @@ def new_work(arrays: MembraneArrays, state: MembraneState, imp: ImplicitWork | N
         calls=np.zeros(NCALL, np.int64),
         force_calls=np.zeros((len(forces), 2), np.int64),
     )
+    if addresses:
+        term_addresses(work, arrays, state, imp)
+    return work
+
+
+def term_addresses(work: StepWork, arrays: MembraneArrays, state: MembraneState, imp: ImplicitWork | None) -> None:
+    """The addresses of the terms' kernels the step calls compiled apart into `work` (`new_work`)."""
+    forces = [(tid, step_force) for tid, step_force in STEP_FORCES if arrays.term_on[tid]]
     # the example arguments: the types the loop passes (`membrane_forces`, `integrate`, `_after_integration`)
     control = new_control(arrays)
     for row, (tid, step_force) in enumerate(forces):
@@ -154,7 +171,6 @@ def new_work(arrays: MembraneArrays, state: MembraneState, imp: ImplicitWork | N
     if arrays.term_on[T_LUNGS]:
         occluded = nb_types.Tuple((nb_types.float64, nb_types.float64, nb_types.boolean))
         work.calls[CALL_OCCLUDED] = kernel_address(project_occluded, occluded, arrays, state, work, 0.0, True)
-    return work
 
 
 def _lung_start(arrays: MembraneArrays) -> np.ndarray:

@@ -467,7 +467,7 @@ def test_a_first_runs_estimate_is_what_this_machine_measured_last(tmp_path, monk
 
 
 def test_implicit_euler_s_solve_is_announced_alone_once_the_loop_is_cached(tmp_path, monkeypatch):
-    """The solve is compiled apart from the loop (`hybrid.kernel.call_at`), when the simulation is
+    """The solve is compiled apart from the loop (`hybrid.calls.call_at`), when the simulation is
     made: with the loop cached its compile is the one announced ("implicit solve"); on an empty
     cache the first compile, the solve's or the loop's, announces the whole first run."""
     import dataclasses
@@ -498,7 +498,7 @@ def test_a_kernel_called_at_its_address_is_the_kernel_called_directly():
     from numba import njit
     from numba.core import types as nb_types
 
-    from hybrid.kernel import call_at, kernel_address
+    from hybrid.calls import call_at, kernel_address
 
     class Pack(NamedTuple):
         x: np.ndarray

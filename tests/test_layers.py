@@ -17,7 +17,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "hybrid"
 
 # Bottom to top. A module imports only modules of its own layer or below.
 LAYERS = (
-    ("errors, kernel", ("errors", "kernel", "checks", "integrators")),
+    ("errors, kernel", ("errors", "kernel", "calls", "checks", "integrators")),
     ("geometry, regions, schedules", ("mesh", "mesh.*", "regions", "schedule", "stability", "sites")),
     ("terms", ("terms", "terms.*")),
     ("scene", ("scene", "scenefile", "scenefile.*", "rigidfile", "demo", "resolve")),

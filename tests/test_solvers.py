@@ -114,7 +114,7 @@ def test_a_membrane_scene_and_a_coupled_one_share_the_compiled_loop(solver):
 
 
 def test_every_solver_steps_through_one_compiled_loop_and_implicit_euler_s_kernels_take_its_types():
-    # implicit Euler's solve is compiled apart and called at its address (`hybrid.kernel.call_at`):
+    # implicit Euler's solve is compiled apart and called at its address (`hybrid.calls.call_at`):
     # the loop's argument types are the same whichever solver steps (one build, whose compile an
     # implicit scene after a symplectic one skips), and the solve's kernels were compiled for exactly
     # the types the loop passes them (another type there would be read wrongly, not refused)

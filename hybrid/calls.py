@@ -1,0 +1,241 @@
+"""Kernels compiled apart and called at their addresses (`call_at`): a caller compiled without its
+callee's code. numba links a callee's code into each caller and optimizes it again there, so
+that a step loop calling every phase and term directly is one compile of all of them, again for
+each caller. Called at an address, a kernel compiles once, apart, only for a model that calls it
+(`kernel_address`), without the entry point Python would call (`ADDRESS_ONLY`), its large
+arguments read from the caller's frame (`args_in_memory`, `args_from_memory`); on a first run
+with a second core free, the largest is compiled by a helper process meanwhile (`compile_elsewhere`).
+"""
+
+from __future__ import annotations
+
+import atexit
+import os
+import pickle
+import subprocess
+import sys
+
+import numba
+from llvmlite import ir as llvm_ir
+from numba.core import cgutils
+from numba.core import types as nb_types
+from numba.extending import intrinsic
+
+__all__ = [
+    "call_at",
+    "kernel_address",
+    "ADDRESS_ONLY",
+    "args_in_memory",
+    "args_type_of",
+    "args_from_memory",
+    "is_cached",
+    "compile_elsewhere",
+]
+
+
+@intrinsic
+def call_at(typingctx, address, result, args):
+    """The kernel compiled at `address` (`kernel_address`) called with the tuple `args`; its result,
+    of `result`'s type. The caller is compiled without the kernel's code: numba links a callee's
+    code into each caller and optimizes it again there, so that implicit Euler's whole solve was
+    compiled into the step loop, a loop build of its own (76 s of CPU for a first implicit run).
+    Called this way it compiles once, apart, beside the one loop every solver shares. The
+    kernel must have been compiled for exactly args' types and result's (`kernel_address` takes
+    them from the same arrays); an address of 0 must never be called.
+    # Data in: address (int64), result (a value of the result's type), args (a tuple)   # Data out: returns result's type
+    """
+    result_type = nb_types.unliteral(result)
+    arg_types = tuple(nb_types.unliteral(t) for t in args.types)
+
+    def codegen(context, builder, signature, llargs):
+        fn_type = context.call_conv.get_function_type(result_type, arg_types).as_pointer()
+        fn = builder.inttoptr(llargs[0], fn_type)
+        values = cgutils.unpack_tuple(builder, llargs[2], len(arg_types))
+        status, res = context.call_conv.call_function(builder, fn, result_type, arg_types, values)
+        with cgutils.if_unlikely(builder, status.is_error):
+            context.call_conv.return_status_propagate(builder, status)
+        return res
+
+    return result_type(address, result, args), codegen
+
+
+def _store_leaves(builder, value, ptr):
+    """Store an aggregate field by field: LLVM copies a large aggregate stored or loaded whole
+    (thousands of words a call) where a field at a time lets it drop the fields never read."""
+    ty = value.type
+    if isinstance(ty, (llvm_ir.LiteralStructType, llvm_ir.IdentifiedStructType)):
+        for i in range(len(ty.elements)):
+            _store_leaves(builder, builder.extract_value(value, i), cgutils.gep_inbounds(builder, ptr, 0, i))
+    else:
+        builder.store(value, ptr)
+
+
+def _load_leaves(builder, ptr):
+    """Load an aggregate field by field (`_store_leaves`)."""
+    ty = ptr.type.pointee
+    if isinstance(ty, (llvm_ir.LiteralStructType, llvm_ir.IdentifiedStructType)):
+        value = cgutils.get_null_value(ty)
+        for i in range(len(ty.elements)):
+            value = builder.insert_value(value, _load_leaves(builder, cgutils.gep_inbounds(builder, ptr, 0, i)), i)
+        return value
+    load = builder.load(ptr)
+    # unchanged while the kernel runs: LLVM may load a field again where it is used rather than
+    # keep every field in a register or a spill slot from the kernel's start
+    load.set_metadata("invariant.load", builder.module.add_metadata([]))
+    return load
+
+
+@intrinsic
+def args_in_memory(typingctx, args):
+    """The tuple args stored once in the caller's stack frame; returns its address (int64), which a
+    kernel called at its address reads back (`args_from_memory`): a call then passes one word
+    instead of every field of every array in args (numba passes each as arguments of its own:
+    about a thousand for the step's arrays, 0.3 us a call). Valid until the caller returns.
+    # Data in: args (a tuple)   # Data out: returns the address of its copy
+    """
+
+    def codegen(context, builder, signature, llargs):
+        slot = cgutils.alloca_once(builder, context.get_value_type(args))
+        _store_leaves(builder, llargs[0], slot)
+        return builder.ptrtoint(slot, context.get_value_type(nb_types.int64))
+
+    return nb_types.int64(args), codegen
+
+
+@intrinsic
+def args_type_of(typingctx, args):
+    """The type of the tuple args, as a value (`numba.typeof` of a numba type: a `TypeRef`) that a
+    kernel called at its address takes to know what `args_from_memory` reads.
+    # Data in: args   # Data out: returns its type (no data)
+    """
+
+    def codegen(context, builder, signature, llargs):
+        return context.get_dummy_value()
+
+    return nb_types.TypeRef(args)(args), codegen
+
+
+@intrinsic
+def args_from_memory(typingctx, address, index, args_type):
+    """Item `index` (a constant) of the tuple of type args_type stored at address by
+    `args_in_memory`. An item at a time: LLVM splits a tuple held in a variable into its fields
+    only up to about a thousand of them (the step's five tuples hold more).
+    # Data in: address (int64), index, args_type (a `TypeRef`)   # Data out: returns the item
+    """
+    if not isinstance(index, nb_types.IntegerLiteral):
+        return None
+    tup = args_type.instance_type
+    item = tup.types[index.literal_value]
+
+    def codegen(context, builder, signature, llargs):
+        ty = context.get_value_type(tup)
+        ptr = builder.inttoptr(llargs[0], ty.as_pointer())
+        # all of it readable, and unchanged while the kernel runs: LLVM may then read a field
+        # where it is used instead of copying every field to the stack at the kernel's start
+        size = llvm_ir.Constant(llvm_ir.IntType(64), context.get_abi_sizeof(ty))
+        ptr.set_metadata("dereferenceable", builder.module.add_metadata([size]))
+        return _load_leaves(builder, cgutils.gep_inbounds(builder, ptr, 0, index.literal_value))
+
+    return item(address, index, args_type), codegen
+
+
+def kernel_address(dispatcher, result, *example_args) -> int:
+    """The address of `dispatcher` compiled (or loaded from the cache) for the example arguments'
+    types, returning `result` (a numba type), which `call_at` calls. Refuses a kernel whose
+    result is another type (the call would read it wrongly)."""
+    arg_types = tuple(numba.typeof(a) for a in example_args)
+    dispatcher.compile(arg_types)
+    compiled = dispatcher.overloads[arg_types]
+    if nb_types.unliteral(compiled.signature.return_type) != result:
+        raise TypeError(
+            f"kernel_address: {dispatcher.py_func.__qualname__} returns {compiled.signature.return_type}, expected {result}"
+        )
+    return int(compiled.library.get_pointer_to_function(compiled.fndesc.llvm_func_name))
+
+
+#: `@kernel(**ADDRESS_ONLY)`: a kernel only ever called at its address, compiled without the entry
+#: point through which Python calls a kernel (numba's CPython wrapper: unboxing each array of its
+#: arguments' tuples, 2.3 s of a first run's CPU for a kernel given the step's arrays). Called from
+#: Python, such a kernel crashes: the step loop's own (`hybrid.loop.steps_between`, `rigid_between`).
+ADDRESS_ONLY = {"no_cpython_wrapper": True}
+
+
+def is_cached(dispatcher, arg_types: tuple) -> bool:
+    """Whether numba's disk cache holds a build of `dispatcher` for exactly these argument types
+    and this source (numba's cache internals: False where they cannot be read)."""
+    try:
+        index = dispatcher._cache._cache_file._load_index()
+    except Exception:  # noqa: BLE001 - numba internals moved: assume nothing cached
+        return False
+    return any(key[0] == arg_types for key in index)
+
+
+class Elsewhere:
+    """Builds compiled by a helper process (`compile_elsewhere`); `wait` before using them."""
+
+    def __init__(self, process, builds):
+        self.process, self.builds = process, builds
+
+    def wait(self) -> bool:
+        """Wait for the helper; whether it compiled every build (else the caller compiles what
+        is missing itself). While waiting, numba's compile event is on: the compile notice
+        counts the wait as compiling (`hybrid.kernel.compile_notice`)."""
+        from numba.core import event
+
+        dispatcher, arg_types = self.builds[0]
+        with event.trigger_event("numba:compile", data={"dispatcher": dispatcher, "args": arg_types}):
+            code = self.process.wait()
+        return code == 0
+
+
+def compile_elsewhere(builds) -> Elsewhere | None:
+    """Start compiling `builds` [(dispatcher, arg_types)] in a helper process writing numba's disk cache, while this process compiles others; None when
+    each is cached already, when this process may use only one core, or when HYBRID_COMPILE_HELPER
+    is 0. The builds are then loaded from the cache. Compiling is a process's main thread: on a
+    first run, the step's largest build (the steps between two stops, half of the compile) then
+    takes the second core instead of waiting for the first."""
+    if os.environ.get("HYBRID_COMPILE_HELPER", "1") == "0":
+        return None
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):  # no affinity on this platform
+        cores = os.cpu_count() or 1
+    todo = [(d, t) for d, t in builds if not is_cached(d, t)]
+    if cores < 2 or not todo:
+        return None
+    jobs = [(d.py_func.__module__, d.py_func.__qualname__, t) for d, t in todo]
+    try:
+        process = subprocess.Popen(
+            [sys.executable, "-c", "import sys; from hybrid.calls import compile_jobs; compile_jobs(sys.stdin.buffer)"],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.DEVNULL,
+        )
+        process.stdin.write(pickle.dumps(jobs))
+        process.stdin.close()
+    except OSError:  # no process to spare: compile here
+        return None
+    _HELPERS.append(process)
+    return Elsewhere(process, todo)
+
+
+_HELPERS: list = []
+
+
+@atexit.register
+def _stop_helpers() -> None:
+    """A helper still compiling when the program ends (a run refused after its simulation was
+    made) is stopped: nothing of this program goes on after it."""
+    for process in _HELPERS:
+        if process.poll() is None:
+            process.kill()
+
+
+def compile_jobs(stream) -> None:
+    """The helper process of `compile_elsewhere`: compile each job read from stream."""
+    import importlib
+
+    for module, qualname, arg_types in pickle.load(stream):
+        dispatcher = importlib.import_module(module)
+        for name in qualname.split("."):
+            dispatcher = getattr(dispatcher, name)
+        dispatcher.compile(arg_types)
