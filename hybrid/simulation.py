@@ -125,7 +125,8 @@ class Simulation:
         if self.rigid is not None:
             self.rigid.reset(self.state)
         if not hasattr(self, "_loop_elsewhere"):  # made: a first run's loop compiles meanwhile elsewhere
-            self._loop_elsewhere = start_loop_compile(*self._loop_types(self.model.arrays))
+            work, arrays, state, imp_, control, rig, par = self._loop_types(self.model.arrays)
+            self._loop_elsewhere = start_loop_compile(work, arrays, state, imp_, control, rig, par)
         term_addresses(self.work, self.model.arrays, self.state, imp)
 
     def _loop_types(self, arrays):
@@ -271,7 +272,8 @@ class Simulation:
         step0 = self.steps_done
         rig = _MEMBRANE_ONLY if self.rigid is None else self.rigid.pack(int(stops[-1]) - step0)
         if not self.work.calls[CALL_STEPS]:  # the first step: the loop's kernels compiled or loaded
-            loop_calls(*self._loop_types(arrays), getattr(self, "_loop_elsewhere", None))
+            work, typed, state, imp, control, rig0, par = self._loop_types(arrays)
+            loop_calls(work, typed, state, imp, control, rig0, par, getattr(self, "_loop_elsewhere", None))
             self._loop_elsewhere = None
         count = run_steps(
             arrays,
