@@ -393,6 +393,13 @@ def has_cached_build(dispatcher) -> bool:
         return False
 
 
+def process_and_helpers_cpu_s() -> float:
+    """The CPU seconds of this process and of its child processes that have ended: a helper that
+    compiled part of a first run (`hybrid.calls.compile_elsewhere`) counts once it is waited for."""
+    t = os.times()
+    return t.user + t.system + t.children_user + t.children_system
+
+
 @contextlib.contextmanager
 def compile_notice(
     estimate_cpu_s,
@@ -401,7 +408,7 @@ def compile_notice(
     on_compiled=None,
     tick_s: float = 1.0,
     line_every_s: float = 10.0,
-    cpu_clock=time.process_time,
+    cpu_clock=None,
 ):
     """Say when kernels compile within the block: at the first compile (numba's
     "numba:compile" event fires only when no build is cached, before compiling), one
@@ -414,7 +421,8 @@ def compile_notice(
     beside it; past the estimate it says so instead of a full bar); at the end of the
     block the wall and CPU time it took. Nothing at all when every kernel came from the
     cache, nor when the block raises after compiles it never announced. `cpu_clock`: the
-    process's CPU seconds (compiling is this process's main thread; the others wait);
+    CPU seconds compiling takes (default `process_and_helpers_cpu_s`: compiling is this process's
+    main thread, the others wait, and a helper process's counts once it has ended);
     `line_every_s`: the wall seconds between lines off a terminal; `on_compiled`: called with
     the CPU seconds of an announced compile when the block ends without an error (the
     estimate's record, `record_compile_s`)."""
@@ -424,6 +432,7 @@ def compile_notice(
     from numba.core import event
 
     stream = sys.stderr if stream is None else stream
+    cpu_clock = process_and_helpers_cpu_s if cpu_clock is None else cpu_clock
     tty = hasattr(stream, "isatty") and stream.isatty()
     estimate_of = estimate_cpu_s if callable(estimate_cpu_s) else (lambda dispatcher, args: estimate_cpu_s)
     state = {"depth": 0, "t0": None, "spent": 0.0, "since": None, "cpu": 0.0, "cpu_since": None, "shown": -1}
