@@ -134,7 +134,10 @@ def args_from_memory(typingctx, address, index, args_type):
         # where it is used instead of copying every field to the stack at the kernel's start
         size = llvm_ir.Constant(llvm_ir.IntType(64), context.get_abi_sizeof(ty))
         ptr.set_metadata("dereferenceable", builder.module.add_metadata([size]))
-        return _load_leaves(builder, cgutils.gep_inbounds(builder, ptr, 0, index.literal_value))
+        value = _load_leaves(builder, cgutils.gep_inbounds(builder, ptr, 0, index.literal_value))
+        if context.enable_nrt:  # a new reference, as numba counts an intrinsic's result (the step: none)
+            context.nrt.incref(builder, item, value)
+        return value
 
     return item(address, index, args_type), codegen
 
@@ -182,16 +185,19 @@ class Elsewhere:
         counts the wait as compiling (`hybrid.kernel.compile_notice`)."""
         from numba.core import event
 
-        dispatcher, arg_types = self.builds[0]
-        with event.trigger_event("numba:compile", data={"dispatcher": dispatcher, "args": arg_types}):
-            code = self.process.wait()
-        return code == 0
+        if self.process.poll() is None:
+            dispatcher, arg_types = self.builds[0]
+            with event.trigger_event("numba:compile", data={"dispatcher": dispatcher, "args": arg_types}):
+                self.process.wait()
+        return self.process.returncode == 0
 
 
 def compile_elsewhere(builds) -> Elsewhere | None:
-    """Start compiling `builds` [(dispatcher, arg_types)] in a helper process writing numba's disk cache, while this process compiles others; None when
-    each is cached already, when this process may use only one core, or when HYBRID_COMPILE_HELPER
-    is 0. The builds are then loaded from the cache. Compiling is a process's main thread: on a
+    """Start compiling `builds` [(dispatcher, arg_types)] in a helper process writing numba's disk
+    cache, while this process compiles others; the helper already compiling them if asked again;
+    None when each is cached already, when this process may use only one core, when another
+    helper of this process is still compiling (one at a time), or when HYBRID_COMPILE_HELPER is 0.
+    The builds are then loaded from the cache. Compiling is a process's main thread: on a
     first run, the step's largest build (the steps between two stops, half of the compile) then
     takes the second core instead of waiting for the first."""
     if os.environ.get("HYBRID_COMPILE_HELPER", "1") == "0":
@@ -202,6 +208,11 @@ def compile_elsewhere(builds) -> Elsewhere | None:
         cores = os.cpu_count() or 1
     todo = [(d, t) for d, t in builds if not is_cached(d, t)]
     if cores < 2 or not todo:
+        return None
+    key = tuple((id(d), t) for d, t in todo)
+    if key in _RUNNING:  # asked again (another simulation of the same types): the same helper
+        return _RUNNING[key]
+    if any(e.process.poll() is None for e in _RUNNING.values()):  # one helper at a time
         return None
     jobs = [(d.py_func.__module__, d.py_func.__qualname__, t) for d, t in todo]
     try:
@@ -214,20 +225,20 @@ def compile_elsewhere(builds) -> Elsewhere | None:
         process.stdin.close()
     except OSError:  # no process to spare: compile here
         return None
-    _HELPERS.append(process)
-    return Elsewhere(process, todo)
+    _RUNNING[key] = Elsewhere(process, todo)
+    return _RUNNING[key]
 
 
-_HELPERS: list = []
+_RUNNING: dict = {}  # the helpers started, by the builds they compile
 
 
 @atexit.register
 def _stop_helpers() -> None:
     """A helper still compiling when the program ends (a run refused after its simulation was
     made) is stopped: nothing of this program goes on after it."""
-    for process in _HELPERS:
-        if process.poll() is None:
-            process.kill()
+    for elsewhere in _RUNNING.values():
+        if elsewhere.process.poll() is None:
+            elsewhere.process.kill()
 
 
 def compile_jobs(stream) -> None:
