@@ -250,3 +250,42 @@ def compile_jobs(stream) -> None:
         for name in qualname.split("."):
             dispatcher = getattr(dispatcher, name)
         dispatcher.compile(arg_types)
+
+
+def compile_callees(fn, arg_types: tuple, like) -> bool:
+    """Compile (or load) into the cache every kernel `fn` calls, for the types it calls them with
+    at arg_types, without compiling `fn` itself: numba's front end and type inference only, which
+    compile a callee as they type its call, with the flags of the kernel `like` (those a callee
+    that sets none inherits: the same build as when `like` calls it). On a first run this process does this for part of the
+    steps while the helper compiles them whole (`compile_elsewhere`): the helper then loads those
+    callees instead of compiling them. Whether it ran (numba's internals: False where they moved)."""
+    try:
+        from numba.core import compiler
+        from numba.core.compiler_machinery import PassManager
+        from numba.core.registry import cpu_target
+        from numba.core.typed_passes import NopythonTypeInference
+
+        class TypeOnly(compiler.CompilerBase):
+            def define_pipelines(self):
+                pm = compiler.DefaultPassBuilder.define_untyped_pipeline(self.state)
+                typed = PassManager("type only")
+                typed.add_pass(NopythonTypeInference, "type inference")
+                typed.passes = pm.passes + typed.passes
+                typed.finalize()
+                return [typed]
+
+        options = compiler.Flags()
+        cpu_target.options.parse_as_flags(options, like.targetoptions)
+        compiler.compile_extra(
+            cpu_target.typing_context,
+            cpu_target.target_context,
+            fn,
+            arg_types,
+            None,
+            options,
+            {},
+            pipeline_class=TypeOnly,
+        )
+    except Exception:  # noqa: BLE001 - an optimisation only: the helper compiles them anyway
+        return False
+    return True

@@ -42,6 +42,7 @@ from .calls import (
     args_in_memory,
     args_type_of,
     call_at,
+    compile_callees,
     compile_elsewhere,
     kernel_address,
 )
@@ -532,12 +533,22 @@ def _steps_args(work, arrays, state, imp, control, rig, par) -> tuple:
     return 0, 0, 0, 0, par, numba.typeof((arrays, state, work, imp, control, rig))
 
 
+def _advance_of(m, s, w, imp, c, t, step, par):
+    """Phases 2-5 as `steps_between` calls them (`membrane_advance`): typed, never compiled, so
+    that this process compiles its callees while a helper compiles the steps (`start_loop_compile`)."""
+    return membrane_advance(m, s, w, imp, c, t, step, par)
+
+
 def start_loop_compile(work, arrays, state, imp, control, rig: RigidPack, par):
     """On a first run, the steps between two stops (`steps_between`, half of the step's compile)
     compiled for these types by a helper process meanwhile (`hybrid.calls.compile_elsewhere`),
     for `loop_calls` to wait for; else None."""
     steps_types = tuple(numba.typeof(a) for a in _steps_args(work, arrays, state, imp, control, rig, par))
-    return compile_elsewhere([(steps_between, steps_types)])
+    elsewhere = compile_elsewhere([(steps_between, steps_types)])
+    if elsewhere is not None:  # meanwhile the second half's callees here, which the helper then loads
+        advance_types = tuple(numba.typeof(a) for a in (arrays, state, work, imp, control, 0.0, 0, par))
+        compile_callees(_advance_of, advance_types, like=steps_between)
+    return elsewhere
 
 
 def loop_calls(work, arrays, state, imp, control, rig: RigidPack, par, elsewhere=None) -> None:
