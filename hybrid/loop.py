@@ -66,7 +66,7 @@ from .step import (
     membrane_advance,
     membrane_forces,
 )
-from .step_work import CALL_RIGID, CALL_STEPS
+from .step_work import CALL_RIGID, CALL_STEPS, CALL_STEPS_PARALLEL
 from .terms import Lungs
 from .terms.lungs import L_ALVEOLAR, L_PLEURAL, L_VOLUME, P_REF, cavity_volume_rate
 from .terms.slide_planes import carry_planes
@@ -91,6 +91,7 @@ __all__ = [
     "rigid_between",
     "loop_calls",
     "start_loop_compile",
+    "steps_slot",
 ]
 
 LUNGS_ID = Lungs.id
@@ -463,8 +464,12 @@ def run_steps(m, s, w, imp, c, stops, step0, frames, rig, par=True):
     args = (m, s, w, imp, c, rig)
     args_at, args_type = args_in_memory(args), args_type_of(args)
     done = step0
+    if par is None:  # the two builds of `steps_between`, each compiled for its `par`
+        steps_at = w.calls[CALL_STEPS]
+    else:
+        steps_at = w.calls[CALL_STEPS_PARALLEL]
     for f in range(stops.shape[0]):
-        if call_at(w.calls[CALL_STEPS], OK, (args_at, done, stops[f], step0, par, args_type)) != OK:
+        if call_at(steps_at, OK, (args_at, done, stops[f], step0, par, args_type)) != OK:
             return f
         done = stops[f]
         capture_frame(m, s, frames.pos[f], frames.scal[f])
@@ -552,7 +557,7 @@ def start_loop_compile(work, arrays, state, imp, control, rig: RigidPack, par):
 
 
 def loop_calls(work, arrays, state, imp, control, rig: RigidPack, par, elsewhere=None) -> None:
-    """The addresses of the steps between two stops (`steps_between`) and, with a rigid part,
+    """The addresses of the steps between two stops (`steps_between`, its build for `par`) and, with a rigid part,
     of its phase (`rigid_between`) into `work.calls`, each compiled (or loaded from the cache)
     now for the types `run_steps` passes them with these arrays. `elsewhere`: the steps being
     compiled by a helper process (`start_loop_compile`), waited for after this process compiled
@@ -567,7 +572,12 @@ def loop_calls(work, arrays, state, imp, control, rig: RigidPack, par, elsewhere
         )
         elsewhere.wait()
     steps_args = _steps_args(work, arrays, state, imp, control, rig, par)
-    work.calls[CALL_STEPS] = kernel_address(steps_between, types.int64, *steps_args)
+    work.calls[steps_slot(par)] = kernel_address(steps_between, types.int64, *steps_args)
+
+
+def steps_slot(par) -> int:
+    """The slot of `StepWork.calls` holding `steps_between`'s build for `par` (`run_steps`)."""
+    return CALL_STEPS if par is None else CALL_STEPS_PARALLEL
 
 
 def membrane_only() -> RigidPack:

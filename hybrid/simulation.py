@@ -20,7 +20,7 @@ from .diagnosis import advice, failure
 from .errors import ArgumentError, SceneError, SimulationDiverged
 from .implicit import Info
 from .implicit_work import no_implicit_work
-from .loop import Frames, kinetic_energy_of, loop_calls, membrane_only, run_steps, start_loop_compile
+from .loop import Frames, kinetic_energy_of, loop_calls, membrane_only, run_steps, start_loop_compile, steps_slot
 from .model import TERMS, Model
 from .solvers import SOLVERS, Solver, solver_of
 from .state import State
@@ -31,7 +31,7 @@ from .step import (
     S_TIME,
     step_par,
 )
-from .step_work import CALL_STEPS, new_control, new_state, new_work, term_addresses
+from .step_work import new_control, new_state, new_work, term_addresses
 from .terms.volume import face_volume
 
 __all__ = ["Simulation"]
@@ -237,6 +237,7 @@ class Simulation:
             left = int(n)
             while True:  # one compiled call, or pieces timed for the choice of build
                 par, k = self.builds.chunk(left)
+                self._loop_ready(self._arrays[par])
                 t0 = time.perf_counter()
                 done = self._run(self._arrays[par], k)
                 self.builds.record(par, done, time.perf_counter() - t0)
@@ -265,16 +266,24 @@ class Simulation:
             return nstep
         return int(self.state.status[1]) - self.steps_done  # the failing step's index
 
+    def _loop_ready(self, arrays) -> None:
+        """The loop's kernels for these arrays' build compiled or loaded (`hybrid.loop.loop_calls`), at
+        its first step: before a timed piece of the run (`hybrid.builds`), which would count loading
+        them. The helper's compile (`start_loop_compile`) is the model's own build's."""
+        work, typed, state, imp, control, rig0, par = self._loop_types(arrays)
+        if not self.work.calls[steps_slot(par)]:
+            elsewhere = getattr(self, "_loop_elsewhere", None) if par == step_par(self.model.arrays) else None
+            loop_calls(work, typed, state, imp, control, rig0, par, elsewhere)
+            if elsewhere is not None:
+                self._loop_elsewhere = None
+
     def _loop(self, arrays, stops: np.ndarray, frames: Frames, first: int) -> int:
         """Step to each of stops in one call of the compiled step loop
         (`hybrid.loop.run_steps`), capturing into frames from index `first` on; the
         frames captured."""
         step0 = self.steps_done
         rig = _MEMBRANE_ONLY if self.rigid is None else self.rigid.pack(int(stops[-1]) - step0)
-        if not self.work.calls[CALL_STEPS]:  # the first step: the loop's kernels compiled or loaded
-            work, typed, state, imp, control, rig0, par = self._loop_types(arrays)
-            loop_calls(work, typed, state, imp, control, rig0, par, getattr(self, "_loop_elsewhere", None))
-            self._loop_elsewhere = None
+        self._loop_ready(arrays)
         count = run_steps(
             arrays,
             self.state,
@@ -323,6 +332,7 @@ class Simulation:
         i, s = 0, self.state
         while i < len(stops):  # one compiled call, or pieces timed for the choice of build
             par, k = self.builds.chunk(int(stops[-1]) - self.steps_done)
+            self._loop_ready(self._arrays[par])
             t0 = time.perf_counter()
             if k < int(stops[i]) - self.steps_done:  # a piece short of the next frame
                 done = self._run(self._arrays[par], k)

@@ -31,6 +31,7 @@ __all__ = [
     "CALL_OCCLUDED",
     "CALL_SOFT_VOLUME",
     "CALL_STEPS",
+    "CALL_STEPS_PARALLEL",
     "CALL_RIGID",
     "new_state",
     "new_work",
@@ -73,8 +74,9 @@ class StepWork(NamedTuple):
     the step calls compiled apart (`hybrid.calls.call_at`), by slot (`CALL_*`): implicit
     Euler's phases 1 and 2 (`implicit_start_forces`, `implicit_step`), the occluded airway's
     projection (`project_occluded`), the soft volume's force (`soft_volume_step`), the steps
-    between two frames (`hybrid.loop.steps_between`) and the rigid phase (`rigid_between`: both
-    filled at the first step, `hybrid.loop.loop_calls`), 0 where the model never calls it;
+    between two frames (`hybrid.loop.steps_between`: its serial-only build and the one with the
+    multi-core passes, each a build of its own) and the rigid phase (`rigid_between`: all three
+    filled at the first step of their build, `hybrid.loop.loop_calls`), 0 where the model never calls it;
     force_calls (k, 2)
     int64: the registry's terms with their own step kernel that the model has, (id, address)
     (`hybrid.terms.STEP_FORCES`). Compiled apart, a kernel compiles only for a model that calls
@@ -99,8 +101,16 @@ class StepWork(NamedTuple):
 
 
 #: the slots of `StepWork.calls`
-NCALL = 6
-CALL_IMPLICIT_START, CALL_IMPLICIT_STEP, CALL_OCCLUDED, CALL_SOFT_VOLUME, CALL_STEPS, CALL_RIGID = range(NCALL)
+NCALL = 7
+(
+    CALL_IMPLICIT_START,
+    CALL_IMPLICIT_STEP,
+    CALL_OCCLUDED,
+    CALL_SOFT_VOLUME,
+    CALL_STEPS,
+    CALL_STEPS_PARALLEL,
+    CALL_RIGID,
+) = range(NCALL)
 
 
 def new_state(arrays: MembraneArrays) -> MembraneState:

@@ -164,12 +164,19 @@ def test_parallel_build_matches_the_serial_build():
 
     model = compile_scene(bench_membrane(4))  # 2562 points: above the parallel threshold
     model = model.with_dt(0.25 * model.dt_stable_s)
+    from hybrid.step_work import CALL_STEPS, CALL_STEPS_PARALLEL
+    from hybrid.terms.membrane import membrane_faces_parallel
+
     runs = {}
     for parallel in (False, True):
         sim = Simulation(model, build="parallel" if parallel else "serial")
         sim.step(200)
         assert sim.builds.steps[parallel] == 200
+        # each build steps through its own build of the steps (`hybrid.loop.steps_slot`): the
+        # parallel one with the multi-core passes compiled in (a build without them would agree too)
+        assert (sim.work.calls[CALL_STEPS_PARALLEL] != 0, sim.work.calls[CALL_STEPS] != 0) == (parallel, not parallel)
         runs[parallel] = (sim.vert_pos.copy(), sim.pressure)
+    assert membrane_faces_parallel._cache._cache_file._load_index()  # compiled (here or by a helper)
     assert np.max(np.abs(runs[True][0] - runs[False][0])) <= 1e-15
     assert runs[True][1] == pytest.approx(runs[False][1], rel=1e-13)
     assert runs[True][1] != 0.0
