@@ -177,7 +177,7 @@ class Elsewhere:
     """Builds compiled by a helper process (`compile_elsewhere`); `wait` before using them."""
 
     def __init__(self, process, builds):
-        self.process, self.builds = process, builds
+        self.process, self.builds, self.waited = process, builds, False
 
     def wait(self) -> bool:
         """Wait for the helper; whether it compiled every build (else the caller compiles what
@@ -185,7 +185,8 @@ class Elsewhere:
         counts the wait as compiling (`hybrid.kernel.compile_notice`)."""
         from numba.core import event
 
-        if self.process.poll() is None:
+        if not self.waited:  # ended or not, waited for once inside the event: its CPU is counted
+            self.waited = True
             dispatcher, arg_types = self.builds[0]
             with event.trigger_event("numba:compile", data={"dispatcher": dispatcher, "args": arg_types}):
                 self.process.wait()
