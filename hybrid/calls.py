@@ -21,6 +21,8 @@ from numba.core import cgutils
 from numba.core import types as nb_types
 from numba.extending import intrinsic
 
+from .kernel import cached_signatures
+
 __all__ = [
     "call_at",
     "kernel_address",
@@ -165,12 +167,8 @@ ADDRESS_ONLY = {"no_cpython_wrapper": True}
 
 def is_cached(dispatcher, arg_types: tuple) -> bool:
     """Whether numba's disk cache holds a build of `dispatcher` for exactly these argument types
-    and this source (numba's cache internals: False where they cannot be read)."""
-    try:
-        index = dispatcher._cache._cache_file._load_index()
-    except Exception:  # noqa: BLE001 - numba internals moved: assume nothing cached
-        return False
-    return any(key[0] == arg_types for key in index)
+    and this source (`hybrid.kernel.cached_signatures`)."""
+    return arg_types in cached_signatures(dispatcher)
 
 
 class Elsewhere:

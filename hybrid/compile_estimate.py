@@ -17,7 +17,8 @@ def compile_estimate(scene):
     this machine's last compiles of that kind (`hybrid.kernel.measured_compile_s`), else the
     package's figure; on_compiled records the compile announced."""
     from .implicit import implicit_start_forces, implicit_step
-    from .loop import loop_build, run_steps, steps_between
+    from .loop import run_steps, steps_between
+    from .loop_compile import loop_build
 
     implicit = is_implicit(scene.integrator)
     loop = (run_steps, steps_between)
@@ -51,7 +52,7 @@ def compile_estimate(scene):
 
 #: a compile's CPU seconds on a machine that has recorded none: a first run's (membrane only,
 #: with a rigid part, implicit Euler), another build of the step loop once one is cached
-#: (`hybrid.loop.loop_build`), implicit Euler's solve (compiled apart) once the loop is; a first
+#: (`hybrid.loop_compile.loop_build`), implicit Euler's solve (compiled apart) once the loop is; a first
 #: run's counts its helper process's too (`hybrid.calls.compile_elsewhere`). Measured by the notice on
 #: an empty NUMBA_CACHE_DIR, 2 cores, --duration 0.01 or 0.02 --no-record: `hybrid run` 20.8, 21.6,
 #: 21.8, 22.2 (0.13.2); the others as measured for 0.13.1 (`hybrid run membrane_demo` 18.3; `hybrid run

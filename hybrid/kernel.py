@@ -63,6 +63,7 @@ __all__ = [
     "measured_compile_s",
     "record_compile_s",
     "has_cached_build",
+    "cached_signatures",
     "numba_info",
 ]
 
@@ -383,14 +384,19 @@ def numba_info() -> dict:
     return {"numba": numba.__version__, "numba_threads": numba.get_num_threads()}
 
 
-def has_cached_build(dispatcher) -> bool:
-    """Whether numba's disk cache holds a build of this compiled function for its current
-    source, of any signature (an index from older source counts as none). False where the
-    cache cannot be read (numba's cache internals: a guess, used only for the compile notice)."""
+def cached_signatures(dispatcher) -> list:
+    """The argument types of the builds numba's disk cache holds of this compiled function for its
+    current source (an index from older source holds none); none where the cache cannot be read
+    (numba's cache internals: a guess, used for the compile notice and a first run's helper)."""
     try:
-        return bool(dispatcher._cache._cache_file._load_index())
+        return [key[0] for key in dispatcher._cache._cache_file._load_index()]
     except Exception:  # noqa: BLE001 - numba internals moved: assume nothing cached
-        return False
+        return []
+
+
+def has_cached_build(dispatcher) -> bool:
+    """Whether numba's disk cache holds a build of this compiled function, of any signature."""
+    return bool(cached_signatures(dispatcher))
 
 
 def process_and_helpers_cpu_s() -> float:

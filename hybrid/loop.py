@@ -30,22 +30,12 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-import numba
 import numpy as np
 from llvmlite import ir
 from numba import types
 from numba.extending import intrinsic
 
-from .calls import (
-    ADDRESS_ONLY,
-    args_from_memory,
-    args_in_memory,
-    args_type_of,
-    call_at,
-    compile_callees,
-    compile_elsewhere,
-    kernel_address,
-)
+from .calls import ADDRESS_ONLY, args_from_memory, args_in_memory, args_type_of, call_at
 from .kernel import kernel
 from .schedule import schedule_eval, stack_schedules
 from .sites import add_point_wrench_kernel, add_wrench_at, point_wrench_kernel, site_vel_kernel
@@ -86,12 +76,8 @@ __all__ = [
     "kinetic_energy_of",
     "run_steps",
     "membrane_only",
-    "loop_build",
     "steps_between",
     "rigid_between",
-    "loop_calls",
-    "start_loop_compile",
-    "steps_slot",
 ]
 
 LUNGS_ID = Lungs.id
@@ -434,15 +420,6 @@ def carry_wall(wall, site_xpos, wall_pos, wall_vel):
             wall_vel[p, a] += share * wall.vel[j, a]
 
 
-def loop_build(arg_types) -> str:
-    """Which build of the step loop (`run_steps`, or the steps it calls, `steps_between`) its
-    argument types make: "parallel" (the multi-core passes) or "serial" (every solver steps through
-    either: implicit Euler's solve is compiled apart, `hybrid.step_work.StepWork`). For the compile
-    notice's estimate (`hybrid.compile_estimate`)."""
-    par = arg_types[9] if len(arg_types) == 10 else arg_types[4]  # `run_steps`'s, `steps_between`'s
-    return "serial" if par == types.none else "parallel"
-
-
 @kernel
 def run_steps(m, s, w, imp, c, stops, step0, frames, rig, par=True):
     """Steps (module docstring) to each step index of stops, capturing a frame at each
@@ -531,53 +508,6 @@ def rigid_between(args_at, t, row, args_type):
     )
     planes, rig = args_from_memory(args_at, 3, args_type), args_from_memory(args_at, 4, args_type)
     rigid_phase(m, s, w, planes, t, row, rig)
-
-
-def _steps_args(work, arrays, state, imp, control, rig, par) -> tuple:
-    """Example arguments of `steps_between` as `run_steps` calls it with these arrays."""
-    return 0, 0, 0, 0, par, numba.typeof((arrays, state, work, imp, control, rig))
-
-
-def _advance_of(m, s, w, imp, c, t, step, par):
-    """Phases 2-5 as `steps_between` calls them (`membrane_advance`): typed, never compiled, so
-    that this process compiles its callees while a helper compiles the steps (`start_loop_compile`)."""
-    return membrane_advance(m, s, w, imp, c, t, step, par)
-
-
-def start_loop_compile(work, arrays, state, imp, control, rig: RigidPack, par):
-    """On a first run, the steps between two stops (`steps_between`, half of the step's compile)
-    compiled for these types by a helper process meanwhile (`hybrid.calls.compile_elsewhere`),
-    for `loop_calls` to wait for; else None."""
-    steps_types = tuple(numba.typeof(a) for a in _steps_args(work, arrays, state, imp, control, rig, par))
-    elsewhere = compile_elsewhere([(steps_between, steps_types)])
-    if elsewhere is not None:  # meanwhile the second half's callees here, which the helper then loads
-        advance_types = tuple(numba.typeof(a) for a in (arrays, state, work, imp, control, 0.0, 0, par))
-        compile_callees(_advance_of, advance_types, like=steps_between)
-    return elsewhere
-
-
-def loop_calls(work, arrays, state, imp, control, rig: RigidPack, par, elsewhere=None) -> None:
-    """The addresses of the steps between two stops (`steps_between`, its build for `par`) and, with a rigid part,
-    of its phase (`rigid_between`) into `work.calls`, each compiled (or loaded from the cache)
-    now for the types `run_steps` passes them with these arrays. `elsewhere`: the steps being
-    compiled by a helper process (`start_loop_compile`), waited for after this process compiled
-    the rigid phase and `run_steps` itself (which its first call would otherwise compile)."""
-    if rig.coupled:
-        rigid_args = numba.typeof((arrays, state, work, imp.planes, rig))
-        work.calls[CALL_RIGID] = kernel_address(rigid_between, types.none, 0, 0.0, 0, rigid_args)
-    if elsewhere is not None:
-        stops, frames = np.zeros(1, np.int64), Frames(1, 1, 0).arrays()
-        run_steps.compile(
-            tuple(numba.typeof(a) for a in (arrays, state, work, imp, control, stops, 0, frames, rig, par))
-        )
-        elsewhere.wait()
-    steps_args = _steps_args(work, arrays, state, imp, control, rig, par)
-    work.calls[steps_slot(par)] = kernel_address(steps_between, types.int64, *steps_args)
-
-
-def steps_slot(par) -> int:
-    """The slot of `StepWork.calls` holding `steps_between`'s build for `par` (`run_steps`)."""
-    return CALL_STEPS if par is None else CALL_STEPS_PARALLEL
 
 
 def membrane_only() -> RigidPack:

@@ -20,7 +20,8 @@ from .diagnosis import advice, failure
 from .errors import ArgumentError, SceneError, SimulationDiverged
 from .implicit import Info
 from .implicit_work import no_implicit_work
-from .loop import Frames, kinetic_energy_of, loop_calls, membrane_only, run_steps, start_loop_compile, steps_slot
+from .loop import Frames, kinetic_energy_of, membrane_only, run_steps
+from .loop_compile import loop_calls, start_loop_compile, steps_slot
 from .model import TERMS, Model
 from .solvers import SOLVERS, Solver, solver_of
 from .state import State
@@ -130,7 +131,7 @@ class Simulation:
         term_addresses(self.work, self.model.arrays, self.state, imp)
 
     def _loop_types(self, arrays):
-        """What the loop's kernels are compiled for (`hybrid.loop.loop_calls`): these arrays, the
+        """What the loop's kernels are compiled for (`hybrid.loop_compile.loop_calls`): these arrays, the
         state, work, solver's work and inputs, the rigid pack's types and the build's `par`."""
         rig = _MEMBRANE_ONLY if self.rigid is None else self.rigid.pack(0)
         return self.work, arrays, self.state, self.solver_work, self.control.arrays, rig, step_par(arrays)
@@ -267,11 +268,12 @@ class Simulation:
         return int(self.state.status[1]) - self.steps_done  # the failing step's index
 
     def _loop_ready(self, arrays) -> None:
-        """The loop's kernels for these arrays' build compiled or loaded (`hybrid.loop.loop_calls`), at
+        """The loop's kernels for these arrays' build compiled or loaded (`hybrid.loop_compile.loop_calls`), at
         its first step: before a timed piece of the run (`hybrid.builds`), which would count loading
         them. The helper's compile (`start_loop_compile`) is the model's own build's."""
-        work, typed, state, imp, control, rig0, par = self._loop_types(arrays)
-        if not self.work.calls[steps_slot(par)]:
+        par = step_par(arrays)
+        if not self.work.calls[steps_slot(par)]:  # checked at each piece: the rest once a build
+            work, typed, state, imp, control, rig0, par = self._loop_types(arrays)
             elsewhere = getattr(self, "_loop_elsewhere", None) if par == step_par(self.model.arrays) else None
             loop_calls(work, typed, state, imp, control, rig0, par, elsewhere)
             if elsewhere is not None:

@@ -76,7 +76,7 @@ class StepWork(NamedTuple):
     projection (`project_occluded`), the soft volume's force (`soft_volume_step`), the steps
     between two frames (`hybrid.loop.steps_between`: its serial-only build and the one with the
     multi-core passes, each a build of its own) and the rigid phase (`rigid_between`: all three
-    filled at the first step of their build, `hybrid.loop.loop_calls`), 0 where the model never calls it;
+    filled at the first step of their build, `hybrid.loop_compile.loop_calls`), 0 where the model never calls it;
     force_calls (k, 2)
     int64: the registry's terms with their own step kernel that the model has, (id, address)
     (`hybrid.terms.STEP_FORCES`). Compiled apart, a kernel compiles only for a model that calls

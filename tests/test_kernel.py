@@ -172,7 +172,7 @@ def test_parallel_build_matches_the_serial_build():
         sim = Simulation(model, build="parallel" if parallel else "serial")
         sim.step(200)
         assert sim.builds.steps[parallel] == 200
-        # each build steps through its own build of the steps (`hybrid.loop.steps_slot`): the
+        # each build steps through its own build of the steps (`hybrid.loop_compile.steps_slot`): the
         # parallel one with the multi-core passes compiled in (a build without them would agree too)
         assert (sim.work.calls[CALL_STEPS_PARALLEL] != 0, sim.work.calls[CALL_STEPS] != 0) == (parallel, not parallel)
         runs[parallel] = (sim.vert_pos.copy(), sim.pressure)

@@ -26,7 +26,7 @@ LAYERS = (
         "step",
         ("step", "step_work", "switches", "readouts", "implicit", "implicit_work", "implicit_matrix", "implicit_lungs"),
     ),
-    ("step loop", ("loop",)),
+    ("step loop", ("loop", "loop_compile")),
     ("coupled step", ("coupling",)),
     ("simulation", ("simulation", "solvers", "builds", "control", "state", "diagnosis", "anatomy", "anatomy.*")),
     (
