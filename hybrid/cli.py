@@ -79,7 +79,8 @@ def _load_and_run(args, scene, drawer=None) -> int:
 
     duration = scene.duration_s if args.duration is None else args.duration
     out = _out_arg(args.out) if args.out is not None else default_out(scene.name)
-    check_out_folder(out)  # before anything compiles (the folder is claimed after the checks)
+    # before anything compiles (the folder is claimed after the checks)
+    check_out_folder(out, refuse_a_run=args.out is not None and not args.overwrite)
     try:
         sim = Simulation(compile_scene(scene))
     except HybridError as exc:

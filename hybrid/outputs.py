@@ -64,12 +64,17 @@ def _unwritable(out: Path, reason: str) -> HybridError:
     return HybridError(f"--out: expected a folder that can be created and written, received {str(out)!r} ({reason})")
 
 
-def check_out_folder(out: Path) -> None:
+def check_out_folder(out: Path, *, refuse_a_run: bool = False) -> None:
     """Refuse, without creating anything, an output folder that cannot be created or
     written: the nearest part of `out` that exists must be a folder this process may
-    write into. `hybrid run` asks before it builds anything, so that a bad --out is
-    refused at once, not after the scene's kernels compile; `out_folder` checks by
-    doing when the run claims the folder. The same message as out_folder's."""
+    write into; with `refuse_a_run` (an explicit --out without --overwrite), one that holds
+    a run. `hybrid run` asks before it builds anything, so that a bad --out is refused at
+    once, not after the scene's kernels compile; `claim_folder` checks again when the run
+    claims the folder. The same messages as out_folder's and claim_folder's."""
+    if refuse_a_run and holds_run(out) is not None:
+        if _lock_free(out) is False:  # a run writing there: named as claim_folder names it
+            FolderLock(out).release()
+        raise _holds_run_error(out)
     probe = out.absolute()
     while not os.path.lexists(probe) and probe != probe.parent:
         probe = probe.parent
@@ -80,6 +85,17 @@ def check_out_folder(out: Path) -> None:
     else:
         return
     raise _unwritable(out, reason)
+
+
+def _holds_run_error(out: Path) -> HybridError:
+    found = holds_run(out)
+    earlier = run_status(out)
+    if earlier is not None and earlier.get("died"):
+        found = f"{found}, interrupted: {earlier['died']}"
+    return HybridError(
+        f"--out: expected a folder that holds no earlier run, received {str(out)!r}, "
+        f"which holds one ({found}); add --overwrite to replace it, or choose another --out"
+    )
 
 
 class OutputError(HybridError, OSError):
@@ -383,16 +399,9 @@ def claim_folder(out: Path, *, explicit: bool, overwrite: bool = False) -> tuple
                 except OSError:  # the other run has written into it meanwhile
                     pass
             raise
-        found = holds_run(out) if not overwrite else None
-        if found is not None:
+        if not overwrite and holds_run(out) is not None:
             lock.release()
-            earlier = run_status(out)
-            if earlier is not None and earlier.get("died"):
-                found += f", interrupted: {earlier['died']}"
-            raise HybridError(
-                f"--out: expected a folder that holds no earlier run, received {str(out)!r}, "
-                f"which holds one ({found}); add --overwrite to replace it, or choose another --out"
-            )
+            raise _holds_run_error(out)
         return out, lock
     for k in range(1, MAX_SUFFIX + 1):
         folder = out if k == 1 else out.with_name(f"{out.name}-{k}")

@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 
 import hybrid
+import hybrid.model
 from hybrid.cli import main
 from hybrid.demo import membrane_demo
 from hybrid.errors import HybridError, SimulationDiverged
@@ -178,7 +179,14 @@ def test_a_rerun_into_a_folder_that_holds_a_run_is_refused_unless_overwrite(tmp_
     out = tmp_path / "o"
     assert main(["run", "membrane_demo", "--duration", "0.05", "--no-record", "--out", str(out)]) == 0
     before = {p.name: p.read_bytes() for p in out.iterdir()}
-    assert main(["run", "membrane_demo", "--duration", "0.1", "--out", str(out)]) == 2
+
+    def built(*_args, **_kw):
+        raise AssertionError("the scene was built before --out was refused")
+
+    # refused before the scene is built or its kernels compile (a first run waited for them)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(hybrid.model, "compile_scene", built)
+        assert main(["run", "membrane_demo", "--duration", "0.1", "--out", str(out)]) == 2
     line = _one_line(capsys.readouterr().err)
     assert "holds no earlier run" in line and str(out) in line and "--overwrite" in line
     assert {p.name: p.read_bytes() for p in out.iterdir()} == before
