@@ -127,15 +127,15 @@ def newton_matrix(nvert: int, vert_free, mem_vert, fib_vert, pf_vert, rt_vert) -
 
 
 @kernel
-def assemble(m, rows, face, fib, pf, h, mat, planes=None):
-    """mat.amat = M + h^2 K + h C on the free points, mat.pdiag its diagonal blocks with K
-    projected, from the tangent caches of `rows` (`hybrid.implicit.newton_caches`) and the sliding
+def assemble(m, rows, face, fib, pf, h, mat, planes=None, project=False):
+    """mat.amat = M + h^2 K + h C on the free points (K projected element by element when
+    `project`), mat.pdiag its diagonal blocks with K projected, from the tangent caches of `rows` (`hybrid.implicit.newton_caches`) and the sliding
     links' planes when given (`hybrid.terms.slide_planes.SlidePlanes`: diagonal blocks); mat.sdiag,
     mat.dinv, mat.gchol, mat.ediag. One thread in both builds (threads summing into shared blocks
     would change their last bits from one build to the other).
     # Model: m (vert_mass kg, damp_coef kg/s, term_on); rows (NewtonRows): mem_vert, mem_par, fib_vert, pf_vert, rt_vert, rt_par;
     #        mat's pattern: free, row_ptr, mem_slot, fib_slot, pf_slot, rt_slot
-    # Data in: face, fib, pf (the tangent caches), h (s), planes.normal
+    # Data in: face, fib, pf (the tangent caches), h (s), planes.normal, project
     # Data out: mat.amat (nblocks, 9) kg, mat.pdiag (nvert, 9) kg (the free points' rows), mat.sdiag (nfree, 9) kg,
     #           mat.dinv (nfree, 9) 1/kg, mat.gchol (nfree, 6) kg^1/2, mat.ediag (nfree, 9) kg
     """
@@ -152,11 +152,11 @@ def assemble(m, rows, face, fib, pf, h, mat, planes=None):
             pdiag[i, r] = c if r % 4 == 0 else 0.0
             amat[ptr[f], r] = pdiag[i, r]
     if on[T_MEMBRANE]:
-        membrane_tangent_blocks(rows.mem_vert, rows.mem_par, face, h * h, h, mat.mem_slot, amat, pdiag)
+        membrane_tangent_blocks(rows.mem_vert, rows.mem_par, face, h * h, h, mat.mem_slot, amat, pdiag, project)
     if on[T_MUSCLE_FIBRES]:
-        fibre_tangent_blocks(rows.fib_vert, fib, h * h, mat.fib_slot, amat, pdiag)
+        fibre_tangent_blocks(rows.fib_vert, fib, h * h, mat.fib_slot, amat, pdiag, project)
     if on[T_PASSIVE_FIBRES]:
-        passive_fibres_tangent_blocks(rows.pf_vert, pf, h * h, mat.pf_slot, amat, pdiag)
+        passive_fibres_tangent_blocks(rows.pf_vert, pf, h * h, mat.pf_slot, amat, pdiag, project)
     if on[T_RESTING_TENSION]:
         resting_tension_blocks(rows.rt_vert, rows.rt_par, h * h, mat.rt_slot, amat, pdiag)
     if planes is not None:
@@ -379,12 +379,13 @@ def split_cg(w, target, cg_max, rank_c=0.0, rank_g=None, rank_gh=None):
     (D = G G^T, D the sweep's diagonal blocks sdiag, L = U^T the assembled off-diagonal
     ones), they iterate on C^-1 A C^-T, whose product is two triangular solves (A = (D +
     L) + (D + U) + E, E = D_A - 2 D, D_A the exact diagonal blocks): t = (D + U)^-1 G p,
-    C^-1 A C^-T p = G^T (t + (D + L)^-1 (G p + E t)). The same iterates as
-    `hybrid.implicit._solve` (its x = C^-T y), for two triangular solves an iteration
-    instead of a product and a sweep (three). Stops when the residual b - A x is at most
+    C^-1 A C^-T p = G^T (t + (D + L)^-1 (G p + E t)). The iterates of the
+    conjugate gradients preconditioned with the sweep `sgs_sweep` (their x = C^-T y), for two
+    triangular solves an iteration instead of a product and a sweep (three). Stops when the residual b - A x is at most
     target, looked at when |C^-1 r| has fallen by target / |r_0| (then replacing the
-    recursive C^-1 r if not yet), or at negative curvature as `_solve`. Returns the
-    iterations (-1: negative curvature at once). The rank-one term adds c ^g (^g . p) to the
+    recursive C^-1 r if not yet), or at negative curvature (p^T A p not > 0). Returns the
+    iterations, or -1 - k at negative curvature after k of them. The rank-one term adds
+    c ^g (^g . p) to the
     product (^g = C^-1 g = rank_gh, `half_sweep`): a rank-one change of the matrix adds at
     most one iteration in exact arithmetic, where solving A^-1 g apart for Sherman-Morrison took
     a second solve (a smooth vector over the whole dome, 18 iterations against the first's 8 on
@@ -427,10 +428,8 @@ def split_cg(w, target, cg_max, rank_c=0.0, rank_g=None, rank_gh=None):
         if rank_g is not None and rank_c != 0.0:  # + c ^g ^g^T p
             add_rank_one(rank_c, rank_gh, p, q)
         pq = dot(p, q)
-        if not pq > 0.0:  # negative curvature (or p = 0): stop with what we have (truncated Newton)
-            if k == 0:
-                return -1
-            break
+        if not pq > 0.0:  # negative curvature (or p = 0): the caller solves with the projected matrix
+            return -1 - k
         alpha = rr / pq
         rr_new = cg_update(alpha, p, q, y, r)
         k += 1

@@ -38,7 +38,7 @@ class Info(IntEnum):
     NEWTON_TOTAL = 5  # over the run
     CG_TOTAL = 6
     WORST = 7  # the vertex of the largest residual
-    PROJECTED_TOTAL = 8  # Newton iterations over the run solved with the projected Hessian
+    PROJECTED_TOTAL = 8  # Newton iterations over the run solved again with the projected Hessian (negative curvature)
     FORCE_SUM = 9  # N, the step-start force scale F summed over the run's solved steps
     SOLVED = 10  # the run's solved steps
     FORCE = 11  # N, the last step's step-start force scale F
@@ -106,8 +106,8 @@ def newton_rows(arrays) -> NewtonRows:
 class ImplicitWork(NamedTuple):
     """The implicit step's arrays: dv (nvert, 3) m/s, the last step's velocity change
     (warm start); x_try, v_try, f, f_expl, res, x_kv (the positions the line search's
-    viscous dissipation is taken at), dv_start (the Newton iteration's dv), full_u,
-    full_y (the projected product's) (nvert, 3) and the conjugate gradients' cg_* (nfree,
+    viscous dissipation is taken at), dv_start (the Newton iteration's dv) (nvert, 3) and
+    the conjugate gradients' cg_* (nfree,
     3, in the Newton matrix's numbering of the free points): scratch; grad (nvert, 3)
     m^2: the volume gradient at the step's start; rows: the
     triangles the Newton matrix reads (`newton_rows`); face (NCACHE), fib (NFIB_CACHE),
@@ -129,8 +129,6 @@ class ImplicitWork(NamedTuple):
     x_kv: np.ndarray
     grad: np.ndarray
     dv_start: np.ndarray
-    full_u: np.ndarray
-    full_y: np.ndarray
     cg_x: np.ndarray
     cg_r: np.ndarray
     cg_z: np.ndarray
@@ -165,7 +163,7 @@ def implicit_work(
         return None
     n = arrays.vert_rest.shape[0]
     nfree = int(np.count_nonzero(np.asarray(arrays.vert_free)))
-    vec = [np.zeros((n, 3)) for _ in range(11)] + [np.zeros((nfree, 3)) for _ in range(7)]
+    vec = [np.zeros((n, 3)) for _ in range(9)] + [np.zeros((nfree, 3)) for _ in range(7)]
     rows = newton_rows(arrays)
     return ImplicitWork(
         *vec,

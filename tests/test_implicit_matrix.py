@@ -113,6 +113,29 @@ def test_the_assembled_blocks_are_the_element_products(setup):
     assert np.abs(mat.sdiag - mat.pdiag[fr] / SSOR_OMEGA).max() <= 1e-15 * np.abs(mat.pdiag).max()
 
 
+def test_the_projected_assembly_is_the_projected_element_product(setup):
+    """The matrix implicit Euler solves with at negative curvature: assembled with every
+    element's Hessian projected, it is the projected element-by-element product (and its
+    diagonal blocks the preconditioner's, the same as the exact assembly's)."""
+    a, rows, face, fib, pf, exact = setup
+    n = a.vert_rest.shape[0]
+    free = np.repeat(a.vert_free != 0, 3)
+    proj = dense_matrix(n, lambda u, y: newton_product(a, rows, face, fib, pf, H, True, u, y, no_planes(a)))
+    proj[~free, :] = 0.0
+    proj[:, ~free] = 0.0
+    mat = newton_matrix(n, a.vert_free, rows.mem_vert, rows.fib_vert, rows.pf_vert, rows.rt_vert)
+    assemble(a, rows, face, fib, pf, H, mat, no_planes(a), True)
+    scale = np.abs(proj).max()
+    # a sum of the same products in another order: to rounding
+    assert np.abs(blocks_of(mat, n, mat.amat) - proj).max() <= 1e-12 * scale
+    assert np.abs(blocks_of(mat, n, mat.amat) - blocks_of(exact, n, exact.amat)).max() > 1e-6 * scale
+    assert np.array_equal(mat.pdiag, exact.pdiag) and np.array_equal(mat.sdiag, exact.sdiag)
+    # the projection only adds stiffness (a compressed triangle's stress and a fibre's negative
+    # coefficients clamped at zero): the difference is positive semi-definite, to rounding
+    added = np.linalg.eigvalsh((proj - blocks_of(exact, n, exact.amat))[np.ix_(free, free)])
+    assert added.min() >= -1e-12 * scale and added.max() > 1e-6 * scale
+
+
 def sweep_diagonal(mat, n):
     """The sweep's D on every point (zero on fixed points)."""
     diag = np.zeros((3 * n, 3 * n))
@@ -142,12 +165,46 @@ def test_the_sweep_is_ssor_with_the_projected_diagonal(setup):
     assert np.abs(z[fr].ravel() - want).max() <= 1e-10 * np.abs(want).max()
 
 
+def sweep_parts(mat, n):
+    """The dense (D + L), (D + U) and D of the sweep on the free points (the matrix's numbering)."""
+    full = blocks_of(mat, n, mat.amat)
+    one = np.kron(np.eye(n), np.ones((3, 3)))
+    off = full - one * full
+    diag = sweep_diagonal(mat, n)
+    free = np.repeat(np.isin(np.arange(n), mat.free), 3)
+    sub = np.ix_(free, free)
+    return (np.tril(off) + diag)[sub], (np.triu(off) + diag)[sub], diag[sub]
+
+
+def swept_cg(big, lower, upper, d, r, iters):
+    """The reference: `iters` iterations of the conjugate gradients on big x = r preconditioned
+    with the sweep (D + U)^-1 D (D + L)^-1, dense, from x = 0; x as (nfree, 3)."""
+    res = r.ravel().copy()
+    x = np.zeros_like(res)
+
+    def sweep(v):
+        return np.linalg.solve(upper, d @ np.linalg.solve(lower, v))
+
+    z = sweep(res)
+    p = z.copy()
+    rz = res @ z
+    for _ in range(iters):
+        q = big @ p
+        alpha = rz / (p @ q)
+        x += alpha * p
+        res -= alpha * q
+        z = sweep(res)
+        rz, rz_old = res @ z, rz
+        p = z + rz / rz_old * p
+    return x.reshape(r.shape)
+
+
 def test_eisenstats_conjugate_gradients_take_the_same_iterates_as_the_swept_ones(setup):
-    """`split_cg` (two triangular solves an iteration) iterates on C^-1 A C^-T what
-    `_solve` (a product and a sweep) iterates on A with the preconditioner C C^T: after
-    the same number of iterations both have the same x, to round-off (1e-9 of x: the
-    iterates differ by the rounding of a few dozen products)."""
-    from hybrid.implicit import _solve, implicit_work
+    """`split_cg` (two triangular solves an iteration) iterates on C^-1 A C^-T what the
+    conjugate gradients with the preconditioner C C^T (the sweep) iterate on A: after the same
+    number of iterations both have the same x, to round-off (1e-9 of x: the iterates differ
+    by the rounding of a few dozen products; the reference is dense, `swept_cg`)."""
+    from hybrid.implicit import implicit_work
     from hybrid.implicit_matrix import lower_solve, split_cg, upper_solve
 
     def _solve_split(w, target, cg_max):
@@ -174,12 +231,10 @@ def test_eisenstats_conjugate_gradients_take_the_same_iterates_as_the_swept_ones
     b = np.abs(np.linalg.eigvalsh(full[np.ix_(free, free)]))
     assert b.min() > 0.0
     for iters in (1, 3, 6):
-        out = []
-        for solve in (lambda: _solve(a, w, H, False, 0.0, iters, 0.0, w.lung_gf), lambda: _solve_split(w, 0.0, iters)):
-            w.cg_r[:] = r
-            assert solve() == iters
-            out.append(w.cg_x.copy())
-        assert np.abs(out[0] - out[1]).max() <= 1e-9 * np.abs(out[0]).max(), iters
+        swept = swept_cg(full[np.ix_(free, free)], lower, upper, diag[np.ix_(free, free)], r, iters)
+        w.cg_r[:] = r
+        assert _solve_split(w, 0.0, iters) == iters
+        assert np.abs(w.cg_x - swept).max() <= 1e-9 * np.abs(swept).max(), iters
     # to a tolerance: |A x - r| <= target, checked on the residual itself
     w.cg_r[:] = r
     k = _solve_split(w, 1e-6 * np.linalg.norm(r), 10 * n)
@@ -191,11 +246,11 @@ def test_eisenstats_conjugate_gradients_take_the_same_iterates_as_the_swept_ones
 def test_a_rank_one_term_in_the_conjugate_gradients_costs_at_most_an_iteration_more(setup):
     """The lungs' stiffness c g g^T (`hybrid.implicit_lungs`) in `split_cg`'s product: it
     solves (A + c g g^T) x = r to its target against the dense matrix, takes the iterates
-    `_solve` takes with the term in its product (to round-off, as without it), and, a rank-one
+    of the swept conjugate gradients on that matrix (to round-off, as without it), and, a rank-one
     change of the matrix adding at most one iteration in exact arithmetic, needs at most 2 more
     iterations than A alone (one for rounding) for a term up to A's largest eigenvalue: the
     Sherman-Morrison it replaced solved A^-1 g apart, a second solve each Newton iteration."""
-    from hybrid.implicit import _solve, implicit_work
+    from hybrid.implicit import implicit_work
     from hybrid.implicit_matrix import half_sweep, split_cg
 
     a, rows, face, fib, pf, mat = setup
@@ -234,9 +289,7 @@ def test_a_rank_one_term_in_the_conjugate_gradients_costs_at_most_an_iteration_m
         assert np.linalg.norm(want @ sol.ravel() - r.ravel()) <= target * (1 + 1e-6), stiff
         assert 0 < k <= plain + 2, (stiff, k, plain)
         for iters in (1, 3, 6):
-            w.cg_r[:] = r
-            assert _solve(a, w, H, False, 0.0, iters, c, g) == iters
-            swept = w.cg_x.copy()
+            swept = swept_cg(want, *sweep_parts(mat, n), r, iters)
             assert run(c, g, gh, cg_max=iters)[0] == iters
             assert np.abs(w.cg_x - swept).max() <= 1e-9 * np.abs(swept).max(), (stiff, iters)
 

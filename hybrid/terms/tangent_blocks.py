@@ -67,11 +67,13 @@ def _corner_weights(d00, d01, d11, n):
 
 
 @kernel(fastmath=FAST_NO_FMA)
-def membrane_tangent_blocks(mem_vert, mem_par, cache, kx, kv, slot, amat, pdiag):
-    """amat[slot] += the blocks of kx K + kv C; pdiag[corner] += the diagonal ones with K projected.
-    # Model: mem_vert, mem_par   # Data in: cache (membrane_tangent_cache), slot (nf, 9) int64
+def membrane_tangent_blocks(mem_vert, mem_par, cache, kx, kv, slot, amat, pdiag, project=False):
+    """amat[slot] += the blocks of kx K + kv C (K projected when `project`); pdiag[corner] += the
+    diagonal ones with K projected.
+    # Model: mem_vert, mem_par   # Data in: cache (membrane_tangent_cache), slot (nf, 9) int64, project
     # Data out: amat (nblocks, 9), pdiag (nvert, 9) row-major blocks, added to
     """
+    col = 9 if project else 6  # the stress, or the clamped one
     for k in range(mem_vert.shape[0]):
         p = mem_par[k]
         c = cache[k]
@@ -94,7 +96,7 @@ def membrane_tangent_blocks(mem_vert, mem_par, cache, kx, kv, slot, amat, pdiag)
                 wn0, wn1 = _corner_weights(d00, d01, d11, n)
                 qnx, qny, qnz = wn0 * f0x + wn1 * f1x, wn0 * f0y + wn1 * f1y, wn0 * f0z + wn1 * f1z
                 w00, w01, w11 = wm0 * wn0, wm0 * wn1 + wm1 * wn0, wm1 * wn1
-                geo_e = kg * (w00 * c[6] + w01 * c[7] + w11 * c[8])
+                geo_e = kg * (w00 * c[col] + w01 * c[col + 1] + w11 * c[col + 2])
                 ww = cu * (w00 + w11)
                 v0 = cl * qmx * qnx + cu * qnx * qmx + ww * a00
                 v1 = cl * qmx * qny + cu * qnx * qmy + ww * a01
@@ -156,26 +158,29 @@ def _edge_blocks(tri, c, slot, scale, rank_e, rank_p, e_col, p_col, amat, pdiag)
 
 
 @kernel(fastmath=FAST_NO_FMA)
-def fibre_tangent_blocks(fib_vert, cache, kx, slot, amat, pdiag):
-    """amat[slot] += the muscle fibres' blocks of kx K, pdiag[corner] += the diagonal ones of K
-    projected, from `fibre_tangent_cache`.
-    # Model: fib_vert (nf, 3) int32   # Data in: cache (fibre_tangent_cache), kx, slot (nf, 9) int64
+def fibre_tangent_blocks(fib_vert, cache, kx, slot, amat, pdiag, project=False):
+    """amat[slot] += the muscle fibres' blocks of kx K (projected when `project`), pdiag[corner] +=
+    the diagonal ones of K projected, from `fibre_tangent_cache`.
+    # Model: fib_vert (nf, 3) int32   # Data in: cache (fibre_tangent_cache), kx, slot (nf, 9) int64, project
     # Data out: amat (nblocks, 9), pdiag (nvert, 9), added to
     """
     for f in range(fib_vert.shape[0]):
         c = cache[f]
         if c[17] != 0.0:
-            _edge_blocks(fib_vert[f], c, slot[f], kx, c[9], c[10], 11, 14, amat, pdiag)
+            if project:
+                _edge_blocks(fib_vert[f], c, slot[f], kx, c[10], c[10], 14, 14, amat, pdiag)
+            else:
+                _edge_blocks(fib_vert[f], c, slot[f], kx, c[9], c[10], 11, 14, amat, pdiag)
 
 
 @kernel(fastmath=FAST_NO_FMA)
-def passive_fibres_tangent_blocks(pf_vert, cache, kx, slot, amat, pdiag):
-    """amat[slot] += the passive fibres' blocks of kx K, pdiag[corner] += the diagonal ones of
-    K projected, from `passive_fibres_tangent_cache`.
-    # Model: pf_vert (nf, 3) int32   # Data in: cache (passive_fibres_tangent_cache), kx, slot (nf, 9) int64
+def passive_fibres_tangent_blocks(pf_vert, cache, kx, slot, amat, pdiag, project=False):
+    """amat[slot] += the passive fibres' blocks of kx K (projected when `project`), pdiag[corner]
+    += the diagonal ones of K projected, from `passive_fibres_tangent_cache`.
+    # Model: pf_vert (nf, 3) int32   # Data in: cache (passive_fibres_tangent_cache), kx, slot (nf, 9) int64, project
     # Data out: amat (nblocks, 9), pdiag (nvert, 9), added to
     """
     for f in range(pf_vert.shape[0]):
         c = cache[f]
         if c[9] != 0.0:
-            _edge_blocks(pf_vert[f], c, slot[f], kx * c[9], 1.0, 1.0, 10, 13, amat, pdiag)
+            _edge_blocks(pf_vert[f], c, slot[f], kx * c[9], 1.0, 1.0, 13 if project else 10, 13, amat, pdiag)
