@@ -157,3 +157,39 @@ def test_a_scene_survives_its_scene_file(scene):
     back = sf.scene_from_dict(tomllib.loads(text), source="roundtrip.toml")
     assert back == scene
     assert sf.scene_to_toml(back) == text
+
+
+_SCALARS = st.one_of(
+    st.integers(-(10**12), 10**12),
+    st.floats(allow_nan=False, width=64),
+    st.booleans(),
+    st.text(max_size=12),  # quotes, brackets, braces, escapes: left an item a line where not plain
+)
+_VALUES = st.recursive(st.lists(_SCALARS, max_size=60), lambda inner: st.lists(inner, max_size=8), max_leaves=200)
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.dictionaries(st.text("abcdefgh_", min_size=1, max_size=8), _VALUES, max_size=5))
+def test_compacted_arrays_hold_the_same_values(table):
+    """The scene file's arrays written a line at a time (`compact_arrays`): the same TOML values
+    as tomli_w's item per line, and no line longer than LINE but one that holds a single item."""
+    import tomli_w
+
+    from hybrid.scenefile.write import LINE, compact_arrays
+
+    text = tomli_w.dumps(table)
+    compact = compact_arrays(text)
+    assert tomllib.loads(compact) == tomllib.loads(text)
+    for line in compact.split("\n"):  # longer only where one item is
+        assert len(line) <= LINE or tomllib.loads("x = " + line.strip().rstrip(","))["x"] is not None, line
+
+
+def test_a_long_list_of_indices_takes_a_line_per_few_dozen():
+    import tomli_w
+
+    from hybrid.scenefile.write import compact_arrays
+
+    text = tomli_w.dumps({"indices": list(range(1000)), "p": [[0.5, 1.0, -2.0]] * 3})
+    compact = compact_arrays(text)
+    assert len(text.splitlines()) > 1000 and len(compact.splitlines()) < 60
+    assert "p = [[0.5, 1.0, -2.0], [0.5, 1.0, -2.0], [0.5, 1.0, -2.0]]" in compact
