@@ -223,6 +223,11 @@ class Coupling:
         `slide_vert` order; its body took the opposite, at the point."""
         return self._slides.force.copy()
 
+    def wall_forces(self) -> np.ndarray:
+        """(nc, 3) N: the lungs' load on each carried wall point in the last step (a copy), in
+        `system.wall_point` order; its body took `system.wall_weight` times it at its site."""
+        return self._wall.force.copy()
+
     def wrench_history(self) -> np.ndarray:
         """(nstep, nbody, 6) [N, N m]: `xfrc_applied` of every recorded step."""
         nb = self.system.model.nbody

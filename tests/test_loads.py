@@ -235,9 +235,11 @@ def test_the_abdomen_extends_myotorsos_lumbosacral_joint_through_the_added_ribs(
     """L5/S1 is myotorso's `flex_extension` (lumbar5 on the sacrum; its axis -x, the
     model's +x to the left and -y anterior), named in the packaged scene's
     rigid.load_joints: a positive moment along it turns the thorax backward, an
-    extension. The membrane pushes the ribs added to the thorax into extension and the
-    nailed pelvic bowl, below the joint, the other way; the pressure's moment summed over
-    every held point (`iap/...`, the pelvic bowl included) is reported beside them."""
+    extension. The membrane pushes the lower ribs added to the thorax into extension (the
+    upper pair holds no membrane point: it carries the lungs' wall); the fitted pelvic floor,
+    from the sacrum's tip to the pelvic inlet, lies about the joint, and its moment is small
+    beside theirs. The pressure's moment summed over every held point (`iap/...`, the
+    pelvic floor included) is reported beside them."""
     sim = hybrid.load("myotorso_breathing")
     obs_loads = Loads(sim)
     names = obs_loads.channels()
@@ -252,5 +254,5 @@ def test_the_abdomen_extends_myotorsos_lumbosacral_joint_through_the_added_ribs(
         on_pelvis.append(sample[names.index("nail/pelvis/moment_about/flex_extension_n_m")] @ axis)
         assert np.isfinite(sample[names.index("iap/moment_about/flex_extension_n_m")]).all()
     on_ribs, on_pelvis = np.array(on_ribs), np.array(on_pelvis)
-    assert on_ribs.max() > 0.05 and on_ribs.min() > -0.01 * on_ribs.max()  # 0.069 N m at 0.3 s measured
-    assert on_pelvis.min() < -0.05 and on_pelvis.max() < 0.01 * on_ribs.max()
+    assert on_ribs.max() > 0.05 and on_ribs.min() > -0.01 * on_ribs.max()  # 0.069 N m at 0.64 s measured
+    assert np.abs(on_pelvis).max() < 0.2 * on_ribs.max()  # +0.0022 to -0.0074 N m measured

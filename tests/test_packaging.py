@@ -75,6 +75,9 @@ def test_builtin_scenes_and_trunk_resolve_inside_the_installed_package(tmp_path)
     for line, expected in zip(out[1:], ("scenes/breathing.toml", "scenes/myotorso_breathing.toml", "trunk.xml")):
         assert Path(line) == models / expected and Path(line).is_file()
         assert Path(line).read_bytes() == (REPO / "models" / expected).read_bytes()
+    # the fitted torso's membrane, which its scene file names beside it
+    mesh = models / "scenes" / "myotorso_breathing" / "abdomen.obj"
+    assert mesh.read_bytes() == (REPO / "models" / "scenes" / "myotorso_breathing" / "abdomen.obj").read_bytes()
 
 
 def test_the_version_has_one_place_and_the_command_prints_it():

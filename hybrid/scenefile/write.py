@@ -115,9 +115,12 @@ def scene_to_dict(scene: Scene) -> dict:
         del d["dt_s"]
     ms = scene.mesh
     mesh = {k: getattr(ms, k) for k in _MESH if getattr(ms, k) is not None}
-    if ms.path is not None:
-        mesh.pop("generator", None)
     mesh["center_m"] = list(ms.center_m)
+    if ms.path is not None:  # a file: the generators' keys not written where they are the defaults
+        mesh.pop("generator", None)
+        for k, f in _MESH.items():
+            if k != "path" and k in mesh and getattr(ms, k) == f.default:
+                del mesh[k]
     d["mesh"] = mesh
     m = scene.masses
     if m.total_kg is not None:

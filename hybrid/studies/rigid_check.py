@@ -6,9 +6,10 @@ against MuJoCo alone and against the paper's rigid algorithm.
    through MuJoCo alone (`hybrid.rigid.replay_states`, `mujoco.rollout`) from the run's
    initial state; `replay_max_abs_qpos` and `replay_max_abs_qvel` are the largest
    differences over every step (0 when the coupled loop drives MuJoCo as `mj_step` does).
-2. Wrench: at every step, the point forces sent to the sites are summed in numpy into a
-   force and a moment about each body's centre of mass, from the sites' and centres'
-   positions at the step's start, and compared with the recorded `xfrc_applied`:
+2. Wrench: at every step, the membrane's loads on the bodies (the linked points' forces at
+   their sites, the lungs' carried wall's at theirs, the sliding points' planes' reactions at
+   the points) are summed in numpy into a force and a moment about each body's centre of mass,
+   from the positions at the step's start, and compared with the recorded `xfrc_applied`:
    `wrench_rel_error` = max |difference| / max |xfrc_applied|.
 3. The paper's rigid-region algorithm (section 3.5; `rigid_reference.run_paper`) against
    MuJoCo's RK4 at a fine step on a free body pushed by a body-fixed force, as h halves
@@ -49,17 +50,27 @@ def replay_check(scene, nstep: int) -> dict:
         raise SceneError(f"study rigid: scene {scene.name!r} has no rigid part; expected a scene with [rigid]")
     coupling, d = sim.rigid, sim.mj_data
     coupling.record_wrenches = True
-    site_id, site_body = coupling.system.site_id, coupling.system.site_body
+    system = coupling.system
+    # every load the membrane puts on a body: the linked points' forces at their sites, the lungs'
+    # wall's shares at theirs, and the sliding points' planes' reactions at the points themselves
+    site_id, site_body = system.site_id, system.site_body
+    wall_id, wall_body, wall_weight = system.wall_site_id, system.wall_site_body, system.wall_weight
+    slide_vert, slide_body = system.slide_vert, system.slide_site_body
     qvel, ctrl, wrench_err, wrench_max = [], [], 0.0, 0.0
     for _k in range(nstep):
-        site_pos, com = d.site_xpos[site_id].copy(), d.xipos.copy()
+        site_pos, wall_pos, com = d.site_xpos[site_id].copy(), d.site_xpos[wall_id].copy(), d.xipos.copy()
+        slide_pos = sim.state.vert_pos[slide_vert]
         sim.step(1)
         xfrc = coupling.wrench_history()[-1]
-        force = coupling.link_forces()
         mine = np.zeros_like(xfrc)
-        np.add.at(mine[:, :3], site_body, force)
-        np.add.at(mine[:, 3:], site_body, np.cross(site_pos - com[site_body], force))
-        bodies = np.unique(site_body)
+        for body, at, force in (
+            (site_body, site_pos, coupling.link_forces()),
+            (wall_body, wall_pos, wall_weight[:, None] * coupling.wall_forces()),
+            (slide_body, slide_pos, -coupling.slide_forces()),
+        ):
+            np.add.at(mine[:, :3], body, force)
+            np.add.at(mine[:, 3:], body, np.cross(at - com[body], force))
+        bodies = np.unique(np.concatenate([site_body, wall_body, slide_body]))
         wrench_err = max(wrench_err, float(np.abs(mine[bodies] - xfrc[bodies]).max()))
         wrench_max = max(wrench_max, float(np.abs(xfrc[bodies]).max()))
         qvel.append(d.qvel.copy())
