@@ -15,6 +15,8 @@ import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 from . import checks
 from .errors import SceneError
 from .integrators import NAMES
@@ -41,6 +43,7 @@ from .terms import (
 from .terms.base import FORMULATIONS, param
 
 __all__ = [
+    "body_axes",
     "MeshSpec",
     "Masses",
     "Gravity",
@@ -339,3 +342,20 @@ class Scene:
         if not p.is_absolute() and self.base_dir is not None:
             p = Path(self.base_dir) / p
         return p
+
+
+def body_axes(scene: Scene) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+    """The body's anterior and cranial directions in the scene's frame (unit vectors, cranial made
+    perpendicular to anterior): its added rib pairs' (`rigid.ribs`, the model's own directions)
+    when it has them, else +x and +z (the packaged trunk's and the paper's frame). The pictures
+    turn the body by them, so that their views and their mid-sagittal section are the body's own
+    on any model (`hybrid.pictures.frames`)."""
+    ribs = scene.rigid.ribs if scene.rigid is not None else None
+    if ribs is None:
+        return (1.0, 0.0, 0.0), (0.0, 0.0, 1.0)
+    a = np.asarray(ribs.anterior, float)
+    a = a / np.linalg.norm(a)
+    c = np.asarray(ribs.cranial, float)
+    c = c - (c @ a) * a
+    c = c / np.linalg.norm(c)
+    return tuple(float(v) for v in a), tuple(float(v) for v in c)

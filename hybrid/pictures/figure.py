@@ -125,6 +125,14 @@ def draw_panel(ax, fr: Frames, k: int, centre, half, *, membrane: bool, title: s
         ax.add_collection3d(Line3DCollection(lines, zorder=4, **REST_STYLE))
 
 
+def _plane(left, y0: float) -> str:
+    """The section's plane in the model's own coordinates: `y0` m along its left, `left`."""
+    k = int(np.argmax(np.abs(left)))
+    if abs(abs(left[k]) - 1.0) < 1e-9:
+        return f"the plane {'xyz'[k]} = {round(y0 * left[k], 3) + 0.0:.3f} m"
+    return f"the plane {round(y0, 3) + 0.0:.3f} m along the body's left"
+
+
 def sagittal_section(pos: np.ndarray, face_vert: np.ndarray, y0: float) -> tuple[np.ndarray, np.ndarray]:
     """The membrane cut by the plane y = y0: segments (nseg, 2, 2) as (x, z) in m, and
     the face each comes from (nseg,). A point on the plane counts as above it, so that
@@ -263,7 +271,7 @@ def build_figure(fr: Frames, frames=None, *, membrane: bool = True, dpi: int = 1
             rest_cut=(rest_cut, y0) if membrane else None,
         )
         _draw_section(fig.add_subplot(grid[1, i]), fr, k, y0, box, membrane=membrane)
-    fig.suptitle(f"{fr.scene}: each view above its mid-sagittal section (the plane y = {y0 + 0.0:.3f} m)", fontsize=11)
+    fig.suptitle(f"{fr.scene}: each view above its mid-sagittal section ({_plane(fr.left, y0)})", fontsize=11)
     _legend(fig, fr, membrane)
     return fig, frames
 

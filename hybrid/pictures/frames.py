@@ -3,6 +3,7 @@ and which of them are the key frames (rest, peak inspiration, end of expiration)
 
 from __future__ import annotations
 
+import dataclasses
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -12,6 +13,7 @@ import numpy as np
 from ..errors import HybridError
 
 __all__ = [
+    "turned",
     "PANEL_TITLES",
     "STILL_TITLES",
     "SHOWN_GEOM_GROUPS",
@@ -47,7 +49,9 @@ class Frames:
     face_vert (nface, 3); vert_rgba (nvert, 4); body_pos (n, nbody, 3), body_quat
     (n, nbody, 4) (w, x, y, z) for `bodies`; geoms: dicts (body, type, size, pos,
     quat, rgba) in body frames; apex_descent, muscle, rib_lift (n,) for choosing the key frames and the labels;
-    regions: the region names, vert_label (nvert,) each point's index in them (-1: none)."""
+    regions: the region names, vert_label (nvert,) each point's index in them (-1: none);
+    left: the model's own direction that the frames' +y is (`turned`: the frames are in the body's
+    axes, x anterior, y left, z cranial, whatever the model's)."""
 
     scene: str
     t: np.ndarray
@@ -63,6 +67,31 @@ class Frames:
     rib_lift: np.ndarray | None = None
     regions: list = field(default_factory=list)
     vert_label: np.ndarray | None = None
+    left: tuple = (0.0, 1.0, 0.0)
+
+
+def turned(fr: Frames, anterior, cranial) -> Frames:
+    """fr in the body's axes: x anterior, y left (cranial x anterior), z cranial, as the pictures
+    draw a body (the packaged trunk's frame, the paper's); the points, the bodies' positions and
+    orientations turned about the origin (the geoms stay in their bodies' frames)."""
+    from scipy.spatial.transform import Rotation
+
+    a, c = np.asarray(anterior, float), np.asarray(cranial, float)
+    rot = np.stack([a, np.cross(c, a), c])  # rows: the body's axes in the model's frame
+    if np.allclose(rot, np.eye(3)):
+        return fr
+    quat = None
+    if fr.body_quat is not None:  # (w, x, y, z), scipy's (x, y, z, w)
+        q = fr.body_quat.reshape(-1, 4)[:, [1, 2, 3, 0]]
+        quat = (Rotation.from_matrix(rot) * Rotation.from_quat(q)).as_quat()[:, [3, 0, 1, 2]]
+        quat = quat.reshape(fr.body_quat.shape)
+    return dataclasses.replace(
+        fr,
+        pos=fr.pos @ rot.T,
+        body_pos=None if fr.body_pos is None else fr.body_pos @ rot.T,
+        body_quat=quat,
+        left=tuple(float(v) for v in rot[1]),
+    )
 
 
 def frames_from_recording(path: str | Path) -> Frames:
@@ -98,7 +127,7 @@ def frames_from_recording(path: str | Path) -> Frames:
         s = data.get(topic)
         return None if s is None or len(s["value"]) < n else s["value"][:n]
 
-    return Frames(
+    frames = Frames(
         scene=meta.get("scene", path.stem),
         t=pts["t"][:n],
         pos=pts["pos"][:n].astype(float),
@@ -114,6 +143,8 @@ def frames_from_recording(path: str | Path) -> Frames:
         regions=list(meta.get("regions", [])),
         vert_label=meta.get("vert_label"),
     )
+    # a recording made before the axes were written: the packaged trunk's frame
+    return turned(frames, meta.get("anterior", (1.0, 0.0, 0.0)), meta.get("cranial", (0.0, 0.0, 1.0)))
 
 
 def frames_from_scene(
@@ -133,6 +164,7 @@ def frames_from_scene(
     from ..record import body_geoms, region_colours
     from ..resolve import resolve_scene
     from ..run import RunFailed, run
+    from ..scene import body_axes
     from ..simulation import Simulation
 
     scene = resolve_scene(scene_arg, overrides=overrides, without=without)
@@ -164,7 +196,7 @@ def frames_from_scene(
     n = len(keep["t"])
     idx = np.searchsorted(tr["t_s"], np.asarray(keep["t"]) - 1e-12)
     names, label, colours = region_colours(sim.model)
-    return Frames(
+    frames = Frames(
         scene=scene.name,
         t=np.asarray(keep["t"]),
         pos=np.asarray(keep["pos"]),
@@ -180,6 +212,7 @@ def frames_from_scene(
         regions=names,
         vert_label=label,
     )
+    return turned(frames, *body_axes(scene))
 
 
 def _present(series: np.ndarray) -> np.ndarray | None:

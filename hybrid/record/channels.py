@@ -10,6 +10,7 @@ import zlib
 import numpy as np
 
 from ..loads import topics as load_topics
+from ..scene import body_axes
 from .encoder import (
     MAX_DEPTH,
     OP_BEGIN,
@@ -62,6 +63,7 @@ def _plan(sim, every_s: float) -> dict:
         "geoms": body_geoms(mj_model) if mj_model is not None else [],
         "bodies": bodies,
         "loads": [],
+        "axes": body_axes(model.scene),
     }
 
 
@@ -148,6 +150,9 @@ class _FrameWriter:
                 "vert_rgba": np.round(colours, 4).tolist(),
                 "link_vert": plan["link_vert"].tolist(),
                 "geoms": plan["geoms"],
+                # the body's anterior and cranial directions (`hybrid.scene.body_axes`), for the pictures
+                "anterior": list(plan["axes"][0]),
+                "cranial": list(plan["axes"][1]),
                 "bodies": bodies,
                 "loads": plan["loads"],
                 "provenance": plan.get("provenance"),
