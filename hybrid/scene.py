@@ -358,4 +358,4 @@ def body_axes(scene: Scene) -> tuple[tuple[float, float, float], tuple[float, fl
     c = np.asarray(ribs.cranial, float)
     c = c - (c @ a) * a
     c = c / np.linalg.norm(c)
-    return tuple(float(v) for v in a), tuple(float(v) for v in c)
+    return (float(a[0]), float(a[1]), float(a[2])), (float(c[0]), float(c[1]), float(c[2]))
