@@ -43,7 +43,6 @@ from .terms import (
 from .terms.base import FORMULATIONS, param
 
 __all__ = [
-    "body_axes",
     "MeshSpec",
     "Masses",
     "Gravity",
