@@ -8,12 +8,12 @@ from pathlib import Path
 import numpy as np
 
 from ..outputs import replaced
+from ..record.schemas import GEOM_MESH
 from .frames import Frames, key_frames, panel_titles
 
-__all__ = ["sagittal_section", "view_bounds", "draw_panel", "build_figure", "draw_figure"]
+__all__ = ["bone_points", "sagittal_section", "view_bounds", "draw_panel", "build_figure", "draw_figure"]
 
-#: MuJoCo's mesh geom type (mjGEOM_MESH), and the radius (m) of the mark drawn for one
-GEOM_MESH = 7
+#: the radius (m) of the mark drawn for a mesh geom recorded without its points
 MESH_MARK_M = 0.006
 
 
@@ -58,13 +58,43 @@ def _geom_segments(fr: Frames, k: int):
             segs.append([centre - half * axis, centre + half * axis])
             radii.append(g["size"][0])
             cols.append(g["rgba"])
+        elif g["type"] == GEOM_MESH and "points" in g:  # a bone's surface: drawn as its dots (`bone_points`)
+            continue
         else:
             pts.append(centre)
-            # a mesh (a bone's surface) as a small mark where it is: its size is no radius,
-            # and a disc of its extent would cover the membrane
+            # a mesh (a bone's surface) recorded without its points, as a small mark where it is:
+            # its size is no radius, and a disc of its extent would cover the membrane
             psize.append(MESH_MARK_M if g["type"] == GEOM_MESH else max(g["size"][:3]))
             pcols.append(g["rgba"])
     return segs, radii, cols, pts, psize, pcols
+
+
+def bone_points(fr: Frames, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """World points (n, 3) of the model's mesh geoms (its bones' surfaces: the vertices
+    `hybrid.record.body_geoms` keeps) at frame k, and their colours (n, 4)."""
+    out, colours = [], []
+    if fr.body_pos is not None:
+        index = {name: i for i, name in enumerate(fr.bodies)}
+        for g in fr.geoms:
+            b = index.get(g["body"])
+            if g["type"] != GEOM_MESH or "points" not in g or (b is None and g.get("body_id") != 0):
+                continue
+            local = np.asarray(g["pos"]) + np.asarray(g["points"]) @ _quat_mat(g["quat"]).T
+            if b is None:  # the world's own geoms: fixed, turned with the frames
+                out.append(local @ np.asarray(fr.axes).T)
+            else:
+                out.append(fr.body_pos[k, b] + local @ _quat_mat(fr.body_quat[k, b]).T)
+            colours.append(np.repeat(np.asarray(g["rgba"], float)[None], len(local), axis=0))
+    if not out:
+        return np.zeros((0, 3)), np.zeros((0, 4))
+    return np.concatenate(out), np.concatenate(colours)
+
+
+#: the bones' dots: their size (points^2), opacity, and how near the section's plane (m) a dot is cut
+BONE_DOT = 2.5
+BONE_ALPHA = 0.5
+BONE_RGB = (0.55, 0.5, 0.42)
+BONE_SLAB_M = 0.004
 
 
 def view_bounds(fr: Frames, frames) -> tuple[np.ndarray, float]:
@@ -101,6 +131,11 @@ def draw_panel(ax, fr: Frames, k: int, centre, half, *, membrane: bool, title: s
         ax.add_collection3d(
             Poly3DCollection(tri, facecolors=np.clip(col, 0, 1), edgecolors=(0, 0, 0, 0.12), linewidths=0.3, zorder=3)
         )
+    bones, _ = bone_points(fr, k)
+    inside = np.all(np.abs(bones - centre) <= half, axis=1)  # mplot3d does not clip
+    if inside.any():  # in the bones' colour of the section (a model's own is often near white)
+        b = bones[inside]
+        ax.scatter(b[:, 0], b[:, 1], b[:, 2], s=BONE_DOT, color=BONE_RGB + (BONE_ALPHA,), linewidths=0, zorder=1)
     segs, radii, cols, pts, psize, pcols = _geom_segments(fr, k)
     if segs:
         widths = np.maximum(np.asarray(radii) * 2 * px_per_m * 0.72, 1.0)  # points (1/72 in)
@@ -182,6 +217,11 @@ def _draw_section(ax, fr: Frames, k: int, y0: float, box, *, membrane: bool):
     ax.set_ylim(z_lo, z_hi)
     ax.set_aspect("equal")
     ax.set_axis_off()
+    bones, _ = bone_points(fr, k)
+    cut_bones = (np.abs(bones[:, 1] - y0) <= BONE_SLAB_M) & (bones[:, 0] >= x_lo) & (bones[:, 0] <= x_hi)
+    cut_bones &= (bones[:, 2] >= z_lo) & (bones[:, 2] <= z_hi)
+    if cut_bones.any():  # the bones the plane cuts (the spine, the sternum), behind the membrane
+        ax.scatter(bones[cut_bones, 0], bones[cut_bones, 2], s=2 * BONE_DOT, color=BONE_RGB, zorder=1)
     segs, _ = _geom_segments(fr, k)[:2]
     if segs:  # the bones seen from the side, faint, behind the membrane
         bones = np.asarray(segs)[:, :, [0, 2]]
@@ -233,6 +273,10 @@ def _legend(fig, fr: Frames, membrane: bool):
         handles.append(Line2D([], [], color="black", linestyle=(0, (3, 2)), linewidth=1.0, label="rest outline"))
     if fr.body_pos is not None and fr.geoms:
         handles.append(Line2D([], [], color=(0.55, 0.5, 0.42), linewidth=3, label="ribs and spine"))
+    if len(bone_points(fr, 0)[0]):
+        handles.append(
+            Line2D([], [], color=(0.55, 0.5, 0.42), marker=".", linestyle="", label="the model's bones (dots)")
+        )
     if handles:
         fig.legend(handles=handles, loc="lower center", ncol=min(len(handles), 7), fontsize=8, frameon=False)
 

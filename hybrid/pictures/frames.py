@@ -50,8 +50,9 @@ class Frames:
     (n, nbody, 4) (w, x, y, z) for `bodies`; geoms: dicts (body, type, size, pos,
     quat, rgba) in body frames; apex_descent, muscle, rib_lift (n,) for choosing the key frames and the labels;
     regions: the region names, vert_label (nvert,) each point's index in them (-1: none);
-    left: the model's own direction that the frames' +y is (`turned`: the frames are in the body's
-    axes, x anterior, y left, z cranial, whatever the model's)."""
+    left: the model's own direction that the frames' +y is, axes the turn from the model's frame
+    (rows: the body's axes in it; `turned`: the frames are in the body's axes, x anterior, y left,
+    z cranial, whatever the model's)."""
 
     scene: str
     t: np.ndarray
@@ -68,6 +69,7 @@ class Frames:
     regions: list = field(default_factory=list)
     vert_label: np.ndarray | None = None
     left: tuple = (0.0, 1.0, 0.0)
+    axes: np.ndarray = field(default_factory=lambda: np.eye(3))
 
 
 def turned(fr: Frames, anterior, cranial) -> Frames:
@@ -91,6 +93,7 @@ def turned(fr: Frames, anterior, cranial) -> Frames:
         body_pos=None if fr.body_pos is None else fr.body_pos @ rot.T,
         body_quat=quat,
         left=tuple(float(v) for v in rot[1]),
+        axes=rot,
     )
 
 

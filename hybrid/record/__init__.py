@@ -58,8 +58,10 @@ from .schemas import (
     GEOM_CAPSULE,
     GEOM_CYLINDER,
     GEOM_ELLIPSOID,
+    GEOM_MESH,
     GEOM_SPHERE,
     MESH_EVERY_FRAME_MAX,
+    MESH_POINTS,
     SCALAR_CHANNELS,
     body_geoms,
     region_colours,
@@ -82,4 +84,6 @@ __all__ = [
     "GEOM_ELLIPSOID",
     "GEOM_CYLINDER",
     "GEOM_BOX",
+    "GEOM_MESH",
+    "MESH_POINTS",
 ]

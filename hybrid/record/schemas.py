@@ -141,28 +141,44 @@ def _message_classes(schemas: dict[str, bytes]) -> dict:
     return out
 
 
-def body_geoms(mj_model) -> list[dict]:
-    """Each geom of a body (world geoms too) in its body's frame, for display, with its
-    MuJoCo geom group (`hybrid.render.shown_geoms` hides groups 3 and above)."""
-    out = []
-    for g in range(mj_model.ngeom):
-        body = int(mj_model.geom_bodyid[g])
-        out.append(
-            {
-                "body": mj_model.body(body).name or f"body{body}",
-                "body_id": body,
-                "type": int(mj_model.geom_type[g]),
-                "size": mj_model.geom_size[g].tolist(),
-                "pos": mj_model.geom_pos[g].tolist(),
-                "quat": mj_model.geom_quat[g].tolist(),
-                "rgba": mj_model.geom_rgba[g].tolist(),
-                "name": mj_model.geom(g).name,
-                "group": int(mj_model.geom_group[g]),
-            }
-        )
-    return out
-
-
 # mjtGeom values (stable in MuJoCo's C API): plane 0, hfield 1, sphere 2, capsule 3,
 # ellipsoid 4, cylinder 5, box 6, mesh 7
 GEOM_SPHERE, GEOM_CAPSULE, GEOM_ELLIPSOID, GEOM_CYLINDER, GEOM_BOX = 2, 3, 4, 5, 6
+GEOM_MESH = 7
+
+#: how many of a model's mesh vertices (its bones' surfaces) the pictures draw, in all
+MESH_POINTS = 8000
+#: ... and at least this many of each mesh
+MESH_POINTS_MIN = 50
+
+
+def body_geoms(mj_model) -> list[dict]:
+    """Each geom of a body (world geoms too) in its body's frame, for display, with its
+    MuJoCo geom group (`hybrid.render.shown_geoms` hides groups 3 and above). A mesh geom (a
+    bone's surface) carries "points": evenly strided vertices of its mesh in the geom's frame,
+    `MESH_POINTS` over all the meshes in proportion to their vertices (the pictures draw the
+    skeleton as these dots; 0.1 mm rounding)."""
+    mesh = [g for g in range(mj_model.ngeom) if int(mj_model.geom_type[g]) == GEOM_MESH]
+    total = sum(int(mj_model.mesh_vertnum[mj_model.geom_dataid[g]]) for g in mesh)
+    out = []
+    for g in range(mj_model.ngeom):
+        body = int(mj_model.geom_bodyid[g])
+        geom = {
+            "body": mj_model.body(body).name or f"body{body}",
+            "body_id": body,
+            "type": int(mj_model.geom_type[g]),
+            "size": mj_model.geom_size[g].tolist(),
+            "pos": mj_model.geom_pos[g].tolist(),
+            "quat": mj_model.geom_quat[g].tolist(),
+            "rgba": mj_model.geom_rgba[g].tolist(),
+            "name": mj_model.geom(g).name,
+            "group": int(mj_model.geom_group[g]),
+        }
+        if g in mesh:
+            m = int(mj_model.geom_dataid[g])
+            start, n = int(mj_model.mesh_vertadr[m]), int(mj_model.mesh_vertnum[m])
+            keep = min(n, max(MESH_POINTS_MIN, round(MESH_POINTS * n / total)))
+            rows = start + np.linspace(0, n - 1, keep).round().astype(int)
+            geom["points"] = np.round(mj_model.mesh_vert[rows], 4).tolist()
+        out.append(geom)
+    return out
