@@ -113,19 +113,24 @@ def _names_taken(spec: mujoco.MjSpec, names: dict) -> str | None:
     return None
 
 
-def _inertia(points: np.ndarray, mass: float) -> tuple[np.ndarray, np.ndarray]:
-    """Centre of mass and inertia tensor (about it) of thin uniform rods between
-    consecutive points, of total mass `mass` spread by length."""
+def _inertia(points: np.ndarray, mass: float, radius: float) -> tuple[np.ndarray, np.ndarray]:
+    """Centre of mass and inertia tensor (about it) of solid uniform rods of `radius` between
+    consecutive points, of total mass `mass` spread by length. (Thin rods in a plane have a
+    degenerate tensor, its largest moment the sum of the other two: MuJoCo's check A + B >= C
+    then fails or passes by rounding, and refused a 0.5 kg rib of the breathing trunk's upper
+    pair. A rod's own thickness, m r^2 / 4 (1 + u u^T), makes it strictly physical.)"""
     seg = np.diff(points, axis=0)
     length = np.linalg.norm(seg, axis=1)
     m = mass * length / length.sum()
     mid = 0.5 * (points[1:] + points[:-1])
     com = (m[:, None] * mid).sum(axis=0) / mass
     tensor = np.zeros((3, 3))
+    eye = np.eye(3)
     for mk, c, s, ell in zip(m, mid, seg, length):
         r = c - com
         u = s / ell
-        tensor += mk * (r @ r * np.eye(3) - np.outer(r, r)) + mk * ell**2 / 12.0 * (np.eye(3) - np.outer(u, u))
+        tensor += mk * (r @ r * eye - np.outer(r, r)) + mk * ell**2 / 12.0 * (eye - np.outer(u, u))
+        tensor += mk * radius**2 / 4.0 * (eye + np.outer(u, u))
     return com, tensor
 
 
@@ -230,7 +235,7 @@ def add_ribs(spec: mujoco.MjSpec, ribs: Ribs, label: str, key_id: int = -1) -> R
             # hinge axis: a positive angle lifts the rib (pump: about -left; bucket: about +-anterior)
             axis = -np.sin(alpha) * left + sign * np.cos(alpha) * anterior
             rib = parent.add_body(name=f"{name}_{side}", pos=(rot.T @ (h - origin)).tolist(), quat=[1, 0, 0, 0])
-            com, tensor = _inertia(local, mass)
+            com, tensor = _inertia(local, mass, radius)
             rib.explicitinertial = True
             rib.mass, rib.ipos = float(mass), com.tolist()
             rib.fullinertia = [tensor[0, 0], tensor[1, 1], tensor[2, 2], tensor[0, 1], tensor[0, 2], tensor[1, 2]]

@@ -80,6 +80,29 @@ def test_ribs_are_hinged_mirror_images_whose_positive_angle_lifts_them():
     assert len(y) == 6 and max(y) <= 0.11 + 1e-9
 
 
+def test_a_rib_s_inertia_is_its_solid_rods_and_any_mass_compiles():
+    """A rib is rods of the capsule's radius: one straight rod has the solid cylinder's moments
+    (m r^2 / 2 about its axis, m (3 r^2 + l^2) / 12 across it, to rounding); an arc's tensor is
+    strictly physical (its largest moment below the sum of the other two by m r^2 / 2: thin rods in
+    a plane leave it equal, and MuJoCo refused a 0.5 kg rib of this pair by rounding), so that
+    every mass the key admits compiles."""
+    from hybrid.rigid.ribs import _inertia
+
+    mass, r, ell = 0.3, 0.006, 0.2
+    com, tensor = _inertia(np.array([[0.0, 0.0, 0.0], [ell / 2, 0.0, 0.0], [ell, 0.0, 0.0]]), mass, r)
+    across = mass * (3 * r**2 + ell**2) / 12
+    assert np.allclose(com, [ell / 2, 0.0, 0.0], rtol=0, atol=1e-15)
+    assert np.allclose(tensor, np.diag([mass * r**2 / 2, across, across]), rtol=1e-12, atol=0)
+    for kg in (0.05, 0.5, 1.0, 5.0):
+        pair = dataclasses.replace(PAIR, mass_kg=kg, head_m=(-0.13, 0.025, 0.14), front_m=(0.10, 0.012, 0.10))
+        m, _ = _compiled(Ribs(body="spine", pairs=(pair,)))
+        for side in ("left", "right"):
+            a, b, c = sorted(m.body(f"r_{side}").inertia)
+            radius = RIBS.radius_m
+            assert m.body(f"r_{side}").mass[0] == pytest.approx(kg, rel=1e-12)
+            assert a + b - c == pytest.approx(kg * radius**2 / 2, rel=1e-6)
+
+
 def test_ribs_hold_their_weight_where_drawn_and_spring_back():
     m, _ = _compiled()
     d = mujoco.MjData(m)
