@@ -9,13 +9,54 @@ import dataclasses
 
 from . import scenefile
 from .regions import Difference, HalfSpace
-from .scene import Damping, Gravity, Lungs, Masses, MeshSpec, Muscle, Nailed, Scene, ShapeMemory, Volume
+from .scene import (
+    Damping,
+    Gravity,
+    Lungs,
+    Masses,
+    MeshSpec,
+    Muscle,
+    Nailed,
+    RibPair,
+    Ribs,
+    Scene,
+    ShapeMemory,
+    Volume,
+)
 from .schedule import Breathing
+from .terms.fibres import MuscleFibres
 from .terms.lungs import ADULT_LUNGS
 
-__all__ = ["membrane_demo", "breathing_lungs"]
+__all__ = ["membrane_demo", "breathing_lungs", "UPPER_RIBS", "UPPER_RIB_WALL_TOP_M", "UPPER_RIB_ACTIVATION"]
 
 RADIUS_M = 0.12
+
+#: the breathing trunk's upper rib pair, the pulmonary rib cage: hinged on the spine 0.14 m up and
+#: sloping down to its front 0.10 m up (the lower pair, the trunk's rib band, spans 0.045-0.08 m),
+#: the rib cage's inspiratory muscles (parasternal intercostals, scalenes) a motor of 2 N m on
+#: each hinge. Geometry, stiffness (the builder's 12 N m/rad), gear and damping are chosen, not
+#: sourced. The damping (0.5 N m s/rad; the builder's 0.05 otherwise) is the chest wall's tissue
+#: resistance on the pair, which MuJoCo takes implicitly; the pleural load reaches the pair a step
+#: late (staggered). At 0.05 the pair went unstable under implicit Euler's large steps (the
+#: realtime row, level 8 at 30 ms: its two ribs swinging apart from 2 s on); 0.2 holds it; at 1
+#: an obstructed airway (20 cmH2O s/L, level 0, 20 ms) ran on to a tidal volume of 1.84 L (0.104
+#: at 5 ms) where at 0.5 its solve stops, as without the pair (docs/lungs.md).
+UPPER_RIBS = RibPair(
+    name="upper_ribs",
+    head_m=(-0.13, 0.025, 0.14),
+    front_m=(0.10, 0.012, 0.10),
+    half_width_m=0.12,
+    damping_n_m_s_per_rad=0.5,
+    muscle_gear_n_m=2.0,
+)
+#: the height (m) of the thoracic cavity's top over the upper rib pair: its wall's rings meet the
+#: upper ribs at their own height (0.10-0.14 m), where the pleural pull on a rib sloping down to
+#: the front turns it down about its hinge (the sign of the paradox depends on it)
+UPPER_RIB_WALL_TOP_M = 0.165
+#: the upper ribs' muscles' peak activation in each breath (of 1), with the diaphragm's waveform
+UPPER_RIB_ACTIVATION = 1.0
+#: the top of the trunk's rib band (m): the dome's border, where the lungs' wall starts
+_BAND_TOP_M = 0.08
 
 
 def membrane_demo(duration_s: float = 12.0) -> Scene:
@@ -48,22 +89,32 @@ def membrane_demo(duration_s: float = 12.0) -> Scene:
 
 def breathing_lungs() -> Scene:
     """The breathing trunk (`breathing`, models/scenes/breathing.toml) with lungs in its
-    thorax (`hybrid.terms.lungs`), every lung parameter from a source, none fitted:
-    lung compliance 0.2 L/cmH2O (Guyton, Textbook of Medical Physiology), resting recoil
-    5 cmH2O (pleural pressure -5 cmH2O at rest, physiology textbooks), airway resistance
-    1.5 cmH2O s/L (DuBois et al. 1956, J Clin Invest 35:327), spontaneous breathing (the
-    airway open at 0 cmH2O); a thoracic cavity 0.12 m high over the dome's border, about 3 L
-    at rest (a functional residual capacity of about 3 L, textbooks; the linear law does not
-    depend on it). The cavity's floor is the dome above the rib band: the band, the zone of
-    apposition the lower ribs hold, is the abdomen's wall (the abdominal rib cage), not the lungs'
-    (Mead & Loring 1982), so that the lung volume change is the pulmonary rib cage's, the
-    abdominal rib cage's and the abdomen's displacements. The trunk's geometry and drive are the
-    `breathing` scene's: it is small for an adult (a tidal volume near 0.14 L, not 0.5 L;
+    thorax (`hybrid.terms.lungs`) and an upper rib pair carrying their wall, every lung
+    parameter from a source, none fitted: lung compliance 0.2 L/cmH2O (Guyton, Textbook of
+    Medical Physiology), resting recoil 5 cmH2O (pleural pressure -5 cmH2O at rest, physiology
+    textbooks), airway resistance 1.5 cmH2O s/L (DuBois et al. 1956, J Clin Invest 35:327),
+    spontaneous breathing (the airway open at 0 cmH2O). The cavity's floor is the dome above
+    the rib band: the band, the zone of apposition the lower ribs hold, is the abdomen's wall
+    (the abdominal rib cage), not the lungs' (Mead & Loring 1982), so that the lung volume
+    change is the pulmonary rib cage's, the abdominal rib cage's and the abdomen's
+    displacements. The cavity's wall rises from the dome's border (0.08 m) to
+    `UPPER_RIB_WALL_TOP_M` and rides on the upper rib pair (`UPPER_RIBS`, the pulmonary rib
+    cage, under the pleural pressure and its own muscles only), whose muscles the scene drives
+    with the diaphragm's waveform (`rigid.ctrl`, peak `UPPER_RIB_ACTIVATION`): quiet breathing
+    with both, as a subject breathes; without `rigid.ctrl`, the diaphragm alone. The pair and
+    its muscles are chosen, not sourced. The trunk's geometry and the diaphragm's drive are
+    the `breathing` scene's: it is small for an adult (a tidal volume near 0.17 L, not 0.5 L;
     docs/lungs.md)."""
     base = scenefile.load_scene(scenefile.builtin_scene("breathing"))
+    drive = next(f.tension_n_per_m for f in base.forces if isinstance(f, MuscleFibres))
+    muscles = dataclasses.replace(drive, peak=UPPER_RIB_ACTIVATION)  # the diaphragm's waveform
+    rigid = dataclasses.replace(
+        base.rigid, ribs=Ribs(body="spine", pairs=(UPPER_RIBS,)), ctrl={"upper_ribs_*_muscle": muscles}
+    )
     lungs = Lungs(
         floor=Difference(base="diaphragm", minus="rib_band"),
-        wall_height_m=0.12,
+        wall_height_m=UPPER_RIB_WALL_TOP_M - _BAND_TOP_M,
+        wall_bodies="upper_ribs_*",
         **ADULT_LUNGS,
     )
-    return dataclasses.replace(base, name="breathing_lungs", forces=(*base.forces, lungs))
+    return dataclasses.replace(base, name="breathing_lungs", rigid=rigid, forces=(*base.forces, lungs))

@@ -398,17 +398,19 @@ def _cases(tmp: Path) -> list[Case]:
         Case(
             "lungs_obstructed_implicit",
             "breathing_lungs at level 0 with an obstructed airway (resistance 1.5 -> 20 cmH2O s/L), "
-            "implicit Euler at 20 ms",
+            "implicit Euler at 10 ms",
             lambda: resolve_scene(
                 "breathing_lungs",
                 overrides=(
                     "mesh.level=0",
                     "forces.lungs.airway_resistance_cmh2o_s_per_l=20",
                     "integrator=implicit_euler",
-                    "dt_s=0.02",
+                    "dt_s=0.01",
                 ),
             ),
-            small_duration_s=2.0,  # 100 steps of 80 points: cheap (until 0.12.0 Newton stalled at 1.68 s; now at 2.18 s)
+            # 200 steps of 80 points: cheap. At 20 ms its solve stops (at 1.94 s since 0.15, the upper
+            # ribs carrying the lungs' wall; 2.18 s before): docs/lungs.md, "a known limit"
+            small_duration_s=2.0,
         ),
         Case(
             "missing_mjcf",

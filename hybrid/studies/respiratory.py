@@ -20,10 +20,10 @@
 4. **Twitch**: the airway occluded, the diaphragm contracting alone for `TWITCH_S`: the
    ratio of the oesophageal (pleural) to the transdiaphragmatic pressure change at the
    latter's peak (band 0.35-0.55, the ATS/ERS statement's normal values).
-5. **The paradox** of a rib cage without its muscles: the scene given an upper rib pair
-   (`upper_rib_scene`) that carries the cavity's wall; the hinge angles of the upper and
-   lower ribs at the end of inspiration, with the diaphragm alone and with the upper
-   ribs' inspiratory muscles.
+5. **The paradox** of a rib cage without its muscles: the upper ribs the cavity's wall rides on
+   (the scene's own, as `breathing_lungs`'s; a scene without them is given the breathing
+   trunk's pair, `upper_rib_scene`); the hinge angles of the upper and lower ribs at the end of
+   inspiration, with the diaphragm alone and with the upper ribs' inspiratory muscles.
 
 Writes DIR/respiratory.json, DIR/respiratory.md and DIR/respiratory.png. What is a
 prediction and what is not: nothing here is fitted; the bands are the adult's, and the
@@ -40,11 +40,12 @@ from pathlib import Path
 
 import numpy as np
 
+from ..demo import UPPER_RIB_WALL_TOP_M, UPPER_RIBS
 from ..errors import SceneError
 from ..outputs import save_figure
 from ..outputs import write_text as _write_text
 from ..resolve import resolve_scene
-from ..scene import Lungs, RibPair, Ribs
+from ..scene import Lungs, Ribs
 from ..schedule import Breathing, Constant, Table
 from ..terms.fibres import MuscleFibres
 from ..terms.lungs import CMH2O_PA
@@ -284,33 +285,21 @@ def twitch(scene) -> dict:
     return out
 
 
-#: the height (m) of the cavity's top with the upper rib pair: its wall's rings then meet the upper
-#: ribs at their own height (0.10-0.14 m), where the pleural pull on a rib sloping down to the front
-#: turns it down about its hinge (the sign of the paradox depends on it)
-UPPER_RIB_WALL_TOP_M = 0.165
-
-
 def upper_rib_scene(scene, activation: float):
-    """`scene` given an upper rib pair (the pulmonary rib cage: sloping down to the front, 0.10-0.14 m
-    high, a motor of gear 2 N m on each hinge) that carries the cavity's wall, its muscles driven by
-    a breathing cycle of peak `activation` (0: the diaphragm alone), the cavity's top at
-    `UPPER_RIB_WALL_TOP_M`. The pair's stiffness and gear are chosen, not sourced."""
+    """`scene` given the breathing trunk's upper rib pair (`hybrid.demo.UPPER_RIBS`: the pulmonary
+    rib cage, sloping down to the front, 0.10-0.14 m high, a motor of 2 N m on each hinge) that
+    carries the cavity's wall, its muscles driven by a breathing cycle of peak `activation` (0: the
+    diaphragm alone), the cavity's top at `hybrid.demo.UPPER_RIB_WALL_TOP_M`. The pair's stiffness
+    and gear are chosen, not sourced."""
     if scene.rigid is None:
         raise SceneError(f"study respiratory: scene {scene.name!r} has no rigid part for an upper rib pair")
-    upper = RibPair(
-        name="upper_ribs",
-        head_m=(-0.13, 0.025, 0.14),
-        front_m=(0.10, 0.012, 0.10),
-        half_width_m=0.12,
-        muscle_gear_n_m=2.0,
-    )
     period = _breath_period(scene)
     ctrl = (
         {"upper_ribs_*_muscle": Breathing(period_s=period, inspiration_fraction=0.4, peak=activation)}
         if activation
         else {}
     )
-    rigid = dataclasses.replace(scene.rigid, ribs=Ribs(body="spine", pairs=(upper,)), ctrl=ctrl)
+    rigid = dataclasses.replace(scene.rigid, ribs=Ribs(body="spine", pairs=(UPPER_RIBS,)), ctrl=ctrl)
     lungs = _lungs_of(scene)
     from ..model import compile_scene
 

@@ -21,9 +21,13 @@ def small(tmp_path_factory):
 def test_a_step_of_airway_pressure_relaxes_with_tau_r_c(small):
     """The single compartment's closed form: after a step of airway-opening pressure the lung
     volume approaches its new equilibrium as exp(-t / tau), tau = R C, C the compliance of the
-    same run (V_inf over the step). Within 1%, from: the chest wall's own damping (the membrane's
-    drag), which adds its resistance to the airway's (measured with the cavity's floor over the
-    whole diaphragm: 0.26% of R at a tenth of the scene's drag, 4.4% at ten times it); the chest wall's stiffening
+    same run (V_inf over the step). Within 2%, from: the chest wall's own damping, which adds its
+    resistance to the airway's (tau = (R + R_cw) C): the membrane's drag and the lower ribs', on
+    which the cavity's wall rides above the dome's border (measured with the cavity's floor over
+    the whole diaphragm: 0.26% of R at a tenth of the scene's drag, 4.4% at ten times it; with
+    the upper rib pair carrying the wall, 0.085 m high, 1.06%, where a fixed wall 0.12 m high
+    read 0.75%: the lower ribs carry more of a shorter wall; the upper pair's hinges 16 times
+    stiffer, or their damping 0.05 -> 0.5 N m s/rad, change it by less than 0.01%); the chest wall's stiffening
     over the 0.05 cmH2O step (C at 0.05 and 0.25 cmH2O differ by 5%: the step is kept small so
     that the secant compliance is near the tangent one, about 1% over 0.05 cmH2O, half of it
     on tau); backward Euler's lag, h / (2 tau) = 0.1%. At level 0 (the small study); on finer
@@ -32,17 +36,18 @@ def test_a_step_of_airway_pressure_relaxes_with_tau_r_c(small):
     _, r = small
     rel = r["relaxation"]
     assert rel["tau_rc_s"] > 1.0  # R C long against the fast modes (tens of ms)
-    assert rel["tau_ratio"] == pytest.approx(1.0, abs=0.01)
+    assert rel["tau_ratio"] == pytest.approx(1.0, abs=0.02)
     assert rel["fit_residual_rel"] < 2e-3  # one exponential after the fast modes
     # the chest wall's dissipation adds to the airway's resistance, never takes from it
-    assert 0 < rel["chest_wall_resistance_implied_cmh2o_s_per_l"] < 0.01 * rel["airway_resistance_cmh2o_s_per_l"]
+    assert 0 < rel["chest_wall_resistance_implied_cmh2o_s_per_l"] < 0.02 * rel["airway_resistance_cmh2o_s_per_l"]
 
 
 def test_the_relaxation_subtracts_the_scene_s_own_drift():
     """A scene not at rest where it starts: the small trunk under a weak gravity (0.05 m/s^2) sags
     and its lungs fill by about 0.6 mL over 15 s, a sixth of the 0.05 cmH2O step's response. The
-    relaxation subtracts a control run without the step, so that tau = R C holds within the same 1%
-    as the trunk at rest (measured 1.004; fitted without the control, 0.854)."""
+    relaxation subtracts a control run without the step, so that tau = R C holds within the same 2%
+    as the trunk at rest (measured 1.008, at rest 1.011; before 0.15, with the lungs' wall fixed above
+    the rib band, 1.004; fitted without the control, 0.854)."""
     import dataclasses
 
     from hybrid.studies.respiratory import relaxation, study_scene
@@ -52,7 +57,7 @@ def test_the_relaxation_subtracts_the_scene_s_own_drift():
     sagging = dataclasses.replace(scene, forces=(*scene.forces, Gravity(accel_m_s2=(0.0, 0.0, -0.05))))
     rel = relaxation(sagging, 15.0)
     assert rel["control_drift_l"] > 0.1 * rel["fitted"]["v_inf_l"] > 0
-    assert rel["tau_ratio"] == pytest.approx(1.0, abs=0.01)
+    assert rel["tau_ratio"] == pytest.approx(1.0, abs=0.02)
 
 
 def test_the_passive_system_composes_the_law_s_lung_with_a_chest_wall_in_the_adult_band(small):
