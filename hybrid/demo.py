@@ -36,9 +36,11 @@ RADIUS_M = 0.12
 #: the rib cage's inspiratory muscles (parasternal intercostals, scalenes) a motor of 2 N m on
 #: each hinge. Geometry, stiffness (the builder's 12 N m/rad), gear and damping are chosen, not
 #: sourced. The damping (0.5 N m s/rad; the builder's 0.05 otherwise) is the chest wall's tissue
-#: resistance on the pair, which MuJoCo takes implicitly; the pleural load reaches the pair a step
-#: late (staggered). At 0.05 the pair went unstable under implicit Euler's large steps (the
-#: realtime row, level 8 at 30 ms: its two ribs swinging apart from 2 s on); 0.2 holds it; at 1
+#: resistance on the pair, which MuJoCo takes implicitly; its spring MuJoCo takes explicitly, and
+#: at 30 ms the pair (0.0029 kg m^2 about its hinge) sits at h omega = 1.93, under 2, with the
+#: pleural load added a step late (staggered). At 0.05 the pair went unstable under implicit
+#: Euler's large steps (the realtime row, level 8 at 30 ms: its two ribs swinging apart from 2 s
+#: on; with the muscles off it stayed at rest); 0.2 holds it (h c / I = 2.1 at 30 ms); at 1
 #: an obstructed airway (20 cmH2O s/L, level 0, 20 ms) ran on to a tidal volume of 1.84 L (0.104
 #: at 5 ms) where at 0.5 its solve stops, as without the pair (docs/lungs.md).
 UPPER_RIBS = RibPair(
