@@ -27,7 +27,14 @@ from .schedule import Breathing
 from .terms.fibres import MuscleFibres
 from .terms.lungs import ADULT_LUNGS
 
-__all__ = ["membrane_demo", "breathing_lungs", "UPPER_RIBS", "UPPER_RIB_WALL_TOP_M", "UPPER_RIB_ACTIVATION"]
+__all__ = [
+    "membrane_demo",
+    "breathing_lungs",
+    "with_upper_ribs",
+    "UPPER_RIBS",
+    "UPPER_RIB_WALL_TOP_M",
+    "UPPER_RIB_ACTIVATION",
+]
 
 RADIUS_M = 0.12
 
@@ -109,14 +116,20 @@ def breathing_lungs() -> Scene:
     docs/lungs.md)."""
     base = scenefile.load_scene(scenefile.builtin_scene("breathing"))
     drive = next(f.tension_n_per_m for f in base.forces if isinstance(f, MuscleFibres))
+    lungs = Lungs(floor=Difference(base="diaphragm", minus="rib_band"), wall_height_m=0.12, **ADULT_LUNGS)
+    with_lungs = dataclasses.replace(base, name="breathing_lungs", forces=(*base.forces, lungs))
     muscles = dataclasses.replace(drive, peak=UPPER_RIB_ACTIVATION)  # the diaphragm's waveform
-    rigid = dataclasses.replace(
-        base.rigid, ribs=Ribs(body="spine", pairs=(UPPER_RIBS,)), ctrl={"upper_ribs_*_muscle": muscles}
+    return with_upper_ribs(with_lungs, muscles, UPPER_RIB_WALL_TOP_M - _BAND_TOP_M)
+
+
+def with_upper_ribs(scene: Scene, muscles, wall_height_m: float) -> Scene:
+    """`scene` (with lungs and a rigid part) given the upper rib pair `UPPER_RIBS` on its body
+    "spine", carrying its lungs' wall, now `wall_height_m` high over the dome's border; the pair's
+    muscles driven by the schedule `muscles` (None: the diaphragm alone, no `rigid.ctrl`)."""
+    ctrl = {} if muscles is None else {"upper_ribs_*_muscle": muscles}
+    rigid = dataclasses.replace(scene.rigid, ribs=Ribs(body="spine", pairs=(UPPER_RIBS,)), ctrl=ctrl)
+    forces = tuple(
+        dataclasses.replace(f, wall_height_m=wall_height_m, wall_bodies="upper_ribs_*") if isinstance(f, Lungs) else f
+        for f in scene.forces
     )
-    lungs = Lungs(
-        floor=Difference(base="diaphragm", minus="rib_band"),
-        wall_height_m=UPPER_RIB_WALL_TOP_M - _BAND_TOP_M,
-        wall_bodies="upper_ribs_*",
-        **ADULT_LUNGS,
-    )
-    return dataclasses.replace(base, name="breathing_lungs", rigid=rigid, forces=(*base.forces, lungs))
+    return dataclasses.replace(scene, rigid=rigid, forces=forces)

@@ -40,12 +40,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ..demo import UPPER_RIB_WALL_TOP_M, UPPER_RIBS
+from ..demo import UPPER_RIB_WALL_TOP_M, with_upper_ribs
 from ..errors import SceneError
 from ..outputs import save_figure
 from ..outputs import write_text as _write_text
 from ..resolve import resolve_scene
-from ..scene import Lungs, Ribs
+from ..scene import Lungs
 from ..schedule import Breathing, Constant, Table
 from ..terms.fibres import MuscleFibres
 from ..terms.lungs import CMH2O_PA
@@ -294,22 +294,11 @@ def upper_rib_scene(scene, activation: float):
     if scene.rigid is None:
         raise SceneError(f"study respiratory: scene {scene.name!r} has no rigid part for an upper rib pair")
     period = _breath_period(scene)
-    ctrl = (
-        {"upper_ribs_*_muscle": Breathing(period_s=period, inspiration_fraction=0.4, peak=activation)}
-        if activation
-        else {}
-    )
-    rigid = dataclasses.replace(scene.rigid, ribs=Ribs(body="spine", pairs=(UPPER_RIBS,)), ctrl=ctrl)
-    lungs = _lungs_of(scene)
+    muscles = Breathing(period_s=period, inspiration_fraction=0.4, peak=activation) if activation else None
     from ..model import compile_scene
 
-    border_z = float(compile_scene(scene).arrays.lung_wall[:, 2].max()) - lungs.wall_height_m
-    height = UPPER_RIB_WALL_TOP_M - border_z
-    forces = tuple(
-        dataclasses.replace(f, wall_height_m=height, wall_bodies="upper_ribs_*") if isinstance(f, Lungs) else f
-        for f in scene.forces
-    )
-    return dataclasses.replace(scene, rigid=rigid, forces=forces)
+    border_z = float(compile_scene(scene).arrays.lung_wall[:, 2].max()) - _lungs_of(scene).wall_height_m
+    return with_upper_ribs(scene, muscles, UPPER_RIB_WALL_TOP_M - border_z)
 
 
 def paradox(scene, at_s: float | None = None) -> dict:

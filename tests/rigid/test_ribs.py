@@ -93,12 +93,13 @@ def test_a_rib_s_inertia_is_its_solid_rods_and_any_mass_compiles():
     across = mass * (3 * r**2 + ell**2) / 12
     assert np.allclose(com, [ell / 2, 0.0, 0.0], rtol=0, atol=1e-15)
     assert np.allclose(tensor, np.diag([mass * r**2 / 2, across, across]), rtol=1e-12, atol=0)
+    from hybrid.demo import UPPER_RIBS
+
+    radius = RIBS.radius_m
     for kg in (0.05, 0.5, 1.0, 5.0):
-        pair = dataclasses.replace(PAIR, mass_kg=kg, head_m=(-0.13, 0.025, 0.14), front_m=(0.10, 0.012, 0.10))
-        m, _ = _compiled(Ribs(body="spine", pairs=(pair,)))
+        m, _ = _compiled(Ribs(body="spine", pairs=(dataclasses.replace(UPPER_RIBS, name="r", mass_kg=kg),)))
         for side in ("left", "right"):
             a, b, c = sorted(m.body(f"r_{side}").inertia)
-            radius = RIBS.radius_m
             assert m.body(f"r_{side}").mass[0] == pytest.approx(kg, rel=1e-12)
             assert a + b - c == pytest.approx(kg * radius**2 / 2, rel=1e-6)
 
