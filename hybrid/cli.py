@@ -122,8 +122,19 @@ def _load_and_run(args, scene, drawer=None) -> int:
 
 def _warn_above_stable_step(model) -> None:
     """One line before the run when an explicit integrator's step is above the per-point
-    stable-step estimate (`Model.dt_stable_s`, as `hybrid inspect` reports it): such a run
-    diverges, and saying so at the start beats a divergence after the compile."""
+    stable-step estimate (`Model.dt_stable_s`, as `hybrid inspect` reports it), and one when
+    the step is above the rigid part's own (`hybrid.rigid.modes`, whatever the membrane's
+    integrator): such a run diverges, and saying so at the start beats a divergence after the
+    compile."""
+    if model.rigid is not None:
+        from .rigid.modes import rigid_modes
+
+        modes = rigid_modes(model.rigid.model)
+        if model.dt_s > modes.dt_stable_s:
+            sys.stderr.write(
+                f"hybrid: warning: dt_s = {model.dt_s:g} s is above the {modes.line(model.dt_s)}: expect "
+                "a divergence; set dt_s below it, or damp the mode's joints\n"
+            )
     if is_implicit(model.scene.integrator) or not math.isfinite(model.dt_stable_s):
         return
     if model.dt_s > model.dt_stable_s:

@@ -103,10 +103,15 @@ def _scene_report(source, overrides, without) -> dict:
                     **region(idx),
                 }
             )
+        from .rigid.modes import rigid_modes
+
+        modes = rigid_modes(rig.model)
         report["rigid"] = {
             "mjcf": str(scene.rigid.mjcf),
             "settings": rig.settings(),
             "model": describe_model(rig.model),
+            "dt_stable_s": modes.dt_stable_s if math.isfinite(modes.dt_stable_s) else None,
+            "stable_step": modes.line(model.dt_s),
         }
     return report
 
@@ -192,7 +197,10 @@ def format_report(r: dict) -> str:
             f"rigid: {r['rigid']['mjcf']}; integrator {s['integrator']} (from the "
             f"{s['integrator_from']}); MJCF timestep {s['mjcf_timestep_s']:g} s" + (f"; {changed}" if changed else "")
         )
-        lines += _model_lines(r["rigid"]["model"])
+        rigid_stable = r["rigid"]["stable_step"]
+        if r["rigid"]["dt_stable_s"] is not None and r["dt_s"] > r["rigid"]["dt_stable_s"]:
+            rigid_stable += " (the step is larger: expect a divergence; set dt_s below it, or damp the mode's joints)"
+        lines += [rigid_stable, *_model_lines(r["rigid"]["model"])]
     return "\n".join(lines)
 
 
