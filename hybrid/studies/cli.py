@@ -16,6 +16,9 @@ Studies with independent runs (work-precision) run them on all local cores,
 or on an existing Dask cluster with `--scheduler tcp://HOST:PORT` (the
 optional extra `hybrid[dask]`; see `hybrid.sweep`).
 
+A folder that holds a study's earlier output (its JSON) is refused without `--overwrite`:
+nothing a study wrote is replaced unasked.
+
 `main_study(argv)` takes the arguments after `study` and returns the exit
 status (0; 2 with one line on stderr for bad input, as `hybrid run`).
 """
@@ -137,7 +140,22 @@ def build_study_parser() -> argparse.ArgumentParser:
         metavar="KEY=VALUE",
         help="a scene override for every run, as hybrid run --set (e.g. rigid.ribs.sternum_stiffness_n_per_m=50)",
     )
+    for study in sub.choices.values():
+        study.add_argument(
+            "--overwrite", action="store_true", help="write into --out even if it holds this study's earlier output"
+        )
     return p
+
+
+def _refuse_earlier(study: str, out: Path) -> None:
+    """A folder holding this study's earlier output (its JSON) is refused without --overwrite:
+    nothing a study wrote is replaced unasked."""
+    earlier = out / f"{study.replace('-', '_')}.json"
+    if earlier.exists():
+        raise HybridError(
+            f"--out: expected a folder without an earlier `hybrid study {study}`, received {str(out)!r}, "
+            f"which holds {earlier.name}; pass --overwrite to replace it, or choose another folder"
+        )
 
 
 def _levels(text):
@@ -270,6 +288,8 @@ def main_study(argv) -> int:
 
     args = build_study_parser().parse_args(list(argv))
     try:
+        if not args.overwrite:
+            _refuse_earlier(args.study, Path(args.out))
         out_folder(Path(args.out))
         {
             "stability": _stability,
