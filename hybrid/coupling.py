@@ -30,10 +30,11 @@ import numpy as np
 
 from .errors import RigidError, SimulationDiverged
 from .loop import CtrlArrays, LinkArrays, MjViews, RigidPack, SlideArrays, WallArrays, WrenchHistory, carry_wall
-from .rigid import CoupledRigid, mj_step_ctypes
+from .rigid import CoupledRigid, mj_step_ctypes, mj_wall_addresses
 from .sites import site_vel_kernel
 from .step import S_TIME, T_GRAVITY
 from .step_work import MembraneState
+from .terms.lungs import faces_at
 
 __all__ = ["Coupling"]
 
@@ -43,6 +44,9 @@ _INTEGRATION = int(mujoco.mjtState.mjSTATE_INTEGRATION)
 _DSBL_GRAVITY = int(mujoco.mjtDisableBit.mjDSBL_GRAVITY)
 
 
+#: MuJoCo's state the lungs' implicit correction saves before its step and sets again to take the
+#: step with the correction (`hybrid.wall_coupling`): everything the step integrates
+_SAVED = int(mujoco.mjtState.mjSTATE_INTEGRATION)
 # MuJoCo's C step functions for the compiled loop: (mj_step, mj_step1, mj_step2)' addresses
 _MJ_FUNCTIONS = tuple(ctypes.cast(fn, ctypes.c_void_p).value for fn in mj_step_ctypes())
 
@@ -53,9 +57,10 @@ class Coupling:
     Owns its own copy of the model's `MjModel` (`mj_model`: change its parameters
     freely, the `Model` and other runs keep theirs) and its own `MjData`. Set
     `record_wrenches = True` before stepping to keep, per step, the `xfrc_applied`
-    used and the `qpos` after the step (`wrench_history()`, `qpos_history()`); with
-    `initial_state` (`mjSTATE_FULLPHYSICS` at reset) they replay through MuJoCo alone
-    (`hybrid.rigid.replay_wrenches`).
+    used, the lungs' implicit correction as a generalized force and the `qpos` after the step
+    (`wrench_history()`, `qfrc_history()`, `qpos_history()`); with `initial_state`
+    (`mjSTATE_FULLPHYSICS` at reset) they replay through MuJoCo alone
+    (`hybrid.rigid.replay_states`; `replay_wrenches` for a scene without lungs).
     """
 
     def __init__(self, model):
@@ -71,9 +76,10 @@ class Coupling:
         self.record_wrenches = False
         self._xfrc_hist: list[np.ndarray] = []
         self._qpos_hist: list[np.ndarray] = []
+        self._qfrc_hist: list[np.ndarray] = []
         self.initial_state: np.ndarray | None = None
         mjm = self.system.model
-        self._no_hist = WrenchHistory(np.empty((0, mjm.nbody, 6)), np.empty((0, mjm.nq)))
+        self._no_hist = WrenchHistory(np.empty((0, mjm.nbody, 6)), np.empty((0, mjm.nq)), np.empty((0, mjm.nv)))
         # 1 where the user's program sets a driven actuator's ctrl (`hybrid.Control`)
         self.ctrl_user = np.zeros(self.system.ctrl_act.size, np.uint8)
         self._mj_time = 0.0  # MuJoCo's time when the loop's last `pack` was made
@@ -122,6 +128,7 @@ class Coupling:
             sys.wall_site_root,
             np.zeros((nc, 3)),
             np.zeros((nc, 3)),
+            *self._wall_scratch(nc, self._lungs()),
         )
         self._slides = SlideArrays(
             sys.slide_vert,
@@ -134,6 +141,7 @@ class Coupling:
         self._mj = MjViews(
             *sys.pointers(),
             *_MJ_FUNCTIONS,
+            *(mj_wall_addresses() if self._lungs() else (0, 0, 0, 0)),
             d.site_xpos,
             d.site_xmat,
             d.xipos,
@@ -141,6 +149,8 @@ class Coupling:
             d.cvel,
             d.subtree_com,
             d.qpos,
+            d.qvel,
+            d.qfrc_applied,
             d.xpos,
             d.xquat,
             d.ctrl,
@@ -148,9 +158,54 @@ class Coupling:
         self.initial_state = sys.state()
         self._xfrc_hist.clear()
         self._qpos_hist.clear()
+        self._qfrc_hist.clear()
         state.vert_pos[self.link_vert] = sys.site_pos()
         state.vert_vel[self.link_vert] = sys.site_vel()
         self._place_wall(state)
+
+    def _lungs(self) -> bool:
+        """Whether the scene has lungs, whose load on the bodies the step takes implicitly
+        (`hybrid.wall_coupling`)."""
+        return self.model.arrays.lung_face.shape[0] > 0
+
+    def _wall_scratch(self, nc: int, lungs: bool) -> tuple:
+        """WallArrays' implicit coupling (`hybrid.loop.WallArrays`, `hybrid.wall_coupling`): empty
+        without lungs. The damping is MuJoCo's joint damping where its Euler step takes it implicitly."""
+        mjm, sys = self.system.model, self.system
+        nv = mjm.nv if lungs else 0
+        euler = int(mjm.opt.integrator) == int(mujoco.mjtIntegrator.mjINT_EULER)
+        undamped = euler and int(mjm.opt.disableflags) & int(mujoco.mjtDisableBit.mjDSBL_EULERDAMP)
+        damping = np.zeros(nv) if undamped else np.array(mjm.dof_damping[:nv], float)
+        nvert = self.model.arrays.vert_mass.shape[0]
+        face = self.model.arrays.lung_face
+        # the cavity's rigid-borne points (cavity indices: a membrane point is itself, a wall point
+        # nvert + its row): the linked points on it, then the carried wall's entries
+        on = np.isin(self.link_vert, face) & lungs
+        points = np.concatenate([self.link_vert[on], nvert + sys.wall_point]).astype(np.int64)
+        site = np.concatenate([sys.site_id[on], sys.wall_site_id]).astype(np.int64)
+        body = np.concatenate([sys.site_body[on], sys.wall_site_body]).astype(np.int64)
+        weight = np.concatenate([np.ones(int(on.sum())), sys.wall_weight]).astype(float)
+        near = faces_at(face, points)
+        nbody = mjm.nbody if lungs else 0
+        ncavity = nvert + self.model.arrays.lung_wall.shape[0] if lungs else 0
+        return (
+            damping,
+            near,
+            points,
+            site,
+            body,
+            weight,
+            np.zeros((ncavity, 3)),
+            np.array([_SAVED], np.int32),
+            np.zeros((points.size, 3)),
+            np.zeros((nbody, 6)),
+            np.zeros(nv),
+            np.zeros(nv),
+            np.zeros((nv, nv)),
+            np.zeros(nv),
+            np.zeros(mujoco.mj_stateSize(mjm, _SAVED) if lungs else 0),
+            np.zeros(nv),
+        )
 
     def _place_wall(self, state: MembraneState) -> None:
         """The lungs' carried wall points onto their bodies (as the step loop places them)."""
@@ -169,7 +224,11 @@ class Coupling:
         with a wrench history of nstep rows when recording. `finish` after the loop."""
         mjm = self.system.model
         record = bool(self.record_wrenches)
-        hist = WrenchHistory(np.empty((nstep, mjm.nbody, 6)), np.empty((nstep, mjm.nq))) if record else self._no_hist
+        hist = (
+            WrenchHistory(np.empty((nstep, mjm.nbody, 6)), np.empty((nstep, mjm.nq)), np.empty((nstep, mjm.nv)))
+            if record
+            else self._no_hist
+        )
         self._mj_time = self.system.data.time
         return RigidPack(True, self._links, self._ctrls, self._mj, self._wall, self._slides, self._rk4(), record, hist)
 
@@ -179,6 +238,7 @@ class Coupling:
         if rig.record:
             self._xfrc_hist.append(rig.hist.xfrc[:done])
             self._qpos_hist.append(rig.hist.qpos[:done])
+            self._qfrc_hist.append(rig.hist.qfrc[:done])
         self._check_not_reset(state, self._mj_time, step0, done)
 
     def _check_not_reset(self, state: MembraneState, mj_time: float, step0: int, done: int) -> None:
@@ -233,6 +293,13 @@ class Coupling:
         nb = self.system.model.nbody
         return np.concatenate(self._xfrc_hist) if self._xfrc_hist else np.zeros((0, nb, 6))
 
+    def qfrc_history(self) -> np.ndarray:
+        """(nstep, nv) [N, N m]: the lungs' implicit correction as a generalized force in every
+        recorded step (`hybrid.wall_coupling`; 0 without lungs): with `wrench_history` as
+        `qfrc_applied`, MuJoCo alone takes the steps the run took (`hybrid.rigid.replay_states`)."""
+        nv = self.system.model.nv
+        return np.concatenate(self._qfrc_hist) if self._qfrc_hist else np.zeros((0, nv))
+
     def qpos_history(self) -> np.ndarray:
         """(nstep, nq): MuJoCo's qpos after every recorded step."""
         nq = self.system.model.nq
@@ -256,6 +323,7 @@ class Coupling:
         self.initial_state = sys.state()
         self._xfrc_hist.clear()
         self._qpos_hist.clear()
+        self._qfrc_hist.clear()
         state.vert_pos[self.link_vert] = sys.site_pos()
         state.vert_vel[self.link_vert] = sys.site_vel()
         self._place_wall(state)

@@ -46,12 +46,9 @@ RADIUS_M = 0.12
 #: resistance on the pair, which MuJoCo takes implicitly; its springs MuJoCo takes explicitly. The
 #: pair's fastest mode (both ribs lifting, the sternal spring stretched by their 35-degree axes)
 #: is at 69.8 rad/s: at 30 ms h omega = 2.09, whose stable limit is 2.24 at 0.05 and 3.79 at 0.5
-#: (`hybrid.rigid.modes`, `hybrid inspect`), with the pleural load added a step late
-#: (staggered). At 0.05 the pair went unstable under implicit
+#: (`hybrid.rigid.modes`, `hybrid inspect`). At 0.05 the pair went unstable under implicit
 #: Euler's large steps (the realtime row, level 8 at 30 ms: its two ribs swinging apart from 2 s
-#: on; with the muscles off it stayed at rest); 0.2 holds it (h c / I = 2.1 at 30 ms); at 1
-#: an obstructed airway (20 cmH2O s/L, level 0, 20 ms) ran on to a tidal volume of 1.84 L (0.104
-#: at 5 ms) where at 0.5 its solve stops, as without the pair (docs/lungs.md).
+#: on; with the muscles off it stayed at rest); 0.2 holds it (h c / I = 2.1 at 30 ms).
 UPPER_RIBS = RibPair(
     name="upper_ribs",
     head_m=(-0.13, 0.025, 0.14),

@@ -10,7 +10,9 @@ One step, from time t:
    wrench at its site (`xfrc_applied`); the driven actuators take their controls
    (`mjData.ctrl`); MuJoCo steps (`mj_step2` then `mj_step1`, or `mj_step` + `mj_step1`
    for RK4, so that the site kinematics belong to the new state; bit for bit
-   `mj_step`); the linked points take their sites' positions and velocities;
+   `mj_step`; with lungs whose wall the bodies carry, their load made implicit in the
+   bodies' velocities between the two, `hybrid.wall_coupling`); the linked points take
+   their sites' positions and velocities;
 3. the free points integrate, the local constraints and the exact volume projection
    apply, the divergence check runs (`hybrid.step.membrane_advance`).
 
@@ -58,9 +60,10 @@ from .step import (
 )
 from .step_work import CALL_RIGID, CALL_STEPS, CALL_STEPS_PARALLEL
 from .terms import Lungs
-from .terms.lungs import L_ALVEOLAR, L_PLEURAL, L_VOLUME, P_REF, cavity_volume_rate
+from .terms.lungs import L_ALVEOLAR, L_OCCLUDED, L_PLEURAL, L_VOLUME, P_REF, cavity_volume_rate
 from .terms.slide_planes import carry_planes
 from .terms.volume import face_volume
+from .wall_coupling import call_c, implicit_wall_correction, wall_rate_gradient
 
 __all__ = [
     "LinkArrays",
@@ -126,8 +129,16 @@ class WallArrays(NamedTuple):
     its rib and the cage's fixed top); rest (nc, 3) m; site_rest (nc, 3) m, where their sites
     start; site_id, site_body, site_root (nc,) int64, their sites on their bodies. The wall's
     pleural load reaches each body as weight x force at the site: the transpose of how the
-    point follows it (virtual work).
-    Scratch: force (nc, 3) N, their loads; vel (nc, 3) m/s, the sites' velocities."""
+    point follows it (virtual work), implicit in the bodies' velocities (`hybrid.wall_coupling`);
+    damping (nv,) N m s/rad: MuJoCo's joint damping where its Euler step takes it implicitly, else 0;
+    g_points (ng,): the cavity's rigid-borne points (its indices: the linked points on it, then the
+    carried ones), g_site, g_body (ng,) int64 and g_weight (ng,) their sites, bodies and shares,
+    g_near their faces (`hybrid.terms.lungs.faces_at`); spec (1,) int32: the parts of MuJoCo's
+    state it saves; g_scratch (nvert + nwall, 3): `cavity_gradient_at`'s.
+    Scratch: force (nc, 3) N, their loads; vel (nc, 3) m/s, the sites' velocities; unit (nlinks +
+    nc, 3), wrench (nbody, 6), qfrc (nv,), a (nv,), dense (nv, nv), saved (MuJoCo's state before
+    its step), applied (nv,): the implicit coupling's; force_q (nv,): its generalized force in the
+    step (N, N m)."""
 
     point: np.ndarray
     weight: np.ndarray
@@ -138,6 +149,22 @@ class WallArrays(NamedTuple):
     site_root: np.ndarray
     force: np.ndarray
     vel: np.ndarray
+    damping: np.ndarray
+    g_near: np.ndarray
+    g_points: np.ndarray
+    g_site: np.ndarray
+    g_body: np.ndarray
+    g_weight: np.ndarray
+    g_scratch: np.ndarray
+    spec: np.ndarray
+    unit: np.ndarray
+    wrench: np.ndarray
+    qfrc: np.ndarray
+    a: np.ndarray
+    dense: np.ndarray
+    force_q: np.ndarray
+    saved: np.ndarray
+    applied: np.ndarray
 
 
 class SlideArrays(NamedTuple):
@@ -170,12 +197,13 @@ class MjViews(NamedTuple):
     """MuJoCo's model and data as the compiled loop sees them: model_ptr, data_ptr
     (int), the `mjModel*` and `mjData*` for the C step functions; fn_step, fn_step1,
     fn_step2 (int): the addresses of `mj_step`, `mj_step1`, `mj_step2` of the library the
-    bindings use (`hybrid.rigid.mj_step_ctypes`); and views of the
+    bindings use (`hybrid.rigid.mj_step_ctypes`), fn_apply_ft, fn_full_m, fn_get_state, fn_set_state
+    those of `mj_applyFT`, `mj_fullM`, `mj_getState`, `mj_setState` (`hybrid.wall_coupling`); and views of the
     `MjData`'s own arrays (valid as long as it lives), written by MuJoCo's step:
     site_xpos (nsite, 3) m; site_xmat (nsite, 9), the sites' orientations (row-major);
     xipos (nbody, 3) m, the bodies' centres of mass;
     xfrc_applied (nbody, 6) [N, N m]; cvel (nbody, 6) [rad/s, m/s]; subtree_com
-    (nbody, 3) m; qpos (nq,); xpos (nbody, 3) m and xquat (nbody, 4) (w, x, y, z),
+    (nbody, 3) m; qpos (nq,); qvel (nv,); qfrc_applied (nv,); xpos (nbody, 3) m and xquat (nbody, 4) (w, x, y, z),
     the bodies' poses; ctrl (nu,), the actuators' controls."""
 
     model_ptr: int
@@ -183,6 +211,10 @@ class MjViews(NamedTuple):
     fn_step: int
     fn_step1: int
     fn_step2: int
+    fn_apply_ft: int
+    fn_full_m: int
+    fn_get_state: int
+    fn_set_state: int
     site_xpos: np.ndarray
     site_xmat: np.ndarray
     xipos: np.ndarray
@@ -190,6 +222,8 @@ class MjViews(NamedTuple):
     cvel: np.ndarray
     subtree_com: np.ndarray
     qpos: np.ndarray
+    qvel: np.ndarray
+    qfrc_applied: np.ndarray
     xpos: np.ndarray
     xquat: np.ndarray
     ctrl: np.ndarray
@@ -197,11 +231,14 @@ class MjViews(NamedTuple):
 
 class WrenchHistory(NamedTuple):
     """Per step k of a recorded run: xfrc (nstep, nbody, 6) [N, N m], the
-    `xfrc_applied` used; qpos (nstep, nq), MuJoCo's qpos after the step. Empty
-    (nstep = 0) when not recording."""
+    `xfrc_applied` used; qpos (nstep, nq), MuJoCo's qpos after the step; qfrc (nstep, nv),
+    the generalized force of the lungs' implicit correction (`hybrid.wall_coupling`: as
+    `qfrc_applied`, it gives the step MuJoCo took; 0 without it). Empty (nstep = 0) when not
+    recording."""
 
     xfrc: np.ndarray
     qpos: np.ndarray
+    qfrc: np.ndarray
 
 
 class RigidPack(NamedTuple):
@@ -298,12 +335,13 @@ def rigid_phase(m, s, w, planes, t, row, rig):
     # Model:    m (MembraneArrays); rig.links.vert, .site_id, .site_body, .site_root,
     #           .extra_force; rig.ctrls.act, .sched, .user; rig.rk4; rig.wall (the lungs' carried wall)
     # Data in:  w.vert_force, s.grad, s.scal[S_PRESSURE] (the last projection's), w.lung_wall_force;
-    #           rig.mj: MuJoCo's state; t (s), the step's time; row: the step's row of rig.hist
+    #           rig.mj: MuJoCo's state; t (s), the step's time; row: the step's row of rig.hist;
+    #           s.lung (the compartment at the step's start: the wall's implicit coupling)
     # Data out: MuJoCo's state (through rig.mj.data_ptr), rig.mj.xfrc_applied,
     #           rig.mj.ctrl[rig.ctrls.act] (the rows the user does not set); the linked
     #           points' s.vert_pos, s.vert_vel; the carried wall's s.lung_wall_pos, s.lung_wall_vel;
     #           rig.hist.xfrc[row], .qpos[row] when rig.record; implicit Euler's planes (`SlidePlanes`, placed)
-    # Scratch:  rig.links.force, .vel, rig.ctrls.val, rig.wall.force, .vel
+    # Scratch:  rig.links.force, .vel, rig.ctrls.val, rig.wall (its scratch)
     """
     links, ctrls, mj, hist = rig.links, rig.ctrls, rig.mj, rig.hist
     pos, vel, frc, grad = s.vert_pos, s.vert_vel, w.vert_force, s.grad
@@ -333,13 +371,32 @@ def rigid_phase(m, s, w, planes, t, row, rig):
             for a in range(6):
                 hist.xfrc[row, b, a] = xfrc[b, a]
     if rig.rk4:
+        wall.force_q[:] = 0.0
         _call_mj(mj.fn_step, mj.model_ptr, mj.data_ptr)
+    elif wall.qfrc.shape[0] and s.lung[L_OCCLUDED] == 0.0:  # with lungs: their load implicit in the bodies' velocities
+        wall_rate_gradient(m, s, rig)
+        rate_before = 0.0
+        for i in range(wall.qfrc.shape[0]):
+            rate_before += wall.qfrc[i] * mj.qvel[i]
+        call_c(mj.fn_get_state, (mj.model_ptr, mj.data_ptr, wall.saved, wall.spec[0]))
+        _call_mj(mj.fn_step2, mj.model_ptr, mj.data_ptr)
+        if implicit_wall_correction(m, s, rig, rate_before):  # the step again, the correction applied
+            call_c(mj.fn_set_state, (mj.model_ptr, mj.data_ptr, wall.saved, wall.spec[0]))
+            for i in range(wall.force_q.shape[0]):
+                wall.applied[i] = mj.qfrc_applied[i]
+                mj.qfrc_applied[i] += wall.force_q[i]
+            _call_mj(mj.fn_step2, mj.model_ptr, mj.data_ptr)
+            for i in range(wall.force_q.shape[0]):
+                mj.qfrc_applied[i] = wall.applied[i]
     else:
+        wall.force_q[:] = 0.0
         _call_mj(mj.fn_step2, mj.model_ptr, mj.data_ptr)
     _call_mj(mj.fn_step1, mj.model_ptr, mj.data_ptr)
     if rig.record:
         for a in range(qpos.shape[0]):
             hist.qpos[row, a] = qpos[a]
+        for a in range(hist.qfrc.shape[1]):
+            hist.qfrc[row, a] = wall.force_q[a] if wall.force_q.shape[0] else 0.0
     site_vel_kernel(mj.site_xpos, mj.cvel, mj.subtree_com, site_id, links.site_body, links.site_root, link_vel)
     for j in range(link_vert.shape[0]):
         i = link_vert[j]
@@ -520,10 +577,37 @@ def membrane_only() -> RigidPack:
     links = LinkArrays(fixed_i32, fixed, fixed, fixed, f3, f3, f3)
     ctrls = CtrlArrays(fixed, stack_schedules(())[0], np.zeros(0, np.uint8), np.zeros(3))
     f6, f9 = np.zeros((0, 6)), np.zeros((0, 9))
-    mj = MjViews(0, 0, 0, 0, 0, f3, f9, f3, f6, f6, f3, np.zeros(0), f3, np.zeros((0, 4)), np.zeros(0))
-    wall = WallArrays(i64, np.zeros(0), f3, f3, i64, i64, i64, f3, f3)
+    f0, f00 = np.zeros(0), np.zeros((0, 0))
+    mj = MjViews(0, 0, 0, 0, 0, 0, 0, 0, 0, f3, f9, f3, f6, f6, f3, f0, f0, f0, f3, np.zeros((0, 4)), f0)
+    wall = WallArrays(
+        i64,
+        f0,
+        f3,
+        f3,
+        i64,
+        i64,
+        i64,
+        f3,
+        f3,
+        f0,
+        i64,
+        i64,
+        i64,
+        i64,
+        f0,
+        f3,
+        np.zeros(1, np.int32),
+        f3,
+        f6,
+        f0,
+        f0,
+        f00,
+        f0,
+        f0,
+        f0,
+    )
     slides = SlideArrays(fixed_i32, fixed, fixed, fixed_f, f3)
-    hist = WrenchHistory(np.zeros((0, 0, 6)), np.zeros((0, 0)))
+    hist = WrenchHistory(np.zeros((0, 0, 6)), np.zeros((0, 0)), np.zeros((0, 0)))
     return RigidPack(False, links, ctrls, mj, wall, slides, False, False, hist)
 
 

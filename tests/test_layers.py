@@ -24,7 +24,17 @@ LAYERS = (
     ("model, rigid", ("model", "body", "rigid", "rigid.*")),
     (
         "step",
-        ("step", "step_work", "switches", "readouts", "implicit", "implicit_work", "implicit_matrix", "implicit_lungs"),
+        (
+            "step",
+            "step_work",
+            "switches",
+            "readouts",
+            "implicit",
+            "implicit_work",
+            "implicit_matrix",
+            "implicit_lungs",
+            "wall_coupling",
+        ),
     ),
     ("step loop", ("loop", "loop_compile")),
     ("coupled step", ("coupling",)),

@@ -30,6 +30,7 @@ from .system import (
     RigidSystem,
     get_state,
     mj_step_ctypes,
+    mj_wall_addresses,
     point_wrench_kernel,
     site_vel_kernel,
 )
@@ -55,6 +56,7 @@ __all__ = [
     "point_wrench_kernel",
     "site_vel_kernel",
     "mj_step_ctypes",
+    "mj_wall_addresses",
     "empty_world",
     "launch_viewer",
     "draw_capsules",

@@ -51,11 +51,16 @@ def replay_wrenches(
 
 
 def replay_states(
-    model: mujoco.MjModel, initial_state: np.ndarray, xfrc: np.ndarray, ctrl: np.ndarray | None = None
+    model: mujoco.MjModel,
+    initial_state: np.ndarray,
+    xfrc: np.ndarray,
+    ctrl: np.ndarray | None = None,
+    qfrc: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """`replay_wrenches` with the actuators' controls too: step k applies `xfrc[k]`
-    and `ctrl[k]` (nstep, nu) (None: the initial state's ctrl throughout). Returns
-    (qpos (nstep, nq), qvel (nstep, nv)) after each step."""
+    and `ctrl[k]` (nstep, nu) (None: the initial state's ctrl throughout), and `qfrc[k]`
+    (nstep, nv) as `qfrc_applied` (None: 0; a run with lungs: `Coupling.qfrc_history`, their
+    implicit correction). Returns (qpos (nstep, nq), qvel (nstep, nv)) after each step."""
     nstate = mujoco.mj_stateSize(model, STATE_SPEC)
     state0 = np.asarray(initial_state, dtype=float)
     if state0.shape != (nstate,):
@@ -69,8 +74,14 @@ def replay_states(
         c = np.asarray(ctrl, dtype=float)
         if c.shape != (nstep, model.nu):
             raise RigidError(f"ctrl: expected shape ({nstep}, {model.nu}), got {c.shape}")
-        parts.insert(0, c)  # MuJoCo orders a state's parts by their bit: ctrl before xfrc_applied
+        parts.insert(0, c)  # MuJoCo orders a state's parts by their bit: ctrl, qfrc_applied, xfrc_applied
         spec |= int(mujoco.mjtState.mjSTATE_CTRL)
+    if qfrc is not None:
+        q = np.asarray(qfrc, dtype=float)
+        if q.shape != (nstep, model.nv):
+            raise RigidError(f"qfrc: expected shape ({nstep}, {model.nv}), got {q.shape}")
+        parts.insert(len(parts) - 1, q)
+        spec |= int(mujoco.mjtState.mjSTATE_QFRC_APPLIED)
     control = np.ascontiguousarray(np.concatenate(parts, axis=1)[None])
     state, _ = _rollout.rollout(model, mujoco.MjData(model), state0[None, :], control, control_spec=spec)
     return state[0, :, 1 : 1 + model.nq].copy(), state[0, :, 1 + model.nq : 1 + model.nq + model.nv].copy()

@@ -47,6 +47,20 @@ _RK4 = int(mujoco.mjtIntegrator.mjINT_RK4)
 
 
 @cache
+def _library() -> ctypes.CDLL:
+    """MuJoCo's C library, the one the Python bindings are linked against."""
+    folder = Path(mujoco.__file__).resolve().parent
+    candidates = (
+        sorted(folder.glob("libmujoco.so*"))
+        + sorted(folder.glob("libmujoco*.dylib"))
+        + sorted(folder.glob("mujoco.dll"))
+    )
+    if not candidates:
+        raise RigidError(f"MuJoCo's C library: not found in {str(folder)!r}")
+    return ctypes.CDLL(str(candidates[0]))
+
+
+@cache
 def mj_step_ctypes() -> tuple[ctypes._CFuncPtr, ctypes._CFuncPtr, ctypes._CFuncPtr]:
     """`(mj_step, mj_step1, mj_step2)` of MuJoCo's C library, callable from numba.
 
@@ -56,20 +70,24 @@ def mj_step_ctypes() -> tuple[ctypes._CFuncPtr, ctypes._CFuncPtr, ctypes._CFuncP
     one the Python bindings are linked against, so results are bit-for-bit those of
     `mujoco.mj_step`. Python's call overhead (about 0.5 us a call) disappears.
     """
-    folder = Path(mujoco.__file__).resolve().parent
-    candidates = (
-        sorted(folder.glob("libmujoco.so*"))
-        + sorted(folder.glob("libmujoco*.dylib"))
-        + sorted(folder.glob("mujoco.dll"))
-    )
-    if not candidates:
-        raise RigidError(f"MuJoCo's C library: not found in {str(folder)!r}")
-    lib = ctypes.CDLL(str(candidates[0]))
+    lib = _library()
     fns = (lib.mj_step, lib.mj_step1, lib.mj_step2)
     for fn in fns:
         fn.argtypes = [ctypes.c_void_p, ctypes.c_void_p]
         fn.restype = None
     return fns
+
+
+#: the C functions besides the step that the compiled loop calls at their addresses
+#: (`mj_wall_addresses`): the lungs' wall coupled implicitly (`hybrid.wall_coupling`)
+WALL_FUNCTIONS = ("mj_applyFT", "mj_fullM", "mj_getState", "mj_setState")
+
+
+@cache
+def mj_wall_addresses() -> tuple[int, ...]:
+    """The addresses of `WALL_FUNCTIONS` in the library `mj_step_ctypes` loads."""
+    lib = _library()
+    return tuple(int(ctypes.cast(getattr(lib, name), ctypes.c_void_p).value) for name in WALL_FUNCTIONS)
 
 
 def get_state(model: mujoco.MjModel, data: mujoco.MjData) -> np.ndarray:

@@ -77,7 +77,11 @@ def replay_check(scene, nstep: int) -> dict:
         ctrl.append(d.ctrl.copy())
     qpos_run = coupling.qpos_history()
     qpos_rep, qvel_rep = replay_states(
-        coupling.mj_model, coupling.initial_state, coupling.wrench_history(), np.array(ctrl).reshape(nstep, -1)
+        coupling.mj_model,
+        coupling.initial_state,
+        coupling.wrench_history(),
+        np.array(ctrl).reshape(nstep, -1),
+        coupling.qfrc_history(),
     )
     return {
         "scene": scene.name,

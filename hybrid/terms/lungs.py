@@ -58,6 +58,8 @@ __all__ = [
     "NLUNG",
     "cavity_volume_rate",
     "add_cavity_pressure",
+    "cavity_gradient_at",
+    "faces_at",
     "lung_load",
     "lung_recoil",
     "recoil_energy_j",
@@ -196,6 +198,44 @@ def add_cavity_pressure(face, ref, load_pa, pos, wall, vert_force, wall_force, t
         _push(a, nvert, k, by * cz - bz * cy, bz * cx - bx * cz, bx * cy - by * cx, vert_force, wall_force, to_points)
         _push(b, nvert, k, cy * az - cz * ay, cz * ax - cx * az, cx * ay - cy * ax, vert_force, wall_force, to_points)
         _push(c, nvert, k, ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx, vert_force, wall_force, to_points)
+
+
+def faces_at(face: np.ndarray, points) -> np.ndarray:
+    """The cavity's faces with a corner among `points` (cavity indices), for `cavity_gradient_at`."""
+    face = np.asarray(face, np.int64)
+    return np.flatnonzero(np.isin(face, np.asarray(points, np.int64)).any(axis=1)).astype(np.int64)
+
+
+@kernel
+def cavity_gradient_at(face, ref, pos, wall, near, points, scratch, out):
+    """out[k] = grad V at the cavity's point points[k] (m^2), from its faces among `near`
+    (`faces_at`): each face's (b x c) / 6 at its corner a, as `add_cavity_pressure`, over those
+    faces only. scratch (nvert + nwall, 3): their corners' sums (the other rows untouched).
+    # Model: face (nf, 3) int64, ref (3,) m, near, points int64   # Data in: pos (nvert, 3) m, wall (nwall, 3) m
+    # Data out: out (n, 3) m^2   # Scratch: scratch
+    """
+    nvert = pos.shape[0]
+    for e in range(near.shape[0]):
+        for r in range(3):
+            i = face[near[e], r]
+            scratch[i, 0] = scratch[i, 1] = scratch[i, 2] = 0.0
+    for e in range(near.shape[0]):
+        a, b, c = face[near[e], 0], face[near[e], 1], face[near[e], 2]
+        ax, ay, az = _corner(a, nvert, pos, wall, ref)
+        bx, by, bz = _corner(b, nvert, pos, wall, ref)
+        cx, cy, cz = _corner(c, nvert, pos, wall, ref)
+        scratch[a, 0] += by * cz - bz * cy
+        scratch[a, 1] += bz * cx - bx * cz
+        scratch[a, 2] += bx * cy - by * cx
+        scratch[b, 0] += cy * az - cz * ay
+        scratch[b, 1] += cz * ax - cx * az
+        scratch[b, 2] += cx * ay - cy * ax
+        scratch[c, 0] += ay * bz - az * by
+        scratch[c, 1] += az * bx - ax * bz
+        scratch[c, 2] += ax * by - ay * bx
+    for k in range(points.shape[0]):
+        for d in range(3):
+            out[k, d] = scratch[points[k], d] / 6.0
 
 
 @kernel

@@ -1,0 +1,166 @@
+"""The lungs' pleural load on the rigid bodies that carry the thoracic cavity, implicit in their
+velocities (`hybrid.loop.rigid_phase`).
+
+The cavity's rigid-borne points are the lungs' carried wall (the upper ribs, `Lungs.wall_bodies`)
+and the linked membrane points on it (the dome's border, on the lower ribs). Their load reaches the
+bodies as the pleural pressure the step started with times the cavity's volume gradient. Taken so,
+a step behind the bodies' motion, it is explicit in the airway's resistance and the lungs'
+elastance: with g = dV/dq (m^3 per unit of each degree of freedom: the points' volume gradients
+through their sites' Jacobians, `mj_applyFT`) the bodies feel a damping c g g^T, c = K1 + 2 K2 |Q|
++ h dP_L/dV (Pa s/m^3), which an explicit step keeps stable only while h c g . (M + h B)^-1 g < 2:
+on `breathing_lungs` at level 0 that number is 1.98 at 20 ms with an obstructed airway of 20 cmH2O
+s/L (the lower ribs' g, -7.4e-4 m^3/rad, through the dome's border), 3.96 at 40, 0.15 in quiet
+breathing (1.5). It is the enclosed compartment's known instability in partitioned coupling; the
+membrane's side is implicit already (`hybrid.implicit_lungs`). After MuJoCo's Euler step, the exact
+rank-one correction that makes the damping implicit (Sherman-Morrison):
+
+    (M + h B + h c g g^T) (v' - v) = h f    =>    v' = v_mj - h c a delta,
+    a = (M + h B)^-1 g,   delta = g . (v_mj - v) / (1 + h c g . a),
+
+v_mj MuJoCo's new velocities, B its joint damping (which its Euler step takes implicitly; under
+implicit and implicitfast the joints' damping stands for their velocity derivatives). The
+correction is the generalized force -c g delta: MuJoCo takes the step again from the state it
+saved, with that force as `qfrc_applied` (`mj_getState`, `mj_setState`), so that its constraints
+and integrator handle it as any load, and a replay of the recorded wrenches with it
+(`Coupling.qfrc_history`) reproduces the run. Without constraints the step is then v' above to
+rounding; with them a is the unconstrained one, an approximation that keeps the damping's
+implicit scale. Not with RK4 (MuJoCo's step is then one call), nor while the airway is occluded
+(its projection holds the volume: `hybrid.terms.lungs.project_occluded`).
+
+MuJoCo stays behind its door: its C functions are called at the addresses the pack carries
+(`hybrid.loop.MjViews`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from llvmlite import ir
+from numba import types
+from numba.core import cgutils
+from numba.extending import intrinsic
+
+from .kernel import kernel
+from .sites import add_point_wrench_kernel
+from .terms.lungs import L_OCCLUDED, L_RATE, L_VOLUME, P_K1, P_K2, P_REF, cavity_gradient_at, lung_recoil
+
+__all__ = ["call_c", "wall_rate_gradient", "implicit_wall_correction"]
+
+
+@intrinsic
+def call_c(typingctx, fn, args):
+    """Call the C function `void f(...)` at address fn with the tuple args: an int64 or a pointer
+    as a 64-bit word, an int32 as a C int, a float64 as a double, an array as its data's address.
+    # Data in: fn (int64), args (a tuple)   # Data out: whatever f writes
+    """
+
+    def codegen(context, builder, signature, llargs):
+        values = cgutils.unpack_tuple(builder, llargs[1], len(args.types))
+        word = ir.IntType(64)
+        kinds, passed = [], []
+        for ty, v in zip(args.types, values):
+            ty = types.unliteral(ty)
+            if isinstance(ty, types.Array):
+                data = context.make_array(ty)(context, builder, v).data
+                kinds.append(word)
+                passed.append(builder.ptrtoint(data, word))
+            elif ty == types.float64:
+                kinds.append(ir.DoubleType())
+                passed.append(v)
+            elif ty == types.int32:
+                kinds.append(ir.IntType(32))
+                passed.append(v)
+            else:
+                kinds.append(word)
+                passed.append(v)
+        target = builder.inttoptr(llargs[0], ir.FunctionType(ir.VoidType(), kinds).as_pointer())
+        builder.call(target, passed)
+        return context.get_dummy_value()
+
+    for ty in args.types:
+        ty = types.unliteral(ty)
+        if not (isinstance(ty, types.Array) or ty in (types.float64, types.int32, types.int64, types.intp)):
+            return None
+    return types.void(fn, args), codegen
+
+
+@kernel
+def wall_rate_gradient(m, s, rig):
+    """g into rig.wall.qfrc: the generalized force of a unit pleural pressure on the cavity's
+    rigid-borne points (its volume gradient, `cavity_gradient_at`, at the carried wall's points by
+    their shares at their sites and at the linked points at theirs, through MuJoCo's `mj_applyFT`),
+    so that g . qvel is the volume's rate the bodies make. At MuJoCo's current positions (the
+    step's start).
+    # Model: m.lung_face, m.lung_par; rig.wall (g_*), rig.mj (fn_apply_ft)
+    # Data in: s.vert_pos, s.lung_wall_pos, MuJoCo's state   # Data out: rig.wall.qfrc (nv,) m^3
+    # Scratch: rig.wall.unit, .wrench
+    """
+    wall, mj = rig.wall, rig.mj
+    unit, wrench = wall.unit, wall.wrench
+    ref = m.lung_par[P_REF:]
+    cavity_gradient_at(m.lung_face, ref, s.vert_pos, s.lung_wall_pos, wall.g_near, wall.g_points, wall.g_scratch, unit)
+    for b in range(wrench.shape[0]):
+        for a in range(6):
+            wrench[b, a] = 0.0
+    add_point_wrench_kernel(mj.site_xpos, mj.xipos, wall.g_site, wall.g_body, wall.g_weight, unit, wrench)
+    wall.qfrc[:] = 0.0
+    for b in range(wrench.shape[0]):
+        loaded = False
+        for a in range(6):
+            loaded = loaded or wrench[b, a] != 0.0
+        if loaded:
+            call_c(
+                mj.fn_apply_ft,
+                (mj.model_ptr, mj.data_ptr, wrench[b, 0:3], wrench[b, 3:6], mj.xipos[b], np.int32(b), wall.qfrc),
+            )
+
+
+@kernel
+def implicit_wall_correction(m, s, rig, rate_before):
+    """After MuJoCo's Euler step: the generalized force that makes the cavity's damping c g g^T on
+    the bodies implicit, -c g delta (module docstring), into rig.wall.force_q; the step is then
+    taken again with it as `qfrc_applied` (`hybrid.loop.rigid_phase`). rate_before: g . qvel
+    before the step. Returns whether there is a correction (lungs, the airway open, c > 0).
+    # Model: m.lung_par, m.dt; rig.wall.damping (nv,) N m s/rad   # Data in: s.lung (rate, volume), rig.wall.qfrc (g), MuJoCo's qvel
+    # Data out: rig.wall.force_q (nv,) [N, N m]   # Scratch: rig.wall.dense, .a
+    """
+    wall, mj = rig.wall, rig.mj
+    par, h = m.lung_par, m.dt
+    c = par[P_K1] + 2.0 * par[P_K2] * abs(s.lung[L_RATE]) + h * lung_recoil(par, s.lung[L_VOLUME])[1]
+    g, a, dense = wall.qfrc, wall.a, wall.dense
+    n = g.shape[0]
+    wall.force_q[:] = 0.0
+    if c <= 0.0 or s.lung[L_OCCLUDED] != 0.0:
+        return False
+    call_c(mj.fn_full_m, (mj.model_ptr, mj.data_ptr, dense))
+    for i in range(n):
+        dense[i, i] += h * wall.damping[i]
+    # a = (M + h B)^-1 g by Cholesky in place (M + h B is symmetric positive definite)
+    for j in range(n):
+        d = dense[j, j]
+        for k in range(j):
+            d -= dense[j, k] * dense[j, k]
+        d = np.sqrt(d)
+        dense[j, j] = d
+        for i in range(j + 1, n):
+            e = dense[i, j]
+            for k in range(j):
+                e -= dense[i, k] * dense[j, k]
+            dense[i, j] = e / d
+    for i in range(n):
+        e = g[i]
+        for k in range(i):
+            e -= dense[i, k] * a[k]
+        a[i] = e / dense[i, i]
+    for i in range(n - 1, -1, -1):
+        e = a[i]
+        for k in range(i + 1, n):
+            e -= dense[k, i] * a[k]
+        a[i] = e / dense[i, i]
+    ga, rate_mj = 0.0, 0.0
+    for i in range(n):
+        ga += g[i] * a[i]
+        rate_mj += g[i] * mj.qvel[i]
+    delta = (rate_mj - rate_before) / (1.0 + h * c * ga)
+    for i in range(n):
+        wall.force_q[i] = -c * g[i] * delta
+    return True
