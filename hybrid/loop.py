@@ -63,7 +63,7 @@ from .terms import Lungs
 from .terms.lungs import L_ALVEOLAR, L_OCCLUDED, L_PLEURAL, L_VOLUME, P_REF, cavity_volume_rate
 from .terms.slide_planes import carry_planes
 from .terms.volume import face_volume
-from .wall_coupling import call_c, implicit_wall_correction, wall_rate_gradient
+from .wall_coupling import step2_with_lungs
 
 __all__ = [
     "LinkArrays",
@@ -374,20 +374,7 @@ def rigid_phase(m, s, w, planes, t, row, rig):
         wall.force_q[:] = 0.0
         _call_mj(mj.fn_step, mj.model_ptr, mj.data_ptr)
     elif wall.qfrc.shape[0] and s.lung[L_OCCLUDED] == 0.0:  # with lungs: their load implicit in the bodies' velocities
-        wall_rate_gradient(m, s, rig)
-        rate_before = 0.0
-        for i in range(wall.qfrc.shape[0]):
-            rate_before += wall.qfrc[i] * mj.qvel[i]
-        call_c(mj.fn_get_state, (mj.model_ptr, mj.data_ptr, wall.saved, wall.spec[0]))
-        _call_mj(mj.fn_step2, mj.model_ptr, mj.data_ptr)
-        if implicit_wall_correction(m, s, rig, rate_before):  # the step again, the correction applied
-            call_c(mj.fn_set_state, (mj.model_ptr, mj.data_ptr, wall.saved, wall.spec[0]))
-            for i in range(wall.force_q.shape[0]):
-                wall.applied[i] = mj.qfrc_applied[i]
-                mj.qfrc_applied[i] += wall.force_q[i]
-            _call_mj(mj.fn_step2, mj.model_ptr, mj.data_ptr)
-            for i in range(wall.force_q.shape[0]):
-                mj.qfrc_applied[i] = wall.applied[i]
+        step2_with_lungs(m, s, rig)
     else:
         wall.force_q[:] = 0.0
         _call_mj(mj.fn_step2, mj.model_ptr, mj.data_ptr)
@@ -579,32 +566,9 @@ def membrane_only() -> RigidPack:
     f6, f9 = np.zeros((0, 6)), np.zeros((0, 9))
     f0, f00 = np.zeros(0), np.zeros((0, 0))
     mj = MjViews(0, 0, 0, 0, 0, 0, 0, 0, 0, f3, f9, f3, f6, f6, f3, f0, f0, f0, f3, np.zeros((0, 4)), f0)
+    i32 = np.zeros(1, np.int32)
     wall = WallArrays(
-        i64,
-        f0,
-        f3,
-        f3,
-        i64,
-        i64,
-        i64,
-        f3,
-        f3,
-        f0,
-        i64,
-        i64,
-        i64,
-        i64,
-        f0,
-        f3,
-        np.zeros(1, np.int32),
-        f3,
-        f6,
-        f0,
-        f0,
-        f00,
-        f0,
-        f0,
-        f0,
+        i64, f0, f3, f3, i64, i64, i64, f3, f3, f0, i64, i64, i64, i64, f0, f3, i32, f3, f6, f0, f0, f00, f0, f0, f0
     )
     slides = SlideArrays(fixed_i32, fixed, fixed, fixed_f, f3)
     hist = WrenchHistory(np.zeros((0, 0, 6)), np.zeros((0, 0)), np.zeros((0, 0)))

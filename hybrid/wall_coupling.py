@@ -43,7 +43,7 @@ from .kernel import kernel
 from .sites import add_point_wrench_kernel
 from .terms.lungs import L_OCCLUDED, L_RATE, L_VOLUME, P_K1, P_K2, P_REF, cavity_gradient_at, lung_recoil
 
-__all__ = ["call_c", "wall_rate_gradient", "implicit_wall_correction"]
+__all__ = ["call_c", "step2_with_lungs", "wall_rate_gradient", "implicit_wall_correction"]
 
 
 @intrinsic
@@ -164,3 +164,28 @@ def implicit_wall_correction(m, s, rig, rate_before):
     for i in range(n):
         wall.force_q[i] = -c * g[i] * delta
     return True
+
+
+@kernel
+def step2_with_lungs(m, s, rig):
+    """MuJoCo's `mj_step2` with the lungs' load implicit in the bodies' velocities (module
+    docstring): g and the rate g . qvel before the step, MuJoCo's step from its saved state, the
+    correction, and the step again from that state with it as `qfrc_applied` (restored after).
+    # Model: as `wall_rate_gradient`, `implicit_wall_correction`   # Data in: MuJoCo's state, s
+    # Data out: MuJoCo's state after the step; rig.wall.force_q   # Scratch: rig.wall's
+    """
+    wall, mj = rig.wall, rig.mj
+    wall_rate_gradient(m, s, rig)
+    rate_before = 0.0
+    for i in range(wall.qfrc.shape[0]):
+        rate_before += wall.qfrc[i] * mj.qvel[i]
+    call_c(mj.fn_get_state, (mj.model_ptr, mj.data_ptr, wall.saved, wall.spec[0]))
+    call_c(mj.fn_step2, (mj.model_ptr, mj.data_ptr))
+    if implicit_wall_correction(m, s, rig, rate_before):  # the step again, the correction applied
+        call_c(mj.fn_set_state, (mj.model_ptr, mj.data_ptr, wall.saved, wall.spec[0]))
+        for i in range(wall.force_q.shape[0]):
+            wall.applied[i] = mj.qfrc_applied[i]
+            mj.qfrc_applied[i] += wall.force_q[i]
+        call_c(mj.fn_step2, (mj.model_ptr, mj.data_ptr))
+        for i in range(wall.force_q.shape[0]):
+            mj.qfrc_applied[i] = wall.applied[i]
