@@ -50,9 +50,9 @@ def test_small_extremes_catalogue(tmp_path, capsys, monkeypatch):
         assert imp["dt_s"] == rows[name]["dt_s"]
     assert rows["continuum_dt_at_bound/implicit_euler"]["outcome"] == "stable"
     assert rows["continuum_muscle_x100/implicit_euler"]["outcome"] == "stable"
-    # an obstructed airway (20 cmH2O s/L) under implicit Euler at 10 ms: a case a respiratory
-    # researcher runs, at the step docs/lungs.md advises for it (at 20 ms the solve stops, since 0.15
-    # at 1.94 s, the lungs' wall on the upper ribs loaded a step late: "a known limit" there)
+    # an obstructed airway (20 cmH2O s/L) under implicit Euler at 20 ms: a case a respiratory
+    # researcher runs; until 0.17 its solve stopped at 1.94 s, the lungs' load on the ribs a step
+    # late (`hybrid.wall_coupling`)
     lungs = rows["lungs_obstructed_implicit"]
     assert lungs["reasonable"] and lungs["outcome"] == "stable", lungs
     assert lungs["volume_rel_error_max"] <= 1e-12, lungs
