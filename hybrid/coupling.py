@@ -31,6 +31,7 @@ import numpy as np
 from .errors import RigidError, SimulationDiverged
 from .loop import CtrlArrays, LinkArrays, MjViews, RigidPack, SlideArrays, WallArrays, WrenchHistory, carry_wall
 from .rigid import CoupledRigid, mj_step_ctypes, mj_wall_addresses
+from .rigid.modes import implicit_joint_damping
 from .sites import site_vel_kernel
 from .step import S_TIME, T_GRAVITY
 from .step_work import MembraneState
@@ -44,9 +45,6 @@ _INTEGRATION = int(mujoco.mjtState.mjSTATE_INTEGRATION)
 _DSBL_GRAVITY = int(mujoco.mjtDisableBit.mjDSBL_GRAVITY)
 
 
-#: MuJoCo's state the lungs' implicit correction saves before its step and sets again to take the
-#: step with the correction (`hybrid.wall_coupling`): everything the step integrates
-_SAVED = int(mujoco.mjtState.mjSTATE_INTEGRATION)
 # MuJoCo's C step functions for the compiled loop: (mj_step, mj_step1, mj_step2)' addresses
 _MJ_FUNCTIONS = tuple(ctypes.cast(fn, ctypes.c_void_p).value for fn in mj_step_ctypes())
 
@@ -173,9 +171,7 @@ class Coupling:
         without lungs. The damping is MuJoCo's joint damping where its Euler step takes it implicitly."""
         mjm, sys = self.system.model, self.system
         nv = mjm.nv if lungs else 0
-        euler = int(mjm.opt.integrator) == int(mujoco.mjtIntegrator.mjINT_EULER)
-        undamped = euler and int(mjm.opt.disableflags) & int(mujoco.mjtDisableBit.mjDSBL_EULERDAMP)
-        damping = np.zeros(nv) if undamped else np.array(mjm.dof_damping[:nv], float)
+        damping = implicit_joint_damping(mjm)[:nv]
         nvert = self.model.arrays.vert_mass.shape[0]
         face = self.model.arrays.lung_face
         # the cavity's rigid-borne points (cavity indices: a membrane point is itself, a wall point
@@ -196,14 +192,14 @@ class Coupling:
             body,
             weight,
             np.zeros((ncavity, 3)),
-            np.array([_SAVED], np.int32),
+            np.array([_INTEGRATION], np.int32),
             np.zeros((points.size, 3)),
             np.zeros((nbody, 6)),
             np.zeros(nv),
             np.zeros(nv),
             np.zeros((nv, nv)),
             np.zeros(nv),
-            np.zeros(mujoco.mj_stateSize(mjm, _SAVED) if lungs else 0),
+            np.zeros(mujoco.mj_stateSize(mjm, _INTEGRATION) if lungs else 0),
             np.zeros(nv),
         )
 

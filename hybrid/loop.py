@@ -370,13 +370,12 @@ def rigid_phase(m, s, w, planes, t, row, rig):
         for b in range(xfrc.shape[0]):
             for a in range(6):
                 hist.xfrc[row, b, a] = xfrc[b, a]
+    wall.force_q[:] = 0.0  # the lungs' correction, when there is one (`hybrid.wall_coupling`)
     if rig.rk4:
-        wall.force_q[:] = 0.0
         _call_mj(mj.fn_step, mj.model_ptr, mj.data_ptr)
     elif wall.qfrc.shape[0] and s.lung[L_OCCLUDED] == 0.0:  # with lungs: their load implicit in the bodies' velocities
         step2_with_lungs(m, s, rig)
     else:
-        wall.force_q[:] = 0.0
         _call_mj(mj.fn_step2, mj.model_ptr, mj.data_ptr)
     _call_mj(mj.fn_step1, mj.model_ptr, mj.data_ptr)
     if rig.record:

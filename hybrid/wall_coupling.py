@@ -121,14 +121,13 @@ def implicit_wall_correction(m, s, rig, rate_before):
     taken again with it as `qfrc_applied` (`hybrid.loop.rigid_phase`). rate_before: g . qvel
     before the step. Returns whether there is a correction (lungs, the airway open, c > 0).
     # Model: m.lung_par, m.dt; rig.wall.damping (nv,) N m s/rad   # Data in: s.lung (rate, volume), rig.wall.qfrc (g), MuJoCo's qvel
-    # Data out: rig.wall.force_q (nv,) [N, N m]   # Scratch: rig.wall.dense, .a
+    # Data out: rig.wall.force_q (nv,) [N, N m] (left as it is, zero, when there is no correction)   # Scratch: rig.wall.dense, .a
     """
     wall, mj = rig.wall, rig.mj
     par, h = m.lung_par, m.dt
     c = par[P_K1] + 2.0 * par[P_K2] * abs(s.lung[L_RATE]) + h * lung_recoil(par, s.lung[L_VOLUME])[1]
     g, a, dense = wall.qfrc, wall.a, wall.dense
     n = g.shape[0]
-    wall.force_q[:] = 0.0
     if c <= 0.0 or s.lung[L_OCCLUDED] != 0.0:
         return False
     call_c(mj.fn_full_m, (mj.model_ptr, mj.data_ptr, dense))

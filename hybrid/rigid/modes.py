@@ -12,8 +12,8 @@ implicitfast) maps (x, v) to
 stable while (h omega)^2 < 4 + 2 h b: h omega < 2 undamped. RK4: h omega < 2 sqrt(2) (its
 stability region on the imaginary axis), damping left out. The estimate is the largest h stable
 for every mode. It leaves out gravity's stiffness, the membrane's pull on the linked bodies and the
-lungs' pleural load on the wall's bodies (staggered a step behind): it is the step above which the
-rigid part diverges alone, not a promise below it.
+lungs' pleural load on the bodies that carry the cavity: it is the step above which the rigid part
+diverges alone, not a promise below it.
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-__all__ = ["RigidModes", "rigid_modes"]
+__all__ = ["RigidModes", "rigid_modes", "implicit_joint_damping"]
 
 _SPRUNG = (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE))
 
@@ -46,12 +46,11 @@ class RigidModes:
         """One line for `hybrid inspect` and the run's warning."""
         if not math.isfinite(self.dt_stable_s):
             return "rigid stable-step estimate: none (no joint or tendon springs)"
-        text = (
+        return (
             f"rigid stable-step estimate {self.dt_stable_s:.3g} s ({self.integrator}; its fastest "
             f"sprung mode {self.omega_rad_s:.3g} rad/s, damping rate {self.damping_rate_per_s:.3g}/s, "
             f"in {', '.join(self.joints)}; h omega {dt_s * self.omega_rad_s:.2f})"
         )
-        return text
 
 
 def _tendon_jacobian(model: mujoco.MjModel, data: mujoco.MjData) -> np.ndarray:
@@ -61,6 +60,15 @@ def _tendon_jacobian(model: mujoco.MjModel, data: mujoco.MjData) -> np.ndarray:
         a, n = model.ten_J_rowadr[t], model.ten_J_rownnz[t]
         jac[t, model.ten_J_colind[a : a + n]] = data.ten_J[a : a + n]
     return jac
+
+
+def implicit_joint_damping(model: mujoco.MjModel) -> np.ndarray:
+    """(nv,) N m s/rad (or N s/m): the joints' damping that MuJoCo's step takes implicitly, the
+    dof damping unless Euler's implicit damping is disabled (`mjDSBL_EULERDAMP`)."""
+    euler = int(model.opt.integrator) == int(mujoco.mjtIntegrator.mjINT_EULER)
+    if euler and int(model.opt.disableflags) & int(mujoco.mjtDisableBit.mjDSBL_EULERDAMP):
+        return np.zeros(model.nv)
+    return np.array(model.dof_damping, float)
 
 
 def _stable_step(omega: float, b: float, rk4: bool) -> float:
@@ -87,14 +95,11 @@ def rigid_modes(model: mujoco.MjModel, data: mujoco.MjData | None = None) -> Rig
         return RigidModes(0.0, 0.0, math.inf, (), integrator)
     inertia = np.zeros((nv, nv))
     mujoco.mj_fullM(model, data, inertia)
-    stiffness, damping = np.zeros((nv, nv)), np.zeros((nv, nv))
+    stiffness, damping = np.zeros((nv, nv)), np.diag(implicit_joint_damping(model))
     euler = int(model.opt.integrator) == int(mujoco.mjtIntegrator.mjINT_EULER)
-    euler_damps = not (int(model.opt.disableflags) & int(mujoco.mjtDisableBit.mjDSBL_EULERDAMP))
     for j in range(model.njnt):
         if int(model.jnt_type[j]) in _SPRUNG:
             stiffness[model.jnt_dofadr[j], model.jnt_dofadr[j]] += model.jnt_stiffness[j]
-    if not euler or euler_damps:
-        damping += np.diag(model.dof_damping)
     jac = _tendon_jacobian(model, data)
     for t in range(model.ntendon):
         stiffness += model.tendon_stiffness[t] * np.outer(jac[t], jac[t])

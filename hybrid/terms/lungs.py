@@ -179,6 +179,22 @@ def _push(i, nvert, k, gx, gy, gz, vert_force, wall_force, to_points):
         wall_force[j, 2] += k * gz
 
 
+@kernel(inline="always")
+def _face_gradients(face, f, nvert, pos, wall, ref):
+    """Six times face f's share of grad V at its corners a, b, c: b x c, c x a, a x b (corners
+    relative to ref; m^2).
+    # Model: face (nf, 3) int64, ref (3,) m   # Data in: pos (nvert, 3) m, wall (nwall, 3) m   # Data out: returns 9 floats
+    """
+    ax, ay, az = _corner(face[f, 0], nvert, pos, wall, ref)
+    bx, by, bz = _corner(face[f, 1], nvert, pos, wall, ref)
+    cx, cy, cz = _corner(face[f, 2], nvert, pos, wall, ref)
+    return (
+        (by * cz - bz * cy, bz * cx - bx * cz, bx * cy - by * cx),
+        (cy * az - cz * ay, cz * ax - cx * az, cx * ay - cy * ax),
+        (ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx),
+    )
+
+
 @kernel
 def add_cavity_pressure(face, ref, load_pa, pos, wall, vert_force, wall_force, to_points=True):
     """F_i += load grad_i V on the cavity's points: a pressure load_pa (Pa) inside the
@@ -191,13 +207,10 @@ def add_cavity_pressure(face, ref, load_pa, pos, wall, vert_force, wall_force, t
     wall_force[:] = 0.0
     k = load_pa / 6.0
     for f in range(face.shape[0]):
-        a, b, c = face[f, 0], face[f, 1], face[f, 2]
-        ax, ay, az = _corner(a, nvert, pos, wall, ref)
-        bx, by, bz = _corner(b, nvert, pos, wall, ref)
-        cx, cy, cz = _corner(c, nvert, pos, wall, ref)
-        _push(a, nvert, k, by * cz - bz * cy, bz * cx - bx * cz, bx * cy - by * cx, vert_force, wall_force, to_points)
-        _push(b, nvert, k, cy * az - cz * ay, cz * ax - cx * az, cx * ay - cy * ax, vert_force, wall_force, to_points)
-        _push(c, nvert, k, ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx, vert_force, wall_force, to_points)
+        ga, gb, gc = _face_gradients(face, f, nvert, pos, wall, ref)
+        _push(face[f, 0], nvert, k, ga[0], ga[1], ga[2], vert_force, wall_force, to_points)
+        _push(face[f, 1], nvert, k, gb[0], gb[1], gb[2], vert_force, wall_force, to_points)
+        _push(face[f, 2], nvert, k, gc[0], gc[1], gc[2], vert_force, wall_force, to_points)
 
 
 def faces_at(face: np.ndarray, points) -> np.ndarray:
@@ -220,19 +233,12 @@ def cavity_gradient_at(face, ref, pos, wall, near, points, scratch, out):
             i = face[near[e], r]
             scratch[i, 0] = scratch[i, 1] = scratch[i, 2] = 0.0
     for e in range(near.shape[0]):
-        a, b, c = face[near[e], 0], face[near[e], 1], face[near[e], 2]
-        ax, ay, az = _corner(a, nvert, pos, wall, ref)
-        bx, by, bz = _corner(b, nvert, pos, wall, ref)
-        cx, cy, cz = _corner(c, nvert, pos, wall, ref)
-        scratch[a, 0] += by * cz - bz * cy
-        scratch[a, 1] += bz * cx - bx * cz
-        scratch[a, 2] += bx * cy - by * cx
-        scratch[b, 0] += cy * az - cz * ay
-        scratch[b, 1] += cz * ax - cx * az
-        scratch[b, 2] += cx * ay - cy * ax
-        scratch[c, 0] += ay * bz - az * by
-        scratch[c, 1] += az * bx - ax * bz
-        scratch[c, 2] += ax * by - ay * bx
+        f = near[e]
+        corners = _face_gradients(face, f, nvert, pos, wall, ref)
+        for r in range(3):
+            i = face[f, r]
+            for d in range(3):
+                scratch[i, d] += corners[r][d]
     for k in range(points.shape[0]):
         for d in range(3):
             out[k, d] = scratch[points[k], d] / 6.0
