@@ -25,6 +25,7 @@ from .kernel import cached_signatures
 
 __all__ = [
     "call_at",
+    "call_c",
     "kernel_address",
     "ADDRESS_ONLY",
     "args_in_memory",
@@ -33,6 +34,47 @@ __all__ = [
     "is_cached",
     "compile_elsewhere",
 ]
+
+
+@intrinsic
+def call_c(typingctx, fn, args):
+    """Call the C function `void f(...)` at address fn with the tuple args: an int64 or a pointer
+    as a 64-bit word, an int32 as a C int, a float64 as a double, an array as its data's address
+    (MuJoCo's functions, whose addresses the step's pack carries: `hybrid.loop.MjViews`), so that
+    the compiled code names no symbol and its cache loads in any process.
+    # Data in: fn (int64), args (a tuple)   # Data out: whatever f writes
+    """
+
+    def codegen(context, builder, signature, llargs):
+        values = cgutils.unpack_tuple(builder, llargs[1], len(args.types))
+        word = llvm_ir.IntType(64)
+        kinds, passed = [], []
+        for ty, v in zip(args.types, values):
+            ty = nb_types.unliteral(ty)
+            if isinstance(ty, nb_types.Array):
+                data = context.make_array(ty)(context, builder, v).data
+                kinds.append(word)
+                passed.append(builder.ptrtoint(data, word))
+            elif ty == nb_types.float64:
+                kinds.append(llvm_ir.DoubleType())
+                passed.append(v)
+            elif ty == nb_types.int32:
+                kinds.append(llvm_ir.IntType(32))
+                passed.append(v)
+            else:
+                kinds.append(word)
+                passed.append(v)
+        target = builder.inttoptr(llargs[0], llvm_ir.FunctionType(llvm_ir.VoidType(), kinds).as_pointer())
+        builder.call(target, passed)
+        return context.get_dummy_value()
+
+    for ty in args.types:
+        ty = nb_types.unliteral(ty)
+        if not (
+            isinstance(ty, nb_types.Array) or ty in (nb_types.float64, nb_types.int32, nb_types.int64, nb_types.intp)
+        ):
+            return None
+    return nb_types.void(fn, args), codegen
 
 
 @intrinsic

@@ -33,11 +33,8 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-from llvmlite import ir
-from numba import types
-from numba.extending import intrinsic
 
-from .calls import ADDRESS_ONLY, args_from_memory, args_in_memory, args_type_of, call_at
+from .calls import ADDRESS_ONLY, args_from_memory, args_in_memory, args_type_of, call_at, call_c
 from .kernel import kernel
 from .schedule import schedule_eval, stack_schedules
 from .sites import add_point_wrench_kernel, add_wrench_at, point_wrench_kernel, site_vel_kernel
@@ -84,22 +81,6 @@ __all__ = [
 ]
 
 LUNGS_ID = Lungs.id
-
-
-@intrinsic
-def _call_mj(typingctx, fn, model_ptr, data_ptr):
-    """Call the C function `void f(const mjModel*, mjData*)` at address fn (MuJoCo's
-    `mj_step`, `mj_step1`, `mj_step2`: `MjViews`): an address read at run time, so that the
-    compiled loop names no symbol and its cache loads in any process, MuJoCo loaded or not."""
-    sig = types.void(types.intp, types.intp, types.intp)
-
-    def codegen(context, builder, signature, args):
-        word = ir.IntType(64)
-        target = builder.inttoptr(args[0], ir.FunctionType(ir.VoidType(), [word, word]).as_pointer())
-        builder.call(target, [args[1], args[2]])
-        return context.get_dummy_value()
-
-    return sig, codegen
 
 
 class LinkArrays(NamedTuple):
@@ -372,12 +353,12 @@ def rigid_phase(m, s, w, planes, t, row, rig):
                 hist.xfrc[row, b, a] = xfrc[b, a]
     wall.force_q[:] = 0.0  # the lungs' correction, when there is one (`hybrid.wall_coupling`)
     if rig.rk4:
-        _call_mj(mj.fn_step, mj.model_ptr, mj.data_ptr)
+        call_c(mj.fn_step, (mj.model_ptr, mj.data_ptr))
     elif wall.qfrc.shape[0] and s.lung[L_OCCLUDED] == 0.0:  # with lungs: their load implicit in the bodies' velocities
         step2_with_lungs(m, s, rig)
     else:
-        _call_mj(mj.fn_step2, mj.model_ptr, mj.data_ptr)
-    _call_mj(mj.fn_step1, mj.model_ptr, mj.data_ptr)
+        call_c(mj.fn_step2, (mj.model_ptr, mj.data_ptr))
+    call_c(mj.fn_step1, (mj.model_ptr, mj.data_ptr))
     if rig.record:
         for a in range(qpos.shape[0]):
             hist.qpos[row, a] = qpos[a]

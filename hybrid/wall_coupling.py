@@ -34,53 +34,13 @@ MuJoCo stays behind its door: its C functions are called at the addresses the pa
 from __future__ import annotations
 
 import numpy as np
-from llvmlite import ir
-from numba import types
-from numba.core import cgutils
-from numba.extending import intrinsic
 
+from .calls import call_c
 from .kernel import kernel
 from .sites import add_point_wrench_kernel
 from .terms.lungs import L_OCCLUDED, L_RATE, L_VOLUME, P_K1, P_K2, P_REF, cavity_gradient_at, lung_recoil
 
-__all__ = ["call_c", "step2_with_lungs", "wall_rate_gradient", "implicit_wall_correction"]
-
-
-@intrinsic
-def call_c(typingctx, fn, args):
-    """Call the C function `void f(...)` at address fn with the tuple args: an int64 or a pointer
-    as a 64-bit word, an int32 as a C int, a float64 as a double, an array as its data's address.
-    # Data in: fn (int64), args (a tuple)   # Data out: whatever f writes
-    """
-
-    def codegen(context, builder, signature, llargs):
-        values = cgutils.unpack_tuple(builder, llargs[1], len(args.types))
-        word = ir.IntType(64)
-        kinds, passed = [], []
-        for ty, v in zip(args.types, values):
-            ty = types.unliteral(ty)
-            if isinstance(ty, types.Array):
-                data = context.make_array(ty)(context, builder, v).data
-                kinds.append(word)
-                passed.append(builder.ptrtoint(data, word))
-            elif ty == types.float64:
-                kinds.append(ir.DoubleType())
-                passed.append(v)
-            elif ty == types.int32:
-                kinds.append(ir.IntType(32))
-                passed.append(v)
-            else:
-                kinds.append(word)
-                passed.append(v)
-        target = builder.inttoptr(llargs[0], ir.FunctionType(ir.VoidType(), kinds).as_pointer())
-        builder.call(target, passed)
-        return context.get_dummy_value()
-
-    for ty in args.types:
-        ty = types.unliteral(ty)
-        if not (isinstance(ty, types.Array) or ty in (types.float64, types.int32, types.int64, types.intp)):
-            return None
-    return types.void(fn, args), codegen
+__all__ = ["step2_with_lungs", "wall_rate_gradient", "implicit_wall_correction"]
 
 
 @kernel
