@@ -55,12 +55,11 @@ from .step import (
     membrane_advance,
     membrane_forces,
 )
-from .step_work import CALL_RIGID, CALL_STEPS, CALL_STEPS_PARALLEL
+from .step_work import CALL_RIGID, CALL_STEPS, CALL_STEPS_PARALLEL, CALL_WALL
 from .terms import Lungs
 from .terms.lungs import L_ALVEOLAR, L_OCCLUDED, L_PLEURAL, L_VOLUME, P_REF, cavity_volume_rate
 from .terms.slide_planes import carry_planes
 from .terms.volume import face_volume
-from .wall_coupling import step2_with_lungs
 
 __all__ = [
     "LinkArrays",
@@ -310,9 +309,11 @@ class Frames:
 
 
 @kernel(inline="always")
-def rigid_phase(m, s, w, planes, t, row, rig):
+def rigid_phase(m, s, w, planes, t, row, rig, args_at, args_type):
     """Step phase 2 (module docstring): forces to the sites, controls, MuJoCo's step,
-    the linked points onto their sites.
+    the linked points onto their sites. args_at, args_type: (m, s, w, planes, rig) in the
+    caller's frame (`rigid_between`), for the lungs' step compiled apart
+    (`hybrid.wall_coupling.wall_step_between`).
     # Model:    m (MembraneArrays); rig.links.vert, .site_id, .site_body, .site_root,
     #           .extra_force; rig.ctrls.act, .sched, .user; rig.rk4; rig.wall (the lungs' carried wall)
     # Data in:  w.vert_force, s.grad, s.scal[S_PRESSURE] (the last projection's), w.lung_wall_force;
@@ -355,7 +356,7 @@ def rigid_phase(m, s, w, planes, t, row, rig):
     if rig.rk4:
         call_c(mj.fn_step, (mj.model_ptr, mj.data_ptr))
     elif wall.qfrc.shape[0] and s.lung[L_OCCLUDED] == 0.0:  # with lungs: their load implicit in the bodies' velocities
-        step2_with_lungs(m, s, rig)
+        call_at(w.calls[CALL_WALL], None, (args_at, args_type))
     else:
         call_c(mj.fn_step2, (mj.model_ptr, mj.data_ptr))
     call_c(mj.fn_step1, (mj.model_ptr, mj.data_ptr))
@@ -531,7 +532,7 @@ def rigid_between(args_at, t, row, args_type):
         args_from_memory(args_at, 2, args_type),
     )
     planes, rig = args_from_memory(args_at, 3, args_type), args_from_memory(args_at, 4, args_type)
-    rigid_phase(m, s, w, planes, t, row, rig)
+    rigid_phase(m, s, w, planes, t, row, rig, args_at, args_type)
 
 
 def membrane_only() -> RigidPack:

@@ -33,6 +33,7 @@ __all__ = [
     "CALL_STEPS",
     "CALL_STEPS_PARALLEL",
     "CALL_RIGID",
+    "CALL_WALL",
     "new_state",
     "new_work",
     "term_addresses",
@@ -75,8 +76,10 @@ class StepWork(NamedTuple):
     Euler's phases 1 and 2 (`implicit_start_forces`, `implicit_step`), the occluded airway's
     projection (`project_occluded`), the soft volume's force (`soft_volume_step`), the steps
     between two frames (`hybrid.loop.steps_between`: its serial-only build and the one with the
-    multi-core passes, each a build of its own) and the rigid phase (`rigid_between`: all three
-    filled at the first step of their build, `hybrid.loop_compile.loop_calls`), 0 where the model never calls it;
+    multi-core passes, each a build of its own), the rigid phase (`rigid_between`) and, with lungs
+    whose wall the bodies carry, MuJoCo's step with their load implicit
+    (`hybrid.wall_coupling.wall_step_between`: these four filled at the first step of their build,
+    `hybrid.loop_compile.loop_calls`), 0 where the model never calls it;
     force_calls (k, 2)
     int64: the registry's terms with their own step kernel that the model has, (id, address)
     (`hybrid.terms.STEP_FORCES`). Compiled apart, a kernel compiles only for a model that calls
@@ -101,7 +104,7 @@ class StepWork(NamedTuple):
 
 
 #: the slots of `StepWork.calls`
-NCALL = 7
+NCALL = 8
 (
     CALL_IMPLICIT_START,
     CALL_IMPLICIT_STEP,
@@ -110,6 +113,7 @@ NCALL = 7
     CALL_STEPS,
     CALL_STEPS_PARALLEL,
     CALL_RIGID,
+    CALL_WALL,
 ) = range(NCALL)
 
 

@@ -27,6 +27,10 @@ rounding; with them a is the unconstrained one, an approximation that keeps the 
 implicit scale. Not with RK4 (MuJoCo's step is then one call), nor while the airway is occluded
 (its projection holds the volume: `hybrid.terms.lungs.project_occluded`).
 
+Compiled apart (`wall_step_between`, called at its address by the rigid phase), for scenes with
+such a wall only: inlined into the rigid phase, every coupled scene compiled it (6 s more of the
+default scene's first run, which has no lungs).
+
 MuJoCo stays behind its door: its C functions are called at the addresses the pack carries
 (`hybrid.loop.MjViews`).
 """
@@ -35,12 +39,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from .calls import call_c
+from .calls import ADDRESS_ONLY, args_from_memory, call_c
 from .kernel import kernel
 from .sites import add_point_wrench_kernel
 from .terms.lungs import L_OCCLUDED, L_RATE, L_VOLUME, P_K1, P_K2, P_REF, cavity_gradient_at, lung_recoil
 
-__all__ = ["step2_with_lungs", "wall_rate_gradient", "implicit_wall_correction"]
+__all__ = ["step2_with_lungs", "wall_step_between", "wall_rate_gradient", "implicit_wall_correction"]
 
 
 @kernel
@@ -148,3 +152,14 @@ def step2_with_lungs(m, s, rig):
         call_c(mj.fn_step2, (mj.model_ptr, mj.data_ptr))
         for i in range(wall.force_q.shape[0]):
             mj.qfrc_applied[i] = wall.applied[i]
+
+
+@kernel(**ADDRESS_ONLY)
+def wall_step_between(args_at, args_type):
+    """`step2_with_lungs`, its arrays read from the rigid phase's frame (`hybrid.loop.rigid_between`'s
+    tuple (m, s, w, planes, rig)): the rigid phase calls it at its address (`StepWork.calls`), so
+    that only a scene whose lungs' wall the bodies carry compiles it.
+    # Model: m, rig   # Data in: args_at (int64), args_type   # Data out: as `step2_with_lungs`
+    """
+    m, s = args_from_memory(args_at, 0, args_type), args_from_memory(args_at, 1, args_type)
+    step2_with_lungs(m, s, args_from_memory(args_at, 4, args_type))

@@ -83,3 +83,18 @@ def test_an_obstructed_airway_runs_at_20_ms_and_converges_at_first_order(resista
     tv10, tv5 = _tidal_volume(2, resistance, 0.01), _tidal_volume(2, resistance, 0.005)
     ratio = (tv20 - tv5) / (tv10 - tv5)
     assert 2.0 <= ratio <= 5.0, (tv20, tv10, tv5)
+
+
+def test_only_a_scene_whose_bodies_carry_the_lungs_compiles_their_step():
+    # the lungs' step is compiled apart and called at its address (`wall_step_between`; inlined
+    # into the rigid phase, it was compiled by every coupled scene: 6 s more of the default
+    # scene's first run): a coupled scene without lungs leaves its slot empty, never asking for
+    # its build; with lungs the slot holds its address
+    from hybrid.step_work import CALL_RIGID, CALL_WALL
+
+    plain = hybrid.load(hybrid.load_scene("breathing", overrides=["mesh.level=0"]))
+    plain.step(1)
+    assert plain.work.calls[CALL_RIGID] != 0 and plain.work.calls[CALL_WALL] == 0
+    lungs = hybrid.load(hybrid.load_scene("breathing_lungs", overrides=["mesh.level=0"]))
+    lungs.step(1)
+    assert lungs.work.calls[CALL_RIGID] != 0 and lungs.work.calls[CALL_WALL] != 0
