@@ -284,6 +284,14 @@ class Coupling:
         `system.wall_point` order; its body took `system.wall_weight` times it at its site."""
         return self._wall.force.copy()
 
+    def wall_correction_wrenches(self) -> np.ndarray:
+        """(nbody, 6) [N, N m]: the lungs' implicit correction in the last step (`hybrid.wall_coupling`)
+        as each body's wrench, its force and its torque about the body's centre of mass where the
+        step started (a copy; zero without lungs, or when the step took none). Its generalized
+        force is the step's row of `qfrc_history`."""
+        w = self._wall.wrench
+        return w.copy() if w.shape[0] else np.zeros((self.system.model.nbody, 6))
+
     def wrench_history(self) -> np.ndarray:
         """(nstep, nbody, 6) [N, N m]: `xfrc_applied` of every recorded step."""
         nb = self.system.model.nbody

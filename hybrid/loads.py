@@ -12,6 +12,12 @@ step (an observer: never inside the step, nothing changed):
   the membrane);
 - a body that sliding points lean on (`RigidLink.slide_stiffness_n_per_m3`) receives the
   opposite of each plane's force on its point, at the point (`Coupling.slide_forces`);
+- a body that carries the lungs' wall (`hybrid.terms.lungs`) receives each carried point's
+  pleural load times its share, at the point's site (`Coupling.wall_forces`), and every body
+  the thoracic cavity moves with receives the step's implicit correction of that load
+  (`hybrid.wall_coupling`) as a wrench at its centre of mass (`Coupling.wall_correction_wrenches`):
+  with the linked points' forces (which hold the pleural load on the dome's border) these are
+  the lungs' whole load on the skeleton, exactly what MuJoCo applied;
 - a nailed region receives what its nail holds: the forces on its points that the
   nail cancels, each point's membrane force of the last step plus, under the exact
   volume constraint, p grad_i V of the last projection; the nail's reaction is minus
@@ -26,7 +32,8 @@ Every moment is M = sum (x_i - c) x F_i, in the scene's frame (right-handed, the
 moment's vector along the axis the load turns the body about, counter-clockwise
 seen from its tip); c is the body's origin (MuJoCo's `xpos`, now), a nailed region's
 rest centroid, or a named joint's anchor (MuJoCo's `xanchor`, now). The arms are
-the points' positions after the step whose forces are given.
+the points' positions after the step whose forces are given (a wall point's: its site's; the
+correction's: the body's centre of mass, MuJoCo's `xipos`).
 """
 
 from __future__ import annotations
@@ -43,8 +50,8 @@ __all__ = ["Loads", "LoadGroup", "LoadsObserver", "topics"]
 
 class LoadGroup:
     """The points whose forces one part of the skeleton takes: kind "body" (a linked
-    body: rows, its rows in the coupling's link order, then slide_rows, its sliding points)
-    or "nail" (a nailed region)."""
+    body: rows, its rows in the coupling's link order, then slide_rows, its sliding points,
+    then wall_rows, the lungs' carried wall points on it) or "nail" (a nailed region)."""
 
     def __init__(
         self,
@@ -57,6 +64,7 @@ class LoadGroup:
     ):
         self.kind, self.name, self.vert, self.rows = kind, name, vert, rows
         self.slide_rows = np.zeros(0, np.int64)  # a body's sliding points, in `slide_vert` order, after rows
+        self.wall_rows = np.zeros(0, np.int64)  # the lungs' wall points it carries, in `wall_point` order
         self.body_id, self.centre_m = body_id, centre_m
 
     @property
@@ -86,12 +94,13 @@ class Loads:
             system = sim.rigid.system
             site_body = np.asarray(system.site_body)
             slide_body = np.asarray(system.slide_site_body)
-            for b in dict.fromkeys([*site_body.tolist(), *slide_body.tolist()]):
+            wall_body = np.asarray(system.wall_site_body)
+            for b in dict.fromkeys([*site_body.tolist(), *slide_body.tolist(), *wall_body.tolist()]):
                 rows, slide_rows = np.nonzero(site_body == b)[0], np.nonzero(slide_body == b)[0]
                 name = sim.mj_model.body(b).name or f"body{b}"
                 vert = np.concatenate([sim.rigid.link_vert[rows], system.slide_vert[slide_rows]]).astype(np.int64)
                 group = LoadGroup("body", name, vert, rows, body_id=int(b))
-                group.slide_rows = slide_rows
+                group.slide_rows, group.wall_rows = slide_rows, np.nonzero(wall_body == b)[0]
                 self.groups.append(group)
                 held.append(sim.rigid.link_vert[rows])
             self.joints = [(n, int(sim.mj_model.joint(n).id)) for n in system.controls.load_joints]
@@ -140,24 +149,31 @@ class Loads:
     def _has_pressure(self) -> bool:
         return self.closed and self.held.size > 0 and self.exact_volume
 
-    def point_forces(self) -> dict:
-        """{group label: (n, 3) N}, the forces each group's points apply to it now."""
+    def point_loads(self) -> dict:
+        """{group label: (x (n, 3) m, f (n, 3) N)}, the forces each group's points apply to it
+        now and where: a linked or sliding point's at the point, a carried wall point's (its
+        share of the pleural load) at its site."""
         s = self.sim.state
         p = float(s.scal[S_PRESSURE])
+        pos = s.vert_pos
         out = {}
-        link_force = slide_force = None
+        link_force = slide_force = wall_force = None
         for g in self.groups:
             if g.kind == "body":
                 if link_force is None:
-                    link_force = self.sim.rigid.link_forces() - self._extra
-                    slide_force = self.sim.rigid.slide_forces()
+                    rigid = self.sim.rigid
+                    link_force = rigid.link_forces() - self._extra
+                    slide_force = rigid.slide_forces()
+                    wall_force = rigid.wall_forces() * rigid.system.wall_weight[:, None]
+                    wall_at = self.sim.mj_data.site_xpos[rigid.system.wall_site_id]
                 # a sliding point loads its body with the opposite of its plane's force on it
-                out[g.label] = np.concatenate([link_force[g.rows], -slide_force[g.slide_rows]])
+                f = np.concatenate([link_force[g.rows], -slide_force[g.slide_rows], wall_force[g.wall_rows]])
+                out[g.label] = (np.concatenate([pos[g.vert], wall_at[g.wall_rows]]), f)
             else:
                 f = np.array(self.sim.work.vert_force[g.vert])
                 if self.exact_volume:
                     f += p * s.grad[g.vert]
-                out[g.label] = f
+                out[g.label] = (pos[g.vert], f)
         return out
 
     def anchors(self) -> np.ndarray:
@@ -174,13 +190,22 @@ class Loads:
     def sample(self) -> np.ndarray:
         """(len(channels()), 3): the current figures, in `channels()`'s order."""
         pos = self.sim.state.vert_pos
-        forces = self.point_forces()
+        loads = self.point_loads()
         anchors = self.anchors()
-        xpos = self.sim.mj_data.xpos if self.sim.rigid is not None else None
+        rigid = self.sim.rigid
+        if rigid is not None:
+            xpos, xipos = self.sim.mj_data.xpos, self.sim.mj_data.xipos
+            correction = rigid.wall_correction_wrenches()
         rows = []
         for g in self.groups:
-            c = xpos[g.body_id] if g.kind == "body" else g.centre_m
-            rows += [*_net_and_moments(pos[g.vert], forces[g.label], np.vstack([c, anchors]))]
+            about = np.vstack([xpos[g.body_id] if g.kind == "body" else g.centre_m, anchors])
+            x, f = loads[g.label]
+            net, moments = _net_and_moments(x, f, about)
+            if g.kind == "body":  # the lungs' correction: a force at its centre of mass and a torque
+                w = correction[g.body_id]
+                more, more_moments = _net_and_moments(xipos[g.body_id][None], w[None, :3], about)
+                net, moments = net + more, moments + more_moments + w[3:]
+            rows += [net, moments]
         if self._has_pressure():
             rows += [*_net_and_moments(pos[self.held], self.iap_forces(), anchors)]
         return np.concatenate(rows).reshape(-1, 3)

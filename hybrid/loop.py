@@ -116,9 +116,10 @@ class WallArrays(NamedTuple):
     g_near their faces (`hybrid.terms.lungs.faces_at`); spec (1,) int32: the parts of MuJoCo's
     state it saves; g_scratch (nvert + nwall, 3): `cavity_gradient_at`'s.
     Scratch: force (nc, 3) N, their loads; vel (nc, 3) m/s, the sites' velocities; unit (nlinks +
-    nc, 3), wrench (nbody, 6), qfrc (nv,), a (nv,), dense (nv, nv), saved (MuJoCo's state before
-    its step), applied (nv,): the implicit coupling's; force_q (nv,): its generalized force in the
-    step (N, N m)."""
+    nc, 3), qfrc (nv,), a (nv,), dense (nv, nv), saved (MuJoCo's state before its step), applied
+    (nv,): the implicit coupling's; force_q (nv,): its generalized force in the step (N, N m);
+    wrench (nbody, 6): the same as each body's wrench (N; N m about its centre of mass at the
+    step's start), after the step (`hybrid.loads`)."""
 
     point: np.ndarray
     weight: np.ndarray
@@ -353,6 +354,7 @@ def rigid_phase(m, s, w, planes, t, row, rig, args_at, args_type):
             for a in range(6):
                 hist.xfrc[row, b, a] = xfrc[b, a]
     wall.force_q[:] = 0.0  # the lungs' correction, when there is one (`hybrid.wall_coupling`)
+    wall.wrench[:] = 0.0
     if rig.rk4:
         call_c(mj.fn_step, (mj.model_ptr, mj.data_ptr))
     elif wall.qfrc.shape[0] and s.lung[L_OCCLUDED] == 0.0:  # with lungs: their load implicit in the bodies' velocities

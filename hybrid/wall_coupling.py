@@ -85,7 +85,10 @@ def implicit_wall_correction(m, s, rig, rate_before):
     taken again with it as `qfrc_applied` (`hybrid.loop.rigid_phase`). rate_before: g . qvel
     before the step. Returns whether there is a correction (lungs, the airway open, c > 0).
     # Model: m.lung_par, m.dt; rig.wall.damping (nv,) N m s/rad   # Data in: s.lung (rate, volume), rig.wall.qfrc (g), MuJoCo's qvel
-    # Data out: rig.wall.force_q (nv,) [N, N m] (left as it is, zero, when there is no correction)   # Scratch: rig.wall.dense, .a
+    # Data out: rig.wall.force_q (nv,) [N, N m] (left as it is, zero, when there is no correction);
+    #           rig.wall.wrench (nbody, 6) [N, N m]: the correction's wrench on each body (force, and
+    #           torque about its centre of mass), which force_q is (zero without a correction)
+    # Data in:  rig.wall.wrench: the unit pressure's (`wall_rate_gradient`)   # Scratch: rig.wall.dense, .a
     """
     wall, mj = rig.wall, rig.mj
     par, h = m.lung_par, m.dt
@@ -93,6 +96,7 @@ def implicit_wall_correction(m, s, rig, rate_before):
     g, a, dense = wall.qfrc, wall.a, wall.dense
     n = g.shape[0]
     if c <= 0.0 or s.lung[L_OCCLUDED] != 0.0:
+        wall.wrench[:] = 0.0
         return False
     call_c(mj.fn_full_m, (mj.model_ptr, mj.data_ptr, dense))
     for i in range(n):
@@ -126,6 +130,10 @@ def implicit_wall_correction(m, s, rig, rate_before):
     delta = (rate_mj - rate_before) / (1.0 + h * c * ga)
     for i in range(n):
         wall.force_q[i] = -c * g[i] * delta
+    wrench = wall.wrench  # g is the unit pressure's wrenches through the bodies' Jacobians
+    for b in range(wrench.shape[0]):
+        for k in range(6):
+            wrench[b, k] *= -c * delta
     return True
 
 
