@@ -39,6 +39,7 @@ from .kernel import kernel
 from .schedule import schedule_eval, stack_schedules
 from .sites import add_point_wrench_kernel, add_wrench_at, point_wrench_kernel, site_vel_kernel
 from .step import (
+    F_AIRWAY,
     F_ALVEOLAR,
     F_FLOW,
     F_KE,
@@ -57,7 +58,7 @@ from .step import (
 )
 from .step_work import CALL_RIGID, CALL_STEPS, CALL_STEPS_PARALLEL, CALL_WALL
 from .terms import Lungs
-from .terms.lungs import L_ALVEOLAR, L_OCCLUDED, L_PLEURAL, L_VOLUME, P_REF, cavity_volume_rate
+from .terms.lungs import L_AIRWAY, L_ALVEOLAR, L_OCCLUDED, L_PLEURAL, L_VOLUME, P_REF, cavity_volume_rate
 from .terms.slide_planes import carry_planes
 from .terms.volume import face_volume
 
@@ -272,6 +273,7 @@ def capture_frame(m, s, pos_out, scal_out):
         scal_out[F_FLOW] = (vol - s.lung[L_VOLUME]) / m.dt
         scal_out[F_PLEURAL] = s.lung[L_PLEURAL]
         scal_out[F_ALVEOLAR] = s.lung[L_ALVEOLAR]
+        scal_out[F_AIRWAY] = s.lung[L_AIRWAY]
 
 
 class FrameArrays(NamedTuple):
@@ -289,7 +291,7 @@ class FrameArrays(NamedTuple):
 class Frames:
     """Frames captured in one compiled call (`Simulation.step_frames`): per frame,
     pos (nvert, 3) m, scal (`hybrid.step.FrameColumn`: time, volume, pressure, kinetic energy,
-    the lungs' volume, flow and pressures), and the
+    the lungs' volume, flow and pressures: pleural, alveolar, airway-opening), and the
     rigid bodies' poses body_pos (nbody, 3) m, body_quat (nbody, 4) (w, x, y, z),
     world excluded. `count`: the frames of the last call, also when it raised."""
 

@@ -432,6 +432,7 @@ class FrameColumn(IntEnum):
     FLOW = 5  # m^3/s, into the lungs: the last step's volume change over h
     PLEURAL = 6  # Pa, at the last step's start
     ALVEOLAR = 7  # Pa, at the last step's start
+    AIRWAY = 8  # Pa, the airway-opening pressure at the last step's start
 
 
-F_TIME, F_VOLUME, F_PRESSURE, F_KE, F_LUNG_VOLUME, F_FLOW, F_PLEURAL, F_ALVEOLAR = FrameColumn
+F_TIME, F_VOLUME, F_PRESSURE, F_KE, F_LUNG_VOLUME, F_FLOW, F_PLEURAL, F_ALVEOLAR, F_AIRWAY = FrameColumn

@@ -424,7 +424,7 @@ def test_the_recording_carries_the_lung_series_of_the_trace(tmp_path):
         tr = hybrid.run(sim, 0.5, observers=[rec])["trace"].arrays()
     data = hybrid.read(tmp_path / "run.mcap")
     lung_topics = [t for t in SCALAR_CHANNELS if t.startswith("/lungs/")]
-    assert len(lung_topics) == 8
+    assert len(lung_topics) == 10
     for topic in lung_topics:
         ch, key = data[topic], SCALAR_CHANNELS[topic]
         assert np.allclose(ch["t"], tr["t_s"], rtol=0, atol=1e-9)  # stamps in whole nanoseconds

@@ -50,6 +50,27 @@ def sinusoidal_run():
     return sim, hybrid.run(sim, 2 * PERIOD_S, frame_dt_s=0.01)
 
 
+def test_the_trace_gives_the_airway_opening_and_gastric_pressures():
+    # a ventilator's constant 5 cmH2O at the airway opening: the trace's airway-opening pressure
+    # is it from the first step on (0 in the frame before any step, the lungs at rest); the
+    # gastric pressure is the abdomen's, and with the pleural one it makes the transdiaphragmatic
+    # pressure's change exactly (Pdi - Pdi_rest = Pga - Ppl - P_L0, the pleural pressure at rest
+    # being -P_L0): three series the run computes apart, to rounding
+    over = ["mesh.level=0", "forces.lungs.airway_opening_pressure_cmh2o=5"]
+    sim = hybrid.load(hybrid.load_scene("breathing_lungs", overrides=over))
+    tr = hybrid.run(sim, 0.3, frame_dt_s=0.01)["trace"].arrays()
+    pao, pga, ppl = tr["airway_opening_pressure_cmh2o"], tr["gastric_pressure_cmh2o"], tr["pleural_pressure_cmh2o"]
+    assert pao[0] == 0.0
+    np.testing.assert_allclose(pao[1:], 5.0, rtol=1e-14, atol=0)
+    np.testing.assert_allclose(pga, tr["pressure_pa"] / CMH2O_PA, rtol=1e-14, atol=0)
+    recoil = next(f for f in sim.model.scene.forces if isinstance(f, Lungs)).resting_recoil_cmh2o
+    pdi = tr["transdiaphragmatic_pressure_change_cmh2o"]
+    np.testing.assert_allclose(pdi, pga - ppl - recoil, rtol=0, atol=1e-12 * np.abs(pga).max())
+    assert np.ptp(pga) > 0.1  # the abdomen's pressure moves: the identity is not 0 = 0
+    # and the airway's pressure fills the lungs: above rest from the start
+    assert tr["lung_volume_change_l"][-1] > 0.05
+
+
 def test_the_work_of_breathing_is_the_closed_form_of_a_sinusoidal_dome(sinusoidal_run):
     """x(t) = VT (1 - cos w t) / 2: per inspiration (t from 0 to T/2) the elastic work is
     1/2 E VT^2, the resistive work integral of (K1 + K2 |Q|) Q^2 dt = K1 pi^2 VT^2 / (4 T)

@@ -11,7 +11,7 @@ from ..model import Model
 from ..readouts import axis_crossing_z, pitch_deg, quat_rot, ring_faces, swept_volumes
 from ..scene import Muscle, MuscleFibres, SoftVolume, Volume
 from ..schedule import Breathing, schedule_eval, stack_schedules
-from ..step import F_ALVEOLAR, F_FLOW, F_KE, F_LUNG_VOLUME, F_PLEURAL, F_PRESSURE, F_TIME, F_VOLUME
+from ..step import F_AIRWAY, F_ALVEOLAR, F_FLOW, F_KE, F_LUNG_VOLUME, F_PLEURAL, F_PRESSURE, F_TIME, F_VOLUME
 from ..step_work import ControlArrays
 from ..terms import Lungs
 from ..terms.lungs import CMH2O_PA, CMH2O_PER_L, P_E, P_RECOIL, P_V0
@@ -236,7 +236,9 @@ class TraceMetrics:
         rows[:, COLUMN["flow_l_per_s"]] = scal[:, F_FLOW] * 1e3
         rows[:, COLUMN["pleural_pressure_cmh2o"]] = pleural / CMH2O_PA
         rows[:, COLUMN["alveolar_pressure_cmh2o"]] = scal[:, F_ALVEOLAR] / CMH2O_PA
+        rows[:, COLUMN["airway_opening_pressure_cmh2o"]] = scal[:, F_AIRWAY] / CMH2O_PA
         abdominal = scal[:, F_PRESSURE] if "pressure" in self.parts else 0.0
+        rows[:, COLUMN["gastric_pressure_cmh2o"]] = abdominal / CMH2O_PA
         rows[:, COLUMN["transdiaphragmatic_pressure_change_cmh2o"]] = (
             abdominal - (pleural + lung_par[P_RECOIL])
         ) / CMH2O_PA

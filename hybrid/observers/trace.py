@@ -27,6 +27,8 @@ TRACE_KEYS = (
     "flow_l_per_s",  # into the lungs (inspiration positive): each step's volume change over h
     "pleural_pressure_cmh2o",  # absolute (the oesophageal pressure's model), at the last step's start
     "alveolar_pressure_cmh2o",
+    "airway_opening_pressure_cmh2o",  # the scene's schedule (0: spontaneous breathing), at the last step's start
+    "gastric_pressure_cmh2o",  # the abdominal pressure (the gastric pressure's model): pressure_pa in cmH2O
     "transdiaphragmatic_pressure_change_cmh2o",  # abdominal minus pleural, change from rest
     # the lung volume change's parts (Konno-Mead; optoelectronic plethysmography's compartments), L:
     "rib_cage_pulmonary_volume_change_l",  # the cavity's wall (lung change less what the floor gave)

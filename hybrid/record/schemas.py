@@ -23,6 +23,8 @@ SCALAR_CHANNELS = {
     "/lungs/flow": "flow_l_per_s",
     "/lungs/pleural_pressure": "pleural_pressure_cmh2o",
     "/lungs/alveolar_pressure": "alveolar_pressure_cmh2o",
+    "/lungs/airway_opening_pressure": "airway_opening_pressure_cmh2o",
+    "/lungs/gastric_pressure": "gastric_pressure_cmh2o",
     "/lungs/transdiaphragmatic_pressure_change": "transdiaphragmatic_pressure_change_cmh2o",
     "/lungs/rib_cage_pulmonary_volume_change": "rib_cage_pulmonary_volume_change_l",
     "/lungs/rib_cage_abdominal_volume_change": "rib_cage_abdominal_volume_change_l",
