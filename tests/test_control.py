@@ -131,4 +131,4 @@ def test_the_trace_and_the_recording_keep_the_controls_that_ran(tmp_path):
     want = hybrid.run(scheduled, 0.5, frame_dt_s=0.01)["trace"].arrays()["muscle_n_per_m"]
     assert np.array_equal(column[22:], want[22:])  # released: the schedule again
     data = hybrid.read(tmp_path / "run.mcap")
-    assert np.array_equal(data["/muscle_stiffness"]["value"], column[: len(data["/muscle_stiffness"]["value"])])
+    assert np.array_equal(data["/muscle"]["value"], column[: len(data["/muscle"]["value"])])

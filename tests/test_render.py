@@ -255,3 +255,26 @@ def test_view_runs_in_mujocos_viewer_on_a_virtual_display():
     finally:
         server.terminate()
         server.wait()
+
+
+def test_the_muscle_channel_says_what_it_holds_and_older_recordings_still_draw(recording, monkeypatch):
+    # /muscle (named /muscle_stiffness before 0.20, whatever the muscle was) carries the trace's
+    # muscle_n_per_m; the description says what that is: the paper's per-point muscle, a stiffness
+    import hybrid.record as record
+
+    data = hybrid.read(recording)
+    assert "/muscle" in data and "/muscle_stiffness" not in data
+    assert data["model"]["muscle"] == "muscle stiffness (N/m)"
+    new = frames_from_recording(recording)
+    assert new.muscle is not None and np.ptp(new.muscle) > 0  # the breath's drive, from the channel
+
+    read = record.read
+
+    def as_before(path, *args, **kw):  # the same file as 0.19 wrote it: the channel's old name
+        d = read(path, *args, **kw)
+        d["/muscle_stiffness"] = d.pop("/muscle")
+        return d
+
+    monkeypatch.setattr(record, "read", as_before)
+    old = frames_from_recording(recording)
+    np.testing.assert_array_equal(old.muscle, new.muscle)

@@ -150,7 +150,7 @@ def test_read_recording(tmp_path, monkeypatch):
     assert _run("read_recording", tmp_path, monkeypatch) == 0
     _figure_drawn(tmp_path / "recording.png")
     rows = {r["channel"]: r for r in _table(tmp_path / "recording.csv")}
-    assert {"/volume", "/pressure", "/apex_descent", "/rib_elevation", "/muscle_stiffness"} <= set(rows)
+    assert {"/volume", "/pressure", "/apex_descent", "/rib_elevation", "/muscle"} <= set(rows)
     assert int(rows["/apex_descent"]["samples"]) == 31  # 0.3 s every 0.01 s
     assert float(rows["/apex_descent"]["max"]) > 1.0 and float(rows["/pressure"]["max"]) > 10.0
     assert (tmp_path / "run" / "summary.json").is_file()

@@ -141,7 +141,7 @@ def frames_from_recording(path: str | Path) -> Frames:
         body_quat=body_quat,
         geoms=shown_geoms(meta.get("geoms", [])),
         apex_descent=series("/apex_descent"),
-        muscle=series("/muscle_stiffness"),
+        muscle=series("/muscle") if "/muscle" in data else series("/muscle_stiffness"),  # its name before 0.20
         rib_lift=series("/rib_elevation"),
         regions=list(meta.get("regions", [])),
         vert_label=meta.get("vert_label"),

@@ -14,7 +14,7 @@
   (capsules and cylinders as cylinders, spheres, boxes), frame-locked;
 - scalars, `hybrid.Scalar` {double t (s); double value}: `/volume` (m^3),
   `/volume_rel_error`, `/pressure` (Pa), `/rib_elevation` (mm), `/apex_descent` (mm),
-  `/muscle_stiffness` (N/m), `/kinetic_energy` (J), as far as the observer is given them.
+  `/muscle` (N/m: a fibre tension or the paper's stiffness), `/kinetic_energy` (J), as far as the observer is given them.
 
 Log times are the simulated time in nanoseconds (t = 0 at the start). Each schema is
 a protobuf FileDescriptorSet (foxglove's from `foxglove-schemas-protobuf`). The model's

@@ -10,6 +10,7 @@ import zlib
 import numpy as np
 
 from ..loads import topics as load_topics
+from ..observers.metrics import muscle_label
 from ..scene import body_axes
 from .encoder import (
     MAX_DEPTH,
@@ -64,6 +65,7 @@ def _plan(sim, every_s: float) -> dict:
         "bodies": bodies,
         "loads": [],
         "axes": body_axes(model.scene),
+        "muscle": muscle_label(model),
     }
 
 
@@ -155,6 +157,8 @@ class _FrameWriter:
                 "cranial": list(plan["axes"][1]),
                 "bodies": bodies,
                 "loads": plan["loads"],
+                # what /muscle holds, with its unit ("muscle fibre tension (N/m)"), or None
+                "muscle": plan["muscle"],
                 "provenance": plan.get("provenance"),
             }
         )

@@ -16,7 +16,7 @@ SCALAR_CHANNELS = {
     "/pressure": "pressure_pa",
     "/rib_elevation": "rib_lift_mm",
     "/apex_descent": "apex_descent_mm",
-    "/muscle_stiffness": "muscle_n_per_m",
+    "/muscle": "muscle_n_per_m",  # a fibre tension or the paper's stiffness: the description's `muscle` says which
     "/kinetic_energy": "kinetic_energy_j",
     # scenes with lungs (no message otherwise): in the trace's units, L, L/s, cmH2O
     "/lungs/volume_change": "lung_volume_change_l",
