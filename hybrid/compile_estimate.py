@@ -54,16 +54,16 @@ def compile_estimate(scene):
 #: with a rigid part, implicit Euler), another build of the step loop once one is cached
 #: (`hybrid.loop_compile.loop_build`), implicit Euler's solve (compiled apart) once the loop is; a first
 #: run's counts its helper process's too (`hybrid.calls.compile_elsewhere`). Measured by the notice on
-#: an empty NUMBA_CACHE_DIR, 2 cores, --duration 0.01 or 0.02 --no-record: `hybrid run` 20.8, 21.6,
-#: 21.8, 22.2 (0.13.2); the others as measured for 0.13.1 (`hybrid run membrane_demo` 18.3; `hybrid run
-#: --set integrator=implicit_euler --set dt_s=0.01` 64.4; the implicit one after `hybrid run` 42.2)
-#: and 0.12 (`hybrid run` after an implicit first run 10.4, 11.4; `membrane_demo --set mesh.level=6
-#: --set dt_s=1e-4` after all 20.0, once)
+#: an empty NUMBA_CACHE_DIR, 2 cores, --duration 0.01 or 0.02 --no-record, for 0.20: `hybrid run`
+#: 32.8, 32.0; `hybrid run membrane_demo` 27.6; `hybrid run --set integrator=implicit_euler --set
+#: dt_s=0.01` 104.7, and 60.2 after `hybrid run` (the implicit solve); `membrane_demo --set
+#: mesh.level=6 --set dt_s=1e-4` after `hybrid run` (the multi-core build) 27.0. The serial build
+#: after an implicit first run is 0.12's (10.4, 11.4): every solver now steps through one build.
 COMPILE_ESTIMATE_S = {
-    "first run, membrane": 18,
-    "first run, rigid": 22,
-    "first run, implicit": 64,
+    "first run, membrane": 28,
+    "first run, rigid": 32,
+    "first run, implicit": 105,
     "loop build, serial": 11,
-    "loop build, parallel": 20,
-    "implicit solve": 42,
+    "loop build, parallel": 27,
+    "implicit solve": 60,
 }
