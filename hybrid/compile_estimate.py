@@ -55,15 +55,16 @@ def compile_estimate(scene):
 #: (`hybrid.loop_compile.loop_build`), implicit Euler's solve (compiled apart) once the loop is; a first
 #: run's counts its helper process's too (`hybrid.calls.compile_elsewhere`). Measured by the notice on
 #: an empty NUMBA_CACHE_DIR, 2 cores, --duration 0.01 or 0.02 --no-record, for 0.20: `hybrid run`
-#: 32.8, 32.0; `hybrid run membrane_demo` 27.6; `hybrid run --set integrator=implicit_euler --set
-#: dt_s=0.01` 104.7, and 60.2 after `hybrid run` (the implicit solve); `membrane_demo --set
+#: 32.8, 32.0, 35.1; `hybrid run membrane_demo` 27.6; `hybrid run --set integrator=implicit_euler --set
+#: dt_s=0.01` 85.3, and 44.6 after `hybrid run` (the implicit solve; 104.7 and 60.2 before 0.20.2
+#: compiled `assemble` once); `membrane_demo --set
 #: mesh.level=6 --set dt_s=1e-4` after `hybrid run` (the multi-core build) 27.0. The serial build
 #: after an implicit first run is 0.12's (10.4, 11.4): every solver now steps through one build.
 COMPILE_ESTIMATE_S = {
     "first run, membrane": 28,
     "first run, rigid": 32,
-    "first run, implicit": 105,
+    "first run, implicit": 85,
     "loop build, serial": 11,
     "loop build, parallel": 27,
-    "implicit solve": 60,
+    "implicit solve": 45,
 }

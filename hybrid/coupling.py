@@ -180,6 +180,7 @@ class Coupling:
         points = np.concatenate([self.link_vert[on], nvert + sys.wall_point]).astype(np.int64)
         site = np.concatenate([sys.site_id[on], sys.wall_site_id]).astype(np.int64)
         body = np.concatenate([sys.site_body[on], sys.wall_site_body]).astype(np.int64)
+        site.flags.writeable = body.flags.writeable = False  # as the sites' (one build of `add_point_wrench_kernel`)
         weight = np.concatenate([np.ones(int(on.sum())), sys.wall_weight]).astype(float)
         near = faces_at(face, points)
         nbody = mjm.nbody if lungs else 0

@@ -130,6 +130,11 @@ __all__ = [
     "newton_product",
 ]
 
+#: `assemble`'s `project`, the exact Hessian or projected element by element: numpy booleans, so
+#: that numba compiles one build for both (a constant True or False is a literal type, each its own
+#: build of `assemble`: 10-14 s more of implicit Euler's first compile)
+EXACT, PROJECTED = np.bool_(False), np.bool_(True)
+
 CG_MIN_ITER = 50  # the conjugate gradients' cap: 3 x the free coordinates, at least this
 HALVINGS = 12
 ARMIJO = 1e-4  # the fraction of the predicted decrease a step must achieve
@@ -394,7 +399,7 @@ def implicit_step(m, s, sched_val, step, imp, vert_acc):
             for a in range(3):
                 w.x_kv[i, a] = w.x_try[i, a]
         newton_caches(m, w.rows, sched_val, w.x_try, w.face, w.fib, w.pf)
-        assemble(m, w.rows, w.face, w.fib, w.pf, h, w.mat, w.planes)
+        assemble(m, w.rows, w.face, w.fib, w.pf, h, w.mat, w.planes, EXACT)
         # the exact Hessian; where it has negative curvature, the Hessian projected per element
         gather(rows_of, h, w.res, w.cg_r)
         # solve just accurately enough: FORCING of what convergence asks, at most FORCING of the residual
@@ -406,7 +411,7 @@ def implicit_step(m, s, sched_val, step, imp, vert_acc):
         k = split_cg(w, target, cg_max, c_lung, w.lung_gf, w.lung_gh)
         if k < 0:  # negative curvature: solved again with the Hessian projected element by element
             cg_total += -1 - k
-            assemble(m, w.rows, w.face, w.fib, w.pf, h, w.mat, w.planes, True)
+            assemble(m, w.rows, w.face, w.fib, w.pf, h, w.mat, w.planes, PROJECTED)
             if c_lung != 0.0:  # the rank-one term's C^-1 g, of the new matrix's sweep
                 half_sweep(w.mat, w.lung_gf, w.lung_gh)
             gather(rows_of, h, w.res, w.cg_r)

@@ -100,6 +100,8 @@ def newton_rows(arrays) -> NewtonRows:
         out += [np.ascontiguousarray(a[keep]) for a in (tri, *more)]
     faces = np.asarray(arrays.face_vert)
     out.append(np.ascontiguousarray(faces[free[faces.reshape(-1, 3)].any(axis=1)]))
+    for a in out:  # read-only as the model's: the terms' kernels compile once for both (`implicit_forces`)
+        a.flags.writeable = False
     return NewtonRows(*out)
 
 

@@ -149,6 +149,11 @@ class Loads:
     def _has_pressure(self) -> bool:
         return self.closed and self.held.size > 0 and self.exact_volume
 
+    def point_forces(self) -> dict:
+        """{group label: (n, 3) N}, the forces each group's points apply to it now (`point_loads`
+        without where they act)."""
+        return {label: f for label, (_, f) in self.point_loads().items()}
+
     def point_loads(self) -> dict:
         """{group label: (x (n, 3) m, f (n, 3) N)}, the forces each group's points apply to it
         now and where: a linked or sliding point's at the point, a carried wall point's (its

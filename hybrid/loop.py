@@ -552,8 +552,33 @@ def membrane_only() -> RigidPack:
     f0, f00 = np.zeros(0), np.zeros((0, 0))
     mj = MjViews(0, 0, 0, 0, 0, 0, 0, 0, 0, f3, f9, f3, f6, f6, f3, f0, f0, f0, f3, np.zeros((0, 4)), f0)
     i32 = np.zeros(1, np.int32)
+    # read-only where the rigid part's are (`hybrid.rigid.RigidSystem`): the same types, the same loop
     wall = WallArrays(
-        i64, f0, f3, f3, i64, i64, i64, f3, f3, f0, i64, i64, i64, i64, f0, f3, i32, f3, f6, f0, f0, f00, f0, f0, f0
+        point=i64,
+        weight=f0,
+        rest=f3,
+        site_rest=f3,
+        site_id=fixed,
+        site_body=fixed,
+        site_root=fixed,
+        force=f3,
+        vel=f3,
+        damping=f0,
+        g_near=i64,
+        g_points=i64,
+        g_site=fixed,
+        g_body=fixed,
+        g_weight=f0,
+        g_scratch=f3,
+        spec=i32,
+        unit=f3,
+        wrench=f6,
+        qfrc=f0,
+        a=f0,
+        dense=f00,
+        force_q=f0,
+        saved=f0,
+        applied=f0,
     )
     slides = SlideArrays(fixed_i32, fixed, fixed, fixed_f, f3)
     hist = WrenchHistory(np.zeros((0, 0, 6)), np.zeros((0, 0)), np.zeros((0, 0)))

@@ -189,7 +189,7 @@ def test_offset_moment_is_r_cross_f():
     m_c = v[names.index("nail/top/moment_n_m")]
     d = np.array([0.05, -0.02, 0.3])
     pos = sim.state.vert_pos[g.vert]
-    forces = loads.point_loads()["nail/top"][1]
+    forces = loads.point_forces()["nail/top"]
     m_d = np.cross(pos - (g.centre_m + d), forces).sum(axis=0)
     assert np.abs(m_d - (m_c - np.cross(d, f))).max() <= 1e-12 * np.abs(m_d).max()
     # the pressure lifts the top cap: its load is mostly along +z

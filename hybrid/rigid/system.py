@@ -328,6 +328,9 @@ class CoupledRigid(RigidSystem):
             self.site_root,
             self.body_id,
             self.ctrl_act,
+            self.wall_site_id,  # read-only as the links' sites: one build of the kernels given either
+            self.wall_site_body,
+            self.wall_site_root,
         ):
             arr.flags.writeable = False
 
