@@ -48,20 +48,18 @@ __all__ = ["step2_with_lungs", "wall_step_between", "wall_rate_gradient", "impli
 
 
 @kernel
-def wall_rate_gradient(m, s, rig):
-    """g into rig.wall.qfrc: the generalized force of a unit pleural pressure on the cavity's
+def wall_rate_gradient(face, par, pos, wall_pos, wall, mj):
+    """g into wall.qfrc: the generalized force of a unit pleural pressure on the cavity's
     rigid-borne points (its volume gradient, `cavity_gradient_at`, at the carried wall's points by
     their shares at their sites and at the linked points at theirs, through MuJoCo's `mj_applyFT`),
     so that g . qvel is the volume's rate the bodies make. At MuJoCo's current positions (the
     step's start).
-    # Model: m.lung_face, m.lung_par; rig.wall (g_*), rig.mj (fn_apply_ft)
-    # Data in: s.vert_pos, s.lung_wall_pos, MuJoCo's state   # Data out: rig.wall.qfrc (nv,) m^3
-    # Scratch: rig.wall.unit, .wrench
+    # Model: face (m.lung_face), par (m.lung_par); wall (g_*), mj (fn_apply_ft)   # Data in: pos
+    #        (s.vert_pos), wall_pos (s.lung_wall_pos), MuJoCo's state   # Data out: wall.qfrc (nv,) m^3
+    # Scratch: wall.unit, .wrench
     """
-    wall, mj = rig.wall, rig.mj
     unit, wrench = wall.unit, wall.wrench
-    ref = m.lung_par[P_REF:]
-    cavity_gradient_at(m.lung_face, ref, s.vert_pos, s.lung_wall_pos, wall.g_near, wall.g_points, wall.g_scratch, unit)
+    cavity_gradient_at(face, par[P_REF:], pos, wall_pos, wall.g_near, wall.g_points, wall.g_scratch, unit)
     for b in range(wrench.shape[0]):
         for a in range(6):
             wrench[b, a] = 0.0
@@ -79,23 +77,22 @@ def wall_rate_gradient(m, s, rig):
 
 
 @kernel
-def implicit_wall_correction(m, s, rig, rate_before):
+def implicit_wall_correction(par, h, lung, wall, mj, rate_before):
     """After MuJoCo's Euler step: the generalized force that makes the cavity's damping c g g^T on
-    the bodies implicit, -c g delta (module docstring), into rig.wall.force_q; the step is then
+    the bodies implicit, -c g delta (module docstring), into wall.force_q; the step is then
     taken again with it as `qfrc_applied` (`hybrid.loop.rigid_phase`). rate_before: g . qvel
     before the step. Returns whether there is a correction (lungs, the airway open, c > 0).
-    # Model: m.lung_par, m.dt; rig.wall.damping (nv,) N m s/rad   # Data in: s.lung (rate, volume), rig.wall.qfrc (g), MuJoCo's qvel
-    # Data out: rig.wall.force_q (nv,) [N, N m] (left as it is, zero, when there is no correction);
-    #           rig.wall.wrench (nbody, 6) [N, N m]: the correction's wrench on each body (force, and
+    # Model: par (m.lung_par), h (m.dt, s); wall.damping (nv,) N m s/rad   # Data in: lung (s.lung: rate,
+    #        volume), wall.qfrc (g), MuJoCo's qvel
+    # Data out: wall.force_q (nv,) [N, N m] (left as it is, zero, when there is no correction);
+    #           wall.wrench (nbody, 6) [N, N m]: the correction's wrench on each body (force, and
     #           torque about its centre of mass), which force_q is (zero without a correction)
-    # Data in:  rig.wall.wrench: the unit pressure's (`wall_rate_gradient`)   # Scratch: rig.wall.dense, .a
+    # Data in:  wall.wrench: the unit pressure's (`wall_rate_gradient`)   # Scratch: wall.dense, .a
     """
-    wall, mj = rig.wall, rig.mj
-    par, h = m.lung_par, m.dt
-    c = par[P_K1] + 2.0 * par[P_K2] * abs(s.lung[L_RATE]) + h * lung_recoil(par, s.lung[L_VOLUME])[1]
+    c = par[P_K1] + 2.0 * par[P_K2] * abs(lung[L_RATE]) + h * lung_recoil(par, lung[L_VOLUME])[1]
     g, a, dense = wall.qfrc, wall.a, wall.dense
     n = g.shape[0]
-    if c <= 0.0 or s.lung[L_OCCLUDED] != 0.0:
+    if c <= 0.0 or lung[L_OCCLUDED] != 0.0:
         wall.wrench[:] = 0.0
         return False
     call_c(mj.fn_full_m, (mj.model_ptr, mj.data_ptr, dense))
@@ -138,21 +135,20 @@ def implicit_wall_correction(m, s, rig, rate_before):
 
 
 @kernel
-def step2_with_lungs(m, s, rig):
+def step2_with_lungs(face, par, h, pos, wall_pos, lung, wall, mj):
     """MuJoCo's `mj_step2` with the lungs' load implicit in the bodies' velocities (module
     docstring): g and the rate g . qvel before the step, MuJoCo's step from its saved state, the
     correction, and the step again from that state with it as `qfrc_applied` (restored after).
-    # Model: as `wall_rate_gradient`, `implicit_wall_correction`   # Data in: MuJoCo's state, s
-    # Data out: MuJoCo's state after the step; rig.wall.force_q   # Scratch: rig.wall's
+    # Model: as `wall_rate_gradient`, `implicit_wall_correction`   # Data in: MuJoCo's state, pos,
+    #        wall_pos, lung   # Data out: MuJoCo's state after the step; wall.force_q   # Scratch: wall's
     """
-    wall, mj = rig.wall, rig.mj
-    wall_rate_gradient(m, s, rig)
+    wall_rate_gradient(face, par, pos, wall_pos, wall, mj)
     rate_before = 0.0
     for i in range(wall.qfrc.shape[0]):
         rate_before += wall.qfrc[i] * mj.qvel[i]
     call_c(mj.fn_get_state, (mj.model_ptr, mj.data_ptr, wall.saved, wall.spec[0]))
     call_c(mj.fn_step2, (mj.model_ptr, mj.data_ptr))
-    if implicit_wall_correction(m, s, rig, rate_before):  # the step again, the correction applied
+    if implicit_wall_correction(par, h, lung, wall, mj, rate_before):  # the step again, the correction applied
         call_c(mj.fn_set_state, (mj.model_ptr, mj.data_ptr, wall.saved, wall.spec[0]))
         for i in range(wall.force_q.shape[0]):
             wall.applied[i] = mj.qfrc_applied[i]
@@ -170,4 +166,7 @@ def wall_step_between(args_at, args_type):
     # Model: m, rig   # Data in: args_at (int64), args_type   # Data out: as `step2_with_lungs`
     """
     m, s = args_from_memory(args_at, 0, args_type), args_from_memory(args_at, 1, args_type)
-    step2_with_lungs(m, s, args_from_memory(args_at, 4, args_type))
+    rig = args_from_memory(args_at, 4, args_type)
+    # the arrays each kernel reads, not the model's and state's tuples: a kernel given those takes
+    # every field of them as an argument, which numba compiles (7.3 s of a first lungs run for these)
+    step2_with_lungs(m.lung_face, m.lung_par, m.dt, s.vert_pos, s.lung_wall_pos, s.lung, rig.wall, rig.mj)
