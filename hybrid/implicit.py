@@ -172,7 +172,20 @@ def implicit_forces(m, tri, sched_val, x, v, out, w, planes=None):
             for a in range(3):
                 out[i, a] -= c * v[i, a]
     if on[T_LUNGS]:
-        add_lung_forces(m, sched_val, x, v, out, w)
+        add_lung_forces(
+            m.lung_face,
+            m.lung_par,
+            m.lung_sched[0],
+            m.dt,
+            sched_val,
+            x,
+            v,
+            out,
+            w.lung_wall_pos,
+            w.lung_wall_vel,
+            w.lung_wall_f,
+            w.info,
+        )
     if planes is not None:
         add_plane_forces(planes, x, out)
 
@@ -327,7 +340,18 @@ def _merit(m, sched_val, h, dv, w):
     if on[T_RESTING_TENSION]:
         total += resting_tension_energy(tri.rt_vert, tri.rt_par, w.x_try)
     if on[T_LUNGS]:
-        total += lung_potential(m, sched_val, h, w)
+        total += lung_potential(
+            m.lung_face,
+            m.lung_par,
+            m.lung_sched[0],
+            sched_val,
+            h,
+            w.x_try,
+            w.v_try,
+            w.lung_wall_pos,
+            w.lung_wall_vel,
+            w.info,
+        )
     if w.planes.vert.shape[0]:
         total += plane_energy(w.planes, w.x_try)
     return total
@@ -407,7 +431,21 @@ def implicit_step(m, s, sched_val, step, imp, vert_acc):
         target = eta * h * rn
         # the lungs' rank-one stiffness in the product (`hybrid.implicit_lungs`)
         # (c = 0 without lungs: one build of the solves serves every scene, the term skipped at run time)
-        c_lung = lung_rank_one(m, w, h) if m.term_on[T_LUNGS] != 0 else 0.0
+        c_lung = 0.0
+        if m.term_on[T_LUNGS] != 0:
+            c_lung = lung_rank_one(
+                m.lung_face,
+                m.lung_par,
+                h,
+                w.x_try,
+                w.v_try,
+                w.lung_wall_pos,
+                w.lung_wall_vel,
+                w.lung_wall_f,
+                w.info,
+                w.mat,
+                (w.lung_g, w.lung_gf, w.lung_gh),
+            )
         k = split_cg(w, target, cg_max, c_lung, w.lung_gf, w.lung_gh)
         if k < 0:  # negative curvature: solved again with the Hessian projected element by element
             cg_total += -1 - k

@@ -67,64 +67,70 @@ def flow_by_rate(info):
 
 
 @kernel(inline="always")
-def _flow(w, vol, rate, h):
+def _flow(info, vol, rate, h):
     """The airway's flow (m^3/s) at the cavity's volume vol: (vol - from) / h while
     `flow_by_volume` holds, else the rate g . v given.
-    # Model: none   # Data in: w.info (LUNG_FLOW_BY_VOLUME, LUNG_FLOW_FROM), vol m^3, rate m^3/s, h s
+    # Model: none   # Data in: info (LUNG_FLOW_BY_VOLUME, LUNG_FLOW_FROM), vol m^3, rate m^3/s, h s
     # Data out: returns m^3/s
     """
-    if w.info[I_LUNG_FLOW_BY_VOLUME] != 0.0:
-        return (vol - w.info[I_LUNG_FLOW_FROM]) / h
+    if info[I_LUNG_FLOW_BY_VOLUME] != 0.0:
+        return (vol - info[I_LUNG_FLOW_FROM]) / h
     return rate
 
 
+# The kernels below take the arrays they read, not the model's and the solve's tuples: numba makes
+# each field of an argument's tuple an argument of the compiled function, and compiles a kernel
+# again for each tuple type it is given (the start's and the Newton iteration's work differ)
+
+
 @kernel
-def add_lung_forces(m, sched_val, x, v, out, w):
+def add_lung_forces(face, par, pao_row, dt, sched_val, x, v, out, wall_pos, wall_vel, wall_f, info):
     """out += the pleural load on the dome's free points at (x, v): (P_pl + P_L0) grad_i V
     (`hybrid.terms.lungs`), the wall held where the rigid phase put it.
-    # Model: m.lung_face, m.lung_par, m.lung_sched   # Data in: sched_val, x (m), v (m/s), w.lung_wall_pos, w.lung_wall_vel, w.info (`_flow`)
-    # Data in/out: out (N)   # Scratch: w.lung_wall_f
+    # Model: face (m.lung_face), par (m.lung_par), pao_row (m.lung_sched[0]), dt (s)
+    # Data in: sched_val, x (m), v (m/s), wall_pos (m), wall_vel (m/s), info (`_flow`)
+    # Data in/out: out (N)   # Scratch: wall_f
     """
-    ref = m.lung_par[P_REF:]
-    vol, rate = cavity_volume_rate(m.lung_face, ref, x, v, w.lung_wall_pos, w.lung_wall_vel)
-    _, load = lung_load(m.lung_par, sched_val[m.lung_sched[0], 0] * CMH2O_PA, vol, _flow(w, vol, rate, m.dt))
-    add_cavity_pressure(m.lung_face, ref, load, x, w.lung_wall_pos, out, w.lung_wall_f, TO_POINTS)
+    ref = par[P_REF:]
+    vol, rate = cavity_volume_rate(face, ref, x, v, wall_pos, wall_vel)
+    _, load = lung_load(par, sched_val[pao_row, 0] * CMH2O_PA, vol, _flow(info, vol, rate, dt))
+    add_cavity_pressure(face, ref, load, x, wall_pos, out, wall_f, TO_POINTS)
 
 
 @kernel
-def lung_potential(m, sched_val, h, w):
-    """The lungs' part of the incremental potential at w.x_try, w.v_try (J): E (V - V0)^2 / 2
+def lung_potential(face, par, pao_row, sched_val, h, x, v, wall_pos, wall_vel, info):
+    """The lungs' part of the incremental potential at the trial x, v (J): E (V - V0)^2 / 2
     (the recoil's energy) - P_ao V, and h times the airway's dissipation K1 Q^2 / 2 + K2 |Q|^3 / 3.
-    # Model: m.lung_face, m.lung_par, m.lung_sched   # Data in: sched_val, h (s), w.x_try, w.v_try, w.lung_wall_*, w.info
-    # Data out: returns J
+    # Model: face, par, pao_row (as `add_lung_forces`)   # Data in: sched_val, h (s), x (m), v (m/s),
+    #        wall_pos, wall_vel, info   # Data out: returns J
     """
-    par = m.lung_par
-    vol, rate = cavity_volume_rate(m.lung_face, par[P_REF:], w.x_try, w.v_try, w.lung_wall_pos, w.lung_wall_vel)
-    rate = _flow(w, vol, rate, h)
-    pao = sched_val[m.lung_sched[0], 0] * CMH2O_PA
+    vol, rate = cavity_volume_rate(face, par[P_REF:], x, v, wall_pos, wall_vel)
+    rate = _flow(info, vol, rate, h)
+    pao = sched_val[pao_row, 0] * CMH2O_PA
     total = lung_recoil(par, vol)[2] - pao * vol
     return total + h * (0.5 * par[P_K1] * rate * rate + par[P_K2] * abs(rate) ** 3 / 3.0)
 
 
 @kernel
-def lung_rank_one(m, w, h):
-    """The lungs' stiffness c g g^T at the Newton iteration's start (w.x_try, w.v_try): returns
-    c = h^2 dP_L/dV + h dR/dQ (kg/m^4; R(Q) Q the airway's pressure drop); w.lung_gf = g on the
-    free points (the matrix's numbering) and w.lung_gh = C^-1 g (`half_sweep`, of the matrix
-    `assemble` left in w.mat), what `split_cg` adds to its product.
-    # Model: m.lung_face, m.lung_par, w.mat (pattern, free)   # Data in: w.x_try, w.v_try, w.mat (assembled), w.info
-    # Data out: w.lung_gf (nfree, 3) m^2, w.lung_gh (nfree, 3); returns kg/m^4
-    # Scratch: w.lung_g (nvert, 3), w.lung_wall_f, w.mat.acc
+def lung_rank_one(face, par, h, x, v, wall_pos, wall_vel, wall_f, info, mat, rank_one):
+    """The lungs' stiffness c g g^T at the Newton iteration's start (the trial x, v): returns
+    c = h^2 dP_L/dV + h dR/dQ (kg/m^4; R(Q) Q the airway's pressure drop); with rank_one = (g, gf,
+    gh) (the solve's lung_g, lung_gf, lung_gh): gf = g on the free points (the matrix's numbering)
+    and gh = C^-1 g (`half_sweep`, of the matrix `assemble` left in mat), what `split_cg` adds to
+    its product.
+    # Model: face, par (as `add_lung_forces`), mat (pattern, free)   # Data in: x (m), v (m/s),
+    #        wall_pos, wall_vel, mat (assembled), info
+    # Data out: gf (nfree, 3) m^2, gh (nfree, 3); returns kg/m^4
+    # Scratch: g (nvert, 3), wall_f, mat.acc
     """
-    par = m.lung_par
     ref = par[P_REF:]
-    vol, rate = cavity_volume_rate(m.lung_face, ref, w.x_try, w.v_try, w.lung_wall_pos, w.lung_wall_vel)
-    rate = _flow(w, vol, rate, h)
+    vol, rate = cavity_volume_rate(face, ref, x, v, wall_pos, wall_vel)
+    rate = _flow(info, vol, rate, h)
     c = h * h * lung_recoil(par, vol)[1] + h * (par[P_K1] + 2.0 * par[P_K2] * abs(rate))
-    g = w.lung_g
+    g, gf, gh = rank_one
     for i in range(g.shape[0]):
         g[i, 0] = g[i, 1] = g[i, 2] = 0.0
-    add_cavity_pressure(m.lung_face, ref, 1.0, w.x_try, w.lung_wall_pos, g, w.lung_wall_f, TO_POINTS)
-    gather(w.mat.free, 1.0, g, w.lung_gf)
-    half_sweep(w.mat, w.lung_gf, w.lung_gh)
+    add_cavity_pressure(face, ref, 1.0, x, wall_pos, g, wall_f, TO_POINTS)
+    gather(mat.free, 1.0, g, gf)
+    half_sweep(mat, gf, gh)
     return c

@@ -467,10 +467,34 @@ def test_in_implicit_euler_s_solve_the_lungs_force_is_the_gradient_of_their_pote
     def phi(vel):
         w.x_try[:] = x0 + h * vel
         w.v_try[:] = vel
-        return lung_potential(m, sched, h, w)
+        return lung_potential(
+            m.lung_face,
+            m.lung_par,
+            m.lung_sched[0],
+            sched,
+            h,
+            w.x_try,
+            w.v_try,
+            w.lung_wall_pos,
+            w.lung_wall_vel,
+            w.info,
+        )
 
     force = np.zeros_like(x0)
-    add_lung_forces(m, sched, x0 + h * v, v, force, w)
+    add_lung_forces(
+        m.lung_face,
+        m.lung_par,
+        m.lung_sched[0],
+        h,
+        sched,
+        x0 + h * v,
+        v,
+        force,
+        w.lung_wall_pos,
+        w.lung_wall_vel,
+        w.lung_wall_f,
+        w.info,
+    )
     force[~free] = 0.0  # the solve's unknowns: the free points
     eps = 1e-4  # m/s
     worst = 0.0
