@@ -146,13 +146,9 @@ def cavity_volume_rate(face, ref, pos, vel, wall, wall_vel):
     for f in range(face.shape[0]):
         a, b, c = face[f, 0], face[f, 1], face[f, 2]
         ax, ay, az = _corner(a, nvert, pos, wall, ref)
-        bx, by, bz = _corner(b, nvert, pos, wall, ref)
-        cx, cy, cz = _corner(c, nvert, pos, wall, ref)
         # b x c, c x a, a x b: 6 g at a, b, c
-        gax, gay, gaz = by * cz - bz * cy, bz * cx - bx * cz, bx * cy - by * cx
+        (gax, gay, gaz), (gbx, gby, gbz), (gcx, gcy, gcz) = _face_gradients(face, f, nvert, pos, wall, ref)
         vol += ax * gax + ay * gay + az * gaz
-        gbx, gby, gbz = cy * az - cz * ay, cz * ax - cx * az, cx * ay - cy * ax
-        gcx, gcy, gcz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
         vax, vay, vaz = _speed(a, nvert, vel, wall_vel)
         vbx, vby, vbz = _speed(b, nvert, vel, wall_vel)
         vcx, vcy, vcz = _speed(c, nvert, vel, wall_vel)
