@@ -35,7 +35,6 @@ from .rigid.modes import implicit_joint_damping
 from .sites import site_vel_kernel
 from .step import S_TIME, T_GRAVITY
 from .step_work import MembraneState
-from .terms.lungs import faces_at
 
 __all__ = ["Coupling"]
 
@@ -182,17 +181,13 @@ class Coupling:
         body = np.concatenate([sys.site_body[on], sys.wall_site_body]).astype(np.int64)
         site.flags.writeable = body.flags.writeable = False  # as the sites' (one build of `add_point_wrench_kernel`)
         weight = np.concatenate([np.ones(int(on.sum())), sys.wall_weight]).astype(float)
-        near = faces_at(face, points)
         nbody = mjm.nbody if lungs else 0
-        ncavity = nvert + self.model.arrays.lung_wall.shape[0] if lungs else 0
         return (
             damping,
-            near,
             points,
             site,
             body,
             weight,
-            np.zeros((ncavity, 3)),
             np.array([_INTEGRATION], np.int32),
             np.zeros((points.size, 3)),
             np.zeros((nbody, 6)),

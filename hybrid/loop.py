@@ -113,9 +113,8 @@ class WallArrays(NamedTuple):
     point follows it (virtual work), implicit in the bodies' velocities (`hybrid.wall_coupling`);
     damping (nv,) N m s/rad: MuJoCo's joint damping where its Euler step takes it implicitly, else 0;
     g_points (ng,): the cavity's rigid-borne points (its indices: the linked points on it, then the
-    carried ones), g_site, g_body (ng,) int64 and g_weight (ng,) their sites, bodies and shares,
-    g_near their faces (`hybrid.terms.lungs.faces_at`); spec (1,) int32: the parts of MuJoCo's
-    state it saves; g_scratch (nvert + nwall, 3): `cavity_gradient_at`'s.
+    carried ones), g_site, g_body (ng,) int64 and g_weight (ng,) their sites, bodies and shares;
+    spec (1,) int32: the parts of MuJoCo's state it saves.
     Scratch: force (nc, 3) N, their loads; vel (nc, 3) m/s, the sites' velocities; unit (nlinks +
     nc, 3), qfrc (nv,), a (nv,), dense (nv, nv), saved (MuJoCo's state before its step), applied
     (nv,): the implicit coupling's; force_q (nv,): its generalized force in the step (N, N m);
@@ -132,12 +131,10 @@ class WallArrays(NamedTuple):
     force: np.ndarray
     vel: np.ndarray
     damping: np.ndarray
-    g_near: np.ndarray
     g_points: np.ndarray
     g_site: np.ndarray
     g_body: np.ndarray
     g_weight: np.ndarray
-    g_scratch: np.ndarray
     spec: np.ndarray
     unit: np.ndarray
     wrench: np.ndarray
@@ -564,12 +561,10 @@ def membrane_only() -> RigidPack:
         force=f3,
         vel=f3,
         damping=f0,
-        g_near=i64,
         g_points=i64,
         g_site=fixed,
         g_body=fixed,
         g_weight=f0,
-        g_scratch=f3,
         spec=i32,
         unit=f3,
         wrench=f6,

@@ -70,8 +70,10 @@ class StepWork(NamedTuple):
     sm_sums (nsm, 9): the shape memory's ring sums; vert_acc (chunk_count(nvert), 4): the
     per-point passes' sums over each chunk of points (hybrid.kernel); dirn (nvert, 3), cubic
     (2,): the volume projection's; lung_wall_force (nwall, 3) N: the pleural load on the
-    cavity wall (to its bodies); lung_scratch (5, nvert, 3): the occluded airway's
-    projection (empty rows without lungs); calls (NCALL,) int64: the addresses of the kernels
+    cavity wall (to its bodies); lung_grad (nvert + nwall, 3) m^2: the cavity's volume gradient
+    at its points, by cavity index (`hybrid.terms.lungs.cavity_volume_rate_gradient`: the
+    lungs' step force writes it, the rigid phase reads the bodies' points); lung_scratch (5,
+    nvert, 3): the occluded airway's projection (both empty without lungs); calls (NCALL,) int64: the addresses of the kernels
     the step calls compiled apart (`hybrid.calls.call_at`), by slot (`CALL_*`): implicit
     Euler's phases 1 and 2 (`implicit_start_forces`, `implicit_step`), the occluded airway's
     projection (`project_occluded`), the soft volume's force (`soft_volume_step`), the steps
@@ -98,6 +100,7 @@ class StepWork(NamedTuple):
     dirn: np.ndarray
     cubic: np.ndarray
     lung_wall_force: np.ndarray
+    lung_grad: np.ndarray
     lung_scratch: np.ndarray
     calls: np.ndarray
     force_calls: np.ndarray
@@ -156,6 +159,7 @@ def new_work(
         dirn=np.zeros((n, 3)),
         cubic=np.zeros(2),
         lung_wall_force=np.zeros_like(arrays.lung_wall),
+        lung_grad=np.zeros((n + arrays.lung_wall.shape[0] if arrays.lung_face.shape[0] else 0, 3)),
         lung_scratch=np.zeros((5, n if arrays.lung_face.shape[0] else 0, 3)),
         calls=np.zeros(NCALL, np.int64),
         force_calls=np.zeros((len(forces), 2), np.int64),

@@ -42,24 +42,26 @@ import numpy as np
 from .calls import ADDRESS_ONLY, args_from_memory, call_c
 from .kernel import kernel
 from .sites import add_point_wrench_kernel
-from .terms.lungs import L_OCCLUDED, L_RATE, L_VOLUME, P_K1, P_K2, P_REF, cavity_gradient_at, lung_recoil
+from .terms.lungs import L_OCCLUDED, L_RATE, L_VOLUME, P_K1, P_K2, lung_recoil
 
 __all__ = ["step2_with_lungs", "wall_step_between", "wall_rate_gradient", "implicit_wall_correction"]
 
 
 @kernel
-def wall_rate_gradient(face, par, pos, wall_pos, wall, mj):
+def wall_rate_gradient(grad, wall, mj):
     """g into wall.qfrc: the generalized force of a unit pleural pressure on the cavity's
-    rigid-borne points (its volume gradient, `cavity_gradient_at`, at the carried wall's points by
-    their shares at their sites and at the linked points at theirs, through MuJoCo's `mj_applyFT`),
-    so that g . qvel is the volume's rate the bodies make. At MuJoCo's current positions (the
-    step's start).
-    # Model: face (m.lung_face), par (m.lung_par); wall (g_*), mj (fn_apply_ft)   # Data in: pos
-    #        (s.vert_pos), wall_pos (s.lung_wall_pos), MuJoCo's state   # Data out: wall.qfrc (nv,) m^3
-    # Scratch: wall.unit, .wrench
+    rigid-borne points (its volume gradient at them, the step's force pass's: the points have not
+    moved since; at the carried wall's points by their shares at their sites and at the linked
+    points at theirs, through MuJoCo's `mj_applyFT`), so that g . qvel is the volume's rate the
+    bodies make. At MuJoCo's current positions (the step's start).
+    # Model: wall (g_*), mj (fn_apply_ft)   # Data in: grad (nvert + nwall, 3) m^2 (w.lung_grad:
+    #        `hybrid.terms.lungs.cavity_volume_rate_gradient`), MuJoCo's state
+    # Data out: wall.qfrc (nv,) m^3   # Scratch: wall.unit, .wrench
     """
     unit, wrench = wall.unit, wall.wrench
-    cavity_gradient_at(face, par[P_REF:], pos, wall_pos, wall.g_near, wall.g_points, wall.g_scratch, unit)
+    for k in range(wall.g_points.shape[0]):
+        for d in range(3):
+            unit[k, d] = grad[wall.g_points[k], d]
     for b in range(wrench.shape[0]):
         for a in range(6):
             wrench[b, a] = 0.0
@@ -135,14 +137,14 @@ def implicit_wall_correction(par, h, lung, wall, mj, rate_before):
 
 
 @kernel
-def step2_with_lungs(face, par, h, pos, wall_pos, lung, wall, mj):
+def step2_with_lungs(par, h, grad, lung, wall, mj):
     """MuJoCo's `mj_step2` with the lungs' load implicit in the bodies' velocities (module
     docstring): g and the rate g . qvel before the step, MuJoCo's step from its saved state, the
     correction, and the step again from that state with it as `qfrc_applied` (restored after).
-    # Model: as `wall_rate_gradient`, `implicit_wall_correction`   # Data in: MuJoCo's state, pos,
-    #        wall_pos, lung   # Data out: MuJoCo's state after the step; wall.force_q   # Scratch: wall's
+    # Model: as `wall_rate_gradient`, `implicit_wall_correction`   # Data in: MuJoCo's state, grad
+    #        (w.lung_grad), lung   # Data out: MuJoCo's state after the step; wall.force_q   # Scratch: wall's
     """
-    wall_rate_gradient(face, par, pos, wall_pos, wall, mj)
+    wall_rate_gradient(grad, wall, mj)
     rate_before = 0.0
     for i in range(wall.qfrc.shape[0]):
         rate_before += wall.qfrc[i] * mj.qvel[i]
@@ -166,7 +168,7 @@ def wall_step_between(args_at, args_type):
     # Model: m, rig   # Data in: args_at (int64), args_type   # Data out: as `step2_with_lungs`
     """
     m, s = args_from_memory(args_at, 0, args_type), args_from_memory(args_at, 1, args_type)
-    rig = args_from_memory(args_at, 4, args_type)
+    w, rig = args_from_memory(args_at, 2, args_type), args_from_memory(args_at, 4, args_type)
     # the arrays each kernel reads, not the model's and state's tuples: a kernel given those takes
     # every field of them as an argument, which numba compiles (7.3 s of a first lungs run for these)
-    step2_with_lungs(m.lung_face, m.lung_par, m.dt, s.vert_pos, s.lung_wall_pos, s.lung, rig.wall, rig.mj)
+    step2_with_lungs(m.lung_par, m.dt, w.lung_grad, s.lung, rig.wall, rig.mj)

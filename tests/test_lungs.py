@@ -20,7 +20,16 @@ from hybrid.regions import HalfSpace, Union_
 from hybrid.scene import Lungs
 from hybrid.schedule import Table
 from hybrid.studies.respiratory import upper_rib_scene
-from hybrid.terms.lungs import CMH2O_PA, P_REF, add_cavity_pressure, cavity_volume_rate, open_edges, thoracic_cavity
+from hybrid.terms.lungs import (
+    CMH2O_PA,
+    P_REF,
+    add_cavity_load,
+    add_cavity_pressure,
+    cavity_volume_rate,
+    cavity_volume_rate_gradient,
+    open_edges,
+    thoracic_cavity,
+)
 
 CMH2O_PER_L = CMH2O_PA / 1e-3
 LUNG = dict(wall_height_m=0.2, lung_compliance_l_per_cmh2o=0.2, airway_resistance_cmh2o_s_per_l=2.0)
@@ -58,6 +67,19 @@ def test_the_cavity_is_closed_its_volume_is_trimesh_s_and_its_rate_the_derivativ
     assert np.sum(f * vel) + np.sum(f_wall * wall_vel) == pytest.approx(250.0 * rate, rel=1e-12)
     below = pos[:, 2] < DOME_Z_M - 1e-2  # points off the cavity take nothing
     assert np.all(f[below] == 0.0)
+    # the step's one pass: the same volume and rate, and the gradient whose load is the same force
+    grad = np.full((len(pos) + len(wall), 3), np.nan)  # rows off the cavity: left as they are
+    vol1, rate1 = cavity_volume_rate_gradient(a.lung_face, a.lung_point, ref, pos, vel, wall, wall_vel, grad)
+    assert (vol1, rate1) == (vol, rate)  # the same sums in the same order
+    assert np.isnan(grad[: len(pos)][below]).all() and not np.isnan(grad[a.lung_point]).any()
+    g, g_wall = np.full_like(pos, 1.0), np.full_like(wall, 1.0)
+    add_cavity_load(a.lung_point, 250.0, grad, g, g_wall, True)
+    # each point's gradient summed before the load multiplies it: the same force to round-off
+    scale = 250.0 * np.abs(grad[a.lung_point]).max()
+    assert np.abs(g - 1.0 - f).max() <= 1e-14 * scale and np.abs(g_wall - f_wall).max() <= 1e-14 * scale
+    g[:] = 1.0
+    add_cavity_load(a.lung_point, 250.0, grad, g, g_wall, False)  # implicit Euler's: the wall's only
+    assert np.all(g == 1.0) and np.abs(g_wall - f_wall).max() <= 1e-14 * scale
 
 
 def test_a_sinusoidal_dome_gives_the_first_order_law_s_gain_and_phase():

@@ -58,8 +58,8 @@ __all__ = [
     "NLUNG",
     "cavity_volume_rate",
     "add_cavity_pressure",
-    "cavity_gradient_at",
-    "faces_at",
+    "cavity_volume_rate_gradient",
+    "add_cavity_load",
     "lung_load",
     "lung_recoil",
     "recoil_energy_j",
@@ -134,6 +134,25 @@ def _speed(i, nvert, vel, wall_vel):
     return wall_vel[j, 0], wall_vel[j, 1], wall_vel[j, 2]
 
 
+@kernel(inline="always")
+def _face_volume_rate(face, f, nvert, pos, vel, wall, wall_vel, ref):
+    """Face f's six times share of the cavity's volume and of its rate (the latter in two
+    parts, summed in turn as the callers always have), and its corners' six times gradients.
+    # Model: face (nf, 3) int64, ref (3,) m   # Data in: pos, vel, wall, wall_vel
+    # Data out: returns (6 dV m^3, (6 dV/dt over a and b, over c) m^3/s, the corners' 6 g m^2)
+    """
+    a, b, c = face[f, 0], face[f, 1], face[f, 2]
+    ax, ay, az = _corner(a, nvert, pos, wall, ref)
+    # b x c, c x a, a x b: 6 g at a, b, c
+    corners = _face_gradients(face, f, nvert, pos, wall, ref)
+    (gax, gay, gaz), (gbx, gby, gbz), (gcx, gcy, gcz) = corners
+    vax, vay, vaz = _speed(a, nvert, vel, wall_vel)
+    vbx, vby, vbz = _speed(b, nvert, vel, wall_vel)
+    vcx, vcy, vcz = _speed(c, nvert, vel, wall_vel)
+    rate_ab = vax * gax + vay * gay + vaz * gaz + vbx * gbx + vby * gby + vbz * gbz
+    return ax * gax + ay * gay + az * gaz, (rate_ab, vcx * gcx + vcy * gcy + vcz * gcz), corners
+
+
 @kernel
 def cavity_volume_rate(face, ref, pos, vel, wall, wall_vel):
     """The cavity's volume (m^3) and its rate sum_i g_i . v_i (m^3/s), g = dV/dx.
@@ -141,19 +160,28 @@ def cavity_volume_rate(face, ref, pos, vel, wall, wall_vel):
     # Data in: pos (nvert, 3) m, vel (nvert, 3) m/s, wall (nwall, 3) m, wall_vel (nwall, 3) m/s
     # Data out: returns (V, dV/dt)
     """
+    return _volume_rate_pass(face, ref, pos, vel, wall, wall_vel, wall[:0])  # no rows: no gradients
+
+
+@kernel(inline="always")
+def _volume_rate_pass(face, ref, pos, vel, wall, wall_vel, grad6):
+    """`cavity_volume_rate`, and each face's corners' six times gradients summed into grad6
+    when it has rows (`cavity_volume_rate_gradient`; the rows zeroed before).
+    # Model: face, ref   # Data in: pos, vel, wall, wall_vel   # Data out: returns (V, dV/dt); grad6
+    """
     nvert = pos.shape[0]
+    keep = grad6.shape[0] > 0
     vol = rate = 0.0
     for f in range(face.shape[0]):
-        a, b, c = face[f, 0], face[f, 1], face[f, 2]
-        ax, ay, az = _corner(a, nvert, pos, wall, ref)
-        # b x c, c x a, a x b: 6 g at a, b, c
-        (gax, gay, gaz), (gbx, gby, gbz), (gcx, gcy, gcz) = _face_gradients(face, f, nvert, pos, wall, ref)
-        vol += ax * gax + ay * gay + az * gaz
-        vax, vay, vaz = _speed(a, nvert, vel, wall_vel)
-        vbx, vby, vbz = _speed(b, nvert, vel, wall_vel)
-        vcx, vcy, vcz = _speed(c, nvert, vel, wall_vel)
-        rate += vax * gax + vay * gay + vaz * gaz + vbx * gbx + vby * gby + vbz * gbz
-        rate += vcx * gcx + vcy * gcy + vcz * gcz
+        dvol, (drate_ab, drate_c), corners = _face_volume_rate(face, f, nvert, pos, vel, wall, wall_vel, ref)
+        vol += dvol
+        rate += drate_ab
+        rate += drate_c
+        if keep:
+            for r in range(3):
+                i = face[f, r]
+                for d in range(3):
+                    grad6[i, d] += corners[r][d]
     return vol / 6.0, rate / 6.0
 
 
@@ -209,35 +237,45 @@ def add_cavity_pressure(face, ref, load_pa, pos, wall, vert_force, wall_force, t
         _push(face[f, 2], nvert, k, gc[0], gc[1], gc[2], vert_force, wall_force, to_points)
 
 
-def faces_at(face: np.ndarray, points) -> np.ndarray:
-    """The cavity's faces with a corner among `points` (cavity indices), for `cavity_gradient_at`."""
-    face = np.asarray(face, np.int64)
-    return np.flatnonzero(np.isin(face, np.asarray(points, np.int64)).any(axis=1)).astype(np.int64)
+@kernel
+def cavity_volume_rate_gradient(face, point, ref, pos, vel, wall, wall_vel, grad):
+    """`cavity_volume_rate`'s (V, dV/dt) and, in the same pass over the faces, grad V at each of
+    the cavity's points (m^2): the step's pleural load is that pressure times it
+    (`add_cavity_load`), and the bodies' share of the cavity's rate reads it at their points
+    (`hybrid.wall_coupling.wall_rate_gradient`), so one pass gives all three (two passes before).
+    # Model: face (nf, 3) int64 (a point i >= nvert is wall point i - nvert), point (np,) int64:
+    #        the cavity's points (cavity indices), ref (3,) m
+    # Data in: pos (nvert, 3) m, vel (nvert, 3) m/s, wall (nwall, 3) m, wall_vel (nwall, 3) m/s
+    # Data out: returns (V, dV/dt); grad (nvert + nwall, 3) m^2, by cavity index (rows `point` set)
+    """
+    for k in range(point.shape[0]):
+        i = point[k]
+        grad[i, 0] = grad[i, 1] = grad[i, 2] = 0.0
+    vol, rate = _volume_rate_pass(face, ref, pos, vel, wall, wall_vel, grad)
+    for k in range(point.shape[0]):
+        i = point[k]
+        for d in range(3):
+            grad[i, d] /= 6.0
+    return vol, rate
 
 
 @kernel
-def cavity_gradient_at(face, ref, pos, wall, near, points, scratch, out):
-    """out[k] = grad V at the cavity's point points[k] (m^2), from its faces among `near`
-    (`faces_at`): each face's (b x c) / 6 at its corner a, as `add_cavity_pressure`, over those
-    faces only. scratch (nvert + nwall, 3): their corners' sums (the other rows untouched).
-    # Model: face (nf, 3) int64, ref (3,) m, near, points int64   # Data in: pos (nvert, 3) m, wall (nwall, 3) m
-    # Data out: out (n, 3) m^2   # Scratch: scratch
+def add_cavity_load(point, load_pa, grad, vert_force, wall_force, to_points):
+    """F_i += load grad_i V at the cavity's points (grad: `cavity_volume_rate_gradient`'s), as
+    `add_cavity_pressure`: the wall's forces set, the membrane's added to if to_points.
+    # Model: point (np,) int64, the cavity's points   # Data in: load_pa Pa, grad (nvert + nwall, 3) m^2
+    # Data out: vert_force (nvert, 3) N (added to), wall_force (nwall, 3) N (set)
     """
-    nvert = pos.shape[0]
-    for e in range(near.shape[0]):
-        for r in range(3):
-            i = face[near[e], r]
-            scratch[i, 0] = scratch[i, 1] = scratch[i, 2] = 0.0
-    for e in range(near.shape[0]):
-        f = near[e]
-        corners = _face_gradients(face, f, nvert, pos, wall, ref)
-        for r in range(3):
-            i = face[f, r]
+    nvert = vert_force.shape[0]
+    wall_force[:] = 0.0
+    for k in range(point.shape[0]):
+        i = point[k]
+        if i >= nvert:
             for d in range(3):
-                scratch[i, d] += corners[r][d]
-    for k in range(points.shape[0]):
-        for d in range(3):
-            out[k, d] = scratch[points[k], d] / 6.0
+                wall_force[i - nvert, d] = load_pa * grad[i, d]
+        elif to_points:
+            for d in range(3):
+                vert_force[i, d] += load_pa * grad[i, d]
 
 
 @kernel
@@ -415,14 +453,18 @@ def lung_load(par, pao, vol, rate):
 def lungs_step_force(m, s, w, c):
     """The step's call (`Term.step_force`): the lumped law at the step's start (module
     docstring), its readouts into s.lung, the pleural load on the cavity's points.
-    # Model: m.lung_face, m.lung_par, m.lung_sched, m.vert_free
+    # Model: m.lung_face, m.lung_point, m.lung_par, m.lung_sched, m.vert_free
     # Data in: s.vert_pos, s.vert_vel, s.lung_wall_pos, s.lung_wall_vel, c.value, s.lung[HOLD_PRESSURE]
-    # Data out: w.vert_force (added to), w.lung_wall_force (the wall's, to its bodies), s.lung (`LungSlot`)
+    # Data out: w.vert_force (added to), w.lung_wall_force (the wall's, to its bodies), s.lung (`LungSlot`),
+    #           w.lung_grad (grad V at the cavity's points: the rigid phase reads the bodies' share)
     """
     par = m.lung_par
     ref = par[P_REF:]
     wall = s.lung_wall_pos
-    vol, rate = cavity_volume_rate(m.lung_face, ref, s.vert_pos, s.vert_vel, wall, s.lung_wall_vel)
+    grad = w.lung_grad
+    vol, rate = cavity_volume_rate_gradient(
+        m.lung_face, m.lung_point, ref, s.vert_pos, s.vert_vel, wall, s.lung_wall_vel, grad
+    )
     pao = c.value[m.lung_sched[0], 0] * CMH2O_PA
     occluded = c.value[m.lung_sched[1], 0] >= 0.5
     if occluded and s.lung[L_OCCLUDED] == 0.0:  # the airway closes: its volume is held from here
@@ -439,9 +481,7 @@ def lungs_step_force(m, s, w, c):
     s.lung[L_ALVEOLAR] = palv
     s.lung[L_AIRWAY] = pao
     # implicit Euler adds the membrane points' share in its solve (`hybrid.implicit.implicit_forces`)
-    add_cavity_pressure(
-        m.lung_face, ref, load, s.vert_pos, wall, w.vert_force, w.lung_wall_force, m.integrator != IMPLICIT_EULER_ID
-    )
+    add_cavity_load(m.lung_point, load, grad, w.vert_force, w.lung_wall_force, m.integrator != IMPLICIT_EULER_ID)
     hold = s.lung[L_HOLD] if occluded else 0.0  # the occlusion's last pressure, to the bodies (as the abdomen's)
     if hold != 0.0:
         add_hold_pressure(m.lung_face, ref, hold, s.vert_pos, wall, m.vert_free, w.vert_force, w.lung_wall_force)
@@ -474,12 +514,13 @@ class Lungs(Term):
 
     # lung_face (nf, 3) int64: the cavity (points >= nvert on the wall); lung_wall (nwall, 3) m;
     # lung_par (NPAR,): see P_*; lung_sched (2,) int64: the schedule rows of the airway-opening
-    # pressure and of the occlusion
+    # pressure and of the occlusion; lung_point (np,) int64: the cavity's points (its indices)
     arrays = {
         "lung_face": lambda n: np.zeros((0, 3), np.int64),
         "lung_wall": lambda n: np.zeros((0, 3)),
         "lung_par": lambda n: np.zeros(NPAR),
         "lung_sched": lambda n: np.zeros(2, np.int64),
+        "lung_point": lambda n: np.zeros(0, np.int64),
     }
     # the step's call; implicit Euler's solve takes the load on the dome's points itself
     # (`hybrid.implicit_lungs`), and an occluded airway's projection is the step's (`project_occluded`)
@@ -563,7 +604,13 @@ class Lungs(Term):
         par[P_REF:] = ref
         row = b.schedule(self.airway_opening_pressure_cmh2o, f"{what}.airway_opening_pressure_cmh2o", 1)
         shut = b.schedule(self.airway_occluded, f"{what}.airway_occluded", 1)
-        b.out.update(lung_face=face, lung_wall=wall, lung_par=par, lung_sched=np.array([row, shut], np.int64))
+        b.out.update(
+            lung_face=face,
+            lung_wall=wall,
+            lung_par=par,
+            lung_sched=np.array([row, shut], np.int64),
+            lung_point=np.unique(face).astype(np.int64),
+        )
         # the wall's points that rigid bodies carry (`hybrid.rigid.build_rigid`)
         b.carried = (wall, under, weight, self.value("wall_bodies", what))
         # (no per-point stiffness for the stability estimate: the compartment moves the dome as one
