@@ -475,7 +475,7 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument(
         "--only",
         metavar="SECTION[,SECTION]",
-        help="these sections only: membrane, formulations, implicit, realtime, coupled, recording, flex",
+        help="these sections only: membrane, formulations, implicit, realtime, coupled, lungs, recording, flex",
     )
     b.add_argument(
         "--realtime-level",

@@ -75,6 +75,15 @@ def test_bench_only_some_sections_and_bad_names_in_one_line(capsys):
     assert set(bench.run_bench(quick=True, only=("realtime",))) == {"realtime"}
 
 
+def test_the_help_names_every_section():
+    # the command line's help is written out (importing the benchmark there would slow every command)
+    from hybrid.cli import build_parser
+
+    bench_parser = build_parser()._subparsers._group_actions[0].choices["bench"]
+    only = next(a for a in bench_parser._actions if "--only" in a.option_strings)
+    assert only.help.split(": ", 1)[1].split(", ") == list(bench.SECTIONS)
+
+
 def test_the_recommended_levels_realtime_run_is_implicit_euler_solved_to_a_looser_tolerance():
     from hybrid.cli import build_parser
 
