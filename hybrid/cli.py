@@ -127,6 +127,7 @@ def _warn_above_stable_step(model) -> None:
     integrator): such a run diverges, and saying so at the start beats a divergence after the
     compile."""
     if model.rigid is not None:
+        from .rigid.held_volumes import WARN_GAIN, held_volumes_gain, may_occlude
         from .rigid.modes import rigid_modes
 
         modes = rigid_modes(model.rigid.model)
@@ -134,6 +135,13 @@ def _warn_above_stable_step(model) -> None:
             sys.stderr.write(
                 f"hybrid: warning: dt_s = {model.dt_s:g} s is above the {modes.line(model.dt_s)}: expect "
                 "a divergence; set dt_s below it, or damp the mode's joints\n"
+            )
+        gain = held_volumes_gain(model)
+        worst = gain and (gain.worst() if may_occlude(model.scene) else gain.open)
+        if worst and worst >= WARN_GAIN:
+            sys.stderr.write(
+                f"hybrid: warning: the {gain.line()}: expect a divergence that a smaller step will not "
+                "cure; make the bodies that carry the volumes heavier, or damp their joints\n"
             )
     if is_implicit(model.scene.integrator) or not math.isfinite(model.dt_stable_s):
         return

@@ -14,6 +14,7 @@ from .errors import ConstraintError, SimulationDiverged
 from .implicit import IMPLICIT_NOT_CONVERGED, Info
 from .integrators import EXPLICIT_EULER_ID
 from .step import DIVERGED_NONFINITE, S_MAXDISP, VOLUME_FAILED
+from .terms.lungs import L_OCCLUDED
 from .terms.volume import PROJ_NO_GRADIENT
 
 __all__ = ["failure", "advice", "damping_fraction", "SELF_EXCITATION_DAMPING"]
@@ -81,6 +82,9 @@ def failure(model, s, solver=None) -> Exception:
         else:
             what = f"reached {disp / h:.3g} m/s, above max_speed_m_s = {model.arrays.max_speed:.3g}"
         remedy, suggest = advice(model)
+        held = _held_volumes_remedy(model, s)
+        if held is not None:
+            remedy, suggest = held, math.nan
         err = SimulationDiverged(
             f"simulation diverged at t = {t:.6g} s (step {step}): vertex {vert} {what}; "
             f"time step {h:.3g} s with {model.scene.integrator}; {remedy}",
@@ -90,6 +94,26 @@ def failure(model, s, solver=None) -> Exception:
             dt_suggested_s=suggest,
         )
     return err
+
+
+def _held_volumes_remedy(model, s) -> str | None:
+    """The advice when the held volumes' pressures on the rigid bodies grow step by step
+    (`hybrid.rigid.held_volumes`: a gain of 1 or more, with the airway as it was): no step helps."""
+    if model.rigid is None:
+        return None
+    from .rigid.held_volumes import held_volumes_gain
+
+    gain = held_volumes_gain(model)
+    if gain is None:
+        return None
+    occluded = gain.occluded is not None and s.lung.shape[0] > 0 and s.lung[L_OCCLUDED] != 0.0
+    rho = gain.occluded if occluded else gain.open
+    if rho is None or rho < 1.0:
+        return None
+    return (
+        f"the {gain.line()}: the volumes' pressures on the bodies grow {rho:.3g}-fold a step, and a smaller "
+        "step will not help; make the bodies that carry the volumes heavier, or damp their joints"
+    )
 
 
 def damping_fraction(model) -> float:

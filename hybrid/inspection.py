@@ -103,15 +103,19 @@ def _scene_report(source, overrides, without) -> dict:
                     **region(idx),
                 }
             )
+        from .rigid.held_volumes import held_volumes_gain
         from .rigid.modes import rigid_modes
 
         modes = rigid_modes(rig.model)
+        gain = held_volumes_gain(model)
         report["rigid"] = {
             "mjcf": str(scene.rigid.mjcf),
             "settings": rig.settings(),
             "model": describe_model(rig.model),
             "dt_stable_s": modes.dt_stable_s if math.isfinite(modes.dt_stable_s) else None,
             "stable_step": modes.line(model.dt_s),
+            "held_volumes_gain": None if gain is None else {"open": gain.open, "occluded": gain.occluded},
+            "held_volumes": None if gain is None else gain.line(),
         }
     return report
 
@@ -200,7 +204,10 @@ def format_report(r: dict) -> str:
         rigid_stable = r["rigid"]["stable_step"]
         if r["rigid"]["dt_stable_s"] is not None and r["dt_s"] > r["rigid"]["dt_stable_s"]:
             rigid_stable += " (the step is larger: expect a divergence; set dt_s below it, or damp the mode's joints)"
-        lines += [rigid_stable, *_model_lines(r["rigid"]["model"])]
+        lines.append(rigid_stable)
+        if r["rigid"]["held_volumes"] is not None:
+            lines.append(r["rigid"]["held_volumes"])
+        lines += _model_lines(r["rigid"]["model"])
     return "\n".join(lines)
 
 
