@@ -31,6 +31,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from ..mesh.geometry import volume_gradient
 from ..terms.lungs import P_REF, Lungs, cavity_volume_rate_gradient
 from ..terms.volume import Volume
 from .modes import implicit_joint_damping
@@ -76,7 +77,7 @@ def held_volumes_gain(model) -> HeldVolumesGain | None:
     pos = np.array(a.vert_rest, float)
     pos[rig.link_vert] = data.site_xpos[rig.site_id]
     nvert = pos.shape[0]
-    grads = [_closed_surface_gradient(a.face_vert, pos)]
+    grads = [volume_gradient(pos, a.face_vert)]
     carried = [None]
     lungs = bool(a.term_on[Lungs.id]) and a.lung_face.shape[0] > 0
     if lungs:
@@ -122,12 +123,3 @@ def may_occlude(scene) -> bool:
             if not (isinstance(v, (int, float)) and v == 0):
                 return True
     return False
-
-
-def _closed_surface_gradient(face: np.ndarray, pos: np.ndarray) -> np.ndarray:
-    """grad_i V (m^2) of the closed surface's volume at each point (zero off it)."""
-    out = np.zeros_like(pos)
-    x = pos[face]
-    for r in range(3):
-        np.add.at(out, face[:, r], np.cross(x[:, (r + 1) % 3], x[:, (r + 2) % 3]) / 6.0)
-    return out
