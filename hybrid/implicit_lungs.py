@@ -23,17 +23,8 @@ from .implicit_matrix import gather, half_sweep
 from .implicit_work import I_LUNG_FLOW_BY_VOLUME, I_LUNG_FLOW_FROM
 from .kernel import kernel
 from .switches import T_LUNGS
-from .terms.lungs import (
-    CMH2O_PA,
-    L_OCCLUDED,
-    P_K1,
-    P_K2,
-    P_REF,
-    add_cavity_pressure,
-    cavity_volume_rate,
-    lung_load,
-    lung_recoil,
-)
+from .terms.lung_cavity import add_cavity_pressure, cavity_volume_rate
+from .terms.lungs import CMH2O_PA, L_OCCLUDED, P_K1, P_K2, P_REF, lung_load, lung_recoil
 
 __all__ = ["add_lung_forces", "flow_by_rate", "flow_by_volume", "lung_potential", "lung_rank_one"]
 

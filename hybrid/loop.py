@@ -58,7 +58,8 @@ from .step import (
 )
 from .step_work import CALL_RIGID, CALL_STEPS, CALL_STEPS_PARALLEL, CALL_WALL
 from .terms import Lungs
-from .terms.lungs import L_AIRWAY, L_ALVEOLAR, L_OCCLUDED, L_PLEURAL, L_VOLUME, P_REF, cavity_volume_rate
+from .terms.lung_cavity import cavity_volume_rate
+from .terms.lungs import L_AIRWAY, L_ALVEOLAR, L_OCCLUDED, L_PLEURAL, L_VOLUME, P_REF
 from .terms.slide_planes import carry_planes
 from .terms.volume import face_volume
 

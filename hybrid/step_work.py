@@ -71,7 +71,7 @@ class StepWork(NamedTuple):
     per-point passes' sums over each chunk of points (hybrid.kernel); dirn (nvert, 3), cubic
     (2,): the volume projection's; lung_wall_force (nwall, 3) N: the pleural load on the
     cavity wall (to its bodies); lung_grad (nvert + nwall, 3) m^2: the cavity's volume gradient
-    at its points, by cavity index (`hybrid.terms.lungs.cavity_volume_rate_gradient`: the
+    at its points, by cavity index (`hybrid.terms.lung_cavity.cavity_volume_rate_gradient`: the
     lungs' step force writes it, the rigid phase reads the bodies' points); lung_scratch (5,
     nvert, 3): the occluded airway's projection (both empty without lungs); calls (NCALL,) int64: the addresses of the kernels
     the step calls compiled apart (`hybrid.calls.call_at`), by slot (`CALL_*`): implicit

@@ -55,7 +55,7 @@ def wall_rate_gradient(grad, wall, mj):
     points at theirs, through MuJoCo's `mj_applyFT`), so that g . qvel is the volume's rate the
     bodies make. At MuJoCo's current positions (the step's start).
     # Model: wall (g_*), mj (fn_apply_ft)   # Data in: grad (nvert + nwall, 3) m^2 (w.lung_grad:
-    #        `hybrid.terms.lungs.cavity_volume_rate_gradient`), MuJoCo's state
+    #        `hybrid.terms.lung_cavity.cavity_volume_rate_gradient`), MuJoCo's state
     # Data out: wall.qfrc (nv,) m^3   # Scratch: wall.unit, .wrench
     """
     unit, wrench = wall.unit, wall.wrench

@@ -20,16 +20,13 @@ from hybrid.regions import HalfSpace, Union_
 from hybrid.scene import Lungs
 from hybrid.schedule import Table
 from hybrid.studies.respiratory import upper_rib_scene
-from hybrid.terms.lungs import (
-    CMH2O_PA,
-    P_REF,
+from hybrid.terms.lung_cavity import (
     add_cavity_load,
     add_cavity_pressure,
     cavity_volume_rate,
     cavity_volume_rate_gradient,
-    open_edges,
-    thoracic_cavity,
 )
+from hybrid.terms.lungs import CMH2O_PA, P_REF, open_edges, thoracic_cavity
 
 CMH2O_PER_L = CMH2O_PA / 1e-3
 LUNG = dict(wall_height_m=0.2, lung_compliance_l_per_cmh2o=0.2, airway_resistance_cmh2o_s_per_l=2.0)

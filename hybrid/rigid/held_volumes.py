@@ -32,7 +32,8 @@ import mujoco
 import numpy as np
 
 from ..mesh.geometry import volume_gradient
-from ..terms.lungs import P_REF, Lungs, cavity_volume_rate_gradient
+from ..terms.lung_cavity import cavity_volume_rate_gradient
+from ..terms.lungs import P_REF, Lungs
 from ..terms.volume import Volume
 from .modes import implicit_joint_damping
 
