@@ -14,6 +14,7 @@ import contextlib
 import dataclasses
 import gc
 import math
+import os
 import sys
 from pathlib import Path
 
@@ -549,6 +550,11 @@ def _main(argv: list[str] | None) -> int:
     args = build_parser().parse_args(argv)
     args.own_process = own  # the command itself, not main() called by a program
     args.argv = argv  # the command line, for the run's provenance
+    if own and args.command != "view":
+        # MuJoCo's import loads its OpenGL binding unless MUJOCO_GL says not to (glfw, which
+        # starts a Python process to read its own version: about 0.1 s of a warm `hybrid run`);
+        # only `hybrid view` draws with it. A MUJOCO_GL the user set is kept.
+        os.environ.setdefault("MUJOCO_GL", "disable")
     from .outputs import EXIT_IO, OutputError
 
     try:

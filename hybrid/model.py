@@ -293,21 +293,18 @@ def _freeze(arrays: MembraneArrays) -> None:
 
 def compile_scene(scene: Scene) -> Model:
     """Validate `scene` and build its immutable model (see the module docstring).
-    dt_s = "auto": the scene is compiled once to estimate its stable step, then with
-    `auto_dt` of it, or `auto_dt_implicit` of symplectic Euler's for implicit Euler
-    (the model's scene holds the number)."""
+    dt_s = "auto": the step is `auto_dt` of the scene's stable-step estimate, or
+    `auto_dt_implicit` of symplectic Euler's for implicit Euler (the model's scene holds
+    the number)."""
     if not isinstance(scene, Scene):
         raise SceneError(f"scene: expected a hybrid.scene.Scene, received {type(scene).__name__}")
-    if isinstance(scene.dt_s, str) and scene.dt_s == "auto":
-        probe = _compile(dataclasses.replace(scene, dt_s=None))
-        if INTEGRATORS[probe.arrays.integrator].implicit:  # no stability bound of its own
-            explicit = probe.with_dt(probe.dt_s, "symplectic_euler").dt_stable_s
-            return _compile(dataclasses.replace(scene, dt_s=auto_dt_implicit(explicit)))
-        return _compile(dataclasses.replace(scene, dt_s=auto_dt(probe.dt_stable_s)))
     return _compile(scene)
 
 
 def _compile(scene: Scene) -> Model:
+    auto = isinstance(scene.dt_s, str) and scene.dt_s == "auto"
+    if auto:  # built with the rigid part's own step, the estimate then read and the rigid part built again
+        scene = dataclasses.replace(scene, dt_s=None)
     if scene.dt_s is not None:
         _check_dt(scene.dt_s)
         _check_duration(scene.duration_s, scene.dt_s)
@@ -395,6 +392,17 @@ def _compile(scene: Scene) -> Model:
         volume_shake=scene.formulation == "continuum",
         parallel=use_parallel(nvert),
     )
+    dt_stable = _stable_dt(arrays, b.vert_stiffness, b.vert_viscosity)
+    if auto:
+        dt = _auto_dt(arrays, b.vert_stiffness, b.vert_viscosity, dt_stable)
+        _check_dt(dt)
+        _check_duration(scene.duration_s, dt)
+        scene = dataclasses.replace(scene, dt_s=dt)
+        arrays = arrays._replace(dt=dt)
+        if rigid is not None:  # its controls' constraints are as stiff as the step allows
+            from .rigid import build_rigid
+
+            rigid, _ = build_rigid(scene, mesh, regions, vert_mass, carried=b.carried)
     _freeze(arrays)
     terms = tuple(TERMS[i] for i in range(len(TERMS)) if b.term_on[i])
     return Model(
@@ -405,12 +413,21 @@ def _compile(scene: Scene) -> Model:
         terms=terms,
         python_schedules=tuple(python_fns),
         vert_stiffness=b.vert_stiffness,
-        dt_stable_s=_stable_dt(arrays, b.vert_stiffness, b.vert_viscosity),
+        dt_stable_s=dt_stable,
         rigid=rigid,
         link_vert=b.link_vert,
         vert_viscosity=b.vert_viscosity,
         control_keys=tuple(b.schedule_keys),
     )
+
+
+def _auto_dt(arrays: MembraneArrays, vert_stiffness, vert_viscosity, dt_stable_s: float) -> float:
+    """The step dt_s = "auto" takes (`compile_scene`): for implicit Euler, which has no bound of
+    its own, from symplectic Euler's estimate on the same arrays."""
+    if not INTEGRATORS[arrays.integrator].implicit:
+        return auto_dt(dt_stable_s)
+    explicit = arrays._replace(integrator=BY_NAME["symplectic_euler"].id)
+    return auto_dt_implicit(_stable_dt(explicit, vert_stiffness, vert_viscosity))
 
 
 def _refuse_single_points(scene: Scene) -> None:

@@ -122,6 +122,7 @@ def test_auto_step_is_half_the_stable_estimate_rounded_down():
         m = compile_scene(resolve_scene("breathing", overrides=[f"mesh.level={level}"]))
         assert m.dt_s == auto_dt(m.dt_stable_s) and m.dt_s <= 0.5 * m.dt_stable_s
         assert m.scene.dt_s == m.dt_s  # the model's scene holds the number the run uses
+        assert m.rigid.model.opt.timestep == m.dt_s  # the ribs built for that step, not the probe's
     with pytest.raises(SceneError, match="dt_s"):
         compile_scene(resolve_scene("breathing", overrides=["dt_s=fast"]))
     # implicit Euler has no bound of its own: 4 times symplectic Euler's, at most 10 ms
@@ -129,6 +130,7 @@ def test_auto_step_is_half_the_stable_estimate_rounded_down():
     explicit = m.with_dt(m.dt_s, "symplectic_euler").dt_stable_s
     # (rounded down to 1, 2 or 5 x 10^k, which loses at most a factor 2.5 of the 4)
     assert m.dt_s == auto_dt_implicit(explicit) and 1.6 * explicit <= m.dt_s <= min(4 * explicit, 0.01)
+    assert m.rigid.model.opt.timestep == m.dt_s
 
 
 def test_the_trace_gives_the_diaphragms_swept_volume():

@@ -233,3 +233,24 @@ def test_the_summary_says_the_meshs_point_count(tmp_path, capsys):
         assert printed.startswith(f"membrane_demo ({points}-point mesh): ")
         seen.append(points)
     assert seen[0] < seen[1]
+
+
+@pytest.mark.parametrize(("users", "expected"), [(None, "disable"), ("glfw", "glfw")])
+def test_a_command_leaves_mujocos_opengl_unloaded_unless_the_user_asks(users, expected):
+    """Issue 30 (a warm start in about a second): MuJoCo's import loads its OpenGL binding
+    (glfw, which starts a Python process to read its version) unless MUJOCO_GL says not to;
+    no command but `hybrid view` draws with it. A MUJOCO_GL the user set is kept."""
+    import os
+
+    env = {k: v for k, v in os.environ.items() if k != "MUJOCO_GL"}
+    if users is not None:
+        env["MUJOCO_GL"] = users
+    code = (
+        "import os, sys; from hybrid.cli import main; sys.argv = ['hybrid', 'inspect', 'breathing']; "
+        "code = main(); print(code, os.environ.get('MUJOCO_GL'), 'mujoco' in sys.modules, 'glfw' in sys.modules)"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=600)
+    assert out.returncode == 0, out.stderr
+    status, gl, mujoco_loaded, glfw_loaded = out.stdout.split()[-4:]
+    assert (status, gl, mujoco_loaded) == ("0", expected, "True")
+    assert glfw_loaded == str(users is not None)  # glfw: MuJoCo loads its binding as asked
