@@ -133,6 +133,29 @@ def test_the_twitch_reports_how_the_walls_moved_under_the_occluded_airway(small)
     assert "the walls' volume changes" in (out / "respiratory.md").read_text()
 
 
+def test_the_twitch_is_a_single_twitch_peaking_at_its_contraction_time(small):
+    """The twitch's tension rises from 0 to its peak at the contraction time and relaxes (the
+    sampled peak (t / T) exp(1 - t / T) to 8 T): its samples' largest is the peak, at T, and the
+    trapezoid sum of its samples is its integral to 8 T, peak T e (1 - 9 exp(-8)), to the rule's
+    error ((1 ms)^2 / 12 times the second derivative's integral: 1.3e-5 of it) and the last
+    sample's drop to 0 (2e-5), so that the study reads Pdi's peak during a twitch, not after a
+    step of tension held; the report says when that peak came."""
+    import numpy as np
+
+    from hybrid.studies.respiratory import TWITCH_CONTRACTION_S, twitch_tension
+
+    table = twitch_tension(20.0)
+    t, f = np.asarray(table.t_s), np.asarray(table.value, float)
+    assert f[0] == 0.0 == f[-1] and np.all(f >= 0.0) and np.all(np.diff(t) > 0)
+    k = int(np.argmax(f))
+    assert t[k] == pytest.approx(TWITCH_CONTRACTION_S, abs=1e-12) and f[k] == pytest.approx(20.0, rel=1e-12)
+    integral = 20.0 * TWITCH_CONTRACTION_S * np.e * (1.0 - 9.0 * np.exp(-8.0))
+    assert np.trapezoid(f, t) == pytest.approx(integral, rel=1e-4)
+    _, r = small
+    tw = r["twitch"]
+    assert tw["contraction_s"] == TWITCH_CONTRACTION_S and 0.0 < tw["pdi_peak_s"] < 5 * TWITCH_CONTRACTION_S
+
+
 def test_overrides_reach_the_scene_the_study_examines(tmp_path, capsys):
     """`--set KEY=VALUE` changes the scene of every run (`study_scene`), and the command names it in
     the report; a bad override is refused in one line before any run."""
