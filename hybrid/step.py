@@ -352,7 +352,9 @@ def _after_integration(m, s, w, c, t, step, par):
         if not held:
             s.status[3] = PROJ_NO_ROOT
             return _fail(s, VOLUME_FAILED, step, 0)
-        hold = phi_hold / (h * h)  # the step's readouts: the law at its start, this projection's hold
+        # the step's readouts: the law at its start, this projection's hold (implicit Euler's solve
+        # carried the last one, `hybrid.implicit.implicit_step`: the projection corrects it)
+        hold = phi_hold / (h * h) + (s.lung[L_HOLD] if m.integrator == IMPLICIT_EULER_ID else 0.0)
         s.lung[L_PLEURAL] += hold - s.lung[L_HOLD]
         s.lung[L_ALVEOLAR] += hold - s.lung[L_HOLD]
         s.lung[L_HOLD] = hold

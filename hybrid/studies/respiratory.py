@@ -95,6 +95,10 @@ RELAXATION_FIT_FROM_S = 2.0
 TWITCH_CONTRACTION_S = 0.08
 #: the twitch's tension sampled this often (s) for its `Table`
 TWITCH_SAMPLE_S = 1e-3
+#: the same contraction held at its peak this long (s) after the contraction time: the occluded
+#: trunk's quasi-static split, without the walls' inertia (it settles within 0.6 s on the breathing
+#: trunk at level 0: docs/lungs.md)
+TWITCH_HELD_S = 1.0
 
 
 def _lungs_of(scene):
@@ -277,14 +281,32 @@ def twitch_tension(peak: float, contraction_s: float = TWITCH_CONTRACTION_S) -> 
     return Table((*t.tolist(), 8.0 * contraction_s), (*f.tolist(), 0.0))
 
 
+def held_tension(peak: float, contraction_s: float = TWITCH_CONTRACTION_S, held_s: float = TWITCH_HELD_S) -> Table:
+    """`twitch_tension`'s rise to `peak` at the contraction time, then `peak` held for `held_s`."""
+    t = np.arange(0.0, contraction_s, TWITCH_SAMPLE_S)
+    f = peak * (t / contraction_s) * np.exp(1.0 - t / contraction_s)
+    return Table((*t.tolist(), contraction_s, contraction_s + held_s), (*f.tolist(), peak, peak))
+
+
+def _walls(a: dict, k: int) -> dict:
+    """The walls' volume changes (L) at row k of a trace, where the scene has them."""
+    return {p: float(a[f"{p}_volume_change_l"][k]) for p in ("rib_cage_pulmonary", "rib_cage_abdominal", "abdomen")}
+
+
 def twitch(scene) -> dict:
-    """Study 4: the occluded twitch's dPes / dPdi at the peak of Pdi."""
+    """Study 4: the occluded twitch's dPes / dPdi at the peak of Pdi; and the same contraction
+    held (`TWITCH_HELD_S`), its dPes / dPdi at the end: the quasi-static split, which the passive
+    compartments' C_ab / (C_ab + C_rc) predicts but for the diaphragm's insertional pull."""
     peak = _peak_tension(scene)
     occluded = _with(scene, tension=twitch_tension(peak), airway_occluded=Constant(1.0))
     a = _trace(occluded, 5.0 * TWITCH_CONTRACTION_S, 0.002)["trace"].arrays()
     pdi = a["transdiaphragmatic_pressure_change_cmh2o"]
     k = int(np.argmax(pdi))
     dpes = float(a["pleural_pressure_cmh2o"][k] - a["pleural_pressure_cmh2o"][0])
+    held = _with(scene, tension=held_tension(peak), airway_occluded=Constant(1.0))
+    b = _trace(held, TWITCH_CONTRACTION_S + TWITCH_HELD_S, 0.002)["trace"].arrays()
+    held_pdi = float(b["transdiaphragmatic_pressure_change_cmh2o"][-1])
+    held_pes = float(b["pleural_pressure_cmh2o"][-1] - b["pleural_pressure_cmh2o"][0])
     out = {
         "tension_n_per_m": peak,
         "contraction_s": TWITCH_CONTRACTION_S,
@@ -294,11 +316,15 @@ def twitch(scene) -> dict:
         "gastric_pressure_change_cmh2o": float(a["pressure_pa"][k] - a["pressure_pa"][0]) / CMH2O_PA,
         "lung_volume_change_l": float(np.max(np.abs(a["lung_volume_change_l"]))),
         "twitch_pes_over_pdi": abs(dpes) / float(pdi[k]),
+        "held_s": TWITCH_HELD_S,
+        "held_pdi_change_cmh2o": held_pdi,
+        "held_pes_change_cmh2o": held_pes,
+        "held_pes_over_pdi": abs(held_pes) / held_pdi,
+        "held_lung_volume_change_l": float(np.max(np.abs(b["lung_volume_change_l"]))),
     }
     if "rib_cage_pulmonary_volume_change_l" in a:  # how the dome's pull moved the walls, at Pdi's peak
-        out["compartment_volume_change_l"] = {
-            p: float(a[f"{p}_volume_change_l"][k]) for p in ("rib_cage_pulmonary", "rib_cage_abdominal", "abdomen")
-        }
+        out["compartment_volume_change_l"] = _walls(a, k)
+        out["held_compartment_volume_change_l"] = _walls(b, -1)
     return out
 
 
@@ -493,7 +519,7 @@ drag, and the creep of its soft modes, slow on finer meshes): tau / C - R =
 
 The diaphragm alone, {_twitch_words(tw)}: Pdi {tw["pdi_change_cmh2o"]:+.3g} cmH2O,
 Pes {tw["pes_change_cmh2o"]:+.3g} cmH2O, ratio {tw["twitch_pes_over_pdi"]:.3f} (band 0.35-0.55){_implied(res)}.
-{_twitch_walls(tw)}
+{_twitch_walls(tw)}{_held(tw)}
 ## The paradox of a rib cage without its muscles (hinge angles at end inspiration, mrad)
 
 | drive | lower ribs | upper ribs |
@@ -522,6 +548,23 @@ def _twitch_words(tw: dict) -> str:
         f"a twitch of {tw['tension_n_per_m']:g} N/m at its peak, {1e3 * tw['contraction_s']:g} ms after the "
         f"stimulus (Pdi's peak at {1e3 * tw['pdi_peak_s']:.0f} ms)"
     )
+
+
+def _held(tw: dict) -> str:
+    """The same contraction held (absent from reports before 0.23)."""
+    if "held_pes_over_pdi" not in tw:
+        return ""
+    line = (
+        f"Held at its peak for {tw['held_s']:g} s (no inertia left): Pdi {tw['held_pdi_change_cmh2o']:+.3g} cmH2O, "
+        f"Pes {tw['held_pes_change_cmh2o']:+.3g} cmH2O, ratio {tw['held_pes_over_pdi']:.3f}"
+    )
+    if "held_compartment_volume_change_l" in tw:
+        v = {k: 1e3 * x for k, x in tw["held_compartment_volume_change_l"].items()}
+        line += (
+            f"; the walls (mL): pulmonary rib cage {v['rib_cage_pulmonary']:+.1f}, abdominal rib cage "
+            f"{v['rib_cage_abdominal']:+.1f}, abdomen {v['abdomen']:+.1f}"
+        )
+    return line + ".\n"
 
 
 def _twitch_walls(tw: dict) -> str:

@@ -156,6 +156,21 @@ def test_the_twitch_is_a_single_twitch_peaking_at_its_contraction_time(small):
     assert tw["contraction_s"] == TWITCH_CONTRACTION_S and 0.0 < tw["pdi_peak_s"] < 5 * TWITCH_CONTRACTION_S
 
 
+def test_the_contraction_held_gives_the_quasi_static_split(small):
+    """The twitch's contraction held at its peak (`TWITCH_HELD_S`): the occluded airway still holds
+    the lung volume exactly, the walls' changes still add up to it (Mead & Loring, to the
+    constraints' rounding: 1e-12 L on volumes of 1e-2 L), the dome still pulls (Pdi up, Pes
+    down), and the report gives its ratio beside the twitch's."""
+    out, r = small
+    tw = r["twitch"]
+    assert tw["held_lung_volume_change_l"] < 1e-12
+    v = tw["held_compartment_volume_change_l"]
+    assert abs(sum(v.values())) < 1e-12 < max(abs(x) for x in v.values())
+    assert tw["held_pdi_change_cmh2o"] > 0 > tw["held_pes_change_cmh2o"]
+    assert tw["held_pes_over_pdi"] == pytest.approx(-tw["held_pes_change_cmh2o"] / tw["held_pdi_change_cmh2o"])
+    assert f"ratio {tw['held_pes_over_pdi']:.3f}" in (out / "respiratory.md").read_text()
+
+
 def test_overrides_reach_the_scene_the_study_examines(tmp_path, capsys):
     """`--set KEY=VALUE` changes the scene of every run (`study_scene`), and the command names it in
     the report; a bad override is refused in one line before any run."""
