@@ -90,8 +90,7 @@ RELAXATION_FIT_FROM_S = 2.0
 #: diaphragm's Pdi twitch under bilateral phrenic stimulation takes 91.8 ms at residual volume
 #: and 57.7 ms at total lung capacity (J Appl Physiol 62:1893, 1987); the resting volume lies
 #: between, and 80 ms is chosen there. (Until 0.22 the study stepped the tension up in 10 ms and
-#: held it 0.1 s: Pdi then peaked 30-40 ms in, before the ribs had moved, and the ratio read the
-#: ribs' inertia: 1.03 on `breathing_lungs` at level 0 against 0.83 with this twitch, docs/lungs.md.)
+#: held it 0.1 s: Pdi then peaked 30-40 ms in, as the walls started to move, docs/lungs.md.)
 TWITCH_CONTRACTION_S = 0.08
 #: the twitch's tension sampled this often (s) for its `Table`
 TWITCH_SAMPLE_S = 1e-3
