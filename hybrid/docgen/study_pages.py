@@ -74,7 +74,7 @@ STUDIES = {
             "respiratory",
             ("study", "respiratory", "--out"),
             "respiratory.json",
-            "hybrid.studies.respiratory:markdown",
+            "hybrid.studies.respiratory_report:markdown",
             ("respiratory.png",),
             "Respiratory mechanics of the trunk with lungs",
             "The trunk with lungs (`breathing_lungs`) examined as a respiratory physiologist examines a subject: "
