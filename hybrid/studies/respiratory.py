@@ -99,6 +99,8 @@ TWITCH_SAMPLE_S = 1e-3
 #: trunk's quasi-static split, without the walls' inertia (it settles within 0.6 s on the breathing
 #: trunk at level 0: docs/lungs.md)
 TWITCH_HELD_S = 1.0
+#: the twitch's and the held contraction's pressures kept for the figure: every this many frames (2 ms)
+TWITCH_CURVE_EVERY = 2
 
 
 def _lungs_of(scene):
@@ -288,6 +290,17 @@ def held_tension(peak: float, contraction_s: float = TWITCH_CONTRACTION_S, held_
     return Table((*t.tolist(), contraction_s, contraction_s + held_s), (*f.tolist(), peak, peak))
 
 
+def _pressures(a: dict) -> dict:
+    """A trace's time (s), Pdi's and Pes's changes (cmH2O), every `TWITCH_CURVE_EVERY`-th frame."""
+    rows = slice(None, None, TWITCH_CURVE_EVERY)
+    pes = a["pleural_pressure_cmh2o"] - a["pleural_pressure_cmh2o"][0]
+    return {
+        "t_s": a["t_s"][rows].tolist(),
+        "pdi_change_cmh2o": a["transdiaphragmatic_pressure_change_cmh2o"][rows].tolist(),
+        "pes_change_cmh2o": pes[rows].tolist(),
+    }
+
+
 def _walls(a: dict, k: int) -> dict:
     """The walls' volume changes (L) at row k of a trace, where the scene has them."""
     return {p: float(a[f"{p}_volume_change_l"][k]) for p in ("rib_cage_pulmonary", "rib_cage_abdominal", "abdomen")}
@@ -321,6 +334,7 @@ def twitch(scene) -> dict:
         "held_pes_change_cmh2o": held_pes,
         "held_pes_over_pdi": abs(held_pes) / held_pdi,
         "held_lung_volume_change_l": float(np.max(np.abs(b["lung_volume_change_l"]))),
+        "curve": {"twitch": _pressures(a), "held": _pressures(b)},
     }
     if "rib_cage_pulmonary_volume_change_l" in a:  # how the dome's pull moved the walls, at Pdi's peak
         out["compartment_volume_change_l"] = _walls(a, k)

@@ -165,14 +165,17 @@ def _implied(res: dict) -> str:
 
 
 def plot(path: Path, res: dict) -> None:
-    """The relaxation's volume with its fit, and the passive pressure-volume points."""
+    """The relaxation's volume with its fit, the passive pressure-volume points, and (since 0.24)
+    the occluded twitch's and held contraction's pressures over time."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     r = res["relaxation"]
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 4))
+    curves = res["twitch"].get("curve")
+    fig, axes = plt.subplots(1, 3 if curves else 2, figsize=(15 if curves else 10, 4))
+    ax1, ax2 = axes[0], axes[1]
     t = np.asarray(r["curve"]["t_s"])
     ax1.plot(t, 1e3 * np.asarray(r["curve"]["volume_l"]), "k-", label="simulated")
     f = r["fitted"]
@@ -194,6 +197,23 @@ def plot(path: Path, res: dict) -> None:
     ax2.set_ylabel("lung volume change (L)")
     ax2.set_title("passive pressure-volume, muscles relaxed")
     ax2.legend()
+    if curves:
+        _plot_twitch(axes[2], res["twitch"], curves)
     fig.tight_layout()
     save_figure(fig, path)
     plt.close(fig)
+
+
+def _plot_twitch(ax, tw: dict, curves: dict) -> None:
+    """Pdi and -Pes over time, the twitch's (solid) and the held contraction's (dashed), with Pdi's
+    peak marked where the study reads the twitch's ratio."""
+    for name, style in (("twitch", "-"), ("held", "--")):
+        c = curves[name]
+        t = 1e3 * np.asarray(c["t_s"])
+        ax.plot(t, c["pdi_change_cmh2o"], style, color="k", label=f"Pdi, {name}")
+        ax.plot(t, -np.asarray(c["pes_change_cmh2o"]), style, color="tab:blue", label=f"-Pes, {name}")
+    ax.axvline(1e3 * tw["pdi_peak_s"], color="0.6", lw=0.8)
+    ax.set_xlabel("time after the stimulus (ms)")
+    ax.set_ylabel("pressure change (cmH2O)")
+    ax.set_title(f"occluded: Pes/Pdi {tw['twitch_pes_over_pdi']:.3f} twitch, {tw['held_pes_over_pdi']:.3f} held")
+    ax.legend(fontsize="small")

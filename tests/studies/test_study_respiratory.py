@@ -169,6 +169,12 @@ def test_the_contraction_held_gives_the_quasi_static_split(small):
     assert tw["held_pdi_change_cmh2o"] > 0 > tw["held_pes_change_cmh2o"]
     assert tw["held_pes_over_pdi"] == pytest.approx(-tw["held_pes_change_cmh2o"] / tw["held_pdi_change_cmh2o"])
     assert f"ratio {tw['held_pes_over_pdi']:.3f}" in (out / "respiratory.md").read_text()
+    # the figure's curves are the runs' pressures: none above the twitch's reported peak
+    for name in ("twitch", "held"):
+        c = tw["curve"][name]
+        assert len(c["t_s"]) == len(c["pdi_change_cmh2o"]) == len(c["pes_change_cmh2o"]) > 10
+        assert all(b > a for a, b in zip(c["t_s"], c["t_s"][1:]))
+    assert max(tw["curve"]["twitch"]["pdi_change_cmh2o"]) <= tw["pdi_change_cmh2o"]
 
 
 def test_overrides_reach_the_scene_the_study_examines(tmp_path, capsys):
