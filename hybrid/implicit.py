@@ -9,7 +9,8 @@ viscosity, muscle fibres, passive fibres, resting tension, drag, the sliding lin
 at the step's end: `hybrid.terms.slide_planes`) and f_e the others at the step's start
 (gravity, applied loads, pressure loads, ...: the step's force pass minus f_i
 there), plus, with a volume constraint, the last step's pressure on the
-volume gradient. Nailed, prescribed and linked points keep their positions
+volume gradient (and with the lungs' airway occluded, the occlusion's last constraint
+pressure on the cavity's). Nailed, prescribed and linked points keep their positions
 and velocities during the solve (zero rows). The exact volume projection
 follows as in the explicit steps and corrects the pressure carried: at rest the
 correction vanishes and the pressure readout is the constraint's whole
