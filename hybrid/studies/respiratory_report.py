@@ -126,7 +126,9 @@ def _twitch_words(tw: dict) -> str:
 
 
 def _held(tw: dict) -> str:
-    """The same contraction held (absent from reports before 0.23)."""
+    """The same contraction held (absent from reports before 0.24)."""
+    if "held_failed" in tw:
+        return f"Held at its peak for {tw['held_s']:g} s: the run failed ({tw['held_failed']}).\n"
     if "held_pes_over_pdi" not in tw:
         return ""
     line = (
@@ -208,6 +210,8 @@ def _plot_twitch(ax, tw: dict, curves: dict) -> None:
     """Pdi and -Pes over time, the twitch's (solid) and the held contraction's (dashed), with Pdi's
     peak marked where the study reads the twitch's ratio."""
     for name, style in (("twitch", "-"), ("held", "--")):
+        if name not in curves:  # the held run failed (its reason in the report)
+            continue
         c = curves[name]
         t = 1e3 * np.asarray(c["t_s"])
         ax.plot(t, c["pdi_change_cmh2o"], style, color="k", label=f"Pdi, {name}")
@@ -215,5 +219,6 @@ def _plot_twitch(ax, tw: dict, curves: dict) -> None:
     ax.axvline(1e3 * tw["pdi_peak_s"], color="0.6", lw=0.8)
     ax.set_xlabel("time after the stimulus (ms)")
     ax.set_ylabel("pressure change (cmH2O)")
-    ax.set_title(f"occluded: Pes/Pdi {tw['twitch_pes_over_pdi']:.3f} twitch, {tw['held_pes_over_pdi']:.3f} held")
+    held = f"{tw['held_pes_over_pdi']:.3f} held" if "held_pes_over_pdi" in tw else "held failed"
+    ax.set_title(f"occluded: Pes/Pdi {tw['twitch_pes_over_pdi']:.3f} twitch, {held}")
     ax.legend(fontsize="small")

@@ -177,6 +177,34 @@ def test_the_contraction_held_gives_the_quasi_static_split(small):
     assert max(tw["curve"]["twitch"]["pdi_change_cmh2o"]) <= tw["pdi_change_cmh2o"]
 
 
+def test_a_held_contraction_that_fails_leaves_the_twitch_and_says_why(small, tmp_path, monkeypatch):
+    """A soft trunk can fold under the contraction held a second (the fitted torso with its rib
+    hinges at 0.5 N m/rad did at 0.68 s): the twitch's figures stand, the report and the figure
+    say that the held run failed and why, and the study goes on."""
+    from hybrid.run import RunFailed
+    from hybrid.studies import respiratory as study
+    from hybrid.studies.respiratory_report import markdown, plot
+
+    _, r = small
+    calls = []
+    real = study._trace
+
+    def trace(scene, duration_s, frame_dt_s, overrides=()):
+        calls.append(duration_s)
+        if len(calls) == 2:  # the held contraction
+            raise RunFailed(RuntimeError("simulation diverged at t = 0.68 s: the surface folded"), {})
+        return real(scene, duration_s, frame_dt_s, overrides)
+
+    monkeypatch.setattr(study, "_trace", trace)
+    tw = study.twitch(study.study_scene(small=True))
+    assert len(calls) == 2 and "held_pes_over_pdi" not in tw and "folded" in tw["held_failed"]
+    assert tw["twitch_pes_over_pdi"] == r["twitch"]["twitch_pes_over_pdi"]  # the twitch as the study's own
+    res = {**r, "twitch": tw}
+    assert "the run failed (simulation diverged at t = 0.68 s" in markdown(res)
+    plot(tmp_path / "respiratory.png", res)
+    assert (tmp_path / "respiratory.png").stat().st_size > 10_000
+
+
 def test_overrides_reach_the_scene_the_study_examines(tmp_path, capsys):
     """`--set KEY=VALUE` changes the scene of every run (`study_scene`), and the command names it in
     the report; a bad override is refused in one line before any run."""
