@@ -275,20 +275,24 @@ def _peak_tension(scene) -> float:
     raise SceneError(f"study respiratory: scene {scene.name!r} has no muscle_fibres term for the twitch")
 
 
+def _twitch_samples(peak: float, contraction_s: float, until_s: float) -> tuple[list, list]:
+    """peak (t / T) exp(1 - t / T) sampled every `TWITCH_SAMPLE_S` from 0 up to (not at) until_s."""
+    t = np.arange(0.0, until_s, TWITCH_SAMPLE_S)
+    return t.tolist(), (peak * (t / contraction_s) * np.exp(1.0 - t / contraction_s)).tolist()
+
+
 def twitch_tension(peak: float, contraction_s: float = TWITCH_CONTRACTION_S) -> Table:
     """A single twitch's tension: peak (t / T) exp(1 - t / T), which rises from 0 to `peak` at the
     contraction time T and relaxes (the twitch of Fuglevand, Winter & Patla 1993, J Neurophysiol
     70:2470), sampled every `TWITCH_SAMPLE_S` to 8 T (0.7% of the peak left) and 0 after."""
-    t = np.arange(0.0, 8.0 * contraction_s, TWITCH_SAMPLE_S)
-    f = peak * (t / contraction_s) * np.exp(1.0 - t / contraction_s)
-    return Table((*t.tolist(), 8.0 * contraction_s), (*f.tolist(), 0.0))
+    t, f = _twitch_samples(peak, contraction_s, 8.0 * contraction_s)
+    return Table((*t, 8.0 * contraction_s), (*f, 0.0))
 
 
 def held_tension(peak: float, contraction_s: float = TWITCH_CONTRACTION_S, held_s: float = TWITCH_HELD_S) -> Table:
     """`twitch_tension`'s rise to `peak` at the contraction time, then `peak` held for `held_s`."""
-    t = np.arange(0.0, contraction_s, TWITCH_SAMPLE_S)
-    f = peak * (t / contraction_s) * np.exp(1.0 - t / contraction_s)
-    return Table((*t.tolist(), contraction_s, contraction_s + held_s), (*f.tolist(), peak, peak))
+    t, f = _twitch_samples(peak, contraction_s, contraction_s)
+    return Table((*t, contraction_s, contraction_s + held_s), (*f, peak, peak))
 
 
 def _pressures(a: dict) -> dict:
