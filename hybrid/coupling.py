@@ -29,12 +29,13 @@ import mujoco
 import numpy as np
 
 from .errors import RigidError, SimulationDiverged
-from .loop import CtrlArrays, LinkArrays, MjViews, RigidPack, SlideArrays, WallArrays, WrenchHistory, carry_wall
+from .loop import CtrlArrays, LinkArrays, MjViews, RigidPack, SlideArrays, WallArrays, WrenchHistory
 from .rigid import CoupledRigid, mj_step_ctypes, mj_wall_addresses
 from .rigid.modes import implicit_joint_damping
 from .sites import site_vel_kernel
 from .step import S_TIME, T_GRAVITY
 from .step_work import MembraneState
+from .wall_coupling import carry_wall
 
 __all__ = ["Coupling"]
 

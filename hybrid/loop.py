@@ -14,7 +14,9 @@ One step, from time t:
    bodies' velocities between the two, `hybrid.wall_coupling`); the linked points take
    their sites' positions and velocities;
 3. the free points integrate, the local constraints and the exact volume projection
-   apply, the divergence check runs (`hybrid.step.membrane_advance`).
+   apply, the divergence check runs (`hybrid.step.membrane_advance`); while the airway is
+   occluded, the lungs' hold is then shared with the bodies that carry the cavity (MuJoCo's
+   step taken again, the projection again: `hybrid.wall_coupling.hold_with_bodies`).
 
 One compiled loop for every scene: which terms a model has, its integrator and whether
 it has a rigid part are read at run time (`MembraneArrays.term_on`, `.integrator`,
@@ -37,7 +39,7 @@ import numpy as np
 from .calls import ADDRESS_ONLY, args_from_memory, args_in_memory, args_type_of, call_at, call_c
 from .kernel import kernel
 from .schedule import schedule_eval, stack_schedules
-from .sites import add_point_wrench_kernel, add_wrench_at, point_wrench_kernel, site_vel_kernel
+from .sites import add_point_wrench_kernel, add_wrench_at, point_wrench_kernel
 from .step import (
     F_AIRWAY,
     F_ALVEOLAR,
@@ -56,12 +58,13 @@ from .step import (
     membrane_advance,
     membrane_forces,
 )
-from .step_work import CALL_RIGID, CALL_STEPS, CALL_STEPS_PARALLEL, CALL_WALL
+from .step_work import CALL_HOLD, CALL_RIGID, CALL_STEPS, CALL_STEPS_PARALLEL, CALL_WALL
 from .terms import Lungs
 from .terms.lung_cavity import cavity_volume_rate
-from .terms.lungs import L_AIRWAY, L_ALVEOLAR, L_OCCLUDED, L_PLEURAL, L_VOLUME, P_REF
+from .terms.lungs import L_AIRWAY, L_ALVEOLAR, L_HOLD, L_OCCLUDED, L_PLEURAL, L_VOLUME, P_REF
 from .terms.slide_planes import carry_planes
 from .terms.volume import face_volume
+from .wall_coupling import points_onto_sites
 
 __all__ = [
     "LinkArrays",
@@ -328,7 +331,7 @@ def rigid_phase(m, s, w, planes, t, row, rig, args_at, args_type):
     """
     links, ctrls, mj, hist = rig.links, rig.ctrls, rig.mj, rig.hist
     pos, vel, frc, grad = s.vert_pos, s.vert_vel, w.vert_force, s.grad
-    link_vert, site_id, link_force, link_vel = links.vert, links.site_id, links.force, links.vel
+    link_vert, site_id, link_force = links.vert, links.site_id, links.force
     xfrc, qpos = mj.xfrc_applied, mj.qpos
     p = s.scal[S_PRESSURE]
     for j in range(link_vert.shape[0]):
@@ -357,7 +360,7 @@ def rigid_phase(m, s, w, planes, t, row, rig, args_at, args_type):
     wall.wrench[:] = 0.0
     if rig.rk4:
         call_c(mj.fn_step, (mj.model_ptr, mj.data_ptr))
-    elif wall.qfrc.shape[0] and s.lung[L_OCCLUDED] == 0.0:  # with lungs: their load implicit in the bodies' velocities
+    elif wall.qfrc.shape[0]:  # with lungs: their load implicit in the bodies' velocities
         call_at(w.calls[CALL_WALL], None, (args_at, args_type))
     else:
         call_c(mj.fn_step2, (mj.model_ptr, mj.data_ptr))
@@ -367,16 +370,7 @@ def rigid_phase(m, s, w, planes, t, row, rig, args_at, args_type):
             hist.qpos[row, a] = qpos[a]
         for a in range(hist.qfrc.shape[1]):
             hist.qfrc[row, a] = wall.force_q[a] if wall.force_q.shape[0] else 0.0
-    site_vel_kernel(mj.site_xpos, mj.cvel, mj.subtree_com, site_id, links.site_body, links.site_root, link_vel)
-    for j in range(link_vert.shape[0]):
-        i = link_vert[j]
-        sid = site_id[j]
-        for a in range(3):
-            pos[i, a] = mj.site_xpos[sid, a]
-            vel[i, a] = link_vel[j, a]
-    if wall.point.shape[0]:
-        site_vel_kernel(mj.site_xpos, mj.cvel, mj.subtree_com, wall.site_id, wall.site_body, wall.site_root, wall.vel)
-        carry_wall(wall, mj.site_xpos, s.lung_wall_pos, s.lung_wall_vel)
+    points_onto_sites(links, wall, mj, pos, vel, s.lung_wall_pos, s.lung_wall_vel)
     carry_planes(slides.site_id, mj.site_xpos, mj.site_xmat, planes)  # implicit Euler's: the planes it solves with
 
 
@@ -423,28 +417,6 @@ def _gather_rows(rows, src, out):
     for j in range(rows.shape[0]):
         for a in range(3):
             out[j, a] = src[rows[j], a]
-
-
-@kernel
-def carry_wall(wall, site_xpos, wall_pos, wall_vel):
-    """The carried wall points where their bodies put them: p = p_rest + sum_e w_e (x_site_e -
-    x_site_e,rest), v = sum_e w_e v_site_e over the point's bodies e (a blend of the sites'
-    displacements; wall.vel holds the sites' velocities).
-    # Model: wall (WallArrays)   # Data in: site_xpos (nsite, 3) m, wall.vel (nc, 3) m/s
-    # Data out: wall_pos (nwall, 3) m, wall_vel (nwall, 3) m/s (the carried rows)
-    """
-    for j in range(wall.point.shape[0]):  # a point may have two bodies: from rest, then each one's share
-        p = wall.point[j]
-        for a in range(3):
-            wall_pos[p, a] = wall.rest[j, a]
-            wall_vel[p, a] = 0.0
-    for j in range(wall.point.shape[0]):
-        p = wall.point[j]
-        share = wall.weight[j]
-        sid = wall.site_id[j]
-        for a in range(3):
-            wall_pos[p, a] += share * (site_xpos[sid, a] - wall.site_rest[j, a])
-            wall_vel[p, a] += share * wall.vel[j, a]
 
 
 @kernel
@@ -513,11 +485,16 @@ def steps_between(args_at, first, last, step0, par, args_type):
     for k in range(first, last):
         t = origin + k * h
         membrane_forces(m, s, w, imp, c, t, par)
+        hold_before = s.lung[L_HOLD]  # the occluded airway's pressure the bodies take in this step
         if rig.coupled:
             call_at(w.calls[CALL_RIGID], None, (rigid_at, t, k - step0, rigid_type))
         code = membrane_advance(m, s, w, imp, c, t, k, par)
         if code != OK:
             return code
+        if rig.coupled and not rig.rk4 and s.lung[L_OCCLUDED] != 0.0 and w.calls[CALL_HOLD] != 0:  # shared
+            code = call_at(w.calls[CALL_HOLD], OK, (rigid_at, k, k - step0, hold_before, rigid_type))
+            if code != OK:
+                return code
         s.scal[S_TIME] = origin + (k + 1) * h
     return OK
 

@@ -34,6 +34,7 @@ __all__ = [
     "CALL_STEPS_PARALLEL",
     "CALL_RIGID",
     "CALL_WALL",
+    "CALL_HOLD",
     "new_state",
     "new_work",
     "term_addresses",
@@ -80,7 +81,8 @@ class StepWork(NamedTuple):
     between two frames (`hybrid.loop.steps_between`: its serial-only build and the one with the
     multi-core passes, each a build of its own), the rigid phase (`rigid_between`) and, with lungs
     whose wall the bodies carry, MuJoCo's step with their load implicit
-    (`hybrid.wall_coupling.wall_step_between`: these four filled at the first step of their build,
+    (`hybrid.wall_coupling.wall_step_between`), and their occluded airway's hold shared with the
+    bodies (`hold_between`: these five filled at the first step of their build,
     `hybrid.loop_compile.loop_calls`), 0 where the model never calls it;
     force_calls (k, 2)
     int64: the registry's terms with their own step kernel that the model has, (id, address)
@@ -107,7 +109,7 @@ class StepWork(NamedTuple):
 
 
 #: the slots of `StepWork.calls`
-NCALL = 8
+NCALL = 9
 (
     CALL_IMPLICIT_START,
     CALL_IMPLICIT_STEP,
@@ -117,6 +119,7 @@ NCALL = 8
     CALL_STEPS_PARALLEL,
     CALL_RIGID,
     CALL_WALL,
+    CALL_HOLD,
 ) = range(NCALL)
 
 

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 import hybrid
-from hybrid.loop import carry_wall
 from hybrid.run import RunFailed, run
 from hybrid.terms.lungs import L_VOLUME, P_K1, lung_recoil
+from hybrid.wall_coupling import carry_wall
 
 
 def _cavity_volume(sim, rig, qpos_change) -> float:

@@ -1,26 +1,35 @@
-"""The held volumes' pressures on the rigid bodies, a step late: the gain that decides whether
-that coupling is stable (`hybrid inspect`, a warning at the start of `hybrid run`, and the
-message of a divergence).
+"""The held volumes' pressures on the rigid bodies: the gain that decides whether their coupling
+is stable (`hybrid inspect`, a warning at the start of `hybrid run`, and the message of a
+divergence).
 
 The exact volume projection holds the abdomen's volume, and the lungs' while the airway is
 occluded (`hybrid.terms.lungs.project_occluded`), by moving the membrane's free points only. The
 bodies that carry the volumes' other points (the linked points, the lungs' carried wall) take
-the projection's pressures at the next step. Pressures p (Pa, one per held volume) on the bodies
-move them by h^2 (M + h B)^-1 Gq^T p, Gq the volumes' gradients through the bodies' degrees of
-freedom (m^3 per unit of each), M + h B MuJoCo's mass matrix with the damping its Euler step takes
-implicitly; that changes the volumes by h^2 H p, H = Gq (M + h B)^-1 Gq^T, and the next projection
-takes it back from the membrane at the pressures -G^-1 H p, G the free points' Gram matrix of the
-volumes' gradients over their masses (sum_i grad_i V_j . grad_i V_k / m_i). Each step multiplies
-the pressures by -G^-1 H, whatever its size: the coupling is stable while the spectral radius rho
-of G^-1 H is below 1, as for any enclosed incompressible compartment in a staggered coupling. A
-smaller step does not help; heavier bodies, or more damping on their joints, do.
+the projection's pressures at the next step: staggered. Pressures p (Pa, one per held volume) on
+the bodies move them by h^2 (M + h B)^-1 Gq^T p, Gq the volumes' gradients through the bodies'
+degrees of freedom (m^3 per unit of each), M + h B MuJoCo's mass matrix with the damping its Euler
+step takes implicitly; that changes the volumes by h^2 H p, H = Gq (M + h B)^-1 Gq^T, and the next
+projection takes it back from the membrane at the pressures -G^-1 H p, G the free points' Gram
+matrix of the volumes' gradients over their masses (sum_i grad_i V_j . grad_i V_k / m_i). Each
+step multiplies the pressures by -G^-1 H, whatever its size: the coupling is stable while the
+spectral radius rho of that map is below 1, as for any enclosed incompressible compartment in a
+staggered coupling. A smaller step does not help; heavier bodies, or more damping on their
+joints, do.
+
+While the airway is occluded the cavity's hold is shared with the bodies
+(`hybrid.wall_coupling.hold_with_bodies`: MuJoCo's step taken again with the hold's change
+S (p_m - p_n) / (S + H_cc), S the cavity's mobility with the abdomen's held), which takes the
+cavity's part of the map away: what is left is -G^-1 H + s G^-1 H e_c e_c^T (G^-1 H + I),
+s = S / (S + H_cc), zero for the cavity alone. Under MuJoCo's RK4 (one call, no step taken again)
+the hold stays staggered, and RK4 moves the bodies less in a step than Euler: there the estimate
+is an upper bound.
 
 The estimate is linear, at the model's start, and leaves out the joints' springs (h^2 K against
 M) and gravity. Against the growth measured on `breathing_lungs` at level 0 with an undamped upper
-rib pair, occluded: 3.05 against 3.35 (2 g ribs), 1.80 against 1.93 (3.4 g)
-(`tests/rigid/test_held_volumes.py`); near 1 what it leaves out decides (at 5.8 g it reads 1.06 and
-the run holds), hence a warning from 0.9 and a divergence's advice from 1. The packaged trunks read
-about 0.15 at level 0 (`hybrid inspect`).
+rib pair, occluded and staggered (before the shared hold): 3.05 against 3.35 (2 g ribs), 1.80
+against 1.93 (3.4 g); near 1 what it leaves out decides (at 5.8 g it read 1.06 and the run held),
+hence a warning from 0.9 and a divergence's advice from 1. The packaged trunks read about 0.14 at
+level 0 (`hybrid inspect`).
 """
 
 from __future__ import annotations
@@ -109,7 +118,13 @@ def held_volumes_gain(model) -> HeldVolumesGain | None:
     open_ = float(response[0, 0] / gram[0, 0]) if gram[0, 0] > 0 else math.inf
     occluded = None
     if lungs:
-        occluded = float(np.max(np.abs(np.linalg.eigvals(np.linalg.solve(gram, response)))))
+        growth = -np.linalg.solve(gram, response)  # -G^-1 H: the pressures' map over a staggered step
+        if int(mjm.opt.integrator) != int(mujoco.mjtIntegrator.mjINT_RK4):  # the cavity's hold shared
+            c = len(grads) - 1
+            mobility = gram[c, c] - (gram[0, c] ** 2 / gram[0, 0] if c else 0.0)  # S, the abdomen held
+            share = mobility / (mobility + response[c, c])
+            growth = growth + share * np.outer(np.linalg.solve(gram, response[:, c]), np.eye(len(grads))[c] - growth[c])
+        occluded = float(np.max(np.abs(np.linalg.eigvals(growth))))
     return HeldVolumesGain(open_, occluded, h)
 
 

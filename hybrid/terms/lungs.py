@@ -88,10 +88,14 @@ class LungSlot(IntEnum):
     OCCLUDED = 5  # 1 while the airway is occluded, else 0
     HELD_VOLUME = 6  # m^3, the cavity's volume when the airway closed (held exactly while occluded)
     HOLD_PRESSURE = 7  # Pa, the occlusion's constraint pressure in the last step (0 when open)
+    # m^4/kg, the last occluded projection's mobility of the cavity's volume, the abdomen's held:
+    # sum_i |grad_i V|^2 / m_i over the free points, less the share the abdomen's constraint takes
+    # (a Schur complement of its Gram matrix); the bodies' implicit hold (`hybrid.wall_coupling`)
+    HOLD_MOBILITY = 8
 
 
 NLUNG = len(LungSlot)
-L_VOLUME, L_RATE, L_PLEURAL, L_ALVEOLAR, L_AIRWAY, L_OCCLUDED, L_HELD, L_HOLD = LungSlot
+L_VOLUME, L_RATE, L_PLEURAL, L_ALVEOLAR, L_AIRWAY, L_OCCLUDED, L_HELD, L_HOLD, L_MOBILITY = LungSlot
 
 # lung_par: elastance Pa/m^3, K1 Pa s/m^3, K2 Pa s^2/m^6, resting recoil Pa, the cavity's resting
 # volume m^3; the recoil curve: 0 linear, 1 sigmoid, whose a, b (m^3), c, d (Pa) and the lungs'
@@ -162,8 +166,8 @@ def project_occluded(m, s, w, h, abdomen):
     rounding; v += (phi1 d1 + phi2 d2) / h. Returns (phi1, phi2, ok): phi / h^2 the abdomen's
     pressure and the occlusion's pleural pressure (Pa).
     # Model: m.face_vert, m.lung_face, m.lung_par, m.vol0, m.vert_weight   # Data in: s.lung[HELD_VOLUME], wall
-    # Data in/out: s.vert_pos, s.vert_vel   # Data out: s.grad (the abdomen's gradient at X*)
-    # Scratch: w.lung_scratch (5, nvert, 3)
+    # Data in/out: s.vert_pos, s.vert_vel   # Data out: s.grad (the abdomen's gradient at X*),
+    #           s.lung[HOLD_MOBILITY]   # Scratch: w.lung_scratch (5, nvert, 3)
     """
     sc = w.lung_scratch
     x0, d1, d2, g1, g2 = sc[0], sc[1], sc[2], sc[3], sc[4]
@@ -181,6 +185,7 @@ def project_occluded(m, s, w, h, abdomen):
     t1, t2 = m.vol0, s.lung[L_HELD]
     tol1, tol2 = 16 * 2.0**-52 * abs(t1), 16 * 2.0**-52 * abs(t2)
     p1 = p2 = 0.0
+    j11 = j12 = j21 = j22 = 0.0
     ok = False
     for _ in range(40):
         f1 = v1 - t1 if abdomen else 0.0
@@ -211,6 +216,8 @@ def project_occluded(m, s, w, h, abdomen):
         v1, v2 = _two_volumes(m.face_vert, m.lung_face, ref, pos, wall, g1, g2, abdomen)
     if not ok:
         return p1, p2, False
+    if j22 > 0.0:  # the last iteration's Gram matrix (none when the volumes held already)
+        s.lung[L_MOBILITY] = j22 - j12 * j21 / j11 if abdomen and j11 > 0.0 else j22
     for i in range(n):
         for a in range(3):
             vel[i, a] += (p1 * d1[i, a] + p2 * d2[i, a]) / h
