@@ -16,7 +16,7 @@ from .step import membrane_advance
 from .step_work import CALL_HOLD, CALL_RIGID, CALL_STEPS, CALL_STEPS_PARALLEL, CALL_WALL
 from .wall_coupling import hold_between, wall_step_between
 
-__all__ = ["loop_build", "loop_calls", "start_loop_compile", "steps_slot"]
+__all__ = ["hold_call", "loop_build", "loop_calls", "start_loop_compile", "steps_slot"]
 
 
 def loop_build(arg_types) -> str:
@@ -53,7 +53,7 @@ def start_loop_compile(work, arrays, state, imp, control, rig: RigidPack, par):
 
 def loop_calls(work, arrays, state, imp, control, rig: RigidPack, par, elsewhere=None) -> None:
     """The addresses of the steps between two stops (`steps_between`, its build for `par`) and, with a rigid part,
-    of its phase (`rigid_between`, and the lungs' step it calls, `wall_step_between`, and their occluded hold, `hold_between`) into `work.calls`, each compiled (or loaded from the cache)
+    of its phase (`rigid_between`, and the lungs' step it calls, `wall_step_between`) into `work.calls`, each compiled (or loaded from the cache)
     now for the types `run_steps` passes them with these arrays. `elsewhere`: the steps being
     compiled by a helper process (`start_loop_compile`), waited for after this process compiled
     the rigid phase and `run_steps` itself (which its first call would otherwise compile)."""
@@ -62,8 +62,6 @@ def loop_calls(work, arrays, state, imp, control, rig: RigidPack, par, elsewhere
         work.calls[CALL_RIGID] = kernel_address(rigid_between, types.none, 0, 0.0, 0, rigid_args)
         if rig.wall.qfrc.shape[0]:  # lungs whose wall the bodies carry: their step, compiled apart
             work.calls[CALL_WALL] = kernel_address(wall_step_between, types.none, 0, rigid_args)
-            # and the occluded airway's hold shared with them (MuJoCo's step taken again)
-            work.calls[CALL_HOLD] = kernel_address(hold_between, types.int64, 0, 0, 0, 0.0, rigid_args)
     if elsewhere is not None:
         stops, frames = np.zeros(1, np.int64), Frames(1, 1, 0).arrays()
         run_steps.compile(
@@ -72,6 +70,15 @@ def loop_calls(work, arrays, state, imp, control, rig: RigidPack, par, elsewhere
         elsewhere.wait()
     steps_args = _steps_args(work, arrays, state, imp, control, rig, par)
     work.calls[steps_slot(par)] = kernel_address(steps_between, types.int64, *steps_args)
+
+
+def hold_call(work, arrays, state, imp, rig: RigidPack) -> None:
+    """The occluded airway's hold shared with the bodies that carry the cavity (`hold_between`) into
+    `work.calls`, compiled (or loaded from the cache) now: only for a run whose airway may close (its
+    schedule, or the user's program through `hybrid.Control`: `Simulation._loop_ready`), since a
+    lungs scene that breathes with its airway open never reaches it."""
+    rigid_args = numba.typeof((arrays, state, work, imp.planes, rig))
+    work.calls[CALL_HOLD] = kernel_address(hold_between, types.int64, 0, 0, 0, 0.0, rigid_args)
 
 
 def steps_slot(par) -> int:

@@ -21,7 +21,7 @@ from .errors import ArgumentError, SceneError, SimulationDiverged
 from .implicit import Info
 from .implicit_work import no_implicit_work
 from .loop import Frames, kinetic_energy_of, membrane_only, run_steps
-from .loop_compile import loop_calls, start_loop_compile, steps_slot
+from .loop_compile import hold_call, loop_calls, start_loop_compile, steps_slot
 from .model import TERMS, Model
 from .solvers import SOLVERS, Solver, solver_of
 from .state import State
@@ -32,7 +32,7 @@ from .step import (
     S_TIME,
     step_par,
 )
-from .step_work import new_control, new_state, new_work, term_addresses
+from .step_work import CALL_HOLD, new_control, new_state, new_work, term_addresses
 from .terms.volume import face_volume
 
 __all__ = ["Simulation"]
@@ -278,6 +278,22 @@ class Simulation:
             loop_calls(work, typed, state, imp, control, rig0, par, elsewhere)
             if elsewhere is not None:
                 self._loop_elsewhere = None
+        if not self.work.calls[CALL_HOLD] and self._may_occlude():  # the airway may close: the hold's step
+            work, typed, state, imp, control, rig0, par = self._loop_types(arrays)
+            hold_call(work, typed, state, imp, rig0)
+
+    def _may_occlude(self) -> bool:
+        """Whether the next steps may close the airway of lungs whose cavity the bodies carry: the
+        scene's schedule closes it at some time, or the user's program sets it (`Control`)."""
+        a = self.model.arrays
+        if self.rigid is None or not a.lung_face.shape[0]:
+            return False
+        scheduled = getattr(self, "_occlusion_scheduled", None)
+        if scheduled is None:
+            from .rigid.held_volumes import may_occlude  # a rigid part: MuJoCo is loaded
+
+            scheduled = self._occlusion_scheduled = may_occlude(self.model.scene)
+        return scheduled or bool(self.control.arrays.user[a.lung_sched[1]])
 
     def _loop(self, arrays, stops: np.ndarray, frames: Frames, first: int) -> int:
         """Step to each of stops in one call of the compiled step loop

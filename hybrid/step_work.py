@@ -81,9 +81,10 @@ class StepWork(NamedTuple):
     between two frames (`hybrid.loop.steps_between`: its serial-only build and the one with the
     multi-core passes, each a build of its own), the rigid phase (`rigid_between`) and, with lungs
     whose wall the bodies carry, MuJoCo's step with their load implicit
-    (`hybrid.wall_coupling.wall_step_between`), and their occluded airway's hold shared with the
-    bodies (`hold_between`: these five filled at the first step of their build,
-    `hybrid.loop_compile.loop_calls`), 0 where the model never calls it;
+    (`hybrid.wall_coupling.wall_step_between`: these four filled at the first step of their build,
+    `hybrid.loop_compile.loop_calls`), and their occluded airway's hold shared with the bodies
+    (`hold_between`, at the first step of a run whose airway may close, `hold_call`), 0 where the
+    model never calls it;
     force_calls (k, 2)
     int64: the registry's terms with their own step kernel that the model has, (id, address)
     (`hybrid.terms.STEP_FORCES`). Compiled apart, a kernel compiles only for a model that calls

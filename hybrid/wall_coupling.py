@@ -37,7 +37,8 @@ that the bodies and the dome feel one pressure, as in a solve of the two togethe
 then runs again for what is left (second order in the bodies' motion, and the abdomen's share).
 
 Compiled apart (`wall_step_between`, called at its address by the rigid phase, and
-`hold_between`, by the steps while the airway is occluded), for scenes with such a wall only: inlined into the rigid phase, every coupled scene compiled it (6 s more of the
+`hold_between`, by the steps while the airway is occluded, compiled only for a run whose airway
+may close: `hybrid.loop_compile.hold_call`), for scenes with such a wall only: inlined into the rigid phase, every coupled scene compiled it (6 s more of the
 default scene's first run, which has no lungs).
 
 MuJoCo stays behind its door: its C functions are called at the addresses the pack carries

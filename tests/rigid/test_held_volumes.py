@@ -13,6 +13,7 @@ from hybrid.model import compile_scene
 from hybrid.resolve import resolve_scene
 from hybrid.rigid.held_volumes import held_volumes_gain, may_occlude
 from hybrid.scenefile import apply_overrides
+from hybrid.step_work import CALL_HOLD
 from hybrid.studies.rigid_check import replay_check
 from hybrid.terms.lungs import L_HOLD
 
@@ -61,6 +62,27 @@ def test_an_occluded_run_on_light_ribs_replays_exactly():
     r = replay_check(light_ribs(0.002), 60)
     assert r["replay_max_abs_qpos"] <= 1e-12 and r["replay_max_abs_qvel"] <= 1e-12
     assert r["wrench_rel_error"] <= 1e-12 and r["qpos_moved_max"] > 1e-4
+
+
+def test_the_hold_compiles_only_for_a_run_whose_airway_may_close():
+    # a lungs scene breathing with its airway open never reaches the shared hold, and does not
+    # compile it; the user's program closing the airway (`Control`) gets it before its next step:
+    # light ribs, which a staggered hold diverged within 20 steps, then hold 300
+    key = "forces['lungs'].airway_occluded"
+    sim = hybrid.load(light_ribs(0.002, "forces.lungs.airway_occluded=0"))
+    sim.step(5)
+    assert sim.work.calls[CALL_HOLD] == 0
+    sim.control.set(key, 1.0)
+    sim.step(300)
+    assert sim.work.calls[CALL_HOLD] != 0 and abs(sim.state.lung[L_HOLD]) > 0.0
+    # closed by the program from the start, the run is the scheduled occlusion's, bit for bit
+    scheduled, driven = hybrid.load(light_ribs(0.002)), hybrid.load(light_ribs(0.002, "forces.lungs.airway_occluded=0"))
+    driven.control.set(key, 1.0)
+    scheduled.step(50)
+    driven.step(50)
+    assert np.array_equal(scheduled.vert_pos, driven.vert_pos) and np.array_equal(
+        scheduled.mj_data.qpos, driven.mj_data.qpos
+    )
 
 
 def test_a_staggered_hold_on_light_ribs_diverges_and_says_no_step_helps():
