@@ -332,7 +332,8 @@ class Lungs(Term):
     displacement of the body's point beside it (the pulmonary rib cage);
     airway_occluded: a schedule, the airway closed where
     it is 1 (>= 0.5), open where 0: the lung volume when it closes is then held exactly
-    (`project_occluded`), as in the occlusion and twitch manoeuvres."""
+    (`project_occluded`), as in the occlusion and twitch manoeuvres, the hold shared with the bodies
+    that carry the cavity (`hybrid.wall_coupling.hold_with_bodies`)."""
 
     # lung_face (nf, 3) int64: the cavity (points >= nvert on the wall); lung_wall (nwall, 3) m;
     # lung_par (NPAR,): see P_*; lung_sched (2,) int64: the schedule rows of the airway-opening
