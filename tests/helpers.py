@@ -4,6 +4,7 @@ pytest `pythonpath`)."""
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import json
 from pathlib import Path
@@ -343,3 +344,24 @@ def limit_allowance(estimate: dict, ratio: float, order: float = 2.0) -> float:
     observed = estimate["observed_order_space"]
     safety, p = (SAFETY_TWO_MESHES, order) if observed is None else (SAFETY_THREE_MESHES, min(observed, order))
     return safety * abs(x[-1] - x[-2]) / (ratio**p - 1.0) + abs(estimate["limit"] - x[-1])
+
+
+def cavity_volume(sim, rig, qpos_change) -> float:
+    """The thoracic cavity's volume with the rigid bodies moved by qpos_change from where they are
+    (the carried wall and the linked points with them; the free points where they are)."""
+    import mujoco  # here: the suite's conftest imports this module, and a membrane-only test loads no MuJoCo
+
+    from hybrid.wall_coupling import carry_wall
+
+    m, d = sim.mj_model, copy.copy(sim.mj_data)
+    mujoco.mj_integratePos(m, d.qpos, qpos_change, 1.0)
+    mujoco.mj_forward(m, d)
+    state = sim.get_state()
+    wall = state.lung_wall_pos.copy()
+    carry_wall(rig.wall, d.site_xpos, wall, np.zeros_like(wall))
+    pos = state.vert_pos.copy()
+    pos[rig.links.vert] = d.site_xpos[rig.links.site_id]
+    every = np.vstack([pos, wall])
+    face = sim.model.arrays.lung_face
+    a, b, c = every[face[:, 0]], every[face[:, 1]], every[face[:, 2]]
+    return float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0)

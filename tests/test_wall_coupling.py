@@ -7,28 +7,11 @@ import copy
 import mujoco
 import numpy as np
 import pytest
+from helpers import cavity_volume
 
 import hybrid
 from hybrid.run import RunFailed, run
 from hybrid.terms.lungs import L_VOLUME, P_K1, lung_recoil
-from hybrid.wall_coupling import carry_wall
-
-
-def _cavity_volume(sim, rig, qpos_change) -> float:
-    """The thoracic cavity's volume with the rigid bodies moved by qpos_change from where they are
-    (the carried wall and the linked points with them; the free points where they are)."""
-    m, d = sim.mj_model, copy.copy(sim.mj_data)
-    mujoco.mj_integratePos(m, d.qpos, qpos_change, 1.0)
-    mujoco.mj_forward(m, d)
-    state = sim.get_state()
-    wall = state.lung_wall_pos.copy()
-    carry_wall(rig.wall, d.site_xpos, wall, np.zeros_like(wall))
-    pos = state.vert_pos.copy()
-    pos[rig.links.vert] = d.site_xpos[rig.links.site_id]
-    every = np.vstack([pos, wall])
-    face = sim.model.arrays.lung_face
-    a, b, c = every[face[:, 0]], every[face[:, 1]], every[face[:, 2]]
-    return float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0)
 
 
 def test_a_coupled_step_solves_its_implicit_equation():
@@ -42,7 +25,7 @@ def test_a_coupled_step_solves_its_implicit_equation():
     m, d = sim.mj_model, sim.mj_data
     rig = sim.rigid.pack(0)
     e = 1e-6
-    g = np.array([(_cavity_volume(sim, rig, e * u) - _cavity_volume(sim, rig, -e * u)) / (2 * e) for u in np.eye(m.nv)])
+    g = np.array([(cavity_volume(sim, rig, e * u) - cavity_volume(sim, rig, -e * u)) / (2 * e) for u in np.eye(m.nv)])
     before, v0 = copy.copy(d), d.qvel.copy()
     sim.step(1)
     par, h = sim.model.arrays.lung_par, m.opt.timestep

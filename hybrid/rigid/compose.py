@@ -129,9 +129,10 @@ def build_rigid(
     taken site name, a model MuJoCo cannot compile; a body, joint, actuator or keyframe
     the control keys name that the model lacks: `hybrid.rigid.controls`), each a
     one-line message. The sites are placed where the bodies start (`rigid.keyframe`).
-    carried: (pos (n, 3) m, under (n,), weight (n,)), points off the membrane (the lungs'
-    wall) each carried by `weight` of the motion of the body that holds membrane point
-    `under`: those over a linked point get a site `f"{prefix}hybrid_wall_{j}"` on its body.
+    carried: (pos (n, 3) m, under (n,), weight (n,), body pattern or None, top carried), points
+    off the membrane (the lungs' wall) each carried by `weight` of the motion of the body that
+    holds membrane point `under`: those over a linked point get a site `f"{prefix}hybrid_wall_{j}"`
+    on its body (`_carried_sites`).
     """
     rig = scene.rigid
     if not isinstance(rig, Rigid):
@@ -265,14 +266,15 @@ def _carried_sites(
     border as a share of it, and does not swing with the rib's turn extended up to its own
     height (which took a point above the hinge inward as the rib rose). With a body pattern, the
     points strictly between the border and the top (weight in (0, 1)) also follow the nearest
-    matching body (by its centre of mass where the model starts) by one minus their weight: the
+    matching body (by its centre of mass where the model starts) by one minus their weight (and the
+    top ring, weight 0, wholly when `Lungs.wall_top` is "carried"; the top's centre stays): the
     displacement of that body's point nearest to them (on its capsules' axes: the rib beside them;
     their own position for a body without capsules). Returns {"site_names", "point"
     (nc,) the carried points' indices (a point may appear twice), "weight" (nc,), "rest" (nc, 3)
     m the points' rest positions, "site_rest" (nc, 3) m their sites'}, or None."""
     if carried is None:
         return None
-    pos, under, weight, pattern = carried
+    pos, under, weight, pattern, top_carried = carried
     pos, weight = np.asarray(pos, float), np.asarray(weight, float)
     point = [j for j, i in enumerate(under) if int(i) in link_body_of and weight[j] > 0]
     names = [f"{prefix}hybrid_wall_{j}" for j in point]
@@ -289,7 +291,9 @@ def _carried_sites(
             )
         data0 = start_data(model0, key_id)
         com = data0.xipos[[model0.body(b).id for b in chosen]]
-        for j in np.flatnonzero((weight > 0) & (weight < 1)):
+        # between the border and the top; with the top carried (`Lungs.wall_top`), its ring too
+        between = (weight < 1) & ((weight > 0) | (top_carried & (np.asarray(under) >= 0)))
+        for j in np.flatnonzero(between):
             near = chosen[int(np.argmin(np.linalg.norm(com - pos[j], axis=1)))]
             point.append(int(j))
             names.append(f"{prefix}hybrid_wall_up_{int(j)}")

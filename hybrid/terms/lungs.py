@@ -66,6 +66,7 @@ __all__ = [
     "lung_recoil",
     "recoil_energy_j",
     "RECOIL_CURVES",
+    "WALL_TOPS",
     "project_occluded",
     "thoracic_cavity",
     "open_edges",
@@ -115,6 +116,8 @@ ADULT_LUNGS = {
 }
 #: the lungs' recoil curves (`Lungs.recoil_curve`)
 RECOIL_CURVES = ("linear", "sigmoid")
+#: what carries the cavity wall's top ring (`Lungs.wall_top`)
+WALL_TOPS = ("fixed", "carried")
 
 
 @kernel
@@ -329,7 +332,11 @@ class Lungs(Term):
     P the transpulmonary pressure); wall_bodies: a body name or pattern of the rigid model (the
     upper ribs, `rigid.ribs`), None for none: the wall's rings between the border and the top
     follow the nearest such body by the share the border's rib leaves, each ring point the
-    displacement of the body's point beside it (the pulmonary rib cage);
+    displacement of the body's point beside it (the pulmonary rib cage); wall_top: "fixed" (the
+    top ring stays where it is: a rigid upper rib cage above the wall) or "carried" (the top ring
+    follows the nearest of `wall_bodies` wholly, so that the pair's pump-handle turn moves the
+    cavity's wall outward, about 1 L/rad a rib on `breathing_lungs` against 0.15 fixed; needs
+    `wall_bodies`);
     airway_occluded: a schedule, the airway closed where
     it is 1 (>= 0.5), open where 0: the lung volume when it closes is then held exactly
     (`project_occluded`), as in the occlusion and twitch manoeuvres, the hold shared with the bodies
@@ -358,6 +365,7 @@ class Lungs(Term):
     airway_opening_pressure_cmh2o: object = param("schedule", 0.0, ncomp=1)
     airway_occluded: object = param("schedule", 0.0, ncomp=1)
     wall_bodies: str = param("text", None)
+    wall_top: str = param("choice", "fixed", choices=WALL_TOPS)
     recoil_curve: str = param("choice", "linear", choices=RECOIL_CURVES)
     sigmoid_lower_volume_l: float = param("nonneg", None, hi=100.0)
     sigmoid_volume_range_l: float = param("positive", None, hi=100.0)
@@ -435,7 +443,12 @@ class Lungs(Term):
             lung_point=np.unique(face).astype(np.int64),
         )
         # the wall's points that rigid bodies carry (`hybrid.rigid.build_rigid`)
-        b.carried = (wall, under, weight, self.value("wall_bodies", what))
+        bodies, top = self.value("wall_bodies", what), self.value("wall_top", what)
+        if top == "carried" and bodies is None:
+            raise SceneError(
+                f"{what}.wall_top: 'carried' needs wall_bodies (the bodies that carry the top ring), received none"
+            )
+        b.carried = (wall, under, weight, bodies, top == "carried")
         # (no per-point stiffness for the stability estimate: the compartment moves the dome as one
         # mode, E sum_i |g_i|^2 / m_i, about 700 s^-2 on the breathing scene, far below the sheet's)
 
