@@ -131,7 +131,9 @@ STUDIES = {
             "Convergence of the breathing trunk with lungs",
             "The same study of `breathing_lungs` under implicit Euler (steps of 20, 10 and 5 ms at every level, "
             "one breath), with the lungs' metrics: the lung volume change (its largest value is the first "
-            "breath's tidal volume) and the transdiaphragmatic pressure change. Read it as the one above.",
+            "breath's tidal volume), the transdiaphragmatic pressure change, the lowest pleural pressure (end "
+            "inspiration's), and the volume each wall sweeps (pulmonary rib cage, abdominal rib cage, abdomen: "
+            "over the lung volume change, the Konno-Mead shares). Read it as the one above.",
             written="convergence.json",
         ),
         Study(

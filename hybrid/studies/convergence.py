@@ -77,8 +77,18 @@ __all__ = [
 ]
 
 #: with lungs (`hybrid.terms.lungs`): the largest lung volume above rest (the tidal volume of a run
-#: from rest) and the largest transdiaphragmatic pressure change (its swing)
-LUNG_METRICS = ("lung_volume_change_l", "transdiaphragmatic_pressure_change_cmh2o")
+#: from rest), the largest transdiaphragmatic pressure change (its swing), the lowest pleural
+#: pressure (end inspiration's), and the largest volume each wall sweeps (the pulmonary and abdominal
+#: rib cage's, with a lungs' wall on the upper ribs, and the abdomen's), whose ratios to the lung
+#: volume's are the Konno-Mead shares
+LUNG_METRICS = (
+    "lung_volume_change_l",
+    "transdiaphragmatic_pressure_change_cmh2o",
+    "pleural_pressure_cmh2o:min",
+    "rib_cage_pulmonary_volume_change_l",
+    "rib_cage_abdominal_volume_change_l",
+    "abdomen_volume_change_l",
+)
 #: the metrics a study takes by default, those the scene has
 DEFAULT_METRICS = ("rib_lift_mm", "apex_descent_mm", "pressure_pa", "swept_volume_ml", *LUNG_METRICS)
 TARGETS = (0.10, 0.03, 0.01)
@@ -149,7 +159,7 @@ def _check_metrics(scene, overrides, level, metrics) -> tuple:
     model = _model(scene, overrides, level, None)
     table = run_scene(Simulation(model), model.dt_s)["summary"]["metrics"]
     if metrics is None:  # apex_descent_mm: every membrane has a highest point
-        return tuple(k for k in DEFAULT_METRICS if k in table)
+        return tuple(k for k in DEFAULT_METRICS if series_of(k)[0] in table)
     missing = [k for k in metrics if series_of(k)[0] not in table]
     if missing:
         raise HybridError(
