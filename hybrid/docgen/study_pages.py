@@ -114,7 +114,7 @@ STUDIES = {
                 "convergence",
                 "breathing_lungs",
                 "--levels",
-                "3-7",
+                "5-9",
                 "--duration",
                 "4",
                 "--integrator",
