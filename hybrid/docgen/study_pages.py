@@ -123,6 +123,18 @@ STUDIES = {
                 "dt_s=0.02",
                 "--repeats",
                 "1",
+                # the default metrics and the work of breathing, a summary number (`SUMMARY_METRICS`)
+                "--metric=rib_lift_mm",
+                "--metric=apex_descent_mm",
+                "--metric=pressure_pa",
+                "--metric=swept_volume_ml",
+                "--metric=lung_volume_change_l",
+                "--metric=transdiaphragmatic_pressure_change_cmh2o",
+                "--metric=pleural_pressure_cmh2o:min",
+                "--metric=rib_cage_pulmonary_volume_change_l",
+                "--metric=rib_cage_abdominal_volume_change_l",
+                "--metric=abdomen_volume_change_l",
+                "--metric=work_of_breathing_j_per_l",
                 "--out",
             ),
             "convergence_lungs.json",
@@ -133,7 +145,8 @@ STUDIES = {
             "one breath), with the lungs' metrics: the lung volume change (its largest value is the first "
             "breath's tidal volume), the transdiaphragmatic pressure change, the lowest pleural pressure (end "
             "inspiration's), and the volume each wall sweeps (pulmonary rib cage, abdominal rib cage, abdomen: "
-            "over the lung volume change, the Konno-Mead shares). Read it as the one above.",
+            "over the lung volume change, the Konno-Mead shares); and the work of breathing per litre inspired, "
+            "a number of the run's summary. Read it as the one above.",
             written="convergence.json",
         ),
         Study(

@@ -73,6 +73,7 @@ __all__ = [
     "recommend",
     "DEFAULT_METRICS",
     "LUNG_METRICS",
+    "SUMMARY_METRICS",
     "TARGETS",
 ]
 
@@ -89,6 +90,10 @@ LUNG_METRICS = (
     "rib_cage_abdominal_volume_change_l",
     "abdomen_volume_change_l",
 )
+#: the run summary's numbers a study takes besides the trace's series (`--metric NAME`, never by
+#: default): per breath, so that each run must hold a complete inspiration
+#: (`hybrid.respiratory.work_of_breathing`: the work of breathing over the litres inspired)
+SUMMARY_METRICS = ("work_of_breathing_j_per_l",)
 #: the metrics a study takes by default, those the scene has
 DEFAULT_METRICS = ("rib_lift_mm", "apex_descent_mm", "pressure_pa", "swept_volume_ml", *LUNG_METRICS)
 TARGETS = (0.10, 0.03, 0.01)
@@ -150,22 +155,30 @@ def _check_metrics(scene, overrides, level, metrics) -> tuple:
     from ..run import run as run_scene
     from ..simulation import Simulation
 
-    unknown = [k for k in metrics or () if series_of(k)[0] not in METRIC_KEYS]
+    unknown = [k for k in metrics or () if k not in SUMMARY_METRICS and series_of(k)[0] not in METRIC_KEYS]
     if unknown:
-        raise HybridError(f"--metric: expected series among {list(METRIC_KEYS)}, received {unknown}")
-    bad = [k for k in metrics or () if series_of(k)[1] not in STATS]
+        raise HybridError(
+            f"--metric: expected series among {list(METRIC_KEYS)} or a summary number among "
+            f"{list(SUMMARY_METRICS)}, received {unknown}"
+        )
+    bad = [k for k in metrics or () if k not in SUMMARY_METRICS and series_of(k)[1] not in STATS]
     if bad:
         raise HybridError(f"--metric: expected NAME or NAME:min (its smallest value), received {bad}")
     model = _model(scene, overrides, level, None)
     table = run_scene(Simulation(model), model.dt_s)["summary"]["metrics"]
     if metrics is None:  # apex_descent_mm: every membrane has a highest point
         return tuple(k for k in DEFAULT_METRICS if series_of(k)[0] in table)
-    missing = [k for k in metrics if series_of(k)[0] not in table]
+    missing = [k for k in metrics if _series(k) not in table]
     if missing:
         raise HybridError(
             f"--metric: scene {model.scene.name!r} has no series {missing}; expected some of {sorted(table)}"
         )
     return tuple(metrics)
+
+
+def _series(metric: str) -> str:
+    """The trace series a metric needs: its own, or the lung volume for a summary number."""
+    return "lung_volume_change_l" if metric in SUMMARY_METRICS else series_of(metric)[0]
 
 
 def simulate(scene, overrides, level, dt, duration_s, metrics, repeats=REPEATS) -> dict:
@@ -194,13 +207,20 @@ def simulate(scene, overrides, level, dt, duration_s, metrics, repeats=REPEATS) 
     while summary["status"] == "ok" and cpus[0] < REPEAT_BELOW_S and len(cpus) < repeats:
         cpus.append(one(duration_s)[1])
     table = summary["metrics"]
-    missing = [k for k in metrics if series_of(k)[0] not in table]
+    missing = [k for k in metrics if _series(k) not in table]
     if missing:
         raise HybridError(
             f"--metric: scene {model.scene.name!r} has no series {missing}; expected some of {sorted(table)}"
         )
+    values = {k: summary.get(k) if k in SUMMARY_METRICS else table[series_of(k)[0]][series_of(k)[1]] for k in metrics}
+    absent = [k for k, v in values.items() if v is None]
+    if absent and summary["status"] == "ok":
+        raise HybridError(
+            f"--metric {absent[0]}: expected a run holding a complete inspiration, received none in "
+            f"{duration_s:g} s at level {level}; give --duration of at least one breath"
+        )
     return {
-        "values": {k: table[series_of(k)[0]][series_of(k)[1]] for k in metrics},
+        "values": values,
         "wall_s": summary["wall_s"],
         "cpu_s": min(cpus),
         "cpu_s_spread": (max(cpus) - min(cpus)) / max(min(cpus), 1e-300),

@@ -292,6 +292,33 @@ def test_convergence_refuses_an_unknown_metric_in_one_line(tmp_path, capsys):
     assert code == 2 and err.count("\n") == 1 and "snore_mm" in err and "apex_descent_mm" in err
 
 
+def test_the_work_of_breathing_is_a_metric_over_whole_breaths(tmp_path, capsys):
+    """`--metric work_of_breathing_j_per_l`: the run summary's work per litre inspired, each run's
+    own (a run from rest over one breath holds one inspiration); a run too short to hold one is
+    refused in one line, not studied as a missing value."""
+    from hybrid.model import compile_scene
+    from hybrid.resolve import resolve_scene
+    from hybrid.run import run as run_scene
+    from hybrid.simulation import Simulation
+
+    sets = ["--integrator", "implicit_euler", "--set", "dt_s=0.02", "--repeats", "1"]
+    metric = ["--metric", "work_of_breathing_j_per_l", "--metric", "lung_volume_change_l"]
+    args = ["convergence", "breathing_lungs", "--levels", "0-1", "--steps", "2", "--duration", "4", *sets, *metric]
+    assert main_study([*args, "--out", str(tmp_path / "whole")]) == 0
+    data = strict_load(tmp_path / "whole" / "convergence.json")
+    assert data["metrics"] == ["work_of_breathing_j_per_l", "lung_volume_change_l"] and not data["failures"]
+    run0 = next(r for r in data["runs"] if r["level"] == 0 and r["dt"] == 0.02)
+    model = compile_scene(
+        resolve_scene("breathing_lungs", overrides=["integrator=implicit_euler", "dt_s=0.02", "mesh.level=0"])
+    )
+    own = run_scene(Simulation(model), 4.0)["summary"]["work_of_breathing_j_per_l"]
+    assert own > 0 and run0["values"]["work_of_breathing_j_per_l"] == own
+    short = ["convergence", "breathing_lungs", "--small", "--repeats", "1", "--metric", "work_of_breathing_j_per_l"]
+    assert main_study([*short, "--out", str(tmp_path / "short")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "complete inspiration" in err and "--duration" in err
+
+
 def test_a_metric_may_take_its_series_smallest_value(tmp_path, capsys):
     """NAME:min studies the series' smallest value (a pressure that falls), the run's own minimum;
     another statistic is refused in one line."""
