@@ -23,7 +23,7 @@ from __future__ import annotations
 #: the package's version, its one place: pyproject.toml reads it (setuptools' dynamic
 #: version), `hybrid --version` prints it, every run's provenance records it
 #: (the policy: CHANGELOG.md, "Versions")
-__version__ = "0.28.0"
+__version__ = "0.28.1"
 
 from collections.abc import Sequence
 from pathlib import Path

@@ -385,6 +385,12 @@ def _end_workers(pool) -> None:
                 proc.kill()
                 proc.join(1.0)
         pool.shutdown(wait=False, cancel_futures=True)
+        # the pool's manager thread sees its workers gone and closes its wake-up pipe; left running,
+        # CPython 3.11's exit hook may write to that pipe as it closes ("Exception ignored ... Bad file
+        # descriptor" on stderr after the one line, seen once in a test of SIGTERM)
+        manager = getattr(pool, "_executor_manager_thread", None)
+        if manager is not None:
+            manager.join(END_WAIT_S)
     finally:
         for s, handler in previous.items():
             signal.signal(s, handler)
